@@ -1,0 +1,73 @@
+#pragma once
+// The one interface every producer of stereo pairs implements: two V4L2 cameras with
+// stereo sync, one side-by-side device, and the replay of a recording.
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <opencv2/core/types.hpp>
+
+#include "capture/frame.hpp"
+#include "capture/spsc_ring.hpp"
+
+namespace stereod {
+
+using PairRing = SpscRing<StereoPair>;
+
+enum class SourceState {
+    Stopped,   // not started, or stopped on request
+    Starting,  // opening devices / files
+    Running,   // delivering frames
+    Stalled,   // open, but no frame for longer than expected
+    Failed,    // lost (device vanished, files unreadable); may recover
+    Finished,  // a replay that reached its end without looping
+};
+
+const char* toString(SourceState state) noexcept;
+
+// What one camera (or one side of a recording) is doing, for `status`.
+struct CameraStatus {
+    std::string name;          // "left", "right", or a device path
+    SourceState state = SourceState::Stopped;
+    std::string last_error;    // empty when none
+    double fps = 0.0;          // measured delivery rate
+    uint64_t frames = 0;       // frames delivered
+    uint64_t dropped = 0;      // frames lost before pairing (gaps, pool exhausted)
+    uint64_t bad_frames = 0;   // corrupt or unreadable frames skipped
+};
+
+struct SourceStatus {
+    std::string kind;          // "replay", "v4l2", "side-by-side"
+    SourceState state = SourceState::Stopped;
+    std::string last_error;
+    std::vector<CameraStatus> cameras;
+    uint64_t pairs = 0;              // pairs delivered into the ring
+    uint64_t unpaired_dropped = 0;   // frames dropped for lack of a partner in time
+    double skew_mean_ms = 0.0;       // |right - left| capture time of delivered pairs
+    double skew_p99_ms = 0.0;
+    double skew_max_ms = 0.0;
+};
+
+// Thread-safety: start()/stop() from one controlling thread; status() from any thread.
+// The source's own threads deliver into the ring and take no lock on the frame path.
+class FrameSource {
+public:
+    virtual ~FrameSource() = default;
+
+    // Starts delivering pairs into `ring` (borrowed until stop() returns) from the
+    // source's own thread(s). Returns 0, or a negative errno; the reason is then in
+    // status().last_error.
+    virtual int start(PairRing& ring) = 0;
+
+    // Stops and joins the source's threads. Idempotent; never throws.
+    virtual void stop() noexcept = 0;
+
+    // A consistent snapshot for `status`.
+    virtual SourceStatus status() const = 0;
+
+    // Size of the frames this source delivers (known once constructed).
+    virtual cv::Size frameSize() const = 0;
+};
+
+} // namespace stereod

@@ -1,0 +1,40 @@
+#pragma once
+// The nearest-object reading the service hands to a robot: a distance, or "no reading"
+// with the reason. Never a number the data do not support.
+
+#include <cstdint>
+
+namespace stereod {
+
+enum class NoReadingReason {
+    None,               // the reading is valid
+    NoFrameYet,         // the service has not produced a result since it started
+    TooFewValidPixels,  // valid_fraction below the configured minimum in the region
+    NothingInRange,     // valid pixels exist, but none within [min_depth_m, max_depth_m]
+    OutOfSync,          // the pair's capture times differ by more than allowed
+    SourceDown,         // the frame source failed, stalled or finished
+    BadFrame,           // the pair could not be processed (size mismatch, corrupt data)
+    Stale,              // the latest reading is older than the caller allows
+};
+
+// Stable machine code for the protocol ("too_few_valid_pixels", ...).
+const char* reasonCode(NoReadingReason reason) noexcept;
+// One human sentence, without numbers ("too few valid pixels in the region").
+const char* reasonText(NoReadingReason reason) noexcept;
+// True when the reason means the service is not producing (stale, source down, no frame
+// yet), as opposed to "the data of a fresh frame did not support a number".
+bool meansNotProducing(NoReadingReason reason) noexcept;
+
+struct Reading {
+    bool valid = false;
+    double distance_m = 0.0;           // meaningful only when valid
+    NoReadingReason reason = NoReadingReason::NoFrameYet;
+    int64_t stamp_ns = 0;              // capture time of the pair, CLOCK_MONOTONIC
+    uint64_t frame = 0;                // pair index from the source
+    double valid_fraction = 0.0;       // of the region's pixels, those with a valid depth
+    double in_range_fraction = 0.0;    // of the region's pixels, those within the depth range
+    double min_valid_fraction = 0.0;   // the threshold in force, to explain a refusal
+    uint32_t region_pixels = 0;        // size of the region of interest in pixels
+};
+
+} // namespace stereod

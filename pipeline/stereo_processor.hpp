@@ -1,0 +1,103 @@
+#pragma once
+// The stereo chain for one pair: rectify -> match -> depth -> nearest object -> point
+// cloud. No sockets, no threads of its own, no knowledge of where frames come from: the
+// service's worker, `stereoctl depth` and the benchmarks all run this same code.
+//
+// Thread-bound: one StereoProcessor per worker thread. All buffers are allocated in the
+// constructor (or on the first frame of a size); process() allocates nothing in steady
+// state.
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core/mat.hpp>
+
+#include "pipeline/calibration.hpp"
+#include "pipeline/matcher_settings.hpp"
+#include "pipeline/nearest_settings.hpp"
+#include "pipeline/reading.hpp"
+
+namespace stereod {
+
+struct ProcessorSettings {
+    MatcherSettings matcher;
+    NearestSettings nearest;
+    bool compute_cloud = true;         // the point cloud is skipped when nobody needs it
+};
+
+// Milliseconds spent in each stage of the last process() call.
+struct StageTimings {
+    double rectify_ms = 0.0;
+    double match_ms = 0.0;
+    double depth_ms = 0.0;
+    double nearest_ms = 0.0;
+    double cloud_ms = 0.0;
+    double totalMs() const { return rectify_ms + match_ms + depth_ms + nearest_ms + cloud_ms; }
+};
+
+// One point of the cloud: camera frame of the rectified left camera (x right, y down,
+// z forward), metres; intensity from the rectified left image.
+struct CloudPoint {
+    float x, y, z;
+    float intensity;
+};
+
+// Everything the chain produced for one pair. Reused frame after frame: buffers keep
+// their capacity.
+struct DepthResult {
+    cv::Mat left_rectified;            // CV_8UC1
+    cv::Mat disparity;                 // CV_32FC1, pixels; invalid = +inf (Middlebury)
+    cv::Mat depth_m;                   // CV_32FC1, metres; invalid = 0
+    std::vector<CloudPoint> cloud;     // valid depths only; capacity kept across frames
+    Reading reading;
+    StageTimings timings;
+    uint64_t frame = 0;
+    int64_t stamp_ns = 0;              // capture time of the pair, CLOCK_MONOTONIC
+};
+
+// How the disparity range was chosen, for logs and `status`.
+struct DisparityRange {
+    int min_disparity = 0;
+    int num_disparities = 0;           // multiple of 16
+    double closest_depth_m = 0.0;      // the nearest depth this range can see
+    bool capped = false;               // true when max_num_disparities kept min_depth_m out of sight
+};
+
+// Works out the disparity range from the settings and the rectified geometry.
+DisparityRange chooseDisparityRange(const MatcherSettings& settings,
+                                    const RectifiedGeometry& geometry);
+
+class StereoProcessor {
+public:
+    // Computes the rectification maps (fixed-point) once and sets up the matcher.
+    // Throws CalibrationError / std::invalid_argument with the reason when the settings
+    // and calibration cannot work together.
+    StereoProcessor(const StereoCalibration& calibration, const ProcessorSettings& settings);
+    ~StereoProcessor();
+
+    StereoProcessor(const StereoProcessor&) = delete;
+    StereoProcessor& operator=(const StereoProcessor&) = delete;
+
+    // Runs the chain on one raw (unrectified) grayscale pair. Frames whose size does not
+    // match the calibration give a BadFrame reading, never an exception.
+    void process(const cv::Mat& left, const cv::Mat& right, int64_t stamp_ns, uint64_t frame,
+                 DepthResult& out);
+
+    // Applies settings that can change live (matcher parameters, nearest settings).
+    // Throws std::invalid_argument, leaving the current settings in force, if invalid.
+    void updateSettings(const ProcessorSettings& settings);
+
+    const StereoCalibration& calibration() const;
+    const ProcessorSettings& settings() const;
+    DisparityRange disparityRange() const;
+    // A name for logs and status: "sgbm", "sgbm-3way", "bm".
+    std::string matcherName() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+} // namespace stereod
