@@ -88,7 +88,17 @@ void saveCalibration(const StereoCalibration& calibration, const std::string& pa
 void checkFrameSize(const StereoCalibration& calibration, cv::Size frame_size,
                     const std::string& origin);
 
-// A rectified-only calibration. cx/cy default to the image centre.
+// Checks a calibration assembled in code with the same rules the loader applies (focal
+// length and baseline positive, principal point inside the image, R a rotation, P1/P2 a
+// horizontal rig, ...). Throws CalibrationError naming `origin`, the key and the problem.
+void validateCalibration(const StereoCalibration& calibration, const std::string& origin);
+
+// The rectified geometry a full calibration implies: focal = P1(0,0), principal point
+// from P1, baseline = -P2(0,3) / P2(0,0), doffs = P2(0,2) - P1(0,2).
+RectifiedGeometry rectifiedFromProjections(const cv::Matx34d& P1, const cv::Matx34d& P2,
+                                           cv::Size image_size);
+
+// A rectified-only calibration. cx/cy default to the image centre, (size - 1) / 2.
 StereoCalibration makeRectifiedCalibration(cv::Size image_size, double focal_px,
                                            double baseline_m,
                                            std::optional<double> cx_px = std::nullopt,

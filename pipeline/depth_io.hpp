@@ -26,6 +26,8 @@ cv::Mat readDisparity(const std::string& path);
 void writeDepthPng(const std::string& path, const cv::Mat& depth_m);
 // Converts into a preallocated CV_16UC1 buffer (the service's snapshot path).
 void depthToMillimetres(const cv::Mat& depth_m, cv::Mat& depth_mm);
+// Reads a depth .png (uint16 millimetres) back to CV_32FC1 metres, 0 = invalid.
+cv::Mat readDepthPng(const std::string& path);
 
 // Binary little-endian .ply, float x y z intensity.
 void writePly(const std::string& path, const std::vector<CloudPoint>& cloud);

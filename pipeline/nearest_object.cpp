@@ -1,0 +1,129 @@
+#include "pipeline/nearest_object.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace stereod {
+namespace {
+
+[[noreturn]] void invalid(const std::string& key, const std::string& problem)
+{
+    throw std::invalid_argument("nearest." + key + ": " + problem);
+}
+
+void fraction(const std::string& key, double value)
+{
+    if (!(value >= 0.0 && value <= 1.0))
+        invalid(key, "must be within 0..1, got " + std::to_string(value));
+}
+
+} // namespace
+
+void validateNearestSettings(const NearestSettings& s)
+{
+    fraction("roi.x", s.roi.x);
+    fraction("roi.y", s.roi.y);
+    fraction("roi.width", s.roi.width);
+    fraction("roi.height", s.roi.height);
+    if (s.roi.width <= 0.0 || s.roi.height <= 0.0)
+        invalid("roi", "width and height must be > 0");
+    // A little slack for fractions written with a few digits (0.33 + 0.67).
+    constexpr double kSlack = 1e-9;
+    if (s.roi.x + s.roi.width > 1.0 + kSlack)
+        invalid("roi", "x + width must be <= 1, got " + std::to_string(s.roi.x + s.roi.width));
+    if (s.roi.y + s.roi.height > 1.0 + kSlack)
+        invalid("roi", "y + height must be <= 1, got " + std::to_string(s.roi.y + s.roi.height));
+    if (!(s.min_depth_m >= 0.0 && std::isfinite(s.min_depth_m)))
+        invalid("min_depth_m", "must be a finite number >= 0, got " + std::to_string(s.min_depth_m));
+    if (!(s.max_depth_m > s.min_depth_m && std::isfinite(s.max_depth_m)))
+        invalid("max_depth_m", "must be finite and greater than min_depth_m, got " +
+                                   std::to_string(s.max_depth_m));
+    if (!(s.percentile >= 0.0 && s.percentile <= 100.0))
+        invalid("percentile", "must be within 0..100, got " + std::to_string(s.percentile));
+    fraction("min_valid_fraction", s.min_valid_fraction);
+    if (s.min_pixels < 1)
+        invalid("min_pixels", "must be >= 1, got " + std::to_string(s.min_pixels));
+}
+
+cv::Rect regionPixels(const RegionOfInterest& roi, cv::Size image_size)
+{
+    const int x0 = static_cast<int>(std::lround(roi.x * image_size.width));
+    const int y0 = static_cast<int>(std::lround(roi.y * image_size.height));
+    const int x1 = static_cast<int>(std::lround((roi.x + roi.width) * image_size.width));
+    const int y1 = static_cast<int>(std::lround((roi.y + roi.height) * image_size.height));
+    const cv::Rect rect(x0, y0, std::max(0, x1 - x0), std::max(0, y1 - y0));
+    return rect & cv::Rect(0, 0, image_size.width, image_size.height);
+}
+
+size_t percentileIndex(double percentile, size_t count)
+{
+    const double position = std::clamp(percentile, 0.0, 100.0) / 100.0 *
+                            static_cast<double>(count - 1);
+    return std::min(count - 1, static_cast<size_t>(std::floor(position)));
+}
+
+NearestObjectFinder::NearestObjectFinder(size_t max_region_pixels)
+{
+    in_range_.reserve(max_region_pixels);
+}
+
+Reading NearestObjectFinder::find(const cv::Mat& depth_m, const NearestSettings& settings,
+                                  int64_t stamp_ns, uint64_t frame)
+{
+    CV_Assert(depth_m.type() == CV_32FC1);
+    Reading reading;
+    reading.valid = false;
+    reading.stamp_ns = stamp_ns;
+    reading.frame = frame;
+    reading.min_valid_fraction = settings.min_valid_fraction;
+
+    const cv::Rect region = regionPixels(settings.roi, depth_m.size());
+    const size_t region_pixels = static_cast<size_t>(region.area());
+    reading.region_pixels = static_cast<uint32_t>(region_pixels);
+    if (region_pixels == 0) {
+        reading.reason = NoReadingReason::TooFewValidPixels;
+        return reading;
+    }
+    // Grows once when the region is larger than reserved; after that clear() keeps it.
+    if (in_range_.capacity() < region_pixels)
+        in_range_.reserve(region_pixels);
+    in_range_.clear();
+
+    const float lo = static_cast<float>(settings.min_depth_m);
+    const float hi = static_cast<float>(settings.max_depth_m);
+    size_t valid = 0;
+    for (int y = region.y; y < region.y + region.height; ++y) {
+        const float* z = depth_m.ptr<float>(y);
+        for (int x = region.x; x < region.x + region.width; ++x) {
+            const float depth = z[x];
+            if (!(depth > 0.0f) || !std::isfinite(depth))
+                continue;
+            ++valid;
+            if (depth >= lo && depth <= hi)
+                in_range_.push_back(depth);
+        }
+    }
+    const double total = static_cast<double>(region_pixels);
+    reading.valid_fraction = static_cast<double>(valid) / total;
+    reading.in_range_fraction = static_cast<double>(in_range_.size()) / total;
+
+    if (reading.valid_fraction < settings.min_valid_fraction || valid == 0) {
+        reading.reason = NoReadingReason::TooFewValidPixels;
+        return reading;
+    }
+    if (in_range_.size() < static_cast<size_t>(settings.min_pixels)) {
+        reading.reason = NoReadingReason::NothingInRange;
+        return reading;
+    }
+    const auto nth = in_range_.begin() +
+                     static_cast<std::ptrdiff_t>(percentileIndex(settings.percentile,
+                                                                 in_range_.size()));
+    std::nth_element(in_range_.begin(), nth, in_range_.end());
+    reading.valid = true;
+    reading.reason = NoReadingReason::None;
+    reading.distance_m = static_cast<double>(*nth);
+    return reading;
+}
+
+} // namespace stereod

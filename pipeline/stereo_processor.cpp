@@ -1,0 +1,273 @@
+#include "pipeline/stereo_processor.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include <opencv2/imgproc.hpp>
+#include <spdlog/spdlog.h>
+
+#include "pipeline/matcher.hpp"
+#include "pipeline/nearest_object.hpp"
+#include "pipeline/rectifier.hpp"
+#include "pipeline/triangulation.hpp"
+
+namespace stereod {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+constexpr int kDisparityStep = 16;   // OpenCV's matchers search multiples of 16
+
+double msBetween(Clock::time_point a, Clock::time_point b)
+{
+    return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+std::string describeSize(cv::Size size)
+{
+    return std::to_string(size.width) + "x" + std::to_string(size.height);
+}
+
+// Checks the settings against each other and against the calibration; returns the
+// disparity range they give. Throws std::invalid_argument.
+DisparityRange validateSettings(const ProcessorSettings& settings,
+                                const RectifiedGeometry& geometry)
+{
+    validateMatcherSettings(settings.matcher);
+    validateNearestSettings(settings.nearest);
+    const DisparityRange range = chooseDisparityRange(settings.matcher, geometry);
+    const cv::Size size = geometry.image_size;
+    const int last_disparity = range.min_disparity + range.num_disparities - 1;
+    if (last_disparity >= size.width)
+        throw std::invalid_argument(
+            "matcher: a disparity range up to " + std::to_string(last_disparity) +
+            " px leaves no column to match in an image " + std::to_string(size.width) +
+            " px wide");
+    if (settings.matcher.block_size >= std::min(size.width, size.height))
+        throw std::invalid_argument("matcher.block_size: " +
+                                    std::to_string(settings.matcher.block_size) +
+                                    " does not fit in a " + describeSize(size) + " image");
+    return range;
+}
+
+void warnIfCapped(const DisparityRange& range, const MatcherSettings& settings)
+{
+    if (range.capped)
+        spdlog::warn("disparity range capped at {} by max_num_disparities: the closest "
+                     "depth in sight is {:.3f} m, not min_depth_m {:.3f} m",
+                     range.num_disparities, range.closest_depth_m, settings.min_depth_m);
+}
+
+} // namespace
+
+DisparityRange chooseDisparityRange(const MatcherSettings& settings,
+                                    const RectifiedGeometry& geometry)
+{
+    DisparityRange range;
+    range.min_disparity = settings.min_disparity;
+    if (settings.num_disparities > 0) {
+        range.num_disparities = settings.num_disparities;
+    } else {
+        // Disparities min_disparity .. min_disparity + n - 1 are searched: n must reach
+        // the disparity of the closest depth, d_max = f*B/Z_min - doffs.
+        const double d_max = geometry.disparityAtDepth(settings.min_depth_m);
+        const double needed = std::ceil(d_max) - settings.min_disparity + 1.0;
+        const double cap = settings.max_num_disparities;
+        if (!(needed <= cap)) {
+            range.num_disparities = settings.max_num_disparities;
+            range.capped = true;
+        } else {
+            const double steps = std::max(1.0, std::ceil(needed / kDisparityStep));
+            range.num_disparities = static_cast<int>(steps) * kDisparityStep;
+        }
+    }
+    const double largest = range.min_disparity + range.num_disparities - 1;
+    range.closest_depth_m = largest + geometry.doffs_px > 0.0
+                                ? geometry.depthFromDisparity(largest)
+                                : std::numeric_limits<double>::infinity();
+    return range;
+}
+
+struct StereoProcessor::Impl {
+    Impl(const StereoCalibration& calibration_in, const ProcessorSettings& settings_in)
+        : calibration(calibration_in),
+          settings(settings_in),
+          range(validateSettings(settings_in, calibration_in.rectified)),
+          rectifier(calibration_in),
+          matcher(makeMatcher(settings_in.matcher, range)),
+          nearest(static_cast<size_t>(calibration_in.rectified.image_size.area()))
+    {
+        if (rectifier.remaps())
+            right_rectified.create(calibration.rectified.image_size, CV_8UC1);
+        warnIfCapped(range, settings.matcher);
+    }
+
+    // A CV_8UC1 view of an input image of the calibrated size, converting colour into
+    // `gray` (reused). Returns an empty Mat and sets `problem` when the image cannot be
+    // used.
+    cv::Mat grayView(const cv::Mat& image, cv::Mat& gray, const char* side,
+                     std::string& problem) const
+    {
+        if (image.empty()) {
+            problem = std::string(side) + " image is empty";
+            return {};
+        }
+        if (image.depth() != CV_8U) {
+            problem = std::string(side) + " image is not 8-bit";
+            return {};
+        }
+        if (image.size() != calibration.rectified.image_size) {
+            problem = std::string(side) + " image is " + describeSize(image.size()) +
+                      ", the calibration is for " +
+                      describeSize(calibration.rectified.image_size);
+            return {};
+        }
+        switch (image.channels()) {
+        case 1:
+            return image;
+        case 3:
+            cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY);
+            return gray;
+        case 4:
+            cv::cvtColor(image, gray, cv::COLOR_BGRA2GRAY);
+            return gray;
+        default:
+            problem = std::string(side) + " image has " + std::to_string(image.channels()) +
+                      " channels";
+            return {};
+        }
+    }
+
+    void badFrame(DepthResult& out, const std::string& problem)
+    {
+        if (!last_frame_bad)
+            spdlog::warn("frame {}: {}; the pair gives no reading", out.frame, problem);
+        last_frame_bad = true;
+        // Leave nothing of the previous frame behind that could pass for this one.
+        const cv::Size size = calibration.rectified.image_size;
+        out.left_rectified.create(size, CV_8UC1);
+        out.left_rectified.setTo(0);
+        out.disparity.create(size, CV_32FC1);
+        out.disparity.setTo(std::numeric_limits<float>::infinity());
+        out.depth_m.create(size, CV_32FC1);
+        out.depth_m.setTo(0);
+        out.cloud.clear();
+        out.reading = Reading{};
+        out.reading.valid = false;
+        out.reading.reason = NoReadingReason::BadFrame;
+        out.reading.stamp_ns = out.stamp_ns;
+        out.reading.frame = out.frame;
+        out.reading.min_valid_fraction = settings.nearest.min_valid_fraction;
+    }
+
+    StereoCalibration calibration;
+    ProcessorSettings settings;
+    DisparityRange range;
+    Rectifier rectifier;
+    std::unique_ptr<Matcher> matcher;
+    NearestObjectFinder nearest;
+    cv::Mat left_gray, right_gray;   // colour inputs converted, reused
+    cv::Mat right_rectified;         // full calibration only, reused
+    bool last_frame_bad = false;     // log a run of bad frames once
+};
+
+StereoProcessor::StereoProcessor(const StereoCalibration& calibration,
+                                 const ProcessorSettings& settings)
+{
+    validateCalibration(calibration, "calibration");
+    impl_ = std::make_unique<Impl>(calibration, settings);
+}
+
+StereoProcessor::~StereoProcessor() = default;
+
+void StereoProcessor::process(const cv::Mat& left, const cv::Mat& right, int64_t stamp_ns,
+                              uint64_t frame, DepthResult& out)
+{
+    Impl& p = *impl_;
+    out.frame = frame;
+    out.stamp_ns = stamp_ns;
+    out.timings = StageTimings{};
+
+    const Clock::time_point t0 = Clock::now();
+    std::string problem;
+    const cv::Mat left_gray = p.grayView(left, p.left_gray, "left", problem);
+    const cv::Mat right_gray =
+        left_gray.empty() ? cv::Mat() : p.grayView(right, p.right_gray, "right", problem);
+    if (left_gray.empty() || right_gray.empty()) {
+        p.badFrame(out, problem);
+        return;
+    }
+    if (p.last_frame_bad) {
+        spdlog::info("frame {}: frames usable again", frame);
+        p.last_frame_bad = false;
+    }
+
+    p.rectifier.rectifyLeft(left_gray, out.left_rectified);
+    cv::Mat right_rectified = right_gray;
+    if (p.rectifier.remaps()) {
+        p.rectifier.rectifyRight(right_gray, p.right_rectified);
+        right_rectified = p.right_rectified;
+    }
+    const Clock::time_point t1 = Clock::now();
+
+    p.matcher->compute(out.left_rectified, right_rectified, out.disparity);
+    const Clock::time_point t2 = Clock::now();
+
+    disparityToDepth(out.disparity, p.calibration.rectified, out.depth_m);
+    const Clock::time_point t3 = Clock::now();
+
+    out.reading = p.nearest.find(out.depth_m, p.settings.nearest, stamp_ns, frame);
+    const Clock::time_point t4 = Clock::now();
+
+    if (p.settings.compute_cloud)
+        buildPointCloud(out.depth_m, out.left_rectified, p.calibration.rectified, out.cloud);
+    else
+        out.cloud.clear();
+    const Clock::time_point t5 = Clock::now();
+
+    out.timings.rectify_ms = msBetween(t0, t1);
+    out.timings.match_ms = msBetween(t1, t2);
+    out.timings.depth_ms = msBetween(t2, t3);
+    out.timings.nearest_ms = msBetween(t3, t4);
+    out.timings.cloud_ms = msBetween(t4, t5);
+}
+
+void StereoProcessor::updateSettings(const ProcessorSettings& settings)
+{
+    Impl& p = *impl_;
+    // Everything that can throw happens before anything changes.
+    const DisparityRange range = validateSettings(settings, p.calibration.rectified);
+    if (p.matcher->kind() != settings.matcher.kind) {
+        p.matcher = makeMatcher(settings.matcher, range);
+    } else {
+        p.matcher->configure(settings.matcher, range);
+    }
+    if (range.capped && (!p.range.capped || range.num_disparities != p.range.num_disparities))
+        warnIfCapped(range, settings.matcher);
+    p.range = range;
+    p.settings = settings;
+}
+
+const StereoCalibration& StereoProcessor::calibration() const
+{
+    return impl_->calibration;
+}
+
+const ProcessorSettings& StereoProcessor::settings() const
+{
+    return impl_->settings;
+}
+
+DisparityRange StereoProcessor::disparityRange() const
+{
+    return impl_->range;
+}
+
+std::string StereoProcessor::matcherName() const
+{
+    return impl_->matcher->name();
+}
+
+} // namespace stereod

@@ -1,0 +1,50 @@
+#include "pipeline/triangulation.hpp"
+
+#include <cmath>
+
+namespace stereod {
+
+void disparityToDepth(const cv::Mat& disparity_px, const RectifiedGeometry& geometry,
+                      cv::Mat& depth_m)
+{
+    CV_Assert(disparity_px.type() == CV_32FC1);
+    depth_m.create(disparity_px.size(), CV_32FC1);
+    const double fb = geometry.focal_px * geometry.baseline_m;
+    const float doffs = static_cast<float>(geometry.doffs_px);
+    for (int y = 0; y < disparity_px.rows; ++y) {
+        const float* d = disparity_px.ptr<float>(y);
+        float* z = depth_m.ptr<float>(y);
+        for (int x = 0; x < disparity_px.cols; ++x) {
+            const float denominator = d[x] + doffs;
+            // +inf and NaN fail the test below too: both end as 0 (invalid).
+            z[x] = (std::isfinite(denominator) && denominator > 0.0f)
+                       ? static_cast<float>(fb / denominator)
+                       : 0.0f;
+        }
+    }
+}
+
+void buildPointCloud(const cv::Mat& depth_m, const cv::Mat& left_rectified,
+                     const RectifiedGeometry& geometry, std::vector<CloudPoint>& cloud)
+{
+    CV_Assert(depth_m.type() == CV_32FC1 && left_rectified.type() == CV_8UC1 &&
+              depth_m.size() == left_rectified.size());
+    cloud.clear();
+    cloud.reserve(depth_m.total());
+    const float inv_f = static_cast<float>(1.0 / geometry.focal_px);
+    const float cx = static_cast<float>(geometry.cx_px);
+    const float cy = static_cast<float>(geometry.cy_px);
+    for (int v = 0; v < depth_m.rows; ++v) {
+        const float* z = depth_m.ptr<float>(v);
+        const uint8_t* grey = left_rectified.ptr<uint8_t>(v);
+        const float row_factor = (static_cast<float>(v) - cy) * inv_f;
+        for (int u = 0; u < depth_m.cols; ++u) {
+            if (!(z[u] > 0.0f))
+                continue;
+            cloud.push_back(CloudPoint{(static_cast<float>(u) - cx) * inv_f * z[u],
+                                       row_factor * z[u], z[u], static_cast<float>(grey[u])});
+        }
+    }
+}
+
+} // namespace stereod

@@ -1,0 +1,141 @@
+// The nearest-object statistic and its refusals, on depth maps whose answer is known.
+
+#include <cmath>
+#include <limits>
+
+#include <gtest/gtest.h>
+
+#include "pipeline/nearest_object.hpp"
+
+namespace stereod {
+namespace {
+
+NearestSettings wholeImage()
+{
+    NearestSettings s;
+    s.roi = {0.0, 0.0, 1.0, 1.0};
+    s.min_depth_m = 0.1;
+    s.max_depth_m = 20.0;
+    s.percentile = 5.0;
+    s.min_valid_fraction = 0.10;
+    s.min_pixels = 50;
+    return s;
+}
+
+TEST(NearestObject, RegionPixelsScaleWithTheImage)
+{
+    EXPECT_EQ(regionPixels({0.25, 0.25, 0.5, 0.5}, {640, 480}), cv::Rect(160, 120, 320, 240));
+    EXPECT_EQ(regionPixels({0.0, 0.0, 1.0, 1.0}, {1282, 1110}), cv::Rect(0, 0, 1282, 1110));
+    // Clipped to the image, never outside it.
+    EXPECT_EQ(regionPixels({0.9, 0.9, 0.2, 0.2}, {100, 100}), cv::Rect(90, 90, 10, 10));
+}
+
+TEST(NearestObject, PercentileIndex)
+{
+    EXPECT_EQ(percentileIndex(0.0, 100), 0u);
+    EXPECT_EQ(percentileIndex(100.0, 100), 99u);
+    EXPECT_EQ(percentileIndex(50.0, 101), 50u);
+    EXPECT_EQ(percentileIndex(5.0, 1), 0u);
+}
+
+TEST(NearestObject, ReportsThePercentileOfInRangeDepths)
+{
+    // 100 x 100 image: depths 1.00, 1.01, ... 100 distinct values per row, same per column.
+    cv::Mat depth(100, 100, CV_32FC1);
+    for (int y = 0; y < depth.rows; ++y)
+        for (int x = 0; x < depth.cols; ++x)
+            depth.at<float>(y, x) = 1.0f + 0.01f * static_cast<float>(x);
+    NearestObjectFinder finder(depth.total());
+    const Reading r = finder.find(depth, wholeImage(), 42, 9);
+    ASSERT_TRUE(r.valid);
+    EXPECT_EQ(r.reason, NoReadingReason::None);
+    // 10000 values, 100 of each; the 5th percentile is index floor(0.05 * 9999) = 499,
+    // in the block of x = 4.
+    EXPECT_FLOAT_EQ(static_cast<float>(r.distance_m), 1.04f);
+    EXPECT_EQ(r.stamp_ns, 42);
+    EXPECT_EQ(r.frame, 9u);
+    EXPECT_EQ(r.region_pixels, 10000u);
+    EXPECT_DOUBLE_EQ(r.valid_fraction, 1.0);
+    EXPECT_DOUBLE_EQ(r.in_range_fraction, 1.0);
+    EXPECT_DOUBLE_EQ(r.min_valid_fraction, 0.10);
+}
+
+TEST(NearestObject, AFewWrongNearPixelsDoNotMoveTheReading)
+{
+    cv::Mat depth(100, 100, CV_32FC1, cv::Scalar(3.0));
+    // 1 % of the region claims an object at 0.2 m: below the 5th percentile.
+    for (int i = 0; i < 100; ++i)
+        depth.at<float>(i, i) = 0.2f;
+    NearestObjectFinder finder;
+    const Reading r = finder.find(depth, wholeImage(), 0, 0);
+    ASSERT_TRUE(r.valid);
+    EXPECT_FLOAT_EQ(static_cast<float>(r.distance_m), 3.0f);
+}
+
+TEST(NearestObject, TooFewValidPixels)
+{
+    cv::Mat depth(100, 100, CV_32FC1, cv::Scalar(0.0));
+    // 5 % valid, with NaN and +inf counted as invalid too.
+    depth.rowRange(0, 5).setTo(2.0);
+    depth.at<float>(50, 50) = std::numeric_limits<float>::quiet_NaN();
+    depth.at<float>(60, 60) = std::numeric_limits<float>::infinity();
+    NearestObjectFinder finder;
+    const Reading r = finder.find(depth, wholeImage(), 0, 0);
+    EXPECT_FALSE(r.valid);
+    EXPECT_EQ(r.reason, NoReadingReason::TooFewValidPixels);
+    EXPECT_DOUBLE_EQ(r.valid_fraction, 0.05);
+}
+
+TEST(NearestObject, NothingInRange)
+{
+    cv::Mat depth(100, 100, CV_32FC1, cv::Scalar(25.0));   // all beyond max_depth_m
+    depth.at<float>(0, 0) = 2.0f;                          // in range, but one pixel only
+    NearestObjectFinder finder;
+    const Reading r = finder.find(depth, wholeImage(), 0, 0);
+    EXPECT_FALSE(r.valid);
+    EXPECT_EQ(r.reason, NoReadingReason::NothingInRange);
+    EXPECT_DOUBLE_EQ(r.valid_fraction, 1.0);
+    EXPECT_DOUBLE_EQ(r.in_range_fraction, 1e-4);
+}
+
+TEST(NearestObject, OnlyTheRegionCounts)
+{
+    cv::Mat depth(100, 100, CV_32FC1, cv::Scalar(0.0));
+    depth(cv::Rect(25, 25, 50, 50)).setTo(4.0);   // the default region, full
+    depth.at<float>(0, 0) = 0.5f;                 // outside it
+    NearestObjectFinder finder;
+    NearestSettings s = wholeImage();
+    s.roi = RegionOfInterest{};
+    const Reading r = finder.find(depth, s, 0, 0);
+    ASSERT_TRUE(r.valid);
+    EXPECT_FLOAT_EQ(static_cast<float>(r.distance_m), 4.0f);
+    EXPECT_EQ(r.region_pixels, 2500u);
+}
+
+TEST(NearestObject, ValidatesSettings)
+{
+    EXPECT_NO_THROW(validateNearestSettings(NearestSettings{}));
+    NearestSettings s;
+    s.roi.width = 0.0;
+    EXPECT_THROW(validateNearestSettings(s), std::invalid_argument);
+    s = NearestSettings{};
+    s.roi.x = 0.8;   // 0.8 + 0.5 > 1
+    EXPECT_THROW(validateNearestSettings(s), std::invalid_argument);
+    s = NearestSettings{};
+    s.max_depth_m = s.min_depth_m;
+    EXPECT_THROW(validateNearestSettings(s), std::invalid_argument);
+    s = NearestSettings{};
+    s.percentile = 101.0;
+    EXPECT_THROW(validateNearestSettings(s), std::invalid_argument);
+    s = NearestSettings{};
+    s.min_pixels = 0;
+    try {
+        validateNearestSettings(s);
+        FAIL();
+    } catch (const std::invalid_argument& e) {
+        EXPECT_EQ(std::string(e.what()), "nearest.min_pixels: must be >= 1, got 0");
+    }
+}
+
+} // namespace
+} // namespace stereod

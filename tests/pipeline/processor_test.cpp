@@ -1,0 +1,394 @@
+// The processor chain on a real pair (Middlebury tsukuba): disparity range, bad frames,
+// buffer reuse, depth and cloud geometry, live settings.
+
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "pipeline/matcher.hpp"
+#include "pipeline/stereo_processor.hpp"
+
+namespace stereod {
+namespace {
+
+const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba/";
+
+RectifiedGeometry geometry(double focal_px, double baseline_m, double doffs_px)
+{
+    RectifiedGeometry g;
+    g.image_size = {640, 480};
+    g.focal_px = focal_px;
+    g.baseline_m = baseline_m;
+    g.doffs_px = doffs_px;
+    return g;
+}
+
+DisparityRange rangeFor(double min_depth_m, const RectifiedGeometry& g, int cap = 256)
+{
+    MatcherSettings s;
+    s.min_depth_m = min_depth_m;
+    s.max_num_disparities = cap;
+    return chooseDisparityRange(s, g);
+}
+
+TEST(DisparityRange, DerivedFromTheClosestDepth)
+{
+    // f*B = 84 px*m: 0.5 m is 168 px; disparities 0..168 need 169, rounded up to 176.
+    const RectifiedGeometry g = geometry(700.0, 0.12, 0.0);
+    const DisparityRange r = rangeFor(0.5, g);
+    EXPECT_EQ(r.min_disparity, 0);
+    EXPECT_EQ(r.num_disparities, 176);
+    EXPECT_FALSE(r.capped);
+    EXPECT_NEAR(r.closest_depth_m, 84.0 / 175.0, 1e-12);
+    EXPECT_LE(r.closest_depth_m, 0.5);
+}
+
+TEST(DisparityRange, ExactMultipleBoundaries)
+{
+    const RectifiedGeometry g = geometry(100.0, 0.1, 0.0);   // f*B = 10
+    EXPECT_EQ(rangeFor(10.0 / 15.0, g).num_disparities, 16);   // d_max 15: 0..15
+    EXPECT_EQ(rangeFor(10.0 / 16.0, g).num_disparities, 32);   // d_max 16 needs a 17th
+    EXPECT_EQ(rangeFor(100.0, g).num_disparities, 16);          // far: never below 16
+}
+
+TEST(DisparityRange, SubtractsDoffs)
+{
+    // Middlebury 2006 full size: f*B = 598.4, doffs 270; 1.15 m is 250.3 px.
+    const DisparityRange r = rangeFor(1.15, geometry(3740.0, 0.16, 270.0));
+    EXPECT_EQ(r.num_disparities, 256);
+    EXPECT_FALSE(r.capped);
+    EXPECT_NEAR(r.closest_depth_m, 598.4 / (255.0 + 270.0), 1e-12);
+}
+
+TEST(DisparityRange, CappedAtMaxNumDisparities)
+{
+    const RectifiedGeometry g = geometry(700.0, 0.12, 0.0);
+    const DisparityRange r = rangeFor(0.1, g, 128);   // wants 841 disparities
+    EXPECT_EQ(r.num_disparities, 128);
+    EXPECT_TRUE(r.capped);
+    EXPECT_NEAR(r.closest_depth_m, 84.0 / 127.0, 1e-12);
+    EXPECT_GT(r.closest_depth_m, 0.1);
+}
+
+TEST(DisparityRange, FixedNumberAndMinDisparity)
+{
+    MatcherSettings s;
+    s.num_disparities = 64;
+    s.min_disparity = 8;
+    const DisparityRange r = chooseDisparityRange(s, geometry(700.0, 0.12, 0.0));
+    EXPECT_EQ(r.num_disparities, 64);
+    EXPECT_EQ(r.min_disparity, 8);
+    EXPECT_FALSE(r.capped);
+    EXPECT_NEAR(r.closest_depth_m, 84.0 / 71.0, 1e-12);
+}
+
+TEST(MatcherSettings, RejectsWhatOpenCvCannotRun)
+{
+    const auto message = [](const MatcherSettings& s) -> std::string {
+        try {
+            validateMatcherSettings(s);
+        } catch (const std::invalid_argument& e) {
+            return e.what();
+        }
+        return "";
+    };
+    EXPECT_EQ(message(MatcherSettings{}), "");
+    MatcherSettings s;
+    s.block_size = 4;
+    EXPECT_EQ(message(s), "matcher.block_size: must be odd, got 4");
+    s = MatcherSettings{};
+    s.kind = MatcherKind::Bm;
+    s.block_size = 3;
+    EXPECT_EQ(message(s), "matcher.block_size: must be within 5..255, got 3");
+    s = MatcherSettings{};
+    s.block_size = 33;
+    EXPECT_EQ(message(s), "matcher.block_size: must be within 1..31, got 33");
+    s = MatcherSettings{};
+    s.num_disparities = 20;
+    EXPECT_EQ(message(s), "matcher.num_disparities: must be 0 (derived from min_depth_m) or a "
+                          "positive multiple of 16, got 20");
+    s = MatcherSettings{};
+    s.p1 = 900;   // p2 defaults to 800
+    EXPECT_EQ(message(s), "matcher.p2: must be greater than p1 (800 <= 900)");
+    s = MatcherSettings{};
+    s.min_depth_m = 0.0;
+    EXPECT_NE(message(s).find("matcher.min_depth_m"), std::string::npos);
+    s = MatcherSettings{};
+    s.pre_filter_cap = 0;
+    EXPECT_EQ(message(s), "matcher.pre_filter_cap: must be within 1..63, got 0");
+}
+
+class Processor : public ::testing::Test {
+protected:
+    void SetUp() override
+    {
+        left_colour_ = cv::imread(kTsukuba + "im3.png", cv::IMREAD_COLOR);
+        right_colour_ = cv::imread(kTsukuba + "im4.png", cv::IMREAD_COLOR);
+        ASSERT_FALSE(left_colour_.empty() || right_colour_.empty()) << kTsukuba;
+        cv::cvtColor(left_colour_, left_, cv::COLOR_BGR2GRAY);
+        cv::cvtColor(right_colour_, right_, cv::COLOR_BGR2GRAY);
+        // f*B = 10 px*m with doffs 5: tsukuba's disparities 5..15 are 0.5 .. 1 m.
+        calibration_ = makeRectifiedCalibration(left_.size(), 100.0, 0.1, std::nullopt,
+                                                std::nullopt, 5.0);
+        settings_.matcher.min_depth_m = 0.7;     // 14.3 - 5: 16 disparities
+        settings_.nearest.min_depth_m = 0.1;
+        settings_.nearest.max_depth_m = 5.0;
+    }
+
+    cv::Mat left_colour_, right_colour_, left_, right_;
+    StereoCalibration calibration_;
+    ProcessorSettings settings_;
+};
+
+TEST_F(Processor, ProducesAReadingWithStampAndTimings)
+{
+    StereoProcessor p(calibration_, settings_);
+    EXPECT_EQ(p.disparityRange().num_disparities, 16);
+    EXPECT_EQ(p.matcherName(), "sgbm");
+    DepthResult out;
+    p.process(left_, right_, 1000, 3, out);
+    ASSERT_TRUE(out.reading.valid) << reasonText(out.reading.reason);
+    EXPECT_EQ(out.reading.stamp_ns, 1000);
+    EXPECT_EQ(out.reading.frame, 3u);
+    EXPECT_EQ(out.stamp_ns, 1000);
+    EXPECT_EQ(out.frame, 3u);
+    // The central region of tsukuba holds the lamp and the head, 8..14 px: 0.53..0.77 m.
+    EXPECT_GT(out.reading.distance_m, 0.5);
+    EXPECT_LT(out.reading.distance_m, 0.8);
+    EXPECT_GT(out.timings.match_ms, 0.0);
+    EXPECT_GE(out.timings.totalMs(), out.timings.match_ms);
+}
+
+TEST_F(Processor, LeftColumnsThatCannotBeMatchedAreInvalid)
+{
+    StereoProcessor p(calibration_, settings_);
+    DepthResult out;
+    p.process(left_, right_, 0, 0, out);
+    for (int y = 0; y < out.disparity.rows; ++y)
+        for (int x = 0; x < 15; ++x) {
+            ASSERT_TRUE(std::isinf(out.disparity.at<float>(y, x))) << x << "," << y;
+            ASSERT_EQ(out.depth_m.at<float>(y, x), 0.0f);
+        }
+}
+
+TEST_F(Processor, DepthAndCloudFollowTheGeometry)
+{
+    StereoProcessor p(calibration_, settings_);
+    DepthResult out;
+    p.process(left_, right_, 0, 0, out);
+    const RectifiedGeometry& g = calibration_.rectified;
+    size_t valid = 0;
+    for (int v = 0; v < out.depth_m.rows; ++v)
+        for (int u = 0; u < out.depth_m.cols; ++u) {
+            const float d = out.disparity.at<float>(v, u);
+            const float z = out.depth_m.at<float>(v, u);
+            if (std::isfinite(d)) {
+                ASSERT_NEAR(z, 10.0 / (d + 5.0), 1e-6) << u << "," << v;
+                ++valid;
+            } else {
+                ASSERT_EQ(z, 0.0f);
+            }
+        }
+    ASSERT_EQ(out.cloud.size(), valid);
+    // Every point projects back to a pixel with that depth and that grey level.
+    for (size_t i = 0; i < out.cloud.size(); i += 997) {
+        const CloudPoint& pt = out.cloud[i];
+        const double u = pt.x * g.focal_px / pt.z + g.cx_px;
+        const double v = pt.y * g.focal_px / pt.z + g.cy_px;
+        const int ui = static_cast<int>(std::lround(u));
+        const int vi = static_cast<int>(std::lround(v));
+        ASSERT_NEAR(u, ui, 1e-3);
+        ASSERT_NEAR(v, vi, 1e-3);
+        EXPECT_EQ(pt.z, out.depth_m.at<float>(vi, ui));
+        EXPECT_EQ(pt.intensity, static_cast<float>(out.left_rectified.at<uint8_t>(vi, ui)));
+    }
+}
+
+TEST_F(Processor, NoReallocationAcrossFrames)
+{
+    StereoProcessor p(calibration_, settings_);
+    DepthResult out;
+    p.process(left_, right_, 0, 0, out);
+    const uint8_t* left_data = out.left_rectified.data;
+    const uint8_t* disparity_data = out.disparity.data;
+    const uint8_t* depth_data = out.depth_m.data;
+    const CloudPoint* cloud_data = out.cloud.data();
+    const size_t cloud_capacity = out.cloud.capacity();
+    EXPECT_GE(cloud_capacity, left_.total());
+    // Another pair (flipped, so that the content differs) of the same size.
+    cv::Mat left2, right2;
+    cv::flip(right_, left2, 1);
+    cv::flip(left_, right2, 1);
+    p.process(left2, right2, 1, 1, out);
+    EXPECT_EQ(out.left_rectified.data, left_data);
+    EXPECT_EQ(out.disparity.data, disparity_data);
+    EXPECT_EQ(out.depth_m.data, depth_data);
+    EXPECT_EQ(out.cloud.data(), cloud_data);
+    EXPECT_EQ(out.cloud.capacity(), cloud_capacity);
+}
+
+TEST_F(Processor, BadFramesGiveAReasonNotAnException)
+{
+    StereoProcessor p(calibration_, settings_);
+    DepthResult out;
+    p.process(left_, right_, 0, 0, out);
+    ASSERT_TRUE(out.reading.valid);
+    ASSERT_FALSE(out.cloud.empty());
+
+    const auto expectBad = [&](const cv::Mat& l, const cv::Mat& r, const char* what) {
+        p.process(l, r, 77, 5, out);
+        EXPECT_FALSE(out.reading.valid) << what;
+        EXPECT_EQ(out.reading.reason, NoReadingReason::BadFrame) << what;
+        EXPECT_EQ(out.reading.stamp_ns, 77) << what;
+        EXPECT_EQ(out.reading.frame, 5u) << what;
+        // Nothing of the previous good frame is left to pass for this one.
+        EXPECT_TRUE(out.cloud.empty()) << what;
+        EXPECT_EQ(cv::countNonZero(out.depth_m), 0) << what;
+    };
+    expectBad(left_, right_(cv::Rect(0, 0, right_.cols - 1, right_.rows)).clone(), "size mismatch");
+    expectBad(left_(cv::Rect(0, 0, 200, 200)).clone(), right_(cv::Rect(0, 0, 200, 200)).clone(),
+              "both the wrong size");
+    expectBad(cv::Mat(), right_, "empty left");
+    expectBad(left_, cv::Mat(), "empty right");
+    cv::Mat left16;
+    left_.convertTo(left16, CV_16U, 256.0);
+    expectBad(left16, right_, "16-bit");
+    cv::Mat two_channel(left_.size(), CV_8UC2, cv::Scalar(1, 2));
+    expectBad(two_channel, right_, "2 channels");
+
+    // And the next good pair is processed as usual.
+    p.process(left_, right_, 78, 6, out);
+    EXPECT_TRUE(out.reading.valid);
+}
+
+TEST_F(Processor, ColourInputIsConvertedToGrey)
+{
+    StereoProcessor p(calibration_, settings_);
+    DepthResult grey, colour;
+    p.process(left_, right_, 0, 0, grey);
+    p.process(left_colour_, right_colour_, 0, 0, colour);
+    EXPECT_EQ(cv::norm(grey.left_rectified, colour.left_rectified, cv::NORM_INF), 0.0);
+    cv::Mat same;
+    cv::compare(grey.disparity, colour.disparity, same, cv::CMP_EQ);
+    EXPECT_EQ(cv::countNonZero(same), static_cast<int>(grey.disparity.total()));
+}
+
+TEST_F(Processor, CloudSkippedWhenNotWanted)
+{
+    settings_.compute_cloud = false;
+    StereoProcessor p(calibration_, settings_);
+    DepthResult out;
+    p.process(left_, right_, 0, 0, out);
+    EXPECT_TRUE(out.reading.valid);
+    EXPECT_TRUE(out.cloud.empty());
+    EXPECT_EQ(out.timings.cloud_ms < 1.0, true);
+}
+
+TEST_F(Processor, UpdateSettingsAppliesLiveAndRejectsInvalid)
+{
+    StereoProcessor p(calibration_, settings_);
+    ProcessorSettings bad = settings_;
+    bad.matcher.block_size = 6;
+    EXPECT_THROW(p.updateSettings(bad), std::invalid_argument);
+    EXPECT_EQ(p.settings().matcher.block_size, settings_.matcher.block_size);
+    EXPECT_EQ(p.matcherName(), "sgbm");
+
+    bad = settings_;
+    bad.nearest.percentile = -1.0;
+    EXPECT_THROW(p.updateSettings(bad), std::invalid_argument);
+    EXPECT_EQ(p.settings().nearest.percentile, settings_.nearest.percentile);
+
+    ProcessorSettings bm = settings_;
+    bm.matcher.kind = MatcherKind::Bm;
+    bm.matcher.block_size = 9;
+    bm.matcher.min_depth_m = 0.45;   // 22.2 - 5: 32 disparities
+    p.updateSettings(bm);
+    EXPECT_EQ(p.matcherName(), "bm");
+    EXPECT_EQ(p.disparityRange().num_disparities, 32);
+    DepthResult out;
+    p.process(left_, right_, 0, 0, out);
+    EXPECT_TRUE(out.reading.valid) << reasonText(out.reading.reason);
+    for (int x = 0; x < 31; ++x)
+        EXPECT_TRUE(std::isinf(out.disparity.at<float>(100, x))) << x;
+
+    ProcessorSettings three_way = settings_;
+    three_way.matcher.sgbm_mode = SgbmMode::ThreeWay;
+    p.updateSettings(three_way);
+    EXPECT_EQ(p.matcherName(), "sgbm-3way");
+}
+
+// Each filter, switched off, lets more pixels through: the settings reach OpenCV.
+TEST_F(Processor, MatcherSettingsReachOpenCv)
+{
+    const auto validPixels = [&](const ProcessorSettings& s) {
+        StereoProcessor p(calibration_, s);
+        DepthResult out;
+        p.process(left_, right_, 0, 0, out);
+        return cv::countNonZero(out.depth_m);
+    };
+    ProcessorSettings bm = settings_;
+    bm.matcher.kind = MatcherKind::Bm;
+    bm.matcher.block_size = 9;
+    const int bm_valid = validPixels(bm);
+
+    ProcessorSettings no_lr = bm;
+    no_lr.matcher.lr_max_diff_px = -1;
+    EXPECT_GT(validPixels(no_lr), bm_valid);
+
+    ProcessorSettings no_speckle = bm;
+    no_speckle.matcher.speckle_window_px = 0;
+    EXPECT_GT(validPixels(no_speckle), bm_valid);
+
+    // A narrower speckle range cuts the map into more small blobs, which are removed.
+    ProcessorSettings tight_speckle = bm;
+    tight_speckle.matcher.speckle_range_px = 1;
+    EXPECT_LT(validPixels(tight_speckle), bm_valid);
+
+    ProcessorSettings textureless = bm;
+    textureless.matcher.texture_threshold = 1000000;
+    EXPECT_EQ(validPixels(textureless), 0);
+
+    const int sgbm_valid = validPixels(settings_);
+    ProcessorSettings no_uniqueness = settings_;
+    no_uniqueness.matcher.uniqueness_ratio = 0;
+    EXPECT_GT(validPixels(no_uniqueness), sgbm_valid);
+}
+
+TEST_F(Processor, RejectsARangeWiderThanTheImage)
+{
+    settings_.matcher.num_disparities = 400;   // tsukuba is 384 px wide
+    settings_.matcher.max_num_disparities = 512;
+    EXPECT_THROW(StereoProcessor(calibration_, settings_), std::invalid_argument);
+}
+
+TEST_F(Processor, RejectsAnInvalidCalibration)
+{
+    StereoCalibration broken = calibration_;
+    broken.rectified.baseline_m = -0.1;
+    EXPECT_THROW(StereoProcessor(broken, settings_), CalibrationError);
+}
+
+TEST(FixedPoint, ConvertsSixteenthsAndMarksInvalid)
+{
+    DisparityRange range;
+    range.min_disparity = 0;
+    range.num_disparities = 16;
+    cv::Mat fixed(1, 20, CV_16SC1, cv::Scalar(-16));   // OpenCV's "invalid" for min 0
+    fixed.at<int16_t>(0, 16) = 16 * 12 + 8;            // 12.5 px
+    fixed.at<int16_t>(0, 17) = 0;                      // 0 px is a valid disparity
+    fixed.at<int16_t>(0, 5) = 16 * 3;                  // inside the unmatched columns
+    cv::Mat d;
+    fixedPointToPixels(fixed, range, d);
+    ASSERT_EQ(d.type(), CV_32FC1);
+    EXPECT_EQ(d.at<float>(0, 16), 12.5f);
+    EXPECT_EQ(d.at<float>(0, 17), 0.0f);
+    EXPECT_TRUE(std::isinf(d.at<float>(0, 5)));
+    EXPECT_TRUE(std::isinf(d.at<float>(0, 18)));
+}
+
+} // namespace
+} // namespace stereod
