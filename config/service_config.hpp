@@ -2,6 +2,8 @@
 // The service configuration (YAML). Every value is validated with its unit and range;
 // an error names the key and the file:line. Format and defaults: docs/configuration.md
 // and config/examples/.
+//
+// The functions below are reentrant: they share nothing but an immutable table of keys.
 
 #include <cstdint>
 #include <optional>
@@ -13,7 +15,8 @@
 
 namespace stereod {
 
-// Every problem found in a configuration, each one "FILE:LINE: key: problem".
+// Every problem found in a configuration, each one "FILE:LINE: key: problem". what()
+// holds all of them, one per line, ready to print. Immutable, so thread-safe.
 class ConfigError : public std::runtime_error {
 public:
     explicit ConfigError(std::vector<std::string> problems);
@@ -75,10 +78,33 @@ struct ServiceConfig {
 // Built-in defaults (what `stereod` runs without --config).
 ServiceConfig defaultConfig();
 
-// Reads and validates a file. Throws ConfigError with every problem found.
+// Reads and validates a file. Throws ConfigError with every problem found. Relative
+// paths in the file (source.replay.path, calibration, socket.path) resolve against the
+// file's directory.
 ServiceConfig loadConfig(const std::string& path);
 
-// The same for YAML text; `origin` names it in messages.
+// The command-line overrides of `stereod` (--replay, --calib, --socket, --log-level);
+// an empty string leaves the value alone. Relative paths resolve against the working
+// directory.
+struct ConfigOverrides {
+    std::string replay_path;
+    std::string calibration_path;
+    std::string socket_path;
+    std::string log_level;
+};
+
+// Reads a file, applies the overrides, then validates the result, so that a file whose
+// replay path does not exist on this machine still runs with --replay. Problems with an
+// overridden value name the option ("command line (--replay): source.replay.path: ...").
+// Use the same overrides on `reload`, or they show up as changes.
+ServiceConfig loadConfig(const std::string& path, const ConfigOverrides& overrides);
+
+// Applies the overrides to a configuration assembled in code (e.g. defaultConfig());
+// validateConfig() checks the result.
+void applyOverrides(ServiceConfig& config, const ConfigOverrides& overrides);
+
+// Reads and validates YAML text like loadConfig(); `origin` names it in messages.
+// Without a file, relative paths stay relative to the working directory.
 ServiceConfig parseConfig(const std::string& yaml_text, const std::string& origin);
 
 // Checks a configuration assembled in code (defaults plus command-line overrides).
@@ -86,12 +112,20 @@ ServiceConfig parseConfig(const std::string& yaml_text, const std::string& origi
 void validateConfig(const ServiceConfig& config);
 
 // Which settings differ between two configurations and whether all of them can change
-// while running ("processing.nearest.roi", ...). Those that need a restart are listed
-// in `restart_needed`.
+// while running, as the dotted keys of the file ("nearest.roi.x", ...). Those that need
+// a restart (source.*, calibration, socket.*) are also listed in `restart_needed`.
 struct ConfigChange {
     std::vector<std::string> changed;
     std::vector<std::string> restart_needed;
 };
 ConfigChange diffConfig(const ServiceConfig& running, const ServiceConfig& proposed);
+
+// Every key of the file format, as a dotted path in the order of the reference config
+// (config/examples/stereod.yaml), and whether it can change while running.
+struct ConfigKeyInfo {
+    std::string path;
+    bool live = false;
+};
+std::vector<ConfigKeyInfo> configKeys();
 
 } // namespace stereod
