@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <thread>
 #include <utility>
 
 namespace stereod {
@@ -50,6 +51,15 @@ public:
     {
         bool dropped_one = false;
         while (!tryEnqueue(item)) {
+            // Drop only when the ring really holds `capacity` items. Otherwise the
+            // consumer has claimed the oldest item and is still moving it out of the very
+            // slot this push needs: dropping would not free that slot, it would throw away
+            // newer items (all of them, were the consumer preempted mid-move).
+            const std::size_t head = head_.load(std::memory_order_relaxed);
+            if (head - tail_.load(std::memory_order_acquire) < capacity_) {
+                std::this_thread::yield();
+                continue;
+            }
             if (std::optional<T> oldest = tryDequeue()) {
                 dropped_.fetch_add(1, std::memory_order_relaxed);
                 dropped_one = true;

@@ -1,0 +1,434 @@
+#include "replay/replay_source.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+#include <system_error>
+#include <utility>
+
+#include <unistd.h>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <spdlog/spdlog.h>
+
+namespace stereod {
+
+namespace {
+
+constexpr int kLeft = 0;
+constexpr int kRight = 1;
+constexpr const char* kSideName[2] = {"left", "right"};
+constexpr int64_t kForever = std::numeric_limits<int64_t>::max();
+
+std::string errnoText(int code)
+{
+    return std::error_code(code, std::generic_category()).message();
+}
+
+std::string sizeText(cv::Size size)
+{
+    return std::to_string(size.width) + "x" + std::to_string(size.height);
+}
+
+// Decodes one image as 8-bit grayscale into `out` (imread allocates the buffer). On
+// failure says why, with the errno for a file that cannot be opened (ENOENT when
+// missing) and EINVAL for one that is no readable image.
+bool decodeImage(const std::string& path, cv::Mat& out, std::string& reason, int& code)
+{
+    // Checked first because imread would print its own warning for every attempt, every
+    // loop, where the replay says it once per file. access() allocates nothing.
+    if (::access(path.c_str(), R_OK) != 0) {
+        code = errno;
+        reason = code == ENOENT ? "missing" : "cannot be read: " + errnoText(code);
+        out.release();
+        return false;
+    }
+    try {
+        out = cv::imread(path, cv::IMREAD_GRAYSCALE);
+    } catch (const cv::Exception& e) {
+        out.release();
+        reason = std::string("cannot decode: ") + e.what();
+        code = EINVAL;
+        return false;
+    }
+    if (out.empty()) {
+        reason = "not a readable image (corrupt, truncated or of an unknown format)";
+        code = EINVAL;
+        return false;
+    }
+    return true;
+}
+
+} // namespace
+
+ReplaySource::ReplaySource(ReplayOptions options) : options_(std::move(options))
+{
+    try {
+        recording_ = openRecording(options_.path, options_.fps);
+    } catch (const RecordingError& e) {
+        open_error_ = -e.code();
+        fail(e.what());
+        return;
+    }
+    for (const std::string& problem : recording_.problems)
+        spdlog::warn("replay: {} (row skipped)", problem);
+    if (recording_.bad_rows > recording_.problems.size())
+        spdlog::warn("replay: {}: {} more malformed rows skipped", recording_.dir,
+                     recording_.bad_rows - recording_.problems.size());
+
+    warned_.assign(recording_.entries.size() * 2, 0);
+
+    // The first readable pair fixes the frame size (and so the pool).
+    std::string first_problem;
+    int first_code = 0;
+    for (std::size_t i = 0; i < recording_.entries.size(); ++i) {
+        BadPair bad;
+        if (decodePair(i, bad)) {
+            frame_size_ = left_image_.size();
+            break;
+        }
+        if (first_problem.empty()) {
+            first_problem = bad.path + ": " + bad.reason;
+            first_code = bad.code;
+        }
+    }
+    if (frame_size_.empty()) {
+        open_error_ = -(first_code != 0 ? first_code : ENOENT);
+        fail(recording_.dir + ": none of its " + std::to_string(recording_.entries.size()) +
+             " pairs is readable (first: " + first_problem + ")");
+        return;
+    }
+    pool_ = std::make_unique<FramePool>(2 * std::max<std::size_t>(options_.pool_pairs, 1),
+                                        frame_size_);
+    spdlog::info("replay: {}: {} pairs of {}{}, {}{}", recording_.dir,
+                 recording_.entries.size(), sizeText(frame_size_),
+                 recording_.has_index ? "" : " (plain folder)",
+                 options_.pacing == ReplayOptions::Pacing::Paced ? "paced" : "lockstep",
+                 options_.loop ? ", looping" : "");
+}
+
+ReplaySource::~ReplaySource()
+{
+    stop();
+    if (pool_ && pool_->inUse() > 0) {
+        // Frames still out (a ring not drained): freeing the pool would leave them
+        // pointing into freed memory. Leaking it is the lesser evil; say so loudly.
+        spdlog::error("replay: {}: destroyed with {} frames still in use; their pool is "
+                      "leaked (drain the ring before destroying the source)",
+                      recording_.dir, pool_->inUse());
+        static_cast<void>(pool_.release());
+    }
+}
+
+int ReplaySource::start(PairRing& ring)
+{
+    if (thread_.joinable()) {
+        if (state_.load(std::memory_order_acquire) == SourceState::Running)
+            return -EBUSY;
+        thread_.join();   // a replay that finished or failed on its own
+    }
+    if (open_error_ != 0) {
+        state_.store(SourceState::Failed, std::memory_order_release);
+        return open_error_;
+    }
+    {
+        std::lock_guard<std::mutex> lock(status_mutex_);
+        last_error_.clear();
+    }
+    ring_ = &ring;
+    stop_requested_.store(false, std::memory_order_release);
+    recent_count_ = 0;
+    state_.store(SourceState::Running, std::memory_order_release);
+    try {
+        thread_ = std::thread(&ReplaySource::run, this);
+    } catch (const std::system_error& e) {
+        ring_ = nullptr;
+        fail(recording_.dir + ": cannot start the replay thread: " + e.what());
+        return -(e.code().value() != 0 ? e.code().value() : EAGAIN);
+    }
+    return 0;
+}
+
+void ReplaySource::stop() noexcept
+{
+    {
+        std::lock_guard<std::mutex> lock(wake_mutex_);
+        stop_requested_.store(true, std::memory_order_release);
+    }
+    wake_cv_.notify_all();
+    // A lockstep producer may sit in pushWait() on a full ring: only stopping the ring
+    // releases it.
+    if (ring_ != nullptr && options_.pacing == ReplayOptions::Pacing::Lockstep)
+        ring_->stop();
+    if (thread_.joinable())
+        thread_.join();
+    ring_ = nullptr;
+    SourceState running = SourceState::Running;
+    state_.compare_exchange_strong(running, SourceState::Stopped, std::memory_order_acq_rel);
+}
+
+bool ReplaySource::decodePair(std::size_t i, BadPair& bad)
+{
+    const RecordingEntry& entry = recording_.entries[i];
+    if (!decodeImage(entry.left_path, left_image_, bad.reason, bad.code)) {
+        bad.side = kLeft;
+        bad.path = entry.left_path;
+        return false;
+    }
+    if (!decodeImage(entry.right_path, right_image_, bad.reason, bad.code)) {
+        bad.side = kRight;
+        bad.path = entry.right_path;
+        return false;
+    }
+    if (right_image_.size() != left_image_.size()) {
+        bad.side = kRight;
+        bad.path = entry.right_path;
+        bad.reason = "is " + sizeText(right_image_.size()) + ", its left image is " +
+                     sizeText(left_image_.size());
+        bad.code = EINVAL;
+        return false;
+    }
+    if (!frame_size_.empty() && left_image_.size() != frame_size_) {
+        bad.side = kLeft;
+        bad.path = entry.left_path;
+        bad.reason = "is " + sizeText(left_image_.size()) + ", the replay is " +
+                     sizeText(frame_size_) + " (its first readable pair)";
+        bad.code = EINVAL;
+        return false;
+    }
+    return true;
+}
+
+void ReplaySource::reportBadPair(std::size_t i, const BadPair& bad)
+{
+    bad_frames_[bad.side].fetch_add(1, std::memory_order_relaxed);
+    uint8_t& warned = warned_[2 * i + static_cast<std::size_t>(bad.side)];
+    if (warned != 0)
+        return;
+    warned = 1;
+    spdlog::warn("replay: {}: {} (pair {} skipped; said once per file)", bad.path, bad.reason,
+                 recording_.entries[i].index);
+    std::lock_guard<std::mutex> lock(status_mutex_);
+    camera_error_[bad.side] = bad.path + ": " + bad.reason;
+}
+
+FrameHandle ReplaySource::acquireFrame(bool wait)
+{
+    for (;;) {
+        FrameHandle frame = pool_->acquire();
+        if (frame || !wait)
+            return frame;
+        // Lockstep with every buffer held downstream (pool_pairs smaller than the ring
+        // plus what the consumer keeps): poll until one comes back; the pool has no
+        // wake-up of its own.
+        if (!sleepUntil(monotonicNowNs() + 1'000'000))
+            return FrameHandle();
+    }
+}
+
+bool ReplaySource::sleepUntil(int64_t deadline_ns)
+{
+    // Waits are cut into pieces of at most an hour, so a recording with absurd stamp
+    // gaps cannot overflow the clock arithmetic.
+    constexpr int64_t kMaxPieceNs = int64_t{3600} * 1'000'000'000;
+    std::unique_lock<std::mutex> lock(wake_mutex_);
+    for (;;) {
+        if (stop_requested_.load(std::memory_order_acquire))
+            return false;
+        if (deadline_ns == kForever) {
+            wake_cv_.wait(lock);
+            continue;
+        }
+        const int64_t now_ns = monotonicNowNs();
+        if (now_ns >= deadline_ns)
+            return true;
+        wake_cv_.wait_for(lock, std::chrono::nanoseconds(std::min(deadline_ns - now_ns, kMaxPieceNs)));
+    }
+}
+
+void ReplaySource::recordDelivery(int64_t stamp_ns, int64_t skew_ns) noexcept
+{
+    recent_stamps_ns_[recent_count_ % recent_stamps_ns_.size()] = stamp_ns;
+    ++recent_count_;
+    const std::size_t span = std::min(recent_count_, recent_stamps_ns_.size());
+    if (span >= 2) {
+        const int64_t oldest_ns =
+            recent_stamps_ns_[(recent_count_ - span) % recent_stamps_ns_.size()];
+        if (stamp_ns > oldest_ns)
+            fps_.store(static_cast<double>(span - 1) * 1e9 /
+                           static_cast<double>(stamp_ns - oldest_ns),
+                       std::memory_order_relaxed);
+    }
+
+    // Single writer: plain load/store suffice for the running sums.
+    const int64_t skew_abs_ns = std::abs(skew_ns);
+    const uint64_t pairs = pairs_.load(std::memory_order_relaxed);
+    recent_skew_abs_ns_[pairs % kSkewWindow].store(skew_abs_ns, std::memory_order_relaxed);
+    skew_abs_sum_ns_.store(skew_abs_sum_ns_.load(std::memory_order_relaxed) + skew_abs_ns,
+                           std::memory_order_relaxed);
+    if (skew_abs_ns > skew_abs_max_ns_.load(std::memory_order_relaxed))
+        skew_abs_max_ns_.store(skew_abs_ns, std::memory_order_relaxed);
+    frames_[kLeft].fetch_add(1, std::memory_order_relaxed);
+    frames_[kRight].fetch_add(1, std::memory_order_relaxed);
+    pairs_.fetch_add(1, std::memory_order_release);
+}
+
+void ReplaySource::fail(const std::string& message)
+{
+    {
+        std::lock_guard<std::mutex> lock(status_mutex_);
+        last_error_ = message;
+    }
+    state_.store(SourceState::Failed, std::memory_order_release);
+}
+
+void ReplaySource::run() noexcept
+{
+    const std::vector<RecordingEntry>& entries = recording_.entries;
+    const std::size_t count = entries.size();
+    const bool paced = options_.pacing == ReplayOptions::Pacing::Paced;
+    const int64_t first_ns = entries.front().left_stamp_ns;
+    const int64_t span_ns = std::max<int64_t>(entries.back().left_stamp_ns - first_ns, 0);
+    // One frame period: the mean recorded spacing, or the nominal rate for a single pair.
+    const int64_t period_ns =
+        (count > 1 && span_ns > 0)
+            ? span_ns / static_cast<int64_t>(count - 1)
+            : std::llround(1e9 / (options_.fps > 0.0 ? options_.fps : 10.0));
+    // A loop goes on one period after the last pair, as the recording would have.
+    const int64_t loop_ns = span_ns + period_ns;
+
+    int64_t base_ns = monotonicNowNs();   // when the first pair of this pass is due
+    for (;;) {
+        const uint64_t pass = next_pass_++;
+        uint64_t delivered = 0;
+        for (std::size_t i = 0; i < count; ++i) {
+            if (stop_requested_.load(std::memory_order_acquire))
+                return;
+            BadPair bad;
+            if (!decodePair(i, bad)) {
+                reportBadPair(i, bad);
+                continue;
+            }
+            const RecordingEntry& entry = entries[i];
+
+            // Frames from the pool: lock-free; lockstep waits for a free one instead of
+            // dropping the pair.
+            StereoPair pair;
+            pair.left = acquireFrame(!paced);
+            if (pair.left)
+                pair.right = acquireFrame(!paced);
+            if (!pair.right) {
+                if (stop_requested_.load(std::memory_order_acquire))
+                    return;
+                dropped_.fetch_add(1, std::memory_order_relaxed);   // as a camera would
+                continue;
+            }
+            // Same size and type: copyTo() writes into the pooled buffers, no allocation.
+            left_image_.copyTo(pair.left->image);
+            right_image_.copyTo(pair.right->image);
+            const uint64_t number = pass * count + i;
+            pair.index = number;
+            pair.left->sequence = number;
+            pair.right->sequence = number;
+            pair.left->source_stamp_ns = entry.left_stamp_ns;
+            pair.right->source_stamp_ns = entry.right_stamp_ns;
+            const int64_t skew_ns = entry.right_stamp_ns - entry.left_stamp_ns;
+
+            if (paced) {
+                // The pacing sleep is the only lock this thread takes on its way, and it
+                // is the stop() wake-up mutex, never shared with the consumer.
+                const int64_t due_ns = base_ns + (entry.left_stamp_ns - first_ns);
+                if (!sleepUntil(due_ns))
+                    return;
+                // Fell behind (decoding slower than the recorded rate): shift the schedule
+                // rather than burst to catch up, as a camera would.
+                const int64_t late_ns = monotonicNowNs() - due_ns;
+                if (late_ns > period_ns)
+                    base_ns += late_ns;
+            }
+
+            // Delivery: stamps, then the ring. From here to the counters: atomics only.
+            const int64_t now_ns = monotonicNowNs();
+            pair.left->stamp_ns = now_ns;
+            pair.right->stamp_ns = now_ns + skew_ns;
+            if (paced) {
+                ring_->push(std::move(pair));   // drop-oldest; the ring counts the drop
+            } else if (!ring_->pushWait(std::move(pair))) {
+                // The ring was stopped under us: the consumer is gone. Nothing more can
+                // be delivered; wait for stop().
+                sleepUntil(kForever);
+                return;
+            }
+            recordDelivery(now_ns, skew_ns);
+            ++delivered;
+        }
+
+        if (delivered == 0) {
+            fail(recording_.dir + ": no pair of the " + std::to_string(count) +
+                 " could be read in a whole pass (files removed or damaged?)");
+            spdlog::error("replay: {}: no pair readable in a whole pass; replay stopped",
+                          recording_.dir);
+            return;
+        }
+        if (!options_.loop) {
+            state_.store(SourceState::Finished, std::memory_order_release);
+            spdlog::info("replay: {}: finished after {} pairs", recording_.dir,
+                         pairs_.load(std::memory_order_relaxed));
+            return;
+        }
+        base_ns += loop_ns;
+    }
+}
+
+SourceStatus ReplaySource::status() const
+{
+    SourceStatus out;
+    out.kind = "replay";
+    out.state = state_.load(std::memory_order_acquire);
+    out.pairs = pairs_.load(std::memory_order_acquire);
+    std::string camera_error[2];
+    {
+        std::lock_guard<std::mutex> lock(status_mutex_);
+        out.last_error = last_error_;
+        camera_error[kLeft] = camera_error_[kLeft];
+        camera_error[kRight] = camera_error_[kRight];
+    }
+    const double fps = out.state == SourceState::Running ? fps_.load(std::memory_order_relaxed)
+                                                         : 0.0;
+    for (int side : {kLeft, kRight}) {
+        CameraStatus camera;
+        camera.name = kSideName[side];
+        camera.state = out.state;
+        camera.last_error = std::move(camera_error[side]);
+        camera.fps = fps;
+        camera.frames = frames_[side].load(std::memory_order_relaxed);
+        camera.dropped = dropped_.load(std::memory_order_relaxed);
+        camera.bad_frames = bad_frames_[side].load(std::memory_order_relaxed);
+        out.cameras.push_back(std::move(camera));
+    }
+
+    if (out.pairs > 0) {
+        out.skew_mean_ms = static_cast<double>(skew_abs_sum_ns_.load(std::memory_order_relaxed)) /
+                           static_cast<double>(out.pairs) / 1e6;
+        out.skew_max_ms =
+            static_cast<double>(skew_abs_max_ns_.load(std::memory_order_relaxed)) / 1e6;
+        const std::size_t window =
+            static_cast<std::size_t>(std::min<uint64_t>(out.pairs, kSkewWindow));
+        std::vector<int64_t> recent(window);
+        for (std::size_t k = 0; k < window; ++k)
+            recent[k] = recent_skew_abs_ns_[k].load(std::memory_order_relaxed);
+        // p99 of the recent pairs: the value below which 99 % of them lie.
+        const std::size_t rank =
+            std::min(window - 1, static_cast<std::size_t>(std::ceil(0.99 * static_cast<double>(window))) - 1);
+        std::nth_element(recent.begin(), recent.begin() + static_cast<std::ptrdiff_t>(rank),
+                         recent.end());
+        out.skew_p99_ms = static_cast<double>(recent[rank]) / 1e6;
+    }
+    return out;
+}
+
+} // namespace stereod

@@ -1,0 +1,167 @@
+#pragma once
+// The replay of a recording (replay/recording.hpp) behind the same FrameSource interface
+// as the cameras.
+//
+// Two pacings:
+//  - paced: pairs are delivered at their recorded time spacing, like live cameras
+//    (drop-oldest push into the ring; a slow worker loses pairs, as it would live);
+//  - lockstep: as fast as the worker takes them, waiting for room in the ring and for
+//    free buffers; nothing is dropped, so a run is repeatable (tests, offline runs).
+//
+// Every delivered frame is stamped on CLOCK_MONOTONIC at delivery (Frame::stamp_ns); the
+// recorded stamp is kept in Frame::source_stamp_ns, and the right frame's stamp keeps the
+// recorded right-minus-left skew. Pair index and frame sequence numbers are
+// `pass * pairCount() + position in the recording`: they increase across loops, and a
+// skipped pair leaves a gap, as a dropped camera frame would.
+//
+// Bad input is never fatal: a missing or corrupt image, or one whose size differs from
+// the first readable pair's, makes the pair skipped, counted (bad_frames of its side) and
+// logged once per file. Only a recording with no readable pair at all fails start().
+//
+// Frames come from a FramePool sized from the first readable pair and allocated in the
+// constructor; decoding (cv::imread) allocates a temporary image per frame, which
+// OpenCV 4.6 cannot decode into a given buffer; nothing else is allocated per frame.
+//
+// Thread-safety: as FrameSource: start()/stop() from one controlling thread, status()
+// and the const getters from any thread. One replay thread delivers the pairs; on its
+// path into the ring it takes no lock.
+//
+// Lifetime: the frames live in this source's pool, so every pair it delivered must be
+// gone (popped and released, or the ring destroyed) before the source is destroyed. The
+// safe order: stop(), drain or destroy the ring, destroy the source. (A source destroyed
+// with frames still out leaks its pool, with an error in the log, rather than free it
+// under them.)
+
+#include <array>
+#include <atomic>
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "capture/frame_pool.hpp"
+#include "capture/frame_source.hpp"
+#include "replay/recording.hpp"
+
+namespace stereod {
+
+struct ReplayOptions {
+    enum class Pacing {
+        Paced,      // at the recorded time spacing
+        Lockstep,   // as fast as the consumer takes pairs; nothing dropped
+    };
+
+    std::string path;             // a recording directory or a folder of left*/right*
+    Pacing pacing = Pacing::Paced;
+    bool loop = true;             // start over at the end instead of finishing
+    double fps = 10.0;            // nominal rate of a plain folder (no frames.csv)
+    // Pairs that can be in flight at once (filled by the source, queued in the ring,
+    // held by the worker). At least ring capacity + 2, or paced replay drops pairs for
+    // want of buffers (lockstep waits for them instead).
+    std::size_t pool_pairs = 8;
+};
+
+class ReplaySource final : public FrameSource {
+public:
+    // Reads the recording's index and decodes pairs up to the first readable one to learn
+    // the frame size; allocates the pool. Never throws for a bad recording: the source is
+    // then in state Failed, status().last_error says why and start() returns the error.
+    explicit ReplaySource(ReplayOptions options);
+    ~ReplaySource() override;
+
+    ReplaySource(const ReplaySource&) = delete;
+    ReplaySource& operator=(const ReplaySource&) = delete;
+
+    // Starts the replay thread at the first pair. Returns 0; -ENOENT / -EINVAL (and the
+    // reason in status().last_error, naming the path) when nothing is readable; -EBUSY
+    // when already running.
+    int start(PairRing& ring) override;
+
+    // Stops and joins the replay thread, promptly even in the middle of a long paced
+    // gap. In lockstep mode it also stops `ring` (a producer blocked in pushWait() only
+    // wakes that way): the owner calls ring.restart() before using the ring again.
+    void stop() noexcept override;
+
+    SourceStatus status() const override;
+
+    // Size of the first readable pair; empty when nothing is readable.
+    cv::Size frameSize() const override { return frame_size_; }
+
+    // The recording's calibration.yaml, or empty when it has none (the service uses it
+    // when no calibration is given).
+    const std::string& calibrationPath() const noexcept { return recording_.calibration_path; }
+    // Pairs listed in the recording (readable or not).
+    std::size_t pairCount() const noexcept { return recording_.entries.size(); }
+    const ReplayOptions& options() const noexcept { return options_; }
+
+private:
+    // Why a pair was skipped, for the count and the once-per-file warning.
+    struct BadPair {
+        int side = 0;                // 0 left, 1 right
+        std::string path;            // the file at fault
+        std::string reason;
+        int code = 0;                // errno: ENOENT missing, EINVAL undecodable or wrong size
+    };
+
+    void run() noexcept;
+    // Decodes entry `i` into left_image_/right_image_. False (and `bad` filled) when the
+    // pair cannot be used.
+    bool decodePair(std::size_t i, BadPair& bad);
+    void reportBadPair(std::size_t i, const BadPair& bad);
+    // Takes a free frame; with `wait` (lockstep) waits for one, and gives an empty handle
+    // only when stopping.
+    FrameHandle acquireFrame(bool wait);
+    // Sleeps until CLOCK_MONOTONIC reaches `deadline_ns` or stop() is called; false when
+    // stopping.
+    bool sleepUntil(int64_t deadline_ns);
+    void recordDelivery(int64_t stamp_ns, int64_t skew_ns) noexcept;
+    // Records a fatal problem for status() and enters state Failed.
+    void fail(const std::string& message);
+
+    const ReplayOptions options_;
+    Recording recording_;
+    cv::Size frame_size_;
+    int open_error_ = 0;                       // negative errno when nothing is readable
+    std::unique_ptr<FramePool> pool_;
+
+    // Replay thread only (the controlling thread touches them only while it is not running).
+    std::vector<uint8_t> warned_;              // per entry and side: already logged
+    cv::Mat left_image_;                       // last decoded images (imread's buffers)
+    cv::Mat right_image_;
+    uint64_t next_pass_ = 0;                   // loops continue the numbering after a restart
+    std::array<int64_t, 32> recent_stamps_ns_{};   // delivery times, for the measured fps
+    std::size_t recent_count_ = 0;
+
+    PairRing* ring_ = nullptr;                 // borrowed between start() and stop()
+    std::thread thread_;
+
+    // stop() sets stop_requested_ under wake_mutex_ and notifies wake_cv_, so the replay
+    // thread's timed waits end at once. Only those waits (the pacing between pairs, the
+    // lockstep wait for a free buffer) take this mutex; the ring path (acquire, copy,
+    // stamp, push) takes none.
+    std::mutex wake_mutex_;
+    std::condition_variable wake_cv_;
+    std::atomic<bool> stop_requested_{false};
+
+    // Status: counters are atomics written by the replay thread; strings are guarded by
+    // status_mutex_ and written only on the (rare) error paths.
+    std::atomic<SourceState> state_{SourceState::Stopped};
+    std::atomic<uint64_t> pairs_{0};
+    std::atomic<uint64_t> frames_[2]{};
+    std::atomic<uint64_t> bad_frames_[2]{};
+    std::atomic<uint64_t> dropped_{0};          // pairs skipped for want of pool buffers
+    std::atomic<double> fps_{0.0};
+    std::atomic<int64_t> skew_abs_sum_ns_{0};
+    std::atomic<int64_t> skew_abs_max_ns_{0};
+    static constexpr std::size_t kSkewWindow = 128;   // recent pairs for the p99 skew
+    std::array<std::atomic<int64_t>, kSkewWindow> recent_skew_abs_ns_{};
+    mutable std::mutex status_mutex_;
+    std::string last_error_;                   // guarded by status_mutex_
+    std::string camera_error_[2];              // guarded by status_mutex_
+};
+
+} // namespace stereod

@@ -1,0 +1,503 @@
+// The replay source on recordings made at test time: order, stamps, loops, pacing, bad
+// files, failure to start, and stopping (CI runs these under ThreadSanitizer).
+
+#include <cerrno>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+#include <spdlog/sinks/ringbuffer_sink.h>
+#include <spdlog/spdlog.h>
+
+#include "replay/replay_source.hpp"
+#include "tests/ctl/process.hpp"
+#include "tests/replay/replay_test_support.hpp"
+
+namespace stereod {
+namespace {
+
+namespace fs = std::filesystem;
+using test::TempDir;   // tests/ctl/process.hpp
+using test::TestPair;
+
+constexpr int64_t kMs = 1'000'000;
+
+ReplayOptions lockstep(const std::string& path, bool loop = false)
+{
+    ReplayOptions options;
+    options.path = path;
+    options.pacing = ReplayOptions::Pacing::Lockstep;
+    options.loop = loop;
+    // Tests keep every pair they pop; the pool must cover that (a worker keeps one).
+    options.pool_pairs = 16;
+    return options;
+}
+
+// Waits (politely) until the source reaches `state`; false after a generous limit, which
+// only a hung source reaches.
+bool waitForState(const ReplaySource& source, SourceState state)
+{
+    for (int i = 0; i < 20'000; ++i) {
+        if (source.status().state == state)
+            return true;
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    return false;
+}
+
+std::vector<StereoPair> popPairs(PairRing& ring, std::size_t count)
+{
+    std::vector<StereoPair> pairs;
+    for (std::size_t k = 0; k < count; ++k) {
+        std::optional<StereoPair> pair = ring.pop();
+        if (!pair)
+            break;
+        pairs.push_back(std::move(*pair));
+    }
+    return pairs;
+}
+
+bool haveOpenCvSamples()
+{
+    return fs::exists(std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/left01.jpg");
+}
+
+// Checks one delivered pair against the recorded pair it came from.
+void expectPairMatches(const StereoPair& pair, const TestPair& recorded, uint64_t index)
+{
+    ASSERT_TRUE(pair.left);
+    ASSERT_TRUE(pair.right);
+    EXPECT_EQ(pair.index, index);
+    EXPECT_EQ(pair.left->sequence, index);
+    EXPECT_EQ(pair.right->sequence, index);
+    EXPECT_EQ(pair.left->source_stamp_ns, recorded.left_stamp_ns);
+    EXPECT_EQ(pair.right->source_stamp_ns, recorded.right_stamp_ns);
+    EXPECT_EQ(pair.skewNs(), recorded.right_stamp_ns - recorded.left_stamp_ns);
+    EXPECT_TRUE(test::samePixels(pair.left->image, recorded.left)) << "left of pair " << index;
+    EXPECT_TRUE(test::samePixels(pair.right->image, recorded.right)) << "right of pair " << index;
+}
+
+// A source and its ring, torn down in the safe order whatever a test does: stop the
+// source, drain the ring, then free the source (and with it the frames' pool).
+struct Rig {
+    Rig(ReplayOptions options, std::size_t ring_capacity)
+        : source(std::move(options)), ring(ring_capacity) {}
+    ~Rig()
+    {
+        source.stop();
+        while (ring.tryPop()) {
+        }
+    }
+    ReplaySource source;
+    PairRing ring;
+};
+
+class ReplaySourceTest : public ::testing::Test {
+protected:
+    // A recording of `count` Tsukuba pairs, 40 ms apart, with the test skews.
+    std::string makeRecording(int count, int64_t spacing_ns = 40 * kMs)
+    {
+        pairs_ = test::tsukubaPairs(count);
+        test::stampPairs(pairs_, 7'000'000'000, spacing_ns);
+        const std::string dir = tmp_.file("rec");
+        test::writeRecording(dir, pairs_);
+        return dir;
+    }
+
+    TempDir tmp_;
+    std::vector<TestPair> pairs_;
+};
+
+TEST_F(ReplaySourceTest, LockstepDeliversEveryPairInOrderThenFinishes)
+{
+    const std::string dir = makeRecording(6);
+    Rig rig(lockstep(dir), 2);   // smaller than the recording: the source must wait, not drop
+    ReplaySource& source = rig.source;
+    PairRing& ring = rig.ring;
+    EXPECT_EQ(source.frameSize(), cv::Size(96, 72));
+    EXPECT_EQ(source.pairCount(), 6u);
+    EXPECT_TRUE(source.calibrationPath().empty());
+
+    const int64_t started_ns = monotonicNowNs();
+    ASSERT_EQ(source.start(ring), 0);
+    std::vector<StereoPair> got = popPairs(ring, 6);
+    ASSERT_EQ(got.size(), 6u);
+    int64_t previous_ns = started_ns;
+    for (std::size_t k = 0; k < got.size(); ++k) {
+        expectPairMatches(got[k], pairs_[k], k);
+        EXPECT_GE(got[k].stampNs(), previous_ns);   // delivery times, CLOCK_MONOTONIC
+        previous_ns = got[k].stampNs();
+    }
+    EXPECT_LE(previous_ns, monotonicNowNs());
+
+    ASSERT_TRUE(waitForState(source, SourceState::Finished));
+    EXPECT_FALSE(ring.tryPop().has_value());
+    EXPECT_EQ(ring.dropped(), 0u);
+    const SourceStatus status = source.status();
+    EXPECT_EQ(status.kind, "replay");
+    EXPECT_EQ(status.pairs, 6u);
+    EXPECT_TRUE(status.last_error.empty());
+    ASSERT_EQ(status.cameras.size(), 2u);
+    EXPECT_EQ(status.cameras[0].name, "left");
+    EXPECT_EQ(status.cameras[1].name, "right");
+    for (const CameraStatus& camera : status.cameras) {
+        EXPECT_EQ(camera.state, SourceState::Finished);
+        EXPECT_EQ(camera.frames, 6u);
+        EXPECT_EQ(camera.bad_frames, 0u);
+        EXPECT_EQ(camera.dropped, 0u);
+    }
+    // |skew| of the six recorded pairs: 150, 300, 450, 150, 300, 450 us.
+    EXPECT_NEAR(status.skew_mean_ms, 0.3, 1e-9);
+    EXPECT_NEAR(status.skew_max_ms, 0.45, 1e-9);
+    EXPECT_NEAR(status.skew_p99_ms, 0.45, 1e-9);
+
+    got.clear();
+    source.stop();
+    EXPECT_EQ(source.status().state, SourceState::Finished);
+}
+
+TEST_F(ReplaySourceTest, LockstepWaitsForBuffersHeldDownstreamInsteadOfDropping)
+{
+    const std::string dir = makeRecording(8);
+    ReplayOptions options = lockstep(dir);
+    options.pool_pairs = 2;   // fewer than the ring holds plus what the consumer keeps
+    Rig rig(options, 4);
+    ReplaySource& source = rig.source;
+    PairRing& ring = rig.ring;
+    ASSERT_EQ(source.start(ring), 0);
+
+    // The consumer keeps the pair it took last, as a worker keeps its current pair.
+    std::vector<StereoPair> held;
+    for (uint64_t k = 0; k < 8; ++k) {
+        std::optional<StereoPair> pair = ring.pop();
+        ASSERT_TRUE(pair.has_value());
+        expectPairMatches(*pair, pairs_[k], k);
+        held.push_back(std::move(*pair));
+        if (held.size() > 1)
+            held.erase(held.begin());
+    }
+    ASSERT_TRUE(waitForState(source, SourceState::Finished));
+    EXPECT_EQ(source.status().cameras[0].dropped, 0u);
+    EXPECT_EQ(ring.dropped(), 0u);
+}
+
+TEST_F(ReplaySourceTest, LoopWrapsAroundWithIncreasingIndices)
+{
+    const std::string dir = makeRecording(3);
+    Rig rig(lockstep(dir, /*loop=*/true), 2);
+    ReplaySource& source = rig.source;
+    PairRing& ring = rig.ring;
+    ASSERT_EQ(source.start(ring), 0);
+    std::vector<StereoPair> got = popPairs(ring, 8);
+    ASSERT_EQ(got.size(), 8u);
+    for (std::size_t k = 0; k < got.size(); ++k) {
+        expectPairMatches(got[k], pairs_[k % 3], k);
+        if (k > 0) {
+            EXPECT_GE(got[k].stampNs(), got[k - 1].stampNs());
+            EXPECT_GT(got[k].left->sequence, got[k - 1].left->sequence);
+        }
+    }
+    EXPECT_EQ(source.status().state, SourceState::Running);
+    EXPECT_EQ(source.start(ring), -EBUSY);
+    got.clear();
+    source.stop();
+    EXPECT_EQ(source.status().state, SourceState::Stopped);
+
+    // Started again, it replays from the first pair and the numbering goes on.
+    while (ring.tryPop()) {
+    }
+    ring.restart();
+    ASSERT_EQ(source.start(ring), 0);
+    std::optional<StereoPair> next = ring.pop();
+    ASSERT_TRUE(next.has_value());
+    EXPECT_GT(next->index, 7u);
+    EXPECT_EQ(next->index % 3, 0u);
+    EXPECT_EQ(next->left->source_stamp_ns, pairs_[0].left_stamp_ns);
+}
+
+TEST_F(ReplaySourceTest, PacedDeliveryKeepsTheRecordedSpacing)
+{
+    const int64_t spacing_ns = 30 * kMs;
+    const std::string dir = makeRecording(5, spacing_ns);
+    ReplayOptions options;
+    options.path = dir;
+    options.pacing = ReplayOptions::Pacing::Paced;
+    options.loop = false;
+    options.pool_pairs = 10;
+    Rig rig(options, 8);
+    ReplaySource& source = rig.source;
+    PairRing& ring = rig.ring;
+
+    const int64_t started_ns = monotonicNowNs();
+    ASSERT_EQ(source.start(ring), 0);
+    std::vector<StereoPair> got = popPairs(ring, 5);
+    ASSERT_EQ(got.size(), 5u);
+    for (std::size_t k = 0; k < got.size(); ++k) {
+        expectPairMatches(got[k], pairs_[k], k);
+        // Never earlier than its recorded offset from the start (no upper bound: a busy
+        // machine may deliver late).
+        const int64_t recorded_offset_ns = pairs_[k].left_stamp_ns - pairs_[0].left_stamp_ns;
+        EXPECT_GE(got[k].stampNs() - started_ns, recorded_offset_ns) << "pair " << k;
+        if (k > 0) {
+            EXPECT_GT(got[k].stampNs(), got[k - 1].stampNs());
+        }
+    }
+    ASSERT_TRUE(waitForState(source, SourceState::Finished));
+    EXPECT_EQ(ring.dropped(), 0u);
+}
+
+TEST_F(ReplaySourceTest, PacedReplayDropsPairsWhenEveryBufferIsHeld)
+{
+    const std::string dir = makeRecording(4, 1 * kMs);
+    ReplayOptions options;
+    options.path = dir;
+    options.pacing = ReplayOptions::Pacing::Paced;
+    options.loop = false;
+    options.pool_pairs = 1;   // the first pair, unconsumed in the ring, holds both buffers
+    Rig rig(options, 4);
+    ReplaySource& source = rig.source;
+    PairRing& ring = rig.ring;
+    ASSERT_EQ(source.start(ring), 0);
+    ASSERT_TRUE(waitForState(source, SourceState::Finished));
+
+    const SourceStatus status = source.status();
+    EXPECT_EQ(status.pairs, 1u);
+    EXPECT_EQ(status.cameras[0].dropped, 3u);
+    std::optional<StereoPair> only = ring.tryPop();
+    ASSERT_TRUE(only.has_value());
+    expectPairMatches(*only, pairs_[0], 0);
+    EXPECT_FALSE(ring.tryPop().has_value());
+}
+
+TEST_F(ReplaySourceTest, StopDuringALongPacedGapReturnsAtOnce)
+{
+    // Two pairs an hour apart: stop() must cut the wait short, not sit it out.
+    pairs_ = test::tsukubaPairs(2);
+    test::stampPairs(pairs_, 0, int64_t{3600} * 1'000'000'000);
+    test::writeRecording(tmp_.file("rec"), pairs_);
+    ReplayOptions options;
+    options.path = tmp_.file("rec");
+    options.pacing = ReplayOptions::Pacing::Paced;
+    Rig rig(options, 2);
+    ReplaySource& source = rig.source;
+    PairRing& ring = rig.ring;
+    ASSERT_EQ(source.start(ring), 0);
+    std::optional<StereoPair> first = ring.pop();
+    ASSERT_TRUE(first.has_value());
+    expectPairMatches(*first, pairs_[0], 0);
+
+    source.stop();
+    EXPECT_EQ(source.status().state, SourceState::Stopped);
+    EXPECT_EQ(source.status().pairs, 1u);
+    EXPECT_FALSE(ring.tryPop().has_value());
+    EXPECT_FALSE(ring.stopped());   // paced: the ring is left as it was
+}
+
+TEST_F(ReplaySourceTest, StopReleasesALockstepReplayWaitingOnAFullRing)
+{
+    const std::string dir = makeRecording(3);
+    Rig rig(lockstep(dir, /*loop=*/true), 2);
+    ReplaySource& source = rig.source;
+    PairRing& ring = rig.ring;
+    ASSERT_EQ(source.start(ring), 0);
+    // Nobody consumes: the ring fills and the source blocks in pushWait().
+    for (int i = 0; i < 20'000 && ring.size() < 2; ++i)
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    ASSERT_EQ(ring.size(), 2u);
+
+    source.stop();
+    EXPECT_EQ(source.status().state, SourceState::Stopped);
+    EXPECT_TRUE(ring.stopped());
+    EXPECT_EQ(ring.dropped(), 0u);
+    std::vector<StereoPair> left_over = popPairs(ring, 4);
+    EXPECT_EQ(left_over.size(), 2u);
+}
+
+TEST_F(ReplaySourceTest, PlainFolderReplaysAtTheNominalRate)
+{
+    pairs_ = test::tsukubaPairs(5);
+    for (std::size_t k = 0; k < pairs_.size(); ++k) {
+        const std::string n = "_" + std::to_string(k) + ".png";
+        ASSERT_TRUE(cv::imwrite(tmp_.file("left" + n), pairs_[k].left));
+        ASSERT_TRUE(cv::imwrite(tmp_.file("right" + n), pairs_[k].right));
+        pairs_[k].left_stamp_ns = static_cast<int64_t>(k) * 40 * kMs;   // 25 fps
+        pairs_[k].right_stamp_ns = pairs_[k].left_stamp_ns;
+    }
+    ReplayOptions options = lockstep(tmp_.path());
+    options.fps = 25.0;
+    Rig rig(options, 2);
+    ReplaySource& source = rig.source;
+    PairRing& ring = rig.ring;
+    ASSERT_EQ(source.start(ring), 0);
+    std::vector<StereoPair> got = popPairs(ring, 5);
+    ASSERT_EQ(got.size(), 5u);
+    for (std::size_t k = 0; k < got.size(); ++k)
+        expectPairMatches(got[k], pairs_[k], k);
+    ASSERT_TRUE(waitForState(source, SourceState::Finished));
+}
+
+TEST_F(ReplaySourceTest, ChessboardSamplePairsReplayFromAFolderOfLinks)
+{
+    const std::string samples = STEREOD_OPENCV_SAMPLES_DIR;
+    if (!haveOpenCvSamples())
+        GTEST_SKIP() << "opencv-doc sample data not installed in " << samples;
+    // Links, not copies, to the 13 real 640x480 pairs.
+    std::vector<std::string> names;
+    for (int n = 1; n <= 14; ++n) {
+        if (n == 10)
+            continue;
+        const std::string number = (n < 10 ? "0" : "") + std::to_string(n) + ".jpg";
+        for (const char* side : {"left", "right"})
+            fs::create_symlink(samples + "/" + side + number, tmp_.file(side + number));
+        names.push_back(number);
+    }
+    Rig rig(lockstep(tmp_.path()), 4);
+    ReplaySource& source = rig.source;
+    PairRing& ring = rig.ring;
+    EXPECT_EQ(source.frameSize(), cv::Size(640, 480));
+    ASSERT_EQ(source.start(ring), 0);
+    std::vector<StereoPair> got = popPairs(ring, names.size());
+    ASSERT_EQ(got.size(), names.size());
+    for (std::size_t k = 0; k < got.size(); ++k) {
+        EXPECT_EQ(got[k].index, k);
+        const cv::Mat left = cv::imread(samples + "/left" + names[k], cv::IMREAD_GRAYSCALE);
+        EXPECT_TRUE(test::samePixels(got[k].left->image, left)) << "left" << names[k];
+    }
+    ASSERT_TRUE(waitForState(source, SourceState::Finished));
+    EXPECT_EQ(source.status().cameras[0].bad_frames, 0u);
+}
+
+TEST_F(ReplaySourceTest, OpenCvSampleFolderSkipsPairsOfAnotherSize)
+{
+    // The sample folder as it is: left.jpg/right.jpg (612x459) come first by name and fix
+    // the frame size, so the 13 chessboard pairs (640x480) are skipped as bad frames.
+    const std::string samples = STEREOD_OPENCV_SAMPLES_DIR;
+    if (!haveOpenCvSamples())
+        GTEST_SKIP() << "opencv-doc sample data not installed in " << samples;
+    Rig rig(lockstep(samples), 4);
+    ReplaySource& source = rig.source;
+    PairRing& ring = rig.ring;
+    EXPECT_EQ(source.frameSize(), cv::Size(612, 459));
+    ASSERT_EQ(source.start(ring), 0);
+    ASSERT_TRUE(waitForState(source, SourceState::Finished));
+    const SourceStatus status = source.status();
+    EXPECT_EQ(status.pairs, 1u);
+    EXPECT_EQ(status.cameras[0].bad_frames, 13u);
+    EXPECT_NE(status.cameras[0].last_error.find("640x480"), std::string::npos)
+        << status.cameras[0].last_error;
+    EXPECT_EQ(popPairs(ring, 1).size(), 1u);
+    source.stop();
+}
+
+TEST_F(ReplaySourceTest, BadFilesAreSkippedCountedAndLoggedOncePerFile)
+{
+    const std::string dir = makeRecording(7);
+    test::writeGarbage(dir + "/left/000002.png");                 // corrupt
+    fs::remove(dir + "/right/000004.png");                        // missing
+    const std::vector<TestPair> big = test::tsukubaPairs(1, cv::Size(120, 90));
+    cv::imwrite(dir + "/left/000005.png", big[0].left);          // another size
+    cv::imwrite(dir + "/right/000005.png", big[0].right);
+
+    // Capture the warnings.
+    auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(256);
+    auto previous = spdlog::default_logger();
+    spdlog::set_default_logger(std::make_shared<spdlog::logger>("replay-test", sink));
+
+    Rig rig(lockstep(dir, /*loop=*/true), 2);
+    ReplaySource& source = rig.source;
+    PairRing& ring = rig.ring;
+    ASSERT_EQ(source.start(ring), 0);
+    // Two whole passes (4 good pairs each) and the first pair of the third.
+    const uint64_t good[] = {0, 1, 3, 6};
+    std::vector<StereoPair> got = popPairs(ring, 9);
+    ASSERT_EQ(got.size(), 9u);
+    for (std::size_t k = 0; k < got.size(); ++k) {
+        const uint64_t position = good[k % 4];
+        expectPairMatches(got[k], pairs_[position], (k / 4) * 7 + position);
+    }
+    got.clear();
+    source.stop();
+    spdlog::set_default_logger(previous);
+
+    const SourceStatus status = source.status();
+    // Two whole passes saw every bad file once each; the third, running ahead of the
+    // consumer into the ring, may have met them once more before stop().
+    EXPECT_GE(status.cameras[0].bad_frames, 4u);   // 000002 corrupt, 000005 wrong size
+    EXPECT_LE(status.cameras[0].bad_frames, 6u);
+    EXPECT_GE(status.cameras[1].bad_frames, 2u);   // 000004 missing
+    EXPECT_LE(status.cameras[1].bad_frames, 3u);
+    EXPECT_EQ(status.cameras[0].dropped, 0u);
+    EXPECT_FALSE(status.cameras[1].last_error.empty());
+
+    int corrupt = 0;
+    int missing = 0;
+    int resized = 0;
+    for (const std::string& line : sink->last_formatted()) {
+        corrupt += line.find("left/000002.png") != std::string::npos ? 1 : 0;
+        missing += line.find("right/000004.png") != std::string::npos ? 1 : 0;
+        resized += line.find("left/000005.png") != std::string::npos ? 1 : 0;
+    }
+    EXPECT_EQ(corrupt, 1);
+    EXPECT_EQ(missing, 1);
+    EXPECT_EQ(resized, 1);
+}
+
+TEST_F(ReplaySourceTest, NothingReadableFailsStartNamingThePath)
+{
+    const std::string dir = makeRecording(3);
+    for (const char* name : {"000000.png", "000001.png", "000002.png"})
+        test::writeGarbage(dir + "/left/" + name);
+    Rig rig(lockstep(dir), 2);
+    ReplaySource& source = rig.source;
+    PairRing& ring = rig.ring;
+    EXPECT_TRUE(source.frameSize().empty());
+    EXPECT_EQ(source.start(ring), -EINVAL);
+    const SourceStatus status = source.status();
+    EXPECT_EQ(status.state, SourceState::Failed);
+    EXPECT_NE(status.last_error.find(dir), std::string::npos) << status.last_error;
+    EXPECT_NE(status.last_error.find("000000.png"), std::string::npos) << status.last_error;
+    EXPECT_NE(status.last_error.find("not a readable image"), std::string::npos)
+        << status.last_error;
+    source.stop();
+}
+
+TEST_F(ReplaySourceTest, MissingImagesOrPathFailStartWithENOENT)
+{
+    const std::string dir = makeRecording(2);
+    fs::remove_all(dir + "/right");
+    PairRing ring(2);
+    ReplaySource no_images(lockstep(dir));
+    EXPECT_EQ(no_images.start(ring), -ENOENT);
+    EXPECT_NE(no_images.status().last_error.find("missing"), std::string::npos)
+        << no_images.status().last_error;
+
+    const std::string nowhere = tmp_.file("no-such-recording");
+    ReplaySource no_path(lockstep(nowhere));
+    EXPECT_EQ(no_path.start(ring), -ENOENT);
+    EXPECT_EQ(no_path.status().state, SourceState::Failed);
+    EXPECT_NE(no_path.status().last_error.find(nowhere), std::string::npos)
+        << no_path.status().last_error;
+}
+
+TEST_F(ReplaySourceTest, RecordingCalibrationIsExposed)
+{
+    pairs_ = test::tsukubaPairs(1);
+    const std::string calibration = tmp_.file("rig.yaml");
+    {
+        std::ofstream out(calibration);
+        out << "%YAML:1.0\n";
+    }
+    test::writeRecording(tmp_.file("rec"), pairs_, calibration);
+    ReplaySource source(lockstep(tmp_.file("rec")));
+    EXPECT_EQ(source.calibrationPath(), tmp_.file("rec/calibration.yaml"));
+}
+
+} // namespace
+} // namespace stereod

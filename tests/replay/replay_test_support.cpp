@@ -1,0 +1,79 @@
+#include "tests/replay/replay_test_support.hpp"
+
+#include <fstream>
+#include <random>
+
+#include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "replay/recording.hpp"
+
+namespace stereod::test {
+
+std::vector<TestPair> tsukubaPairs(int count, cv::Size size)
+{
+    const std::string dir = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba/";
+    const cv::Mat left = cv::imread(dir + "im3.png", cv::IMREAD_GRAYSCALE);
+    const cv::Mat right = cv::imread(dir + "im4.png", cv::IMREAD_GRAYSCALE);
+    EXPECT_FALSE(left.empty()) << dir << "im3.png missing";
+    EXPECT_FALSE(right.empty()) << dir << "im4.png missing";
+    EXPECT_LE(count, 16);
+    std::vector<TestPair> pairs;
+    if (left.empty() || right.empty())
+        return pairs;
+    for (int k = 0; k < count; ++k) {
+        const cv::Rect roi(12 * k, 6 * k, size.width, size.height);
+        TestPair pair;
+        pair.left = left(roi).clone();
+        pair.right = right(roi).clone();
+        pairs.push_back(std::move(pair));
+    }
+    return pairs;
+}
+
+int64_t testSkewNs(int k)
+{
+    return (k % 2 == 0 ? 1 : -1) * int64_t{150'000} * (k % 3 + 1);
+}
+
+void stampPairs(std::vector<TestPair>& pairs, int64_t first_ns, int64_t spacing_ns)
+{
+    for (std::size_t k = 0; k < pairs.size(); ++k) {
+        pairs[k].left_stamp_ns = first_ns + static_cast<int64_t>(k) * spacing_ns;
+        pairs[k].right_stamp_ns = pairs[k].left_stamp_ns + testSkewNs(static_cast<int>(k));
+    }
+}
+
+void writeRecording(const std::string& dir, const std::vector<TestPair>& pairs,
+                    const std::string& calibration_path)
+{
+    RecordingWriter writer(dir, calibration_path);
+    for (const TestPair& pair : pairs)
+        writer.write(pair.left, pair.right, pair.left_stamp_ns, pair.right_stamp_ns);
+}
+
+bool samePixels(const cv::Mat& a, const cv::Mat& b)
+{
+    return a.size() == b.size() && a.type() == b.type() && cv::norm(a, b, cv::NORM_INF) == 0.0;
+}
+
+void writeGarbage(const std::string& path, std::size_t bytes)
+{
+    std::mt19937 rng(1234);
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    for (std::size_t i = 0; i < bytes; ++i)
+        out.put(static_cast<char>(rng() & 0xFF));
+}
+
+} // namespace stereod::test
+
+#if defined(__SANITIZE_THREAD__)
+// OpenCV's image codecs register GDAL on first use, and GDAL takes two of its own mutexes
+// in both orders while doing so, on one thread: ThreadSanitizer reports a potential
+// deadlock inside libgdal that has nothing to do with the code under test.
+extern "C" const char* __tsan_default_suppressions()
+{
+    return "deadlock:libgdal.so\n";
+}
+#endif
