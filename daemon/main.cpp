@@ -1,0 +1,114 @@
+// stereod: the stereo depth service. Command line and exit codes: docs/service.md.
+
+#include <cstdio>
+#include <exception>
+#include <iostream>
+#include <string>
+
+#include <CLI/CLI.hpp>
+#include <signal.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include "config/service_config.hpp"
+#include "daemon/service.hpp"
+
+namespace {
+
+using stereod::ExitCode;
+
+int exitCode(ExitCode code)
+{
+    return static_cast<int>(code);
+}
+
+// `stereod --check-config FILE`: every problem on its own line, file:line first.
+int checkConfig(const std::string& path)
+{
+    try {
+        stereod::loadConfig(path);
+    } catch (const stereod::ConfigError& e) {
+        for (const std::string& problem : e.problems())
+            std::cerr << problem << '\n';
+        return exitCode(ExitCode::InvalidConfig);
+    } catch (const std::exception& e) {
+        std::cerr << path << ": " << e.what() << '\n';
+        return exitCode(ExitCode::InvalidConfig);
+    }
+    std::cout << path << ": valid\n";
+    return exitCode(ExitCode::Ok);
+}
+
+void setUpLogging()
+{
+    auto logger = spdlog::stderr_color_mt("stereod");
+    // Under systemd the journal stamps every line itself.
+    if (std::getenv("JOURNAL_STREAM") != nullptr)
+        logger->set_pattern("[%l] %v");
+    else
+        logger->set_pattern("%Y-%m-%d %H:%M:%S.%e [%l] %v");
+    spdlog::set_default_logger(logger);
+}
+
+} // namespace
+
+int main(int argc, char** argv)
+{
+    // Before any thread exists, so that every thread inherits the mask: these signals
+    // are taken from a signalfd in the I/O loop, never by an asynchronous handler.
+    stereod::blockServiceSignals();
+    // A client that hangs up while we write must not kill the service (sends also use
+    // MSG_NOSIGNAL; this covers every other write).
+    signal(SIGPIPE, SIG_IGN);
+
+    CLI::App app{"stereod: stereo depth service. Serves the nearest-object distance, depth "
+                 "frames and point clouds on a Unix socket (docs/protocol.md).",
+                 "stereod"};
+    stereod::LaunchRequest request;
+    std::string check_path;
+    app.set_version_flag("--version", stereod::serviceVersion());
+    auto* config_option = app.add_option("--config", request.config_path,
+                                         "configuration file (YAML); without it, built-in "
+                                         "defaults apply");
+    auto* check_option = app.add_option("--check-config", check_path,
+                                        "validate FILE, print every problem (file:line), "
+                                        "and exit: 0 valid, 3 invalid");
+    auto* replay_option = app.add_option("--replay", request.overrides.replay_path,
+                                         "replay this recording directory (or folder of "
+                                         "left*/right* images)");
+    auto* calib_option = app.add_option("--calib", request.overrides.calibration_path,
+                                        "calibration file (default: the configuration's, "
+                                        "or DIR/calibration.yaml of the replay)");
+    auto* socket_option = app.add_option("--socket", request.overrides.socket_path,
+                                         "Unix socket path (default /run/stereod/stereod.sock)");
+    auto* level_option =
+        app.add_option("--log-level", request.overrides.log_level, "log level")
+            ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}));
+    check_option->excludes(config_option, replay_option, calib_option, socket_option, level_option);
+    app.footer("Exit codes: 0 ok; 1 failure while running; 2 bad arguments; 3 invalid "
+               "configuration; 4 calibration problem; 5 source problem; 6 socket problem.");
+
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+        if (e.get_exit_code() == 0)
+            return app.exit(e); // --help, --version
+        std::cerr << "stereod: " << e.what() << " (see stereod --help)\n";
+        return exitCode(ExitCode::BadArguments);
+    }
+
+    if (!check_path.empty())
+        return checkConfig(check_path);
+
+    setUpLogging();
+    try {
+        std::unique_ptr<stereod::Service> service = stereod::launchService(request, true);
+        return exitCode(service->run());
+    } catch (const stereod::StartupError& e) {
+        spdlog::critical("{}", e.what());
+        return exitCode(e.code());
+    } catch (const std::exception& e) {
+        spdlog::critical("{}", e.what());
+        return exitCode(ExitCode::Failure);
+    }
+}

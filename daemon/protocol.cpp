@@ -1,0 +1,443 @@
+#include "daemon/protocol.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <exception>
+#include <new>
+#include <utility>
+#include <vector>
+
+#include "daemon/json_writer.hpp"
+
+namespace stereod {
+
+namespace {
+
+// Longest piece of client-supplied text quoted back in an error message.
+constexpr std::size_t kMaxQuotedBytes = 64;
+// Longest message taken from the JSON library (its "last read" part quotes the input).
+constexpr std::size_t kMaxLibraryMessageBytes = 200;
+
+std::string quoteText(std::string_view text)
+{
+    std::string out;
+    if (text.size() > kMaxQuotedBytes) {
+        out.append("\"").append(text.substr(0, kMaxQuotedBytes)).append("...\"");
+    } else {
+        out.append("\"").append(text).append("\"");
+    }
+    return out;
+}
+
+std::string joinNames(const std::vector<std::string>& names)
+{
+    std::string out;
+    for (const std::string& name : names) {
+        if (!out.empty())
+            out.append(", ");
+        out.append(name);
+    }
+    return out;
+}
+
+// nlohmann's messages start with "[json.exception.parse_error.101] "; the code means
+// nothing to a client, the rest (line, column, what was expected) does.
+std::string libraryMessage(const char* what)
+{
+    std::string_view text(what);
+    if (!text.empty() && text.front() == '[') {
+        if (const std::size_t end = text.find("] "); end != std::string_view::npos)
+            text.remove_prefix(end + 2);
+    }
+    if (text.size() > kMaxLibraryMessageBytes)
+        return std::string(text.substr(0, kMaxLibraryMessageBytes)) + "...";
+    return std::string(text);
+}
+
+ProtocolError badRequest(std::string message, const std::optional<Json>& id)
+{
+    return ProtocolError{ErrorCode::BadRequest, std::move(message), id};
+}
+
+// Reads an optional number that must be finite and > 0. Returns the problem, if any.
+std::optional<std::string> readPositive(const Json& request, const char* key,
+                                        std::optional<double>& value)
+{
+    const auto it = request.find(key);
+    if (it == request.end() || it->is_null())
+        return std::nullopt;
+    if (!it->is_number())
+        return std::string("\"") + key + "\" must be a number, not " + it->type_name();
+    const double number = it->get<double>();
+    if (!std::isfinite(number) || number <= 0.0)
+        return std::string("\"") + key + "\" must be a finite number > 0";
+    value = number;
+    return std::nullopt;
+}
+
+std::optional<SnapshotItem> snapshotItemFromName(std::string_view name)
+{
+    for (const SnapshotItem item :
+         {SnapshotItem::Depth, SnapshotItem::Disparity, SnapshotItem::Left, SnapshotItem::Cloud}) {
+        if (name == snapshotItemName(item))
+            return item;
+    }
+    return std::nullopt;
+}
+
+ParseResult parseSnapshot(const Json& request, const std::optional<Json>& id)
+{
+    SnapshotRequest snapshot;
+    const auto it = request.find("items");
+    if (it == request.end() || it->is_null()) {
+        snapshot.items = {SnapshotItem::Depth, SnapshotItem::Disparity, SnapshotItem::Left,
+                          SnapshotItem::Cloud};
+        return Request{snapshot, id};
+    }
+    if (!it->is_array())
+        return badRequest(
+            std::string("\"items\" must be an array of strings, not ") + it->type_name(), id);
+    std::size_t index = 0;
+    for (const Json& entry : *it) {
+        const std::string where = "\"items\"[" + std::to_string(index++) + "]";
+        if (!entry.is_string())
+            return badRequest(where + " must be a string, not " + entry.type_name(), id);
+        const std::string& name = entry.get_ref<const std::string&>();
+        const std::optional<SnapshotItem> item = snapshotItemFromName(name);
+        if (!item)
+            return badRequest(where + ": unknown item " + quoteText(name) +
+                                  "; known: " + joinNames(knownSnapshotItems()),
+                              id);
+        bool repeated = false;
+        for (const SnapshotItem seen : snapshot.items)
+            repeated = repeated || seen == *item;
+        if (!repeated)
+            snapshot.items.push_back(*item);
+    }
+    return Request{snapshot, id};
+}
+
+ParseResult parseSubscribe(const Json& request, const std::optional<Json>& id)
+{
+    SubscribeRequest subscribe;
+    const auto it = request.find("stream");
+    if (it == request.end() || it->is_null())
+        return badRequest("missing \"stream\" (one of: " + joinNames(knownStreams()) + ")", id);
+    if (!it->is_string())
+        return badRequest(std::string("\"stream\" must be a string, not ") + it->type_name(), id);
+    const std::string& name = it->get_ref<const std::string&>();
+    if (name == streamName(StreamKind::Readings)) {
+        subscribe.stream = StreamKind::Readings;
+    } else if (name == streamName(StreamKind::Depth)) {
+        subscribe.stream = StreamKind::Depth;
+    } else {
+        return badRequest(
+            "unknown stream " + quoteText(name) + "; known: " + joinNames(knownStreams()), id);
+    }
+    if (std::optional<std::string> problem = readPositive(request, "max_hz", subscribe.max_hz))
+        return badRequest(std::move(*problem), id);
+    return Request{subscribe, id};
+}
+
+// Copying and writing a JSON value recurse once per level: an id is echoed, so its
+// depth is bounded before it is copied (the parser itself does not recurse).
+constexpr int kMaxIdDepth = 16;
+
+bool nestedDeeperThan(const Json& value, int limit)
+{
+    std::vector<std::pair<const Json*, int>> pending{{&value, 0}};
+    while (!pending.empty()) {
+        const auto [node, depth] = pending.back();
+        pending.pop_back();
+        if (depth > limit)
+            return true;
+        if (node->is_structured()) {
+            for (const Json& child : *node)
+                pending.emplace_back(&child, depth + 1);
+        }
+    }
+    return false;
+}
+
+ParseResult parseObject(const Json& request)
+{
+    std::optional<Json> id;
+    if (const auto it = request.find("id"); it != request.end()) {
+        if (nestedDeeperThan(*it, kMaxIdDepth))
+            return badRequest("\"id\" nests deeper than " + std::to_string(kMaxIdDepth) + " levels",
+                              std::nullopt);
+        id = *it;
+    }
+
+    const auto cmd = request.find("cmd");
+    if (cmd == request.end())
+        return badRequest("missing \"cmd\" (a string naming the command)", id);
+    if (!cmd->is_string())
+        return badRequest(std::string("\"cmd\" must be a string, not ") + cmd->type_name(), id);
+    const std::string& name = cmd->get_ref<const std::string&>();
+
+    if (name == "hello")
+        return Request{HelloRequest{}, id};
+    if (name == "distance") {
+        DistanceRequest distance;
+        if (std::optional<std::string> problem =
+                readPositive(request, "max_age_ms", distance.max_age_ms))
+            return badRequest(std::move(*problem), id);
+        return Request{distance, id};
+    }
+    if (name == "status")
+        return Request{StatusRequest{}, id};
+    if (name == "snapshot")
+        return parseSnapshot(request, id);
+    if (name == "subscribe")
+        return parseSubscribe(request, id);
+    if (name == "reload")
+        return Request{ReloadRequest{}, id};
+    return ProtocolError{
+        ErrorCode::UnknownCommand,
+        "unknown command " + quoteText(name) + "; known: " + joinNames(knownCommands()), id};
+}
+
+// Writes the reason sentence into `buffer` without allocating; returns its length.
+std::size_t formatReasonMessage(const Reading& reading, char* buffer, std::size_t size)
+{
+    int written = 0;
+    switch (reading.reason) {
+    case NoReadingReason::None:
+        written = 0;
+        break;
+    case NoReadingReason::TooFewValidPixels:
+        written = std::snprintf(buffer, size, "%s: %.1f %% valid, %.1f %% needed",
+                                reasonText(reading.reason), 100.0 * reading.valid_fraction,
+                                100.0 * reading.min_valid_fraction);
+        break;
+    case NoReadingReason::NothingInRange:
+        written = std::snprintf(buffer, size, "%s: %.1f %% valid, %.1f %% in range",
+                                reasonText(reading.reason), 100.0 * reading.valid_fraction,
+                                100.0 * reading.in_range_fraction);
+        break;
+    default:
+        written = std::snprintf(buffer, size, "%s", reasonText(reading.reason));
+        break;
+    }
+    if (written < 0 || size == 0)
+        return 0;
+    return std::min(static_cast<std::size_t>(written), size - 1);
+}
+
+} // namespace
+
+const char* serviceVersion() noexcept
+{
+    return STEREOD_VERSION;
+}
+
+const char* errorCodeName(ErrorCode code) noexcept
+{
+    switch (code) {
+    case ErrorCode::BadJson:
+        return "bad_json";
+    case ErrorCode::BadRequest:
+        return "bad_request";
+    case ErrorCode::UnknownCommand:
+        return "unknown_command";
+    case ErrorCode::RequestTooLarge:
+        return "request_too_large";
+    case ErrorCode::TooManyClients:
+        return "too_many_clients";
+    case ErrorCode::NotAvailable:
+        return "not_available";
+    case ErrorCode::InvalidConfig:
+        return "invalid_config";
+    case ErrorCode::Internal:
+        return "internal";
+    }
+    return "internal";
+}
+
+const char* streamName(StreamKind stream) noexcept
+{
+    return stream == StreamKind::Depth ? "depth" : "readings";
+}
+
+const char* snapshotItemName(SnapshotItem item) noexcept
+{
+    switch (item) {
+    case SnapshotItem::Depth:
+        return "depth";
+    case SnapshotItem::Disparity:
+        return "disparity";
+    case SnapshotItem::Left:
+        return "left";
+    case SnapshotItem::Cloud:
+        return "cloud";
+    }
+    return "depth";
+}
+
+const std::vector<std::string>& knownCommands()
+{
+    static const std::vector<std::string> names = {"hello",    "distance",  "status",
+                                                   "snapshot", "subscribe", "reload"};
+    return names;
+}
+
+const std::vector<std::string>& knownStreams()
+{
+    static const std::vector<std::string> names = {"readings", "depth"};
+    return names;
+}
+
+const std::vector<std::string>& knownSnapshotItems()
+{
+    static const std::vector<std::string> names = {"left", "disparity", "depth", "cloud"};
+    return names;
+}
+
+ParseResult parseRequest(std::string_view line)
+{
+    try {
+        Json request;
+        try {
+            request = Json::parse(line.begin(), line.end());
+        } catch (const Json::exception& e) {
+            return ProtocolError{ErrorCode::BadJson,
+                                 "the request is not valid JSON: " + libraryMessage(e.what()),
+                                 std::nullopt};
+        }
+        if (!request.is_object())
+            return ProtocolError{ErrorCode::BadJson,
+                                 std::string("the request must be a JSON object, not ") +
+                                     request.type_name(),
+                                 std::nullopt};
+        return parseObject(request);
+    } catch (const std::bad_alloc&) {
+        throw;
+    } catch (const std::exception& e) {
+        return ProtocolError{ErrorCode::Internal,
+                             std::string("cannot read the request: ") + e.what(), std::nullopt};
+    }
+}
+
+Json okReply(const std::optional<Json>& id)
+{
+    Json reply = Json::object();
+    reply["ok"] = true;
+    if (id)
+        reply["id"] = *id;
+    return reply;
+}
+
+Json errorReply(ErrorCode code, std::string_view message, const std::optional<Json>& id)
+{
+    Json reply = Json::object();
+    reply["ok"] = false;
+    if (id)
+        reply["id"] = *id;
+    reply["error"] = {{"code", errorCodeName(code)}, {"message", std::string(message)}};
+    return reply;
+}
+
+Json helloReply(const std::optional<Json>& id)
+{
+    Json reply = okReply(id);
+    reply["service"] = "stereod";
+    reply["version"] = serviceVersion();
+    reply["protocol"] = kProtocolVersion;
+    reply["commands"] = knownCommands();
+    reply["streams"] = knownStreams();
+    reply["snapshot_items"] = knownSnapshotItems();
+    return reply;
+}
+
+void appendJsonLine(std::string& out, const Json& json)
+{
+    out.append(json.dump(-1, ' ', false, Json::error_handler_t::replace));
+    out.push_back('\n');
+}
+
+std::string reasonMessage(const Reading& reading)
+{
+    std::array<char, 256> buffer{};
+    const std::size_t length = formatReasonMessage(reading, buffer.data(), buffer.size());
+    return std::string(buffer.data(), length);
+}
+
+void appendReadingJson(std::string& out, const ReadingReport& report, int64_t now_ns)
+{
+    const Reading& reading = report.reading;
+    const bool valid = reading.valid && reading.reason == NoReadingReason::None;
+    JsonObjectWriter object(out);
+    object.field("valid", valid);
+    if (valid)
+        object.field("distance_m", roundTo(reading.distance_m, 4));
+    else
+        object.nullField("distance_m");
+    if (report.has_frame && reading.reason != NoReadingReason::NoFrameYet) {
+        object.field("stamp_ns", reading.stamp_ns);
+        object.field("age_ms", roundTo(static_cast<double>(now_ns - reading.stamp_ns) / 1e6, 3));
+    }
+    object.field("frame", reading.frame);
+    object.field("valid_fraction", roundTo(reading.valid_fraction, 4));
+    object.field("in_range_fraction", roundTo(reading.in_range_fraction, 4));
+    object.field("region_pixels", reading.region_pixels);
+    if (!valid) {
+        const NoReadingReason reason =
+            reading.reason == NoReadingReason::None ? NoReadingReason::BadFrame : reading.reason;
+        std::string& reason_out = object.openField("reason");
+        JsonObjectWriter reason_object(reason_out);
+        reason_object.field("code", reasonCode(reason));
+        if (!report.message.empty()) {
+            reason_object.field("message", report.message);
+        } else {
+            Reading explained = reading;
+            explained.reason = reason;
+            std::array<char, 256> buffer{};
+            const std::size_t length = formatReasonMessage(explained, buffer.data(), buffer.size());
+            reason_object.field("message", std::string_view(buffer.data(), length));
+        }
+        reason_object.close();
+    }
+    object.close();
+}
+
+Json readingToJson(const ReadingReport& report, int64_t now_ns)
+{
+    std::string text;
+    appendReadingJson(text, report, now_ns);
+    return Json::parse(text);
+}
+
+void appendReadingEvent(std::string& out, const ReadingReport& report, int64_t now_ns,
+                        uint64_t skipped)
+{
+    JsonObjectWriter object(out);
+    object.field("event", "reading");
+    if (skipped > 0)
+        object.field("skipped", skipped);
+    appendReadingJson(object.openField("reading"), report, now_ns);
+    object.close();
+    out.push_back('\n');
+}
+
+void appendDepthEventHeader(std::string& out, const DepthEventHeader& header,
+                            const ReadingReport& report, int64_t now_ns, uint64_t skipped)
+{
+    JsonObjectWriter object(out);
+    object.field("event", "depth");
+    object.field("frame", header.frame);
+    object.field("stamp_ns", header.stamp_ns);
+    object.field("format", "u16_mm");
+    object.field("width", header.width);
+    object.field("height", header.height);
+    object.field("bytes", header.bytes);
+    if (skipped > 0)
+        object.field("skipped", skipped);
+    appendReadingJson(object.openField("reading"), report, now_ns);
+    object.close();
+    out.push_back('\n');
+}
+
+} // namespace stereod

@@ -1,0 +1,151 @@
+#pragma once
+// The socket protocol of docs/protocol.md, without sockets: the request parser (a pure
+// function, unit-tested and fuzzable on its own), and the builders of the replies and
+// event lines the server sends.
+//
+// Reentrant: every function here is pure or writes only into the caller's buffer.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <variant>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "pipeline/reading.hpp"
+
+namespace stereod {
+
+// Replies keep their fields in the order written ("ok" first), which people reading a
+// socket by hand appreciate; clients must not depend on the order.
+using Json = nlohmann::ordered_json;
+
+inline constexpr int kProtocolVersion = 1;
+
+// The service's version ("0.1.0"), as `hello` and `stereod --version` give it.
+const char* serviceVersion() noexcept;
+
+// The stable error codes of the protocol.
+enum class ErrorCode {
+    BadJson,         // the line is not a JSON object
+    BadRequest,      // a field is missing, of the wrong type, or out of range
+    UnknownCommand,  // `cmd` names no command
+    RequestTooLarge, // the line exceeded socket.max_request_bytes
+    TooManyClients,  // socket.max_clients connections are open
+    NotAvailable,    // nothing to give yet
+    InvalidConfig,   // `reload` found the configuration invalid
+    Internal,        // the service failed to do something it should have
+};
+
+// "bad_json", "bad_request", ...
+const char* errorCodeName(ErrorCode code) noexcept;
+
+enum class StreamKind { Readings, Depth };
+const char* streamName(StreamKind stream) noexcept;
+
+enum class SnapshotItem { Depth, Disparity, Left, Cloud };
+const char* snapshotItemName(SnapshotItem item) noexcept;
+
+struct HelloRequest {};
+
+struct DistanceRequest {
+    std::optional<double> max_age_ms; // > 0 and finite when present
+};
+
+struct StatusRequest {};
+
+struct SnapshotRequest {
+    // In the order the payloads are to be sent, without repeats. Default (no `items`):
+    // depth, disparity, left, cloud.
+    std::vector<SnapshotItem> items;
+};
+
+struct SubscribeRequest {
+    StreamKind stream = StreamKind::Readings;
+    std::optional<double> max_hz; // > 0 and finite when present
+};
+
+struct ReloadRequest {};
+
+using Command = std::variant<HelloRequest, DistanceRequest, StatusRequest, SnapshotRequest,
+                             SubscribeRequest, ReloadRequest>;
+
+struct Request {
+    Command command;
+    std::optional<Json> id; // echoed in the reply when the request had one
+};
+
+// Why a line is not a request: the error reply to send.
+struct ProtocolError {
+    ErrorCode code = ErrorCode::BadRequest;
+    std::string message;    // names the field and the problem
+    std::optional<Json> id; // the request's id when the line had one
+};
+
+using ParseResult = std::variant<Request, ProtocolError>;
+
+// Parses one request line (without its newline). Any byte sequence gives a Request or a
+// ProtocolError; no exception escapes (bar std::bad_alloc). Unknown fields are ignored so
+// that newer clients can talk to this service; a JSON null counts as an absent optional
+// field.
+ParseResult parseRequest(std::string_view line);
+
+// The commands, streams and snapshot items this service knows, as `hello` lists them.
+const std::vector<std::string>& knownCommands();
+const std::vector<std::string>& knownStreams();
+const std::vector<std::string>& knownSnapshotItems();
+
+// `{"ok":true}` with the request's id when it had one; handlers add their fields.
+Json okReply(const std::optional<Json>& id);
+
+// `{"ok":false, "id":..., "error":{"code":..., "message":...}}`.
+Json errorReply(ErrorCode code, std::string_view message, const std::optional<Json>& id);
+
+// The `hello` reply.
+Json helloReply(const std::optional<Json>& id);
+
+// Appends `json` as one line ending in '\n'. Bytes that are not valid UTF-8 (say, from an
+// echoed exception text) are replaced, so the line is always valid JSON.
+void appendJsonLine(std::string& out, const Json& json);
+
+// What a reading object is written from.
+struct ReadingReport {
+    Reading reading;
+    // False when no pair lies behind the reading (no frame yet, or a source that failed
+    // before its first pair): stamp_ns and age_ms are left out.
+    bool has_frame = true;
+    // The reason as one sentence with its numbers; empty: reasonMessage(reading).
+    std::string_view message;
+};
+
+// The reason of a reading as one sentence with the numbers the reading holds, e.g. "too
+// few valid pixels in the region: 2.0 % valid, 10.0 % needed". Empty for a valid reading.
+std::string reasonMessage(const Reading& reading);
+
+// Appends the reading object of docs/protocol.md; age_ms is `now_ns` minus the stamp.
+// Allocates nothing once `out` has the capacity.
+void appendReadingJson(std::string& out, const ReadingReport& report, int64_t now_ns);
+
+// The same object, for composing replies.
+Json readingToJson(const ReadingReport& report, int64_t now_ns);
+
+// Appends `{"event":"reading","reading":{...}}\n`, with "skipped" when `skipped` > 0.
+void appendReadingEvent(std::string& out, const ReadingReport& report, int64_t now_ns,
+                        uint64_t skipped);
+
+// The header line of a depth event; `bytes` of u16_mm payload follow it.
+struct DepthEventHeader {
+    uint64_t frame = 0;
+    int64_t stamp_ns = 0;
+    int width = 0;
+    int height = 0;
+    uint64_t bytes = 0;
+};
+
+// Appends the depth event's header line (with "skipped" when > 0), without the payload.
+void appendDepthEventHeader(std::string& out, const DepthEventHeader& header,
+                            const ReadingReport& report, int64_t now_ns, uint64_t skipped);
+
+} // namespace stereod

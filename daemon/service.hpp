@@ -1,0 +1,149 @@
+#pragma once
+// The service: the frame source, the ring, the worker, the publisher and the socket
+// server wired together, with their start-up checks, shutdown, signals, reload and
+// systemd notifications.
+//
+// Life cycle: the constructor checks everything that can be checked before running
+// (frames against the calibration, the processor's settings, the socket) and throws
+// StartupError with the exit code for the problem; run() starts the source and the
+// worker, notifies systemd (READY=1) and serves until SIGTERM/SIGINT or requestStop();
+// then it stops the source, stops the ring (which wakes the worker), joins the worker,
+// closes the socket and removes its file.
+//
+// Thread contract: construction, run() and destruction one after the other (run() on
+// the thread that becomes the I/O thread; the signal mask of that thread matters, see
+// blockServiceSignals()); requestStop() from any thread at any time.
+
+#include <cstdint>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include "capture/frame_source.hpp"
+#include "config/service_config.hpp"
+#include "daemon/publisher.hpp"
+#include "daemon/socket_server.hpp"
+#include "daemon/unique_fd.hpp"
+#include "daemon/worker.hpp"
+#include "pipeline/calibration.hpp"
+#include "pipeline/stereo_processor.hpp"
+
+namespace stereod {
+
+// The exit codes of `stereod` (also in docs/service.md).
+enum class ExitCode : int {
+    Ok = 0,
+    Failure = 1,       // anything not listed below (a failure while running)
+    BadArguments = 2,  // the command line
+    InvalidConfig = 3, // the configuration file or its values
+    Calibration = 4,   // the calibration: missing, unreadable, invalid, or not the frame size
+    Source = 5,        // the frame source: missing or unreadable recording, cannot start
+    Socket = 6,        // the socket: cannot bind, in use, bad path, mode or group
+};
+
+// Start-up cannot go on. what() names what is wrong (file, key, path, errno text).
+class StartupError : public std::runtime_error {
+  public:
+    StartupError(ExitCode code, const std::string& message)
+        : std::runtime_error(message), code_(code)
+    {
+    }
+    ExitCode code() const noexcept { return code_; }
+
+  private:
+    ExitCode code_;
+};
+
+// Blocks SIGTERM, SIGINT and SIGHUP in the calling thread (and the threads it creates
+// later), so that they reach the service only through its signalfd. Call it first thing
+// in main(), before any thread exists.
+void blockServiceSignals();
+
+struct ServiceOptions {
+    // The file `reload` and SIGHUP re-read; empty when running on built-in defaults.
+    std::string config_path;
+    // Applied again on every reload, so that they do not show up as changes.
+    ConfigOverrides overrides;
+    // Where the calibration came from, for `status`.
+    std::string calibration_path;
+    // Handle SIGTERM, SIGINT (stop) and SIGHUP (reload) through a signalfd. The caller
+    // must have blocked them in every thread (block them first thing in main()).
+    bool handle_signals = false;
+    // Talk to systemd (READY=1, STATUS=, WATCHDOG=1); harmless without systemd.
+    bool notify_systemd = false;
+};
+
+class Service final : private ServerBackend {
+  public:
+    // Takes the source (not started) and a loaded calibration. Throws StartupError:
+    // Calibration when the source's frames do not fit the calibration or the processor
+    // refuses it, InvalidConfig when the processing settings are refused, Socket when the
+    // socket cannot be set up.
+    Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
+            StereoCalibration calibration, ServiceOptions options);
+    ~Service() override;
+
+    Service(const Service&) = delete;
+    Service& operator=(const Service&) = delete;
+
+    // Runs until a stop; returns the exit code. Throws StartupError(Source) when the
+    // source cannot start.
+    ExitCode run();
+
+    // Makes run() return soon. Any thread.
+    void requestStop() noexcept;
+
+    // Re-reads the configuration file and applies what can change live. I/O thread.
+    ReloadOutcome reloadConfig();
+
+    const std::string& socketPath() const noexcept { return config_.socket.path; }
+
+  private:
+    SourceHealth sourceHealth(int64_t now_ns) override;
+    void describe(Json& status, const PublishedFrame* latest, const SourceHealth& health,
+                  int64_t now_ns) override;
+    ReloadOutcome reload() override;
+    void onTick(int64_t now_ns) override;
+
+    void onSignal();
+    void onStopRequest();
+    void shutdown() noexcept;
+
+    ServiceConfig config_;
+    ServiceOptions options_;
+    std::unique_ptr<FrameSource> source_;
+    StereoCalibration calibration_;
+    std::unique_ptr<StereoProcessor> processor_;
+    std::unique_ptr<PairRing> ring_;
+    std::unique_ptr<Publisher> publisher_;
+    std::unique_ptr<Worker> worker_;
+    std::unique_ptr<SocketServer> server_;
+    UniqueFd signal_fd_;
+    UniqueFd stop_fd_; // eventfd written by requestStop(); outlives server_
+
+    DisparityRange initial_range_; // for `status` before the first frame
+    std::string initial_matcher_;
+    int64_t started_ns_ = 0;
+    bool running_ = false;
+    // Stall detection: when the ring's push count last changed, as seen by this thread.
+    uint64_t last_pushed_ = 0;
+    int64_t last_push_change_ns_ = 0;
+    // systemd notifications.
+    uint64_t watchdog_interval_ns_ = 0;
+    int64_t last_watchdog_ns_ = 0;
+    int64_t last_status_ns_ = 0;
+};
+
+// What `stereod` was asked to run, from its command line.
+struct LaunchRequest {
+    std::string config_path; // empty: built-in defaults
+    ConfigOverrides overrides;
+};
+
+// Reads the configuration (file or defaults) with the overrides and validates it; opens
+// the replay; finds and loads the calibration (--calib, the file's `calibration`, or the
+// recording's calibration.yaml); builds the service. Throws StartupError with the exit
+// code for the problem.
+std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle_signals);
+
+} // namespace stereod

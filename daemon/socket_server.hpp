@@ -1,0 +1,220 @@
+#pragma once
+// The Unix-socket server of docs/protocol.md: one I/O thread, one epoll loop, every
+// socket non-blocking.
+//
+// The loop serves the listening socket, the clients, the publisher's eventfd (a new
+// result: events to subscribers), a 100 ms timer (health, idle clients, the service's
+// periodic work) and descriptors the service adds with watch() (its signalfd). Nothing in
+// it blocks: a client's requests are answered into its output buffer, which is sent as
+// the socket takes it (EPOLLOUT while data is unsent). A subscriber with unsent data
+// skips frames (counted; its next event says how many); one whose unsent data exceed
+// publish.max_client_backlog_bytes is disconnected (counted). So no client can slow down
+// another one, the loop, or the worker.
+//
+// Thread contract: construction, run(), watch(), setPublishConfig(), counters() and the
+// destructor on one thread (the I/O thread); requestStop() from any thread and from a
+// signal handler. The backend is called on the I/O thread only.
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include <sys/types.h>
+
+#include "config/service_config.hpp"
+#include "daemon/protocol.hpp"
+#include "daemon/publisher.hpp"
+#include "daemon/unique_fd.hpp"
+#include "pipeline/calibration.hpp"
+
+namespace stereod {
+
+// The socket cannot be set up. what() names the path and the reason (errno text).
+class SocketError : public std::runtime_error {
+  public:
+    using std::runtime_error::runtime_error;
+};
+
+// Whether the frame source is producing, as the service judges it.
+struct SourceHealth {
+    bool down = false;
+    std::string message; // why, with numbers, when down
+};
+
+// The outcome of a `reload`, for its reply.
+struct ReloadOutcome {
+    bool ok = true;
+    ErrorCode error = ErrorCode::Internal; // when !ok
+    std::string message;                   // when !ok
+    std::vector<std::string> changed;
+    std::vector<std::string> restart_needed;
+};
+
+// What the server needs from the service. Called on the I/O thread only.
+class ServerBackend {
+  public:
+    virtual ~ServerBackend() = default;
+
+    virtual SourceHealth sourceHealth(int64_t now_ns) = 0;
+
+    // Adds the service's parts of the `status` reply: "uptime_s", "state", "source",
+    // "pipeline", "calibration". `latest` is the newest result, or nullptr.
+    virtual void describe(Json& status, const PublishedFrame* latest, const SourceHealth& health,
+                          int64_t now_ns) = 0;
+
+    // Re-reads the configuration and applies what can change live.
+    virtual ReloadOutcome reload() = 0;
+
+    // Runs on every timer tick (about every 100 ms).
+    virtual void onTick(int64_t now_ns) = 0;
+};
+
+struct ServerOptions {
+    SocketConfig socket;
+    PublishConfig publish;
+    RectifiedGeometry geometry; // the calibration summary of snapshot replies
+    // Use the listening socket systemd hands over (socket activation) when there is one
+    // for socket.path; the file then belongs to systemd and is left in place at exit.
+    bool accept_systemd_socket = false;
+};
+
+struct ClientCounters {
+    uint64_t connected = 0;         // open connections
+    uint64_t subscribers = 0;       // connections with at least one subscription
+    uint64_t accepted = 0;          // connections accepted since start
+    uint64_t rejected = 0;          // turned away with too_many_clients
+    uint64_t frames_dropped = 0;    // events skipped for subscribers with unsent data
+    uint64_t disconnected_slow = 0; // subscribers dropped past the backlog limit
+};
+
+class SocketServer {
+  public:
+    // Binds and listens: creates the parent directory when missing; refuses a symbolic
+    // link or a non-socket at the path; removes a stale socket file only when nothing
+    // answers on it, and fails when something does; applies socket.mode and
+    // socket.group. Throws SocketError naming the path and the reason.
+    SocketServer(const ServerOptions& options, Publisher& publisher, ServerBackend& backend);
+    // Closes every connection and removes the socket file if it is still the one bound.
+    ~SocketServer();
+
+    SocketServer(const SocketServer&) = delete;
+    SocketServer& operator=(const SocketServer&) = delete;
+
+    // Serves until requestStop(). Throws SocketError only when epoll itself fails.
+    void run();
+
+    // Makes run() return soon. Any thread; async-signal-safe.
+    void requestStop() noexcept;
+
+    // Also watches `fd` (borrowed; it must stay open while watched) for input:
+    // `on_readable` runs on the I/O thread when it is readable (level-triggered).
+    void watch(int fd, std::function<void()> on_readable);
+
+    // New publishing settings (from a reload); take effect with the next event.
+    void setPublishConfig(const PublishConfig& publish);
+
+    ClientCounters counters() const;
+    const std::string& socketPath() const noexcept { return options_.socket.path; }
+
+    // How often the timer ticks.
+    static constexpr int64_t kTickNs = 100'000'000;
+
+  private:
+    struct Subscription {
+        bool active = false;
+        std::optional<double> max_hz; // the client's own limit
+        int64_t next_due_ns = 0;      // rate limit: earliest time of the next event
+        uint64_t skipped = 0;         // events lost since the last one delivered
+        uint64_t last_sequence = 0;   // publisher sequence of the last frame considered
+    };
+
+    struct Client {
+        UniqueFd fd;
+        uint64_t id = 0;
+        std::string in;  // received bytes not yet framed into requests
+        std::string out; // bytes to send; out_sent of them are sent
+        std::size_t out_sent = 0;
+        uint32_t epoll_events = 0; // what the client is registered for
+        bool input_closed = false; // peer shut down its side, or we stopped reading
+        bool close_when_flushed = false;
+        bool dead = false;
+        int64_t last_input_ns = 0;
+        Subscription readings;
+        Subscription depth;
+
+        std::size_t unsent() const noexcept { return out.size() - out_sent; }
+        bool subscribed() const noexcept { return readings.active || depth.active; }
+    };
+
+    void addToEpoll(int fd, uint64_t tag, uint32_t events);
+    void acceptClients();
+    void readClient(Client& client);
+    void handleLines(Client& client);
+    void handleRequest(Client& client, std::string_view line);
+    void rejectTooLarge(Client& client);
+    void writeClient(Client& client);
+    void updateEpoll(Client& client);
+    void closeClient(Client& client);
+    void reapClients();
+    // Appends `bytes` to the client's output, first compacting what was sent.
+    // Makes room at the end of the client's output: drops the part already sent once it
+    // is at least half of the buffer (amortised O(1) per byte, no per-send memmove).
+    void compactOut(Client& client);
+    void reply(Client& client, const Json& json);
+    // Drops the client when its unsent data exceed the backlog limit; returns whether.
+    bool dropIfBacklogged(Client& client);
+
+    void onPublished();
+    void dispatchFrame(const PublishedFrame& frame, int64_t now_ns);
+    // Tells readings subscribers that the source went down (no frame will say so).
+    void broadcastSourceDown(const SourceHealth& health, int64_t now_ns);
+    bool due(Subscription& subscription, double max_hz_config, int64_t now_ns) const;
+    void onTick();
+
+    // The reading to hand out now: the newest one, or no_frame_yet / source_down / stale.
+    // `message` holds the reason sentence the report points to.
+    ReadingReport currentReading(const PublishedFrame* latest, double max_age_ms,
+                                 const SourceHealth& health, int64_t now_ns,
+                                 std::string& message) const;
+
+    void handle(Client& client, const HelloRequest& request, const std::optional<Json>& id);
+    void handle(Client& client, const DistanceRequest& request, const std::optional<Json>& id);
+    void handle(Client& client, const StatusRequest& request, const std::optional<Json>& id);
+    void handle(Client& client, const SnapshotRequest& request, const std::optional<Json>& id);
+    void handle(Client& client, const SubscribeRequest& request, const std::optional<Json>& id);
+    void handle(Client& client, const ReloadRequest& request, const std::optional<Json>& id);
+
+    ServerOptions options_;
+    Publisher& publisher_;
+    ServerBackend& backend_;
+
+    UniqueFd listen_fd_;
+    bool owns_socket_file_ = false; // false for a socket handed over by systemd
+    dev_t socket_dev_ = 0;          // identity of the bound file, so that only it is removed
+    ino_t socket_ino_ = 0;
+    UniqueFd epoll_fd_;
+    UniqueFd stop_fd_; // eventfd written by requestStop()
+    UniqueFd timer_fd_;
+    bool stopping_ = false;
+
+    std::unordered_map<uint64_t, Client> clients_;
+    std::vector<uint64_t> dead_clients_;
+    uint64_t next_client_id_ = 0;
+    std::vector<std::function<void()>> watches_;
+
+    std::vector<char> read_buffer_; // recv() target, reused
+    std::string reading_event_;     // the frame's reading event line, built once per frame
+    std::string depth_header_;      // the frame's depth event header, built once per frame
+    std::size_t live_clients_ = 0;  // connections not closed yet
+    bool listen_paused_ = false;    // out of descriptors: accept again on the next tick
+    uint64_t last_dispatched_sequence_ = 0;
+    bool source_was_down_ = false;
+    ClientCounters counters_;
+};
+
+} // namespace stereod

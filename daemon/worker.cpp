@@ -1,0 +1,237 @@
+#include "daemon/worker.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <exception>
+#include <limits>
+
+#include <spdlog/spdlog.h>
+
+#include "pipeline/depth_io.hpp"
+
+namespace stereod {
+
+namespace {
+
+// At most one log line per this interval for failing frames; the others are counted.
+constexpr int64_t kFailureLogIntervalNs = 5'000'000'000;
+
+// A result that carries no distance carries no depth either: a robot reading the depth
+// stream must not act on numbers the reading refuses.
+void clearDepth(DepthResult& result)
+{
+    if (!result.depth_m.empty())
+        result.depth_m.setTo(0.0f);
+    if (!result.disparity.empty())
+        result.disparity.setTo(std::numeric_limits<float>::infinity());
+    result.cloud.clear();
+}
+
+void refuseReading(Reading& reading, NoReadingReason reason)
+{
+    reading.valid = false;
+    reading.distance_m = 0.0;
+    reading.reason = reason;
+}
+
+} // namespace
+
+void logDisparityRange(const DisparityRange& range, const MatcherSettings& settings,
+                       const std::string& matcher_name)
+{
+    spdlog::info("disparity range: {} disparities from {} ({}): sees from {:.2f} m",
+                 range.num_disparities, range.min_disparity, matcher_name, range.closest_depth_m);
+    if (range.capped)
+        spdlog::warn("cannot see closer than {:.2f} m with {} disparities (matcher.min_depth_m "
+                     "asks for {:.2f} m; matcher.max_num_disparities = {} caps the range)",
+                     range.closest_depth_m, range.num_disparities, settings.min_depth_m,
+                     settings.max_num_disparities);
+}
+
+Worker::Worker(PairRing& ring, Publisher& publisher, StereoProcessor& processor, double max_skew_ms)
+    : ring_(ring), publisher_(publisher), processor_(processor), max_skew_ms_(max_skew_ms)
+{
+    refreshRange();
+}
+
+Worker::~Worker()
+{
+    ring_.stop();
+    join();
+    delete pending_settings_.exchange(nullptr, std::memory_order_acq_rel);
+}
+
+void Worker::start()
+{
+    thread_ = std::thread([this] { run(); });
+}
+
+void Worker::join()
+{
+    if (thread_.joinable())
+        thread_.join();
+}
+
+void Worker::setMaxSkewMs(double max_skew_ms) noexcept
+{
+    max_skew_ms_.store(max_skew_ms, std::memory_order_relaxed);
+}
+
+void Worker::updateSettings(const ProcessorSettings& settings)
+{
+    auto fresh = std::make_unique<ProcessorSettings>(settings);
+    std::unique_ptr<ProcessorSettings> replaced(
+        pending_settings_.exchange(fresh.release(), std::memory_order_acq_rel));
+}
+
+void Worker::refreshRange()
+{
+    stats_.range = processor_.disparityRange();
+    const std::string name = processor_.matcherName();
+    stats_.matcher.fill('\0');
+    std::memcpy(stats_.matcher.data(), name.data(),
+                std::min(name.size(), stats_.matcher.size() - 1));
+}
+
+void Worker::applyPendingSettings()
+{
+    std::unique_ptr<ProcessorSettings> settings(
+        pending_settings_.exchange(nullptr, std::memory_order_acq_rel));
+    if (!settings)
+        return;
+    try {
+        processor_.updateSettings(*settings);
+        refreshRange();
+        spdlog::info("new processing settings in force");
+        logDisparityRange(stats_.range, settings->matcher, stats_.matcher.data());
+    } catch (const std::exception& e) {
+        spdlog::error("new processing settings refused, the previous ones stay in force: {}",
+                      e.what());
+    }
+}
+
+void Worker::run()
+{
+    while (std::optional<StereoPair> pair = ring_.pop()) {
+        busy_since_ns_.store(monotonicNowNs(), std::memory_order_release);
+        // processPair() turns failures of the chain into readings; this catches what is
+        // left (the conversion for sending, say), so that nothing leaves the thread.
+        try {
+            applyPendingSettings();
+            processPair(*pair);
+        } catch (const std::exception& e) {
+            logFailure(pair->index, e.what());
+        } catch (...) {
+            logFailure(pair->index, "unknown error");
+        }
+        busy_since_ns_.store(0, std::memory_order_release);
+    }
+}
+
+void Worker::logFailure(uint64_t frame, const char* what)
+{
+    const int64_t now_ns = monotonicNowNs();
+    if (last_failure_log_ns_ != 0 && now_ns - last_failure_log_ns_ < kFailureLogIntervalNs) {
+        ++failures_not_logged_;
+        return;
+    }
+    if (failures_not_logged_ > 0)
+        spdlog::error("frame {}: the pair could not be processed: {} ({} more failures since "
+                      "the last message)",
+                      frame, what, failures_not_logged_);
+    else
+        spdlog::error("frame {}: the pair could not be processed: {}", frame, what);
+    last_failure_log_ns_ = now_ns;
+    failures_not_logged_ = 0;
+}
+
+void Worker::processPair(StereoPair& pair)
+{
+    PublishedFrame& slot = publisher_.writeSlot();
+    DepthResult& result = slot.result;
+    slot.reason_message.clear();
+    slot.skew_ns = pair.skewNs();
+    const int64_t stamp_ns = pair.stampNs();
+    const uint64_t frame = pair.index;
+
+    bool processed = false;
+    if (!pair.left || !pair.right) {
+        refuseReading(result.reading, NoReadingReason::BadFrame);
+        slot.reason_message.assign("the frame pair could not be processed: a frame is missing");
+    } else {
+        try {
+            processor_.process(pair.left->image, pair.right->image, stamp_ns, frame, result);
+            processed = true;
+            const cv::Size calibrated = processor_.calibration().rectified.image_size;
+            if (result.reading.reason == NoReadingReason::BadFrame &&
+                (pair.left->image.size() != calibrated || pair.right->image.size() != calibrated))
+                slot.reason_message.format(
+                    "the frame pair could not be processed: frames %dx%d and %dx%d, "
+                    "calibration %dx%d",
+                    pair.left->image.cols, pair.left->image.rows, pair.right->image.cols,
+                    pair.right->image.rows, calibrated.width, calibrated.height);
+        } catch (const std::exception& e) {
+            refuseReading(result.reading, NoReadingReason::BadFrame);
+            slot.reason_message.format("the frame pair could not be processed: %s", e.what());
+            logFailure(frame, e.what());
+        } catch (...) {
+            refuseReading(result.reading, NoReadingReason::BadFrame);
+            slot.reason_message.assign("the frame pair could not be processed: unknown error");
+            logFailure(frame, "unknown error");
+        }
+    }
+    // The buffers go back to the source now, not when the slot is reused.
+    pair.left.reset();
+    pair.right.reset();
+
+    Reading& reading = result.reading;
+    reading.stamp_ns = stamp_ns;
+    reading.frame = frame;
+    result.stamp_ns = stamp_ns;
+    result.frame = frame;
+
+    const double skew_ms = std::abs(static_cast<double>(slot.skew_ns)) / 1e6;
+    const double max_skew_ms = max_skew_ms_.load(std::memory_order_relaxed);
+    if (skew_ms > max_skew_ms && reading.reason != NoReadingReason::BadFrame) {
+        refuseReading(reading, NoReadingReason::OutOfSync);
+        slot.reason_message.format("%s: %.1f ms apart, %.1f ms allowed",
+                                   reasonText(NoReadingReason::OutOfSync), skew_ms, max_skew_ms);
+        ++stats_.out_of_sync;
+    }
+    if (reading.reason == NoReadingReason::BadFrame) {
+        ++stats_.bad_frames;
+        clearDepth(result);
+    } else if (reading.reason == NoReadingReason::OutOfSync) {
+        clearDepth(result);
+    }
+
+    const int64_t publish_start_ns = monotonicNowNs();
+    if (!result.depth_m.empty())
+        depthToMillimetres(result.depth_m, slot.depth_mm);
+    else
+        slot.depth_mm.release();
+
+    // Stage times only of pairs that went through the chain.
+    if (processed && reading.reason != NoReadingReason::BadFrame) {
+        rectify_ms_.add(result.timings.rectify_ms);
+        match_ms_.add(result.timings.match_ms);
+        depth_ms_.add(result.timings.depth_ms);
+        nearest_ms_.add(result.timings.nearest_ms);
+        cloud_ms_.add(result.timings.cloud_ms);
+    }
+    ++stats_.frames;
+    processed_ns_.add(publish_start_ns);
+    stats_.fps = perSecond(processed_ns_);
+    stats_.stage_mean_ms.rectify_ms = mean(rectify_ms_);
+    stats_.stage_mean_ms.match_ms = mean(match_ms_);
+    stats_.stage_mean_ms.depth_ms = mean(depth_ms_);
+    stats_.stage_mean_ms.nearest_ms = mean(nearest_ms_);
+    stats_.stage_mean_ms.cloud_ms = mean(cloud_ms_);
+    publish_ms_.add(static_cast<double>(monotonicNowNs() - publish_start_ns) / 1e6);
+    stats_.publish_mean_ms = mean(publish_ms_);
+    slot.stats = stats_;
+    publisher_.publish();
+}
+
+} // namespace stereod

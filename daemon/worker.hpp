@@ -1,0 +1,128 @@
+#pragma once
+// The worker: one thread that takes stereo pairs from the ring, runs the stereo chain on
+// each into the publisher's back slot, and publishes the result.
+//
+// Per pair: a pair whose capture times differ by more than max_skew_ms gives an
+// out_of_sync reading (still published, with its stamp, so that clients see why there is
+// no distance); an exception from the chain gives a bad_frame reading and a log line
+// (rate-limited), never an exception across threads; the frames go back to their source
+// right after processing. A reading without a distance never carries depth: the depth,
+// disparity and cloud of such a result are cleared.
+//
+// Thread contract: start(), join() and the destructor from the controlling thread;
+// setMaxSkewMs(), updateSettings() and busySinceNs() from any thread; the processor and
+// the publisher's write side are used by the worker thread only while it runs.
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "capture/frame_source.hpp"
+#include "daemon/publisher.hpp"
+#include "pipeline/stereo_processor.hpp"
+
+namespace stereod {
+
+// Logs the disparity range chosen, and warns when the cap keeps the configured closest
+// distance out of sight ("cannot see closer than X m with N disparities").
+void logDisparityRange(const DisparityRange& range, const MatcherSettings& settings,
+                       const std::string& matcher_name);
+
+// The last N values added, oldest first: the window of the rolling statistics.
+template <typename T, std::size_t N> class RecentValues {
+  public:
+    void add(T value) noexcept
+    {
+        values_[next_] = value;
+        next_ = (next_ + 1) % N;
+        count_ = count_ < N ? count_ + 1 : N;
+    }
+    std::size_t size() const noexcept { return count_; }
+    // The i-th oldest value held, i < size().
+    T operator[](std::size_t i) const noexcept { return values_[(next_ + N - count_ + i) % N]; }
+
+  private:
+    std::array<T, N> values_{};
+    std::size_t next_ = 0;
+    std::size_t count_ = 0;
+};
+
+// Mean of the values held; 0 when there are none.
+template <std::size_t N> double mean(const RecentValues<double, N>& values) noexcept
+{
+    double sum = 0.0;
+    for (std::size_t i = 0; i < values.size(); ++i)
+        sum += values[i];
+    return values.size() == 0 ? 0.0 : sum / static_cast<double>(values.size());
+}
+
+// Events per second, from the times (ns) of the events held; 0 with fewer than two.
+template <std::size_t N> double perSecond(const RecentValues<int64_t, N>& times_ns) noexcept
+{
+    if (times_ns.size() < 2)
+        return 0.0;
+    const int64_t span_ns = times_ns[times_ns.size() - 1] - times_ns[0];
+    return span_ns > 0
+               ? static_cast<double>(times_ns.size() - 1) * 1e9 / static_cast<double>(span_ns)
+               : 0.0;
+}
+
+class Worker {
+  public:
+    // Borrows all three until the worker is destroyed. `max_skew_ms`: pairs further apart
+    // give out_of_sync readings.
+    Worker(PairRing& ring, Publisher& publisher, StereoProcessor& processor, double max_skew_ms);
+    // Stops the ring (waking the thread) and joins it.
+    ~Worker();
+
+    Worker(const Worker&) = delete;
+    Worker& operator=(const Worker&) = delete;
+
+    // Starts the thread. Throws std::system_error when it cannot.
+    void start();
+    // Waits for the thread to end: it does once the ring is stopped (PairRing::stop())
+    // and the pair in hand is done. Idempotent.
+    void join();
+
+    void setMaxSkewMs(double max_skew_ms) noexcept;
+
+    // Hands new settings over; the worker applies them before its next pair (a frame
+    // boundary). Never blocks the worker: an atomic pointer swap; settings not picked up
+    // yet are replaced. If the processor refuses them, the worker logs why and keeps the
+    // ones in force.
+    void updateSettings(const ProcessorSettings& settings);
+
+    // CLOCK_MONOTONIC time at which the worker started on the pair in hand; 0 while it
+    // waits for a pair. For the watchdog: a worker stuck in one pair is not alive.
+    int64_t busySinceNs() const noexcept { return busy_since_ns_.load(std::memory_order_acquire); }
+
+  private:
+    static constexpr std::size_t kWindow = 32; // frames in the rolling means
+
+    void run();
+    void processPair(StereoPair& pair);
+    void applyPendingSettings();
+    void refreshRange();
+    void logFailure(uint64_t frame, const char* what);
+
+    PairRing& ring_;
+    Publisher& publisher_;
+    StereoProcessor& processor_;
+    std::thread thread_;
+    std::atomic<double> max_skew_ms_;
+    std::atomic<ProcessorSettings*> pending_settings_{nullptr}; // owned; see updateSettings()
+    std::atomic<int64_t> busy_since_ns_{0};
+
+    // Worker thread only.
+    PipelineStats stats_;
+    RecentValues<double, kWindow> rectify_ms_, match_ms_, depth_ms_, nearest_ms_, cloud_ms_,
+        publish_ms_;
+    RecentValues<int64_t, kWindow> processed_ns_; // when each pair was done, for the rate
+    int64_t last_failure_log_ns_ = 0;
+    uint64_t failures_not_logged_ = 0;
+};
+
+} // namespace stereod

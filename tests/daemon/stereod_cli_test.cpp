@@ -1,0 +1,230 @@
+// The `stereod` binary as users run it: its command line, its exit codes for each kind of
+// start-up problem, and a run on a replayed tsukuba folder that ends with SIGTERM.
+
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+
+#include "pipeline/calibration.hpp"
+#include "tests/ctl/process.hpp"
+#include "tests/daemon/daemon_test_support.hpp"
+
+namespace stereod {
+namespace {
+
+using test::ChildProcess;
+using test::Json;
+using test::ProcessResult;
+using test::runProcess;
+using test::stereodPath;
+using test::TempDir;
+using test::TestClient;
+using test::waitUntil;
+using namespace std::chrono_literals;
+
+const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba";
+
+std::vector<std::string> lines(const std::string& text)
+{
+    std::vector<std::string> out;
+    std::istringstream stream(text);
+    for (std::string line; std::getline(stream, line);)
+        out.push_back(line);
+    return out;
+}
+
+class StereodCli : public ::testing::Test {
+  protected:
+    void SetUp() override
+    {
+        // A plain folder of one left/right pair, by links to the shared data.
+        replay_ = dir_.file("rec");
+        std::filesystem::create_directory(replay_);
+        std::filesystem::create_symlink(kTsukuba + "/im3.png", replay_ + "/left0.png");
+        std::filesystem::create_symlink(kTsukuba + "/im4.png", replay_ + "/right0.png");
+        calibration_ = dir_.file("tsukuba.yaml");
+        saveCalibration(makeRectifiedCalibration(cv::Size(384, 288), 615.0, 0.013), calibration_);
+        socket_ = dir_.file("run/stereod.sock");
+    }
+
+    ProcessResult run(std::vector<std::string> arguments)
+    {
+        arguments.insert(arguments.begin(), stereodPath());
+        return runProcess(arguments);
+    }
+
+    TempDir dir_;
+    std::string replay_;
+    std::string calibration_;
+    std::string socket_;
+};
+
+TEST_F(StereodCli, HelpListsTheOptionsAndExitCodes)
+{
+    const ProcessResult result = run({"--help"});
+    EXPECT_EQ(result.exit_code, 0) << result.err;
+    for (const char* option : {"--config", "--check-config", "--replay", "--calib", "--socket",
+                               "--log-level", "Exit codes"})
+        EXPECT_NE(result.out.find(option), std::string::npos) << option;
+}
+
+TEST_F(StereodCli, BadArgumentsGiveOneLineAndExitTwo)
+{
+    for (const std::vector<std::string>& arguments : {std::vector<std::string>{"--bogus"},
+                                                      {"--log-level", "loud"},
+                                                      {"--replay"},
+                                                      {"--check-config", "a.yaml", "--replay", "b"},
+                                                      {"positional"}}) {
+        const ProcessResult result = run(arguments);
+        EXPECT_EQ(result.exit_code, 2) << arguments[0] << ": " << result.err;
+        EXPECT_EQ(lines(result.err).size(), 1u) << result.err;
+        EXPECT_EQ(result.err.rfind("stereod: ", 0), 0u) << result.err;
+    }
+}
+
+TEST_F(StereodCli, CheckConfigNamesEveryProblemWithItsLine)
+{
+    const std::string good = dir_.file("good.yaml");
+    std::ofstream(good) << "nearest:\n  percentile: 10\n";
+    const ProcessResult valid = run({"--check-config", good});
+    EXPECT_EQ(valid.exit_code, 0) << valid.err;
+
+    const std::string bad = dir_.file("bad.yaml");
+    std::ofstream(bad) << "nearest:\n  percentile: 500\npublish:\n  depth_max_hz: -1\n";
+    const ProcessResult invalid = run({"--check-config", bad});
+    EXPECT_EQ(invalid.exit_code, 3);
+    const std::vector<std::string> problems = lines(invalid.err);
+    ASSERT_EQ(problems.size(), 2u) << invalid.err;
+    EXPECT_EQ(problems[0].rfind(bad + ":2:", 0), 0u) << problems[0];
+    EXPECT_NE(problems[0].find("nearest.percentile"), std::string::npos) << problems[0];
+    EXPECT_EQ(problems[1].rfind(bad + ":4:", 0), 0u) << problems[1];
+
+    EXPECT_EQ(run({"--check-config", dir_.file("missing.yaml")}).exit_code, 3);
+}
+
+TEST_F(StereodCli, EachStartUpProblemHasItsExitCode)
+{
+    // 3: the configuration.
+    const std::string bad = dir_.file("bad.yaml");
+    std::ofstream(bad) << "nearest:\n  percentile: 500\n";
+    ProcessResult result =
+        run({"--config", bad, "--replay", replay_, "--calib", calibration_, "--socket", socket_});
+    EXPECT_EQ(result.exit_code, 3) << result.err;
+    EXPECT_NE(result.err.find("nearest.percentile"), std::string::npos) << result.err;
+
+    // 4: the calibration, missing, unreadable or not of the frames' size.
+    result = run({"--replay", replay_, "--socket", socket_});
+    EXPECT_EQ(result.exit_code, 4) << result.err;
+    EXPECT_NE(result.err.find("calibration"), std::string::npos) << result.err;
+    const std::string garbage = dir_.file("garbage.yaml");
+    std::ofstream(garbage) << "stereod_calibration: 1\nkind: rectified\n";
+    result = run({"--replay", replay_, "--calib", garbage, "--socket", socket_});
+    EXPECT_EQ(result.exit_code, 4) << result.err;
+    EXPECT_NE(result.err.find("garbage.yaml"), std::string::npos) << result.err;
+    const std::string other_size = dir_.file("vga.yaml");
+    saveCalibration(makeRectifiedCalibration(cv::Size(640, 480), 615.0, 0.013), other_size);
+    result = run({"--replay", replay_, "--calib", other_size, "--socket", socket_});
+    EXPECT_EQ(result.exit_code, 4) << result.err;
+    EXPECT_NE(result.err.find("640x480"), std::string::npos) << result.err;
+
+    // 5: the source: no such recording, or nothing readable in it.
+    result = run({"--replay", dir_.file("nowhere"), "--calib", calibration_, "--socket", socket_});
+    EXPECT_EQ(result.exit_code, 5) << result.err;
+    EXPECT_NE(result.err.find("nowhere"), std::string::npos) << result.err;
+    const std::string empty = dir_.file("empty");
+    std::filesystem::create_directory(empty);
+    result = run({"--replay", empty, "--calib", calibration_, "--socket", socket_});
+    EXPECT_EQ(result.exit_code, 5) << result.err;
+
+    // 6: the socket.
+    const std::string blocker = dir_.file("file");
+    std::ofstream(blocker) << "x";
+    result = run({"--replay", replay_, "--calib", calibration_, "--socket", blocker + "/s.sock"});
+    EXPECT_EQ(result.exit_code, 6) << result.err;
+    EXPECT_NE(result.err.find(blocker), std::string::npos) << result.err;
+    EXPECT_FALSE(std::filesystem::exists(socket_));
+}
+
+TEST_F(StereodCli, ServesAReplayAndStopsOnSigterm)
+{
+    // The recording's own calibration.yaml is used when --calib is not given.
+    std::filesystem::copy_file(calibration_, replay_ + "/calibration.yaml");
+    ChildProcess service(
+        {stereodPath(), "--replay", replay_, "--socket", socket_, "--log-level", "debug"},
+        dir_.file("stereod.log"));
+    const auto log = [&] {
+        std::ifstream file(dir_.file("stereod.log"));
+        return std::string(std::istreambuf_iterator<char>(file), {});
+    };
+    std::unique_ptr<TestClient> client;
+    ASSERT_TRUE(waitUntil([&] {
+        if (!service.running())
+            return true;
+        try {
+            client = std::make_unique<TestClient>(socket_);
+            return true;
+        } catch (const std::exception&) {
+            return false;
+        }
+    })) << log();
+    ASSERT_TRUE(client) << "stereod exited during start-up:\n" << log();
+    Json reading;
+    ASSERT_TRUE(waitUntil([&] {
+        reading = client->request({{"cmd", "distance"}})["reading"];
+        return reading["valid"] == true;
+    })) << reading.dump()
+        << "\n"
+        << log();
+    EXPECT_NEAR(reading["distance_m"].get<double>(), 0.57, 0.05);
+
+    // SIGHUP without a configuration file: refused, logged, and the service goes on.
+    service.sendSignal(SIGHUP);
+    EXPECT_EQ(client->request({{"cmd", "hello"}})["ok"], true);
+
+    service.sendSignal(SIGTERM);
+    const std::optional<int> status = service.waitFor(10s);
+    ASSERT_TRUE(status.has_value()) << "stereod still running 10 s after SIGTERM";
+    ASSERT_TRUE(WIFEXITED(*status)) << "killed by signal " << WTERMSIG(*status);
+    EXPECT_EQ(WEXITSTATUS(*status), 0) << log();
+    EXPECT_FALSE(std::filesystem::exists(socket_));
+    EXPECT_TRUE(client->waitForClose());
+    const std::string text = log();
+    EXPECT_NE(text.find("disparity range: "), std::string::npos) << text;
+    EXPECT_NE(text.find("SIGTERM"), std::string::npos) << text;
+}
+
+TEST_F(StereodCli, WarnsWhenTheDisparityCapHidesTheClosestDistance)
+{
+    // 615 px * 0.013 m / 0.01 m = 800 px of disparity wanted, 64 allowed.
+    const std::string config = dir_.file("close.yaml");
+    std::ofstream(config) << "matcher:\n  min_depth_m: 0.01\n  max_num_disparities: 64\n"
+                          << "source:\n  replay:\n    loop: false\n";
+    ChildProcess service({stereodPath(), "--config", config, "--replay", replay_, "--calib",
+                          calibration_, "--socket", socket_},
+                         dir_.file("stereod.log"));
+    const auto log = [&] {
+        std::ifstream file(dir_.file("stereod.log"));
+        return std::string(std::istreambuf_iterator<char>(file), {});
+    };
+    ASSERT_TRUE(waitUntil([&] {
+        return log().find("listening on") != std::string::npos || !service.running();
+    })) << log();
+    service.sendSignal(SIGTERM);
+    const std::optional<int> status = service.waitFor(10s);
+    ASSERT_TRUE(status.has_value());
+    EXPECT_TRUE(WIFEXITED(*status) && WEXITSTATUS(*status) == 0) << log();
+    const std::string text = log();
+    const std::size_t warning = text.find("cannot see closer than ");
+    ASSERT_NE(warning, std::string::npos) << text;
+    EXPECT_NE(text.find(" m with 64 disparities", warning), std::string::npos) << text;
+}
+
+} // namespace
+} // namespace stereod
