@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# Sets up, builds and runs the test suite.
+#   scripts/test.sh                      the whole suite (build/)
+#   scripts/test.sh --sanitize address   the whole suite under ASan+UBSan (build-asan/)
+#   scripts/test.sh --sanitize thread    the threaded tests under TSan (build-tsan/)
+# Extra arguments after `--` go to ctest (e.g. -- -R Ring).
+set -euo pipefail
+source "$(dirname "$0")/common.sh"
+
+sanitize=""
+ctest_args=()
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --sanitize) sanitize="${2:?--sanitize needs address or thread}"; shift 2 ;;
+    --) shift; ctest_args+=("$@"); break ;;
+    *) echo "test.sh: unknown argument '$1' (expected --sanitize address|thread, or -- CTEST-ARGS)" >&2; exit 2 ;;
+  esac
+done
+
+"$STEREOD_ROOT/scripts/setup.sh"
+
+cmake_args=()
+[ "${CI:-}" = "true" ] && cmake_args+=(-DSTEREOD_WERROR=ON)
+case "$sanitize" in
+  "")
+    dir="$STEREOD_ROOT/build" ;;
+  address)
+    dir="$STEREOD_ROOT/build-asan"
+    cmake_args+=("-DSTEREOD_SANITIZE=address;undefined" -DSTEREOD_BUILD_BENCH=OFF)
+    export ASAN_OPTIONS="detect_leaks=1:abort_on_error=1:strict_string_checks=1"
+    export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
+    export LSAN_OPTIONS="suppressions=$STEREOD_ROOT/tests/sanitizers/lsan.supp"
+    ;;
+  thread)
+    dir="$STEREOD_ROOT/build-tsan"
+    cmake_args+=(-DSTEREOD_SANITIZE=thread -DSTEREOD_BUILD_BENCH=OFF)
+    export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:suppressions=$STEREOD_ROOT/tests/sanitizers/tsan.supp"
+    ctest_args=(-L threaded "${ctest_args[@]}")
+    ;;
+  *) echo "test.sh: --sanitize takes address or thread, not '$sanitize'" >&2; exit 2 ;;
+esac
+
+echo "== build ($dir)"
+build_tree "$dir" "${cmake_args[@]}"
+echo "== test ($dir)"
+cd "$dir"
+ctest --output-on-failure --timeout 600 -j "$STEREOD_JOBS" "${ctest_args[@]}"
