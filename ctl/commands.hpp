@@ -1,0 +1,97 @@
+#pragma once
+// The subcommands of `stereoctl`, each a function from its parsed options to an exit code
+// (ctl/exit_codes.hpp). main.cpp declares the command line; these do the work and print.
+//
+// Reentrant, except that `watch` changes the process's signal mask while it runs.
+
+#include <optional>
+#include <stdexcept>
+#include <string>
+
+namespace stereod {
+
+// A problem with the arguments that the command-line parser cannot see (a malformed
+// --roi, a missing input file, ...). Printed as one line; exit code 2.
+class UsageError : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+
+// Options every command that talks to the service shares.
+struct ServiceOptions {
+    std::string socket_path = "/run/stereod/stereod.sock";
+    int timeout_ms = 5000;            // limit on each wait for the service
+};
+
+struct DistanceOptions {
+    ServiceOptions service;
+    bool json = false;
+    std::optional<double> max_age_ms;
+};
+
+struct StatusOptions {
+    ServiceOptions service;
+    bool json = false;
+};
+
+struct WatchOptions {
+    ServiceOptions service;
+    bool json = false;
+};
+
+struct SnapshotOptions {
+    ServiceOptions service;
+    std::string depth_path;           // .png, uint16 millimetres
+    std::string disparity_path;       // .pfm or .png (KITTI)
+    std::string cloud_path;           // .ply
+    std::string colormap_path;        // .png, colourised depth
+    std::string left_path;            // .png, rectified left image
+};
+
+// The geometry of a pair that comes rectified (--rectified --focal-px ...). The parser
+// guarantees focal_px and baseline_m when `rectified` is set.
+struct RectifiedOptions {
+    bool rectified = false;
+    std::optional<double> focal_px;
+    std::optional<double> baseline_m;
+    std::optional<double> cx_px;      // default: the image centre
+    std::optional<double> cy_px;
+    double doffs_px = 0.0;
+};
+
+struct DepthOptions {
+    std::string left_path;
+    std::string right_path;
+    std::string calib_path;
+    std::string config_path;          // a service configuration whose processing to use
+    RectifiedOptions geometry;
+    std::string matcher;              // "", "bm", "sgbm", "sgbm-3way"
+    std::optional<int> max_disparity;
+    std::optional<double> min_depth_m;
+    std::string roi;                  // "x,y,w,h" in fractions of the image
+    std::string disparity_path;
+    std::string depth_path;
+    std::string cloud_path;
+    std::string colormap_path;
+    bool json = false;
+};
+
+struct CalibrateOptions {
+    RectifiedOptions geometry;
+    std::string size;                 // "WxH"
+    std::string out_path;
+    // The chessboard form (not in this version): remembered only to say so.
+    std::string left_glob;
+    std::string right_glob;
+    std::string board;
+    std::optional<double> square_m;
+};
+
+int runDistance(const DistanceOptions& options);
+int runStatus(const StatusOptions& options);
+int runWatch(const WatchOptions& options);
+int runSnapshot(const SnapshotOptions& options);
+int runDepth(const DepthOptions& options);
+int runCalibrate(const CalibrateOptions& options);
+
+} // namespace stereod

@@ -1,0 +1,237 @@
+// stereoctl: the command-line client of stereod and its offline tools (docs/stereoctl.md).
+// This file declares the command line; ctl/*_commands.cpp do the work.
+
+#include <cstdio>
+#include <exception>
+#include <functional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+
+#include "ctl/client.hpp"
+#include "ctl/commands.hpp"
+#include "ctl/exit_codes.hpp"
+
+namespace stereod {
+
+namespace {
+
+// A number > 0; CLI11's own PositiveNumber prints the whole double range in its message.
+const CLI::Validator kPositive(
+    [](std::string& input) -> std::string {
+        double value = 0.0;
+        if (!CLI::detail::lexical_cast(input, value)) {
+            return "expected a number, got '" + input + "'";
+        }
+        if (!(value > 0.0)) {
+            return "must be greater than 0, got " + input;
+        }
+        return {};
+    },
+    "> 0");
+
+// CLI11 errors as one line (CLI11's default adds a second, "Run with --help ...").
+std::string oneLineFailure(const CLI::App*, const CLI::Error& error)
+{
+    return fmt::format("stereoctl: {} (see --help)\n", error.what());
+}
+
+// A command that talks to the service: --socket, --timeout-ms, and --json when `json` is
+// given.
+CLI::App* addServiceCommand(CLI::App& app, const char* name, const char* description,
+                            ServiceOptions& options, bool* json = nullptr,
+                            const char* json_help = nullptr)
+{
+    CLI::App* command = app.add_subcommand(name, description);
+    command
+        ->add_option("--socket", options.socket_path,
+                     "the service's Unix socket (also from STEREOD_SOCKET)")
+        ->envname("STEREOD_SOCKET")
+        ->capture_default_str();
+    command->add_option("--timeout-ms", options.timeout_ms, "limit on each wait for the service")
+        ->check(kPositive)
+        ->capture_default_str();
+    if (json != nullptr) {
+        command->add_flag("--json", *json, json_help);
+    }
+    return command;
+}
+
+// --rectified and the geometry options, which need it and which it needs (focal length
+// and baseline). Returns the --rectified flag.
+CLI::Option* addRectifiedOptions(CLI::App* cmd, RectifiedOptions& o, const char* what)
+{
+    CLI::Option* rectified = cmd->add_flag("--rectified", o.rectified, what);
+    CLI::Option* focal =
+        cmd->add_option("--focal-px", o.focal_px, "rectified focal length (px)")->check(kPositive);
+    CLI::Option* baseline =
+        cmd->add_option("--baseline-m", o.baseline_m, "baseline (m)")->check(kPositive);
+    CLI::Option* cx = cmd->add_option("--cx", o.cx_px, "principal point x (px; default: centre)");
+    CLI::Option* cy = cmd->add_option("--cy", o.cy_px, "principal point y (px; default: centre)");
+    CLI::Option* doffs = cmd->add_option("--doffs-px", o.doffs_px,
+                                         "right minus left principal point x (px)");
+    rectified->needs(focal)->needs(baseline);
+    for (CLI::Option* geometry : {focal, baseline, cx, cy, doffs}) {
+        geometry->needs(rectified);
+    }
+    return rectified;
+}
+
+struct Options {
+    DistanceOptions distance;
+    StatusOptions status;
+    WatchOptions watch;
+    SnapshotOptions snapshot;
+    DepthOptions depth;
+    CalibrateOptions calibrate;
+};
+
+CLI::App* declareDistance(CLI::App& app, DistanceOptions& o)
+{
+    CLI::App* cmd = addServiceCommand(
+        app, "distance",
+        "the nearest-object distance now (exit 0 valid, 1 no reading in range, 2 stale or not "
+        "producing, 3 service unreachable)",
+        o.service, &o.json, "print the reading object as JSON");
+    cmd->add_option("--max-age-ms", o.max_age_ms, "refuse a reading older than this (ms)")
+        ->check(kPositive);
+    return cmd;
+}
+
+CLI::App* declareSnapshot(CLI::App& app, SnapshotOptions& o)
+{
+    CLI::App* cmd = addServiceCommand(
+        app, "snapshot", "write the service's latest result to files (at least one option)",
+        o.service);
+    cmd->add_option("--depth", o.depth_path, "depth as PNG, uint16 millimetres (0 = invalid)");
+    cmd->add_option("--disparity", o.disparity_path,
+                    "disparity as .pfm (float, inf = invalid) or .png (uint16 x256)");
+    cmd->add_option("--cloud", o.cloud_path, "point cloud as binary .ply (x y z metres, "
+                                             "intensity)");
+    cmd->add_option("--colormap", o.colormap_path, "colourised depth as PNG (near warm, far cool)");
+    cmd->add_option("--left", o.left_path, "the rectified left image as PNG");
+    return cmd;
+}
+
+CLI::App* declareDepth(CLI::App& app, DepthOptions& o)
+{
+    CLI::App* cmd = app.add_subcommand(
+        "depth", "run one stereo pair through the service's pipeline, offline (exit 0 reading, "
+                 "1 no reading, 2 bad arguments or files)");
+    cmd->add_option("LEFT", o.left_path, "left image")->required();
+    cmd->add_option("RIGHT", o.right_path, "right image")->required();
+    CLI::Option* calib = cmd->add_option("--calib", o.calib_path, "calibration file (YAML)");
+    CLI::Option* rectified =
+        addRectifiedOptions(cmd, o.geometry, "the pair is rectified; give its geometry");
+    calib->excludes(rectified);
+    cmd->add_option("--config", o.config_path,
+                    "take the processing settings from this service configuration");
+    cmd->add_option("--matcher", o.matcher, "bm, sgbm or sgbm-3way")
+        ->check(CLI::IsMember({"bm", "sgbm", "sgbm-3way"}));
+    cmd->add_option("--max-disparity", o.max_disparity,
+                    "disparities searched, rounded up to a multiple of 16 (instead of deriving "
+                    "them from the closest depth)")
+        ->check(kPositive);
+    cmd->add_option("--min-depth-m", o.min_depth_m,
+                    "closest depth to see (m); sets the disparity range")
+        ->check(kPositive);
+    cmd->add_option("--roi", o.roi, "region for the nearest object: x,y,w,h fractions of the "
+                                    "image");
+    cmd->add_option("--disparity", o.disparity_path, "write the disparity (.pfm or .png)");
+    cmd->add_option("--depth", o.depth_path, "write the depth (.png, uint16 mm)");
+    cmd->add_option("--cloud", o.cloud_path, "write the point cloud (.ply)");
+    cmd->add_option("--colormap", o.colormap_path, "write the colourised depth (.png)");
+    cmd->add_flag("--json", o.json,
+                  "print the reading, stage timings, disparity range and matcher as JSON");
+    return cmd;
+}
+
+CLI::App* declareCalibrate(CLI::App& app, CalibrateOptions& o)
+{
+    CLI::App* cmd = app.add_subcommand(
+        "calibrate", "write a calibration file; this version makes the rectified-only form "
+                     "(--rectified)");
+    CLI::Option* rectified =
+        addRectifiedOptions(cmd, o.geometry, "a rig or dataset that delivers rectified pairs");
+    CLI::Option* size = cmd->add_option("--size", o.size, "image size WxH (px)");
+    rectified->needs(size);
+    size->needs(rectified);
+    cmd->add_option("--out", o.out_path, "calibration file to write (YAML)")->required();
+    // The chessboard form: accepted so that its use gets a clear answer, not a parse error.
+    const char* later = "chessboard calibration: not available in this version";
+    for (CLI::Option* chessboard : {cmd->add_option("--left", o.left_glob, later),
+                                    cmd->add_option("--right", o.right_glob, later),
+                                    cmd->add_option("--board", o.board, later),
+                                    cmd->add_option("--square-m", o.square_m, later)}) {
+        chessboard->excludes(rectified);
+    }
+    return cmd;
+}
+
+} // namespace
+
+} // namespace stereod
+
+int main(int argc, char** argv)
+{
+    using namespace stereod;
+    CLI::App app("stereoctl: client and offline tools of the stereod stereo depth service",
+                 "stereoctl");
+    app.failure_message(oneLineFailure);
+    app.require_subcommand(0, 1);
+    Options o;
+    const std::vector<std::pair<CLI::App*, std::function<int()>>> commands = {
+        {declareDistance(app, o.distance), [&] { return runDistance(o.distance); }},
+        {addServiceCommand(app, "status",
+                           "source state per camera, fps, dropped frames, pairing skew, "
+                           "per-stage latency, clients",
+                           o.status.service, &o.status.json,
+                           "print the service's status object as JSON"),
+         [&] { return runStatus(o.status); }},
+        {addServiceCommand(app, "watch", "one line per new reading until interrupted (Ctrl-C)",
+                           o.watch.service, &o.watch.json,
+                           "print each reading event as one JSON line"),
+         [&] { return runWatch(o.watch); }},
+        {declareSnapshot(app, o.snapshot), [&] { return runSnapshot(o.snapshot); }},
+        {declareDepth(app, o.depth), [&] { return runDepth(o.depth); }},
+        {declareCalibrate(app, o.calibrate), [&] { return runCalibrate(o.calibrate); }},
+    };
+
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::ParseError& error) {
+        const int code = app.exit(error);
+        return code == 0 ? kExitOk : kExitUsage;
+    }
+
+    try {
+        for (const auto& [command, run] : commands) {
+            if (command->parsed()) {
+                return run();
+            }
+        }
+        std::fputs(app.help().c_str(), stderr);
+        return kExitUsage;
+    } catch (const ClientError& error) {
+        fmt::print(stderr, "stereoctl: {}\n", error.what());
+        return kExitUnreachable;
+    } catch (const nlohmann::ordered_json::exception& error) {
+        // A reply with a field of the wrong type: the peer does not speak this protocol.
+        fmt::print(stderr, "stereoctl: the reply from the service does not follow the protocol: "
+                           "{}\n",
+                   error.what());
+        return kExitUnreachable;
+    } catch (const ServiceError& error) {
+        fmt::print(stderr, "stereoctl: the service refused the request: {}\n", error.what());
+        return kExitNotProducing;
+    } catch (const std::exception& error) {
+        // Bad arguments found after parsing (UsageError), calibration and configuration
+        // files that cannot be used, files that cannot be written, settings the pipeline
+        // refuses: all named by the thrower.
+        fmt::print(stderr, "stereoctl: {}\n", error.what());
+        return kExitUsage;
+    }
+}

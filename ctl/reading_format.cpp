@@ -1,0 +1,102 @@
+#include "ctl/reading_format.hpp"
+
+#include <array>
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "ctl/exit_codes.hpp"
+
+namespace stereod {
+
+namespace {
+
+constexpr std::array kAllReasons = {
+    NoReadingReason::None,           NoReadingReason::NoFrameYet,
+    NoReadingReason::TooFewValidPixels, NoReadingReason::NothingInRange,
+    NoReadingReason::OutOfSync,      NoReadingReason::SourceDown,
+    NoReadingReason::BadFrame,       NoReadingReason::Stale,
+};
+
+bool isValid(const nlohmann::ordered_json& reading)
+{
+    const auto valid = reading.find("valid");
+    const auto distance = reading.find("distance_m");
+    return valid != reading.end() && valid->is_boolean() && valid->get<bool>() &&
+           distance != reading.end() && distance->is_number();
+}
+
+// The reason's message, or its code, or a fallback when the service sent neither.
+std::string reasonMessage(const nlohmann::ordered_json& reading)
+{
+    const auto reason = reading.find("reason");
+    if (reason == reading.end() || !reason->is_object()) {
+        return "the service gave no reason";
+    }
+    if (const auto message = reason->find("message");
+        message != reason->end() && message->is_string()) {
+        return message->get<std::string>();
+    }
+    if (const auto code = reason->find("code"); code != reason->end() && code->is_string()) {
+        return code->get<std::string>();
+    }
+    return "the service gave no reason";
+}
+
+} // namespace
+
+std::optional<NoReadingReason> reasonFromCode(std::string_view code)
+{
+    for (const NoReadingReason reason : kAllReasons) {
+        if (code == reasonCode(reason)) {
+            return reason;
+        }
+    }
+    return std::nullopt;
+}
+
+int exitCodeForReading(const nlohmann::ordered_json& reading)
+{
+    if (isValid(reading)) {
+        return kExitOk;
+    }
+    std::optional<NoReadingReason> reason;
+    if (const auto r = reading.find("reason"); r != reading.end() && r->is_object()) {
+        if (const auto code = r->find("code"); code != r->end() && code->is_string()) {
+            reason = reasonFromCode(code->get<std::string>());
+        }
+    }
+    // A reason this client does not know cannot be vouched for as "fresh data without a
+    // number": treat it as the service not producing.
+    if (!reason || meansNotProducing(*reason) || *reason == NoReadingReason::None) {
+        return kExitNotProducing;
+    }
+    return kExitNoReading;
+}
+
+std::string formatDistance(const nlohmann::ordered_json& reading)
+{
+    if (isValid(reading)) {
+        return fmt::format("{:.3f} m", reading["distance_m"].get<double>());
+    }
+    return "no reading: " + reasonMessage(reading);
+}
+
+std::string formatWatchLine(const nlohmann::ordered_json& reading)
+{
+    std::string line;
+    if (const auto frame = reading.find("frame"); frame != reading.end() && frame->is_number()) {
+        line = fmt::format("frame {}  ", frame->get<uint64_t>());
+    }
+    line += formatDistance(reading);
+    if (const auto age = reading.find("age_ms"); age != reading.end() && age->is_number()) {
+        line += fmt::format("  age {:.0f} ms", age->get<double>());
+    }
+    if (const auto valid = reading.find("valid_fraction");
+        valid != reading.end() && valid->is_number()) {
+        line += fmt::format("  valid {:.0f} %", 100.0 * valid->get<double>());
+    }
+    return line;
+}
+
+} // namespace stereod

@@ -1,0 +1,35 @@
+#pragma once
+// The reading object of the protocol (docs/protocol.md, "The reading object") as
+// `stereoctl` prints it and decides its exit code from it. (The object itself is built by
+// the protocol library, daemon/protocol.hpp, for the service and `stereoctl depth` alike.)
+//
+// Reentrant: pure functions.
+
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include <nlohmann/json.hpp>
+
+#include "pipeline/reading.hpp"
+
+namespace stereod {
+
+// The reason named by a protocol code ("too_few_valid_pixels", ...); nullopt when the
+// code is unknown (a newer service).
+std::optional<NoReadingReason> reasonFromCode(std::string_view code);
+
+// Exit code of `stereoctl distance` for a reading object: 0 valid; 1 a fresh frame whose
+// data support no number (too few valid pixels, nothing in range, bad frame); 2 the
+// service is not producing (stale, out of sync, source down, no frame yet, or a reason
+// this client does not know).
+int exitCodeForReading(const nlohmann::ordered_json& reading);
+
+// "0.873 m", or "no reading: <reason message>".
+std::string formatDistance(const nlohmann::ordered_json& reading);
+
+// One line of `stereoctl watch`: "frame 118  1.412 m  age 37 ms  valid 83 %", or the
+// reason instead of the distance.
+std::string formatWatchLine(const nlohmann::ordered_json& reading);
+
+} // namespace stereod

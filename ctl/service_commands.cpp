@@ -1,0 +1,436 @@
+// The commands that talk to the running service: distance, status, watch, snapshot.
+
+#include <poll.h>
+#include <signal.h>
+#include <sys/signalfd.h>
+#include <unistd.h>
+
+#include <bit>
+#include <cerrno>
+#include <cstdio>
+#include <system_error>
+#include <vector>
+
+#include <fmt/format.h>
+#include <opencv2/core.hpp>
+
+#include "ctl/client.hpp"
+#include "ctl/commands.hpp"
+#include "ctl/exit_codes.hpp"
+#include "ctl/output.hpp"
+#include "ctl/reading_format.hpp"
+#include "pipeline/depth_io.hpp"
+
+namespace stereod {
+
+namespace {
+
+// The payload formats are little-endian (docs/protocol.md) and are read in place.
+static_assert(std::endian::native == std::endian::little,
+              "payloads are read in place: add byte swapping for big-endian hosts");
+static_assert(sizeof(CloudPoint) == 16, "f32_xyzi points are 16 bytes");
+
+using json = nlohmann::ordered_json;
+
+ProtocolClient connect(const ServiceOptions& options)
+{
+    return ProtocolClient(options.socket_path, std::chrono::milliseconds(options.timeout_ms));
+}
+
+// A field of a reply as text: fixed-point with `decimals`, "-" when missing.
+std::string number(const json& object, const char* key, int decimals)
+{
+    if (!object.is_object()) {
+        return "-";
+    }
+    const auto it = object.find(key);
+    if (it == object.end() || !it->is_number()) {
+        return "-";
+    }
+    return fmt::format("{:.{}f}", it->get<double>(), decimals);
+}
+
+std::string text(const json& object, const char* key)
+{
+    if (!object.is_object()) {
+        return "-";
+    }
+    const auto it = object.find(key);
+    if (it == object.end() || it->is_null()) {
+        return "-";
+    }
+    return it->is_string() ? it->get<std::string>() : it->dump();
+}
+
+// A string field that may be absent or empty (an error text): "" unless it is a string.
+std::string optionalText(const json& object, const char* key)
+{
+    if (!object.is_object()) {
+        return {};
+    }
+    const auto it = object.find(key);
+    return it != object.end() && it->is_string() ? it->get<std::string>() : std::string();
+}
+
+const json& member(const json& object, const char* key)
+{
+    static const json kNull;
+    if (!object.is_object()) {
+        return kNull;
+    }
+    const auto it = object.find(key);
+    return it == object.end() ? kNull : *it;
+}
+
+void printCamera(const json& camera)
+{
+    std::string line = fmt::format("  {:<8} {:<10} {:>6} {:>8} {:>8} {:>5}", text(camera, "name"),
+                                   text(camera, "state"), number(camera, "fps", 1),
+                                   number(camera, "frames", 0), number(camera, "dropped", 0),
+                                   number(camera, "bad_frames", 0));
+    if (const std::string error = optionalText(camera, "last_error"); !error.empty()) {
+        line += "  " + error;
+    }
+    fmt::print("{}\n", line);
+}
+
+void printStatus(const json& status)
+{
+    fmt::print("stereod: {}, up {} s\n", text(status, "state"), number(status, "uptime_s", 1));
+
+    const json& source = member(status, "source");
+    fmt::print("source: {}, {}\n", text(source, "kind"), text(source, "state"));
+    if (const std::string reason = optionalText(source, "down_reason"); !reason.empty()) {
+        fmt::print("  down: {}\n", reason);
+    }
+    if (const std::string error = optionalText(source, "last_error"); !error.empty()) {
+        fmt::print("  last error: {}\n", error);
+    }
+    fmt::print("  {:<8} {:<10} {:>6} {:>8} {:>8} {:>5}  {}\n", "camera", "state", "fps", "frames",
+               "dropped", "bad", "last error");
+    if (const json& cameras = member(source, "cameras"); cameras.is_array()) {
+        for (const json& camera : cameras) {
+            printCamera(camera);
+        }
+    }
+    fmt::print("  pairs {}, dropped in the ring {}, dropped unpaired {}\n",
+               number(source, "pairs", 0), number(source, "ring_dropped", 0),
+               number(source, "unpaired_dropped", 0));
+    const json& skew = member(source, "skew_ms");
+    fmt::print("  pairing skew: mean {} ms, p99 {} ms, max {} ms\n", number(skew, "mean", 2),
+               number(skew, "p99", 2), number(skew, "max", 2));
+
+    const json& pipeline = member(status, "pipeline");
+    fmt::print("pipeline: {} frames, {} fps, matcher {}, {} disparities from {}, closest depth {} "
+               "m\n",
+               number(pipeline, "frames", 0), number(pipeline, "fps", 1), text(pipeline, "matcher"),
+               number(pipeline, "num_disparities", 0), number(pipeline, "min_disparity", 0),
+               number(pipeline, "closest_depth_m", 2));
+    printStageTable(stdout, member(pipeline, "stage_ms"));
+
+    const json& calibration = member(status, "calibration");
+    fmt::print("calibration: {}, f {} px, B {} m, doffs {} px, {}x{}, {}\n",
+               text(calibration, "kind"), number(calibration, "focal_px", 1),
+               number(calibration, "baseline_m", 3), number(calibration, "doffs_px", 1),
+               number(calibration, "width", 0), number(calibration, "height", 0),
+               text(calibration, "path"));
+
+    const json& clients = member(status, "clients");
+    fmt::print("clients: {} connected, {} subscribed, {} frames dropped, {} disconnected as too "
+               "slow\n",
+               number(clients, "connected", 0), number(clients, "subscribers", 0),
+               number(clients, "frames_dropped", 0), number(clients, "disconnected_slow", 0));
+
+    if (const json& reading = member(status, "reading"); reading.is_object()) {
+        fmt::print("reading: {}\n", formatWatchLine(reading));
+    }
+}
+
+// Blocks SIGINT and SIGTERM and takes them through a signalfd instead, so that `watch`
+// can end its wait cleanly; restores the mask on destruction.
+class SignalCatcher {
+public:
+    SignalCatcher()
+    {
+        sigemptyset(&signals_);
+        sigaddset(&signals_, SIGINT);
+        sigaddset(&signals_, SIGTERM);
+        if (pthread_sigmask(SIG_BLOCK, &signals_, &previous_) != 0) {
+            throw std::runtime_error("cannot block SIGINT and SIGTERM");
+        }
+        fd_ = ::signalfd(-1, &signals_, SFD_CLOEXEC | SFD_NONBLOCK);
+        if (fd_ < 0) {
+            const int error_number = errno;
+            pthread_sigmask(SIG_SETMASK, &previous_, nullptr);
+            throw std::runtime_error("cannot create a signalfd: " +
+                                     std::system_category().message(error_number));
+        }
+    }
+    ~SignalCatcher()
+    {
+        // A signal that arrived is consumed first, so that unblocking does not deliver it
+        // again and kill the process after it chose to end cleanly.
+        signalfd_siginfo info{};
+        while (::read(fd_, &info, sizeof(info)) == static_cast<ssize_t>(sizeof(info))) {
+        }
+        ::close(fd_);
+        pthread_sigmask(SIG_SETMASK, &previous_, nullptr);
+    }
+    SignalCatcher(const SignalCatcher&) = delete;
+    SignalCatcher& operator=(const SignalCatcher&) = delete;
+
+    int fd() const noexcept { return fd_; }
+
+    // True when a signal is waiting: checked between events, because the client only
+    // looks at the descriptor when it has to wait, and a busy stream may never make it.
+    bool pending() const
+    {
+        pollfd p = {fd_, POLLIN, 0};
+        return ::poll(&p, 1, 0) > 0;
+    }
+
+private:
+    sigset_t signals_{};
+    sigset_t previous_{};
+    int fd_ = -1;
+};
+
+std::size_t payloadBytes(const json& header)
+{
+    const auto bytes = header.find("bytes");
+    if (bytes == header.end()) {
+        return 0;
+    }
+    if (!bytes->is_number_unsigned()) {
+        throw ClientError("a header from the service has a \"bytes\" that is not a count: " +
+                              header.dump(),
+                          0);
+    }
+    return bytes->get<std::size_t>();
+}
+
+// One payload of a snapshot reply, checked against the size its header announces.
+struct Payload {
+    std::string name;
+    std::string format;
+    int width = 0;
+    int height = 0;
+    std::size_t points = 0;
+    std::size_t bytes = 0;
+};
+
+Payload parsePayload(const json& header)
+{
+    Payload p;
+    p.name = header.value("name", std::string());
+    p.format = header.value("format", std::string());
+    p.width = header.value("width", 0);
+    p.height = header.value("height", 0);
+    p.points = header.value("points", std::size_t{0});
+    p.bytes = payloadBytes(header);
+    return p;
+}
+
+// Reads an image payload of `type` into `image`; the header must agree with its size.
+void readImagePayload(ProtocolClient& client, const Payload& payload, int type, cv::Mat& image)
+{
+    const std::size_t expected = static_cast<std::size_t>(std::max(payload.width, 0)) *
+                                 static_cast<std::size_t>(std::max(payload.height, 0)) *
+                                 CV_ELEM_SIZE(type);
+    if (payload.width <= 0 || payload.height <= 0 || payload.bytes != expected) {
+        throw ClientError(fmt::format("the service announced a {} payload of {}x{} {} in {} "
+                                      "bytes, which does not add up",
+                                      payload.name, payload.width, payload.height, payload.format,
+                                      payload.bytes),
+                          0);
+    }
+    image.create(payload.height, payload.width, type);
+    client.readPayload(image.data, payload.bytes);
+}
+
+} // namespace
+
+int runDistance(const DistanceOptions& options)
+{
+    ProtocolClient client = connect(options.service);
+    json request = {{"cmd", "distance"}};
+    if (options.max_age_ms) {
+        request["max_age_ms"] = *options.max_age_ms;
+    }
+    const json reply = client.request(request);
+    const json& reading = member(reply, "reading");
+    if (!reading.is_object()) {
+        throw ClientError("the distance reply from " + options.service.socket_path +
+                              " has no reading object",
+                          0);
+    }
+    if (options.json) {
+        fmt::print("{}\n", reading.dump());
+    } else {
+        fmt::print("{}\n", formatDistance(reading));
+    }
+    return exitCodeForReading(reading);
+}
+
+int runStatus(const StatusOptions& options)
+{
+    ProtocolClient client = connect(options.service);
+    const json reply = client.request({{"cmd", "status"}});
+    const json& status = member(reply, "status");
+    if (options.json) {
+        fmt::print("{}\n", status.dump(2));
+    } else {
+        printStatus(status);
+    }
+    return kExitOk;
+}
+
+int runWatch(const WatchOptions& options)
+{
+    SignalCatcher signals;
+    ProtocolClient client = connect(options.service);
+    client.setCancelFd(signals.fd());
+    try {
+        client.request({{"cmd", "subscribe"}, {"stream", "readings"}});
+        // Readings come as fast as frames do, or not at all while the source is down:
+        // only the service going away ends the wait.
+        client.setTimeout(ProtocolClient::kWaitForever);
+        for (;;) {
+            const json event = client.readJson();
+            client.skipPayload(payloadBytes(event));
+            if (event.value("event", std::string()) != "reading") {
+                continue;
+            }
+            if (options.json) {
+                fmt::print("{}\n", event.dump());
+            } else {
+                std::string line = formatWatchLine(member(event, "reading"));
+                if (const auto skipped = event.value("skipped", 0); skipped > 0) {
+                    line += fmt::format("  ({} skipped)", skipped);
+                }
+                fmt::print("{}\n", line);
+            }
+            // Each line must reach a pipe reader now, not when a buffer fills.
+            std::fflush(stdout);
+            if (signals.pending()) {
+                return kExitOk;
+            }
+        }
+    } catch (const ClientCancelled&) {
+        return kExitOk;
+    }
+}
+
+int runSnapshot(const SnapshotOptions& options)
+{
+    const bool want_depth = !options.depth_path.empty() || !options.colormap_path.empty();
+    const bool want_disparity = !options.disparity_path.empty();
+    const bool want_left = !options.left_path.empty();
+    const bool want_cloud = !options.cloud_path.empty();
+    if (!want_depth && !want_disparity && !want_left && !want_cloud) {
+        throw UsageError("nothing to write: give at least one of --depth, --disparity, --cloud, "
+                         "--colormap, --left");
+    }
+    json items = json::array();
+    if (want_depth) {
+        items.push_back("depth");
+    }
+    if (want_disparity) {
+        items.push_back("disparity");
+    }
+    if (want_left) {
+        items.push_back("left");
+    }
+    if (want_cloud) {
+        items.push_back("cloud");
+    }
+
+    ProtocolClient client = connect(options.service);
+    const json reply = client.request({{"cmd", "snapshot"}, {"items", items}});
+    const json& payloads = member(reply, "payloads");
+    if (!payloads.is_array()) {
+        throw ClientError("the snapshot reply from " + options.service.socket_path +
+                              " has no payloads list",
+                          0);
+    }
+
+    // Every payload is read off the socket before anything is written, so that a slow
+    // disk does not hold the service's connection open longer than the transfer.
+    cv::Mat depth_mm;
+    cv::Mat disparity;
+    cv::Mat left;
+    std::vector<CloudPoint> cloud;
+    bool have_depth = false, have_disparity = false, have_left = false, have_cloud = false;
+    for (const json& header : payloads) {
+        const Payload payload = parsePayload(header);
+        if (payload.name == "depth" && payload.format == "u16_mm") {
+            readImagePayload(client, payload, CV_16UC1, depth_mm);
+            have_depth = true;
+        } else if (payload.name == "disparity" && payload.format == "f32_px") {
+            readImagePayload(client, payload, CV_32FC1, disparity);
+            have_disparity = true;
+        } else if (payload.name == "left" && payload.format == "u8_gray") {
+            readImagePayload(client, payload, CV_8UC1, left);
+            have_left = true;
+        } else if (payload.name == "cloud" && payload.format == "f32_xyzi") {
+            if (payload.bytes != payload.points * sizeof(CloudPoint)) {
+                throw ClientError(fmt::format("the service announced {} cloud points in {} bytes, "
+                                              "which does not add up",
+                                              payload.points, payload.bytes),
+                                  0);
+            }
+            cloud.resize(payload.points);
+            client.readPayload(cloud.data(), payload.bytes);
+            have_cloud = true;
+        } else {
+            // A payload this client does not know (a newer service): read past it.
+            client.skipPayload(payload.bytes);
+        }
+    }
+    const auto require = [&](bool wanted, bool have, const char* name) {
+        if (wanted && !have) {
+            throw ClientError(std::string("the snapshot from ") + options.service.socket_path +
+                                  " has no " + name + " payload",
+                              0);
+        }
+    };
+    require(want_depth, have_depth, "depth");
+    require(want_disparity, have_disparity, "disparity");
+    require(want_left, have_left, "left");
+    require(want_cloud, have_cloud, "cloud");
+
+    const std::string frame = number(reply, "frame", 0);
+    if (want_depth) {
+        cv::Mat depth_m;
+        depth_mm.convertTo(depth_m, CV_32FC1, 1e-3);   // 0 (invalid) stays 0
+        if (!options.depth_path.empty()) {
+            writeDepthPng(options.depth_path, depth_m);
+            fmt::print("wrote depth {} ({}x{}, frame {})\n", options.depth_path, depth_m.cols,
+                       depth_m.rows, frame);
+        }
+        if (!options.colormap_path.empty()) {
+            const auto [near_m, far_m] = depthDisplayRange(depth_m);
+            writeColorizedDepth(options.colormap_path, depth_m, near_m, far_m);
+            fmt::print("wrote colormap {} ({:.2f} m to {:.2f} m, frame {})\n",
+                       options.colormap_path, near_m, far_m, frame);
+        }
+    }
+    if (want_disparity) {
+        writeDisparity(options.disparity_path, disparity);
+        fmt::print("wrote disparity {} ({}x{}, frame {})\n", options.disparity_path,
+                   disparity.cols, disparity.rows, frame);
+    }
+    if (want_left) {
+        writeImagePng(options.left_path, left);
+        fmt::print("wrote left {} ({}x{}, frame {})\n", options.left_path, left.cols, left.rows,
+                   frame);
+    }
+    if (want_cloud) {
+        writePly(options.cloud_path, cloud);
+        fmt::print("wrote cloud {} ({} points, frame {})\n", options.cloud_path, cloud.size(),
+                   frame);
+    }
+    return kExitOk;
+}
+
+} // namespace stereod

@@ -1,0 +1,78 @@
+// How stereoctl reads the protocol's reading object: exit codes per reason class, and
+// the printed lines.
+
+#include <gtest/gtest.h>
+
+#include "ctl/exit_codes.hpp"
+#include "ctl/reading_format.hpp"
+
+namespace stereod {
+namespace {
+
+using Json = nlohmann::ordered_json;
+
+Json noReading(const char* code, const char* message)
+{
+    return {{"valid", false},          {"distance_m", nullptr},
+            {"stamp_ns", 81263511234}, {"age_ms", 37.2},
+            {"frame", 118},            {"valid_fraction", 0.02},
+            {"in_range_fraction", 0.0}, {"region_pixels", 355680},
+            {"reason", {{"code", code}, {"message", message}}}};
+}
+
+TEST(ReadingFormat, EveryReasonCodeOfTheProtocolIsKnown)
+{
+    for (const char* code : {"too_few_valid_pixels", "nothing_in_range", "bad_frame",
+                             "out_of_sync", "source_down", "stale", "no_frame_yet"}) {
+        const auto reason = reasonFromCode(code);
+        ASSERT_TRUE(reason.has_value()) << code;
+        EXPECT_STREQ(reasonCode(*reason), code);
+    }
+    EXPECT_FALSE(reasonFromCode("cosmic_rays").has_value());
+}
+
+TEST(ReadingFormat, ExitCodeFollowsTheReasonClass)
+{
+    const Json valid = {{"valid", true}, {"distance_m", 0.873}, {"frame", 3}};
+    EXPECT_EQ(exitCodeForReading(valid), kExitOk);
+    for (const char* code : {"too_few_valid_pixels", "nothing_in_range", "bad_frame"}) {
+        EXPECT_EQ(exitCodeForReading(noReading(code, "x")), kExitNoReading) << code;
+    }
+    for (const char* code : {"out_of_sync", "source_down", "stale", "no_frame_yet"}) {
+        EXPECT_EQ(exitCodeForReading(noReading(code, "x")), kExitNotProducing) << code;
+    }
+}
+
+TEST(ReadingFormat, AReadingThatDoesNotAddUpIsNeverValid)
+{
+    // valid:true without a number, or a reason nobody knows: not a distance to act on.
+    EXPECT_EQ(exitCodeForReading({{"valid", true}, {"distance_m", nullptr}}), kExitNotProducing);
+    EXPECT_EQ(exitCodeForReading(noReading("cosmic_rays", "?")), kExitNotProducing);
+    EXPECT_EQ(exitCodeForReading(Json::object()), kExitNotProducing);
+    EXPECT_EQ(formatDistance({{"valid", true}, {"distance_m", "1.2"}}),
+              "no reading: the service gave no reason");
+}
+
+TEST(ReadingFormat, DistanceLine)
+{
+    EXPECT_EQ(formatDistance({{"valid", true}, {"distance_m", 0.87349}}), "0.873 m");
+    EXPECT_EQ(formatDistance(noReading("too_few_valid_pixels",
+                                       "too few valid pixels in the region: 2.0 % valid, "
+                                       "10.0 % needed")),
+              "no reading: too few valid pixels in the region: 2.0 % valid, 10.0 % needed");
+    Json code_only = noReading("stale", "");
+    code_only["reason"].erase("message");
+    EXPECT_EQ(formatDistance(code_only), "no reading: stale");
+}
+
+TEST(ReadingFormat, WatchLine)
+{
+    const Json valid = {{"valid", true},  {"distance_m", 1.412},    {"stamp_ns", 5},
+                        {"age_ms", 37.2}, {"frame", 118},          {"valid_fraction", 0.83}};
+    EXPECT_EQ(formatWatchLine(valid), "frame 118  1.412 m  age 37 ms  valid 83 %");
+    EXPECT_EQ(formatWatchLine(noReading("source_down", "frame source down")),
+              "frame 118  no reading: frame source down  age 37 ms  valid 2 %");
+}
+
+} // namespace
+} // namespace stereod
