@@ -214,9 +214,10 @@ std::size_t formatReasonMessage(const Reading& reading, char* buffer, std::size_
                                 100.0 * reading.min_valid_fraction);
         break;
     case NoReadingReason::NothingInRange:
-        written = std::snprintf(buffer, size, "%s: %.1f %% valid, %.1f %% in range",
-                                reasonText(reading.reason), 100.0 * reading.valid_fraction,
-                                100.0 * reading.in_range_fraction);
+        written = std::snprintf(
+            buffer, size, "%s: %.0f pixels in range, %u needed (%.1f %% valid, %.1f %% in range)",
+            reasonText(reading.reason), reading.in_range_fraction * reading.region_pixels,
+            reading.min_pixels, 100.0 * reading.valid_fraction, 100.0 * reading.in_range_fraction);
         break;
     default:
         written = std::snprintf(buffer, size, "%s", reasonText(reading.reason));

@@ -77,6 +77,7 @@ Reading NearestObjectFinder::find(const cv::Mat& depth_m, const NearestSettings&
     reading.stamp_ns = stamp_ns;
     reading.frame = frame;
     reading.min_valid_fraction = settings.min_valid_fraction;
+    reading.min_pixels = static_cast<uint32_t>(settings.min_pixels);
 
     const cv::Rect region = regionPixels(settings.roi, depth_m.size());
     const size_t region_pixels = static_cast<size_t>(region.area());

@@ -34,6 +34,7 @@ struct Reading {
     double valid_fraction = 0.0;       // of the region's pixels, those with a valid depth
     double in_range_fraction = 0.0;    // of the region's pixels, those within the depth range
     double min_valid_fraction = 0.0;   // the threshold in force, to explain a refusal
+    uint32_t min_pixels = 0;           // in-range pixels needed, to explain a refusal
     uint32_t region_pixels = 0;        // size of the region of interest in pixels
 };
 

@@ -321,8 +321,12 @@ TEST(ProtocolReading, RefusalCarriesReasonWithNumbers)
 
     report.reading.reason = NoReadingReason::NothingInRange;
     report.reading.valid_fraction = 0.83;
+    report.reading.in_range_fraction = 0.0001;
+    report.reading.region_pixels = 200000;
+    report.reading.min_pixels = 50;
     EXPECT_EQ(readingToJson(report, 0)["reason"]["message"],
-              "nothing within the depth range in the region: 83.0 % valid, 0.0 % in range");
+              "nothing within the depth range in the region: 20 pixels in range, 50 needed "
+              "(83.0 % valid, 0.0 % in range)");
 }
 
 TEST(ProtocolReading, GivenMessageWinsAndIsEscaped)
