@@ -8,9 +8,19 @@ opencv_samples_dir() {
   if [ -f "$system/aloeL.jpg" ]; then echo "$system"; else echo "$STEREOD_ROOT/.deps/opencv-doc$system"; fi
 }
 
-# build_tree DIR [cmake args...]: configure (once) and build everything into DIR.
+# build_tree DIR [cmake args...] [-- TARGET...]: configure and build into DIR (all
+# targets unless some are named after --).
 build_tree() {
   local dir="$1"; shift
-  cmake -S "$STEREOD_ROOT" -B "$dir" -G Ninja -DSTEREOD_OPENCV_SAMPLES_DIR="$(opencv_samples_dir)" "$@" >/dev/null
-  cmake --build "$dir" -j "$STEREOD_JOBS"
+  local args=() targets=()
+  while [ $# -gt 0 ]; do
+    if [ "$1" = "--" ]; then shift; targets=("$@"); break; fi
+    args+=("$1"); shift
+  done
+  cmake -S "$STEREOD_ROOT" -B "$dir" -G Ninja -DSTEREOD_OPENCV_SAMPLES_DIR="$(opencv_samples_dir)" "${args[@]}" >/dev/null
+  if [ ${#targets[@]} -gt 0 ]; then
+    cmake --build "$dir" -j "$STEREOD_JOBS" --target "${targets[@]}"
+  else
+    cmake --build "$dir" -j "$STEREOD_JOBS"
+  fi
 }

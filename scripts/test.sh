@@ -9,6 +9,7 @@ source "$(dirname "$0")/common.sh"
 
 sanitize=""
 ctest_args=()
+targets=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --sanitize) sanitize="${2:?--sanitize needs address or thread}"; shift 2 ;;
@@ -36,12 +37,13 @@ case "$sanitize" in
     cmake_args+=(-DSTEREOD_SANITIZE=thread -DSTEREOD_BUILD_BENCH=OFF)
     export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:suppressions=$STEREOD_ROOT/tests/sanitizers/tsan.supp"
     ctest_args=(-L threaded "${ctest_args[@]}")
+    targets=(-- stereod_threaded_tests)
     ;;
   *) echo "test.sh: --sanitize takes address or thread, not '$sanitize'" >&2; exit 2 ;;
 esac
 
 echo "== build ($dir)"
-build_tree "$dir" "${cmake_args[@]}"
+build_tree "$dir" "${cmake_args[@]}" "${targets[@]}"
 echo "== test ($dir)"
 cd "$dir"
 ctest --output-on-failure --timeout 600 -j "$STEREOD_JOBS" "${ctest_args[@]}"
