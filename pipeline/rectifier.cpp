@@ -1,9 +1,184 @@
 #include "pipeline/rectifier.hpp"
 
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+
 #include <opencv2/calib3d.hpp>
+#include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
+// Why the remap is ours and not cv::remap: the service promises no heap allocation per
+// frame in steady state, and OpenCV 4.6's cv::remap creates two temporary Mats for every
+// stripe of every call (its RemapInvoker buffers the map tiles), 20 to 56 allocations per
+// frame at 640x480 to 1280x720. The maps themselves are computed once by OpenCV; only the
+// per-frame resampling is done here, with OpenCV's fixed-point arithmetic so that the
+// output is the same. Rows are still shared out with cv::parallel_for_, given a
+// ParallelLoopBody rather than a lambda (whose std::function may need the heap): with the
+// TBB backend of Debian's OpenCV it allocates nothing per call once its workers run
+// (counted with the benchmark's operator new and cv::Mat counters, and with a counting
+// malloc); tests/pipeline/hot_path_alloc_test.cpp keeps the first two at 0.
+
 namespace stereod {
+namespace {
+
+// Sub-pixel positions as cv::initUndistortRectifyMap stores them: INTER_BITS = 5, so 32
+// steps per pixel in x and in y, and map_frac = fy * 32 + fx.
+constexpr int kInterBits = 5;
+constexpr int kInterTabSize = 1 << kInterBits;
+// Bilinear weights in fixed point, as OpenCV's remap: the four neighbours get
+// (32 - fx)(32 - fy), fx (32 - fy), (32 - fx) fy and fx fy, exact integers summing to
+// 1 << 10. OpenCV scales the same weights to 1 << 15 (INTER_REMAP_COEF_BITS) and rounds
+// with (sum + (1 << 14)) >> 15, which equals (sum + (1 << 9)) >> 10 on weights 32 times
+// smaller, so the result is bit-identical to cv::remap. The weighted sum is formed in
+// two steps, along x then along y:
+//   top = tl * 32 + (tr - tl) * fx        (0..8160, fits int16)
+//   out = (top * (32 - fy) + bottom * fy + 512) >> 10
+// which is the same integer as the four-term sum, with three multiplications.
+constexpr int kWeightBits = 2 * kInterBits;
+constexpr int kRounding = 1 << (kWeightBits - 1);
+
+// Output pixels resampled per pass: the neighbours of kChunk pixels are gathered first
+// (scalar loads: SSE2 has no gather), then blended in a loop of fixed length over local
+// arrays, which GCC vectorises even at -O2 (no aliasing to check, no remainder loop).
+constexpr int kChunk = 256;
+
+// The 2x2 neighbourhood at (sx, sy), packed as two pairs: left pixel in the low byte,
+// right pixel in the high byte.
+struct Neighbours {
+    uint16_t top;
+    uint16_t bottom;
+};
+
+uint16_t pack(unsigned left, unsigned right)
+{
+    return static_cast<uint16_t>(left | (right << 8));
+}
+
+// A neighbourhood not wholly inside the source: neighbours outside count as 0
+// (BORDER_CONSTANT), so one wholly outside gives 0, as in OpenCV's remapBilinear.
+Neighbours borderNeighbours(const cv::Mat& src, int sx, int sy)
+{
+    const auto at = [&src](int x, int y) -> unsigned {
+        const bool inside = x >= 0 && x < src.cols && y >= 0 && y < src.rows;
+        return inside ? src.ptr<uint8_t>(y)[x] : 0u;
+    };
+    return {pack(at(sx, sy), at(sx + 1, sy)), pack(at(sx, sy + 1), at(sx + 1, sy + 1))};
+}
+
+// Output rows [rows.start, rows.end). Holds references only: it lives on the caller's
+// stack for one call, and cv::parallel_for_ takes it by reference (no std::function, so
+// no capture that could need the heap).
+class RemapRows final : public cv::ParallelLoopBody {
+public:
+    RemapRows(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac, cv::Mat& out)
+        : src_(src), map_xy_(map_xy), map_frac_(map_frac), out_(out)
+    {
+    }
+
+    void operator()(const cv::Range& rows) const override
+    {
+        // Zeroed once so that the blend's fixed-length loop never reads indeterminate
+        // values past a short last chunk (what it computes there is not stored).
+        alignas(64) uint16_t top[kChunk] = {};
+        alignas(64) uint16_t bottom[kChunk] = {};
+        alignas(64) uint16_t frac[kChunk] = {};
+        alignas(64) uint8_t blended[kChunk];
+        for (int y = rows.start; y < rows.end; ++y) {
+            const int16_t* xy = map_xy_.ptr<int16_t>(y);
+            const uint16_t* frac_row = map_frac_.ptr<uint16_t>(y);
+            uint8_t* dst = out_.ptr<uint8_t>(y);
+            for (int x0 = 0; x0 < out_.cols; x0 += kChunk) {
+                const int n = std::min(kChunk, out_.cols - x0);
+                std::memcpy(frac, frac_row + x0, static_cast<size_t>(n) * sizeof(uint16_t));
+                gather(xy + 2 * x0, n, top, bottom);
+                blend(top, bottom, frac, blended);
+                std::memcpy(dst + x0, blended, static_cast<size_t>(n));
+            }
+        }
+    }
+
+private:
+    void gather(const int16_t* xy, int n, uint16_t* top, uint16_t* bottom) const
+    {
+        const uint8_t* const src = src_.data;
+        const size_t step = src_.step[0];
+        // (unsigned)sx < interior_cols means sx and sx + 1 are both columns of the source
+        // (a negative sx wraps to a large number); the same for rows.
+        const auto interior_cols = static_cast<unsigned>(src_.cols - 1);
+        const auto interior_rows = static_cast<unsigned>(src_.rows - 1);
+        for (int i = 0; i < n; ++i) {
+            const int sx = xy[2 * i];
+            const int sy = xy[2 * i + 1];
+            if (static_cast<unsigned>(sx) < interior_cols &&
+                static_cast<unsigned>(sy) < interior_rows) {
+                const uint8_t* t = src + static_cast<size_t>(sy) * step + sx;
+                const uint8_t* b = t + step;
+                top[i] = pack(t[0], t[1]);
+                bottom[i] = pack(b[0], b[1]);
+            } else {
+                const Neighbours border = borderNeighbours(src_, sx, sy);
+                top[i] = border.top;
+                bottom[i] = border.bottom;
+            }
+        }
+    }
+
+    static void blend(const uint16_t* top, const uint16_t* bottom, const uint16_t* frac,
+                      uint8_t* out)
+    {
+        for (int i = 0; i < kChunk; ++i) {
+            const int fx = frac[i] & (kInterTabSize - 1);
+            const int fy = (frac[i] >> kInterBits) & (kInterTabSize - 1);
+            const int tl = top[i] & 0xff;
+            const int tr = top[i] >> 8;
+            const int bl = bottom[i] & 0xff;
+            const int br = bottom[i] >> 8;
+            const int16_t t = static_cast<int16_t>((tl << kInterBits) + (tr - tl) * fx);
+            const int16_t b = static_cast<int16_t>((bl << kInterBits) + (br - bl) * fx);
+            out[i] = static_cast<uint8_t>((t * (kInterTabSize - fy) + b * fy + kRounding) >>
+                                          kWeightBits);
+        }
+    }
+
+    const cv::Mat& src_;
+    const cv::Mat& map_xy_;
+    const cv::Mat& map_frac_;
+    cv::Mat& out_;
+};
+
+void requireArgument(bool ok, const char* what)
+{
+    if (!ok)
+        throw std::invalid_argument(std::string("remapBilinear: ") + what);
+}
+
+bool overlaps(const cv::Mat& a, const cv::Mat& b)
+{
+    return a.datastart < b.dataend && b.datastart < a.dataend;
+}
+
+} // namespace
+
+void remapBilinear(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac,
+                   cv::Mat& out)
+{
+    requireArgument(!src.empty() && src.type() == CV_8UC1,
+                    "the source must be a non-empty CV_8UC1 image");
+    requireArgument(!map_xy.empty() && map_xy.type() == CV_16SC2,
+                    "map_xy must be a non-empty CV_16SC2 map");
+    requireArgument(map_frac.type() == CV_16UC1 && map_frac.size() == map_xy.size(),
+                    "map_frac must be CV_16UC1 with map_xy's size");
+    out.create(map_xy.size(), CV_8UC1);
+    requireArgument(!overlaps(src, out), "the output must not share the source's buffer");
+    RemapRows body(src, map_xy, map_frac, out);
+    // About 16 rows per stripe: enough stripes for the pool to balance the work, few
+    // enough that scheduling costs nothing next to the rows.
+    cv::parallel_for_(cv::Range(0, out.rows), body, out.rows / 16.0);
+}
 
 Rectifier::Rectifier(const StereoCalibration& calibration)
 {
@@ -36,9 +211,7 @@ void Rectifier::apply(const cv::Mat& raw, const cv::Mat& map_xy, const cv::Mat& 
         raw.copyTo(out);
         return;
     }
-    // Pixels that map outside the raw image become 0; remap() reuses `out` when it
-    // already has the map's size and the input's type.
-    cv::remap(raw, out, map_xy, map_frac, cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0));
+    remapBilinear(raw, map_xy, map_frac, out);
 }
 
 } // namespace stereod
