@@ -7,6 +7,9 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <vector>
+
+#include <opencv2/core/types.hpp>
 
 namespace stereod {
 
@@ -80,11 +83,26 @@ struct CalibrateOptions {
     RectifiedOptions geometry;
     std::string size;                 // "WxH"
     std::string out_path;
-    // The chessboard form (not in this version): remembered only to say so.
+    // The chessboard form.
     std::string left_glob;
     std::string right_glob;
-    std::string board;
+    std::string board;                // "COLSxROWS", inner corners
     std::optional<double> square_m;
+    std::string preview_path;         // .png, the first pair rectified with row lines
+    double alpha = 0.0;               // cv::stereoRectify's free scaling, 0..1
+    int min_pairs = 6;
+    bool json = false;
+    // Other tools' files: two paths each.
+    std::vector<std::string> from_ros;      // left.yaml, right.yaml (camera_info)
+    std::vector<std::string> from_opencv;   // intrinsics.yml, extrinsics.yml (stereo_calib)
+    double unit_m = 1.0;              // metres per unit of stereo_calib's T
+};
+
+struct ExportRosOptions {
+    std::string calib_path;
+    std::string left_path;
+    std::string right_path;
+    std::string camera_name = "stereo";
 };
 
 int runDistance(const DistanceOptions& options);
@@ -93,5 +111,10 @@ int runWatch(const WatchOptions& options);
 int runSnapshot(const SnapshotOptions& options);
 int runDepth(const DepthOptions& options);
 int runCalibrate(const CalibrateOptions& options);
+// ctl/calibration_commands.cpp: the chessboard form of `calibrate`, its imports (the image
+// size parsed from --size for --from-opencv) and `export-ros`.
+int runChessboardCalibration(const CalibrateOptions& options);
+int runCalibrationImport(const CalibrateOptions& options, cv::Size image_size);
+int runExportRos(const ExportRosOptions& options);
 
 } // namespace stereod

@@ -87,6 +87,7 @@ struct Options {
     SnapshotOptions snapshot;
     DepthOptions depth;
     CalibrateOptions calibrate;
+    ExportRosOptions export_ros;
 };
 
 CLI::App* declareDistance(CLI::App& app, DistanceOptions& o)
@@ -152,22 +153,98 @@ CLI::App* declareDepth(CLI::App& app, DepthOptions& o)
 CLI::App* declareCalibrate(CLI::App& app, CalibrateOptions& o)
 {
     CLI::App* cmd = app.add_subcommand(
-        "calibrate", "write a calibration file; this version makes the rectified-only form "
-                     "(--rectified)");
+        "calibrate", "write a calibration file: from chessboard pairs (--left --right --board "
+                     "--square-m), for a rectified rig (--rectified), or from ROS or OpenCV "
+                     "files (--from-ros, --from-opencv)");
     CLI::Option* rectified =
         addRectifiedOptions(cmd, o.geometry, "a rig or dataset that delivers rectified pairs");
     CLI::Option* size = cmd->add_option("--size", o.size, "image size WxH (px)");
-    rectified->needs(size);
-    size->needs(rectified);
     cmd->add_option("--out", o.out_path, "calibration file to write (YAML)")->required();
-    // The chessboard form: accepted so that its use gets a clear answer, not a parse error.
-    const char* later = "chessboard calibration: not available in this version";
-    for (CLI::Option* chessboard : {cmd->add_option("--left", o.left_glob, later),
-                                    cmd->add_option("--right", o.right_glob, later),
-                                    cmd->add_option("--board", o.board, later),
-                                    cmd->add_option("--square-m", o.square_m, later)}) {
-        chessboard->excludes(rectified);
+
+    CLI::Option* left = cmd->add_option(
+        "--left", o.left_glob, "left chessboard images: a glob, quoted (e.g. 'left*.png'), sorted");
+    CLI::Option* right =
+        cmd->add_option("--right", o.right_glob, "right chessboard images, paired in sorted order");
+    CLI::Option* board = cmd->add_option("--board", o.board,
+                                         "inner corners COLSxROWS, as OpenCV counts them (a board "
+                                         "of 10x7 squares is 9x6)");
+    CLI::Option* square =
+        cmd->add_option("--square-m", o.square_m, "side of one square (m)")->check(kPositive);
+    CLI::Option* preview = cmd->add_option(
+        "--preview", o.preview_path, "write the first pair rectified side by side with row lines "
+                                     "(PNG)");
+    CLI::Option* alpha = cmd->add_option("--alpha", o.alpha,
+                                         "rectified scale: 0 crops to pixels with image data, 1 "
+                                         "keeps every raw pixel")
+                             ->check(CLI::Range(0.0, 1.0))
+                             ->capture_default_str();
+    CLI::Option* min_pairs =
+        cmd->add_option("--min-pairs", o.min_pairs, "fewest usable pairs to calibrate from")
+            ->check(CLI::Range(3, 1000))
+            ->capture_default_str();
+    CLI::Option* json = cmd->add_flag("--json", o.json,
+                                      "print rms_px, epipolar_error_px, pairs_used, "
+                                      "pairs_rejected, baseline_m and the per-pair table as JSON");
+    const std::vector<CLI::Option*> chessboard = {left, right, board, square};
+    for (CLI::Option* required : chessboard) {
+        for (CLI::Option* other : chessboard) {
+            if (other != required) {
+                required->needs(other);
+            }
+        }
     }
+    for (CLI::Option* extra : {preview, alpha, min_pairs, json}) {
+        extra->needs(left);
+    }
+
+    CLI::Option* from_ros =
+        cmd->add_option("--from-ros", o.from_ros, "import a ROS camera_info pair: LEFT.yaml "
+                                                  "RIGHT.yaml")
+            ->expected(2);
+    CLI::Option* from_opencv =
+        cmd->add_option("--from-opencv", o.from_opencv,
+                        "import OpenCV stereo_calib output: INTRINSICS.yml EXTRINSICS.yml "
+                        "(needs --size)")
+            ->expected(2);
+    CLI::Option* unit = cmd->add_option("--unit-m", o.unit_m,
+                                        "with --from-opencv: metres per unit of its T (the "
+                                        "square size given to stereo_calib's -s)")
+                            ->check(kPositive);
+    unit->needs(from_opencv);
+    from_opencv->needs(size);
+    // One form at a time; --size belongs to --rectified and --from-opencv.
+    const std::vector<CLI::Option*> forms = {rectified, left, from_ros, from_opencv};
+    for (CLI::Option* form : forms) {
+        for (CLI::Option* other : forms) {
+            if (other != form) {
+                form->excludes(other);
+            }
+        }
+    }
+    rectified->needs(size);
+    for (CLI::Option* not_sized : {left, from_ros}) {
+        size->excludes(not_sized);
+    }
+    cmd->callback([cmd, rectified, left, from_ros, from_opencv] {
+        if (rectified->count() + left->count() + from_ros->count() + from_opencv->count() == 0) {
+            throw CLI::ValidationError(
+                cmd->get_name(), "give one form: --left/--right/--board/--square-m (chessboard), "
+                                 "--rectified, --from-ros or --from-opencv");
+        }
+    });
+    return cmd;
+}
+
+CLI::App* declareExportRos(CLI::App& app, ExportRosOptions& o)
+{
+    CLI::App* cmd = app.add_subcommand(
+        "export-ros", "write a calibration file as a ROS camera_info pair (left.yaml, right.yaml)");
+    cmd->add_option("--calib", o.calib_path, "calibration file (YAML)")->required();
+    cmd->add_option("--left", o.left_path, "left camera_info file to write")->required();
+    cmd->add_option("--right", o.right_path, "right camera_info file to write")->required();
+    cmd->add_option("--camera-name", o.camera_name,
+                    "camera_name prefix: NAME/left and NAME/right")
+        ->capture_default_str();
     return cmd;
 }
 
@@ -198,6 +275,7 @@ int main(int argc, char** argv)
         {declareSnapshot(app, o.snapshot), [&] { return runSnapshot(o.snapshot); }},
         {declareDepth(app, o.depth), [&] { return runDepth(o.depth); }},
         {declareCalibrate(app, o.calibrate), [&] { return runCalibrate(o.calibrate); }},
+        {declareExportRos(app, o.export_ros), [&] { return runExportRos(o.export_ros); }},
     };
 
     try {

@@ -249,17 +249,14 @@ int runDepth(const DepthOptions& options)
 
 int runCalibrate(const CalibrateOptions& options)
 {
+    if (!options.from_ros.empty()) {
+        return runCalibrationImport(options, {});
+    }
+    if (!options.from_opencv.empty()) {
+        return runCalibrationImport(options, parseSize(options.size, "--size"));
+    }
     if (!options.geometry.rectified) {
-        const bool chessboard = !options.left_glob.empty() || !options.right_glob.empty() ||
-                                !options.board.empty() || options.square_m.has_value();
-        if (chessboard) {
-            throw UsageError("chessboard calibration (--left/--right/--board/--square-m) is not "
-                             "available in this version of stereoctl; for a rig that delivers "
-                             "rectified pairs use --rectified --focal-px F --baseline-m B --size "
-                             "WxH");
-        }
-        throw UsageError("give --rectified --focal-px F --baseline-m B --size WxH (chessboard "
-                         "calibration is not available in this version)");
+        return runChessboardCalibration(options);
     }
     const cv::Size size = parseSize(options.size, "--size");
     const StereoCalibration calibration = rectifiedCalibration(options.geometry, size);

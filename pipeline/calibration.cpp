@@ -18,6 +18,20 @@
 #include <yaml-cpp/yaml.h>
 
 namespace stereod {
+
+void throwCalibrationError(const std::string& origin, int line, const std::string& key,
+                           const std::string& problem)
+{
+    std::string message = origin;
+    if (line > 0)
+        message += ":" + std::to_string(line);
+    message += ": ";
+    if (!key.empty())
+        message += key + ": ";
+    message += problem;
+    throw CalibrationError(message);
+}
+
 namespace {
 
 constexpr int kFormatVersion = 1;
@@ -55,14 +69,7 @@ std::string formatNumber(double value)
 [[noreturn]] void fail(const std::string& origin, int line, const std::string& key,
                        const std::string& problem)
 {
-    std::string message = origin;
-    if (line > 0)
-        message += ":" + std::to_string(line);
-    message += ": ";
-    if (!key.empty())
-        message += key + ": ";
-    message += problem;
-    throw CalibrationError(message);
+    throwCalibrationError(origin, line, key, problem);
 }
 
 // ---------------------------------------------------------------------------------------

@@ -25,6 +25,12 @@ public:
     using std::runtime_error::runtime_error;
 };
 
+// Throws CalibrationError with the message every calibration error has:
+// "origin[:line]: [key: ]problem" (line 0: none known; key empty: the file as a whole).
+// For readers of other calibration formats (pipeline/calibration_formats.hpp).
+[[noreturn]] void throwCalibrationError(const std::string& origin, int line,
+                                        const std::string& key, const std::string& problem);
+
 struct CameraIntrinsics {
     cv::Matx33d camera_matrix = cv::Matx33d::eye();
     std::vector<double> distortion;      // OpenCV order: k1 k2 p1 p2 [k3 [k4 k5 k6 ...]]

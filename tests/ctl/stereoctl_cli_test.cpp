@@ -54,17 +54,6 @@ TEST(StereoctlCalibrate, PrincipalPointDefaultsAsTheLibraryDoes)
     EXPECT_DOUBLE_EQ(g.doffs_px, 0.0);
 }
 
-TEST(StereoctlCalibrate, ChessboardFormSaysItIsNotAvailable)
-{
-    test::TempDir dir;
-    const ProcessResult run = runProcess(
-        {stereoctlPath(), "calibrate", "--left", "left*.jpg", "--right", "right*.jpg", "--board",
-         "9x6", "--square-m", "0.025", "--out", dir.file("rig.yaml")});
-    EXPECT_EQ(run.exit_code, 2);
-    EXPECT_NE(run.err.find("not available"), std::string::npos) << run.err;
-    EXPECT_EQ(test::lineCount(run.err), 1u) << run.err;
-}
-
 TEST(StereoctlCalibrate, BadArgumentsExitTwo)
 {
     test::TempDir dir;

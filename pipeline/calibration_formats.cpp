@@ -1,0 +1,361 @@
+#include "pipeline/calibration_formats.hpp"
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <vector>
+
+#include <fmt/format.h>
+#include <opencv2/core.hpp>
+#include <yaml-cpp/yaml.h>
+
+#include "pipeline/chessboard_calibration.hpp"
+
+namespace stereod {
+namespace {
+
+[[noreturn]] void fail(const std::string& path, int line, const std::string& key,
+                       const std::string& problem)
+{
+    throwCalibrationError(path, line, key, problem);
+}
+
+std::string readText(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    if (!in)
+        fail(path, 0, "", std::string("cannot open: ") + std::strerror(errno));
+    std::ostringstream text;
+    text << in.rdbuf();
+    return text.str();
+}
+
+// The Q that cv::stereoRectify gives for projections P1, P2 of a horizontal rig.
+cv::Matx44d disparityToDepth(const cv::Matx34d& P1, const cv::Matx34d& P2)
+{
+    const double tx = P2(0, 3) / P2(0, 0);   // -baseline
+    return {1, 0, 0, -P1(0, 2),
+            0, 1, 0, -P1(1, 2),
+            0, 0, 0, P1(0, 0),
+            0, 0, -1.0 / tx, (P1(0, 2) - P2(0, 2)) / tx};
+}
+
+// Fills what follows from the cameras and the rectification, and checks the result.
+void finish(StereoCalibration& c, cv::Size image_size, const std::string& origin)
+{
+    c.kind = StereoCalibration::Kind::Full;
+    c.rectified = rectifiedFromProjections(c.P1, c.P2, image_size);
+    // Validated before the regions are computed: they need a usable camera model.
+    validateCalibration(c, origin);
+    c.valid_roi_left = validRectifiedRegion(c.left, c.R1, c.P1, image_size);
+    c.valid_roi_right = validRectifiedRegion(c.right, c.R2, c.P2, image_size);
+}
+
+// ---------------------------------------------------------------------------------------
+// ROS camera_info
+
+struct RosCamera {
+    std::string path;
+    cv::Size image_size;
+    CameraIntrinsics intrinsics;
+    cv::Matx33d rectification;
+    cv::Matx34d projection;
+};
+
+class RosReader {
+public:
+    explicit RosReader(const std::string& path) : path_(path) {}
+
+    RosCamera read()
+    {
+        std::string text = readText(path_);
+        // Files written through OpenCV's FileStorage start with "%YAML:1.0", which is not
+        // a YAML directive yaml-cpp accepts; its "!!opencv-matrix" tags are harmless.
+        if (text.rfind("%YAML:", 0) == 0)
+            text.replace(0, text.find('\n'), "");
+        YAML::Node root;
+        try {
+            root = YAML::Load(text);
+        } catch (const YAML::Exception& error) {
+            fail(path_, error.mark.line + 1, "", "invalid YAML: " + error.msg);
+        }
+        if (!root.IsMap())
+            fail(path_, 0, "", "expected a camera_info mapping (image_width, camera_matrix, ...)");
+        RosCamera camera;
+        camera.path = path_;
+        camera.image_size = {integer(root, "image_width"), integer(root, "image_height")};
+        camera.intrinsics.camera_matrix = matrix<3, 3>(root, "camera_matrix");
+        const YAML::Node model = root["distortion_model"];
+        const std::string model_name = model ? model.as<std::string>() : "plumb_bob";
+        const YAML::Node d_node = require(root, "distortion_coefficients");
+        camera.intrinsics.distortion = values(d_node, "distortion_coefficients");
+        const size_t n = camera.intrinsics.distortion.size();
+        if (model_name == "plumb_bob") {
+            if (n != 5 && n != 4 && n != 0)
+                fail(path_, line(d_node), "distortion_coefficients",
+                     "plumb_bob takes 5 coefficients (k1 k2 p1 p2 k3), got " + std::to_string(n));
+        } else if (model_name == "rational_polynomial") {
+            if (n != 8)
+                fail(path_, line(d_node), "distortion_coefficients",
+                     "rational_polynomial takes 8 coefficients, got " + std::to_string(n));
+        } else {
+            fail(path_, line(model), "distortion_model",
+                 "'" + model_name + "' is not supported: stereod undistorts with OpenCV's "
+                 "pinhole models, plumb_bob and rational_polynomial (equidistant is the "
+                 "fisheye model)");
+        }
+        camera.rectification = matrix<3, 3>(root, "rectification_matrix");
+        camera.projection = matrix<3, 4>(root, "projection_matrix");
+        return camera;
+    }
+
+private:
+    static int line(const YAML::Node& node) { return node ? node.Mark().line + 1 : 0; }
+
+    YAML::Node require(const YAML::Node& root, const char* key) const
+    {
+        const YAML::Node node = root[key];
+        if (!node)
+            fail(path_, 0, key, "missing key");
+        return node;
+    }
+
+    int integer(const YAML::Node& root, const char* key) const
+    {
+        const YAML::Node node = require(root, key);
+        try {
+            return node.as<int>();
+        } catch (const YAML::Exception&) {
+            fail(path_, line(node), key, "expected a whole number");
+        }
+    }
+
+    // A matrix as camera_info writes it ({rows, cols, data}) or a plain list.
+    std::vector<double> values(const YAML::Node& node, const std::string& key) const
+    {
+        const YAML::Node data = node.IsMap() ? node["data"] : node;
+        if (!data || !data.IsSequence())
+            fail(path_, line(node), key, "expected a list of numbers or {rows, cols, data}");
+        std::vector<double> out;
+        for (const YAML::Node& item : data) {
+            try {
+                out.push_back(item.as<double>());
+            } catch (const YAML::Exception&) {
+                fail(path_, line(item), key, "not a number: '" + item.Scalar() + "'");
+            }
+        }
+        return out;
+    }
+
+    template <int R, int C>
+    cv::Matx<double, R, C> matrix(const YAML::Node& root, const char* key) const
+    {
+        const YAML::Node node = require(root, key);
+        const std::vector<double> data = values(node, key);
+        if (data.size() != static_cast<size_t>(R * C))
+            fail(path_, line(node), key,
+                 "expected " + std::to_string(R * C) + " values (" + std::to_string(R) + "x" +
+                     std::to_string(C) + "), got " + std::to_string(data.size()));
+        return cv::Matx<double, R, C>(data.data());
+    }
+
+    std::string path_;
+};
+
+std::string formatList(const double* values, int count, int per_line, int indent)
+{
+    std::string out = "[";
+    for (int i = 0; i < count; ++i) {
+        if (i > 0)
+            out += (i % per_line == 0) ? ",\n" + std::string(static_cast<size_t>(indent), ' ')
+                                       : ", ";
+        // Shortest text that reads back to the same double.
+        out += fmt::format("{}", values[i]);
+    }
+    return out + "]";
+}
+
+template <int R, int C>
+std::string rosMatrix(const char* key, const cv::Matx<double, R, C>& m)
+{
+    return fmt::format("{}:\n  rows: {}\n  cols: {}\n  data: {}\n", key, R, C,
+                       formatList(m.val, R * C, C, 9));
+}
+
+std::string rosCameraText(const std::string& name, cv::Size size, const CameraIntrinsics& camera,
+                          const cv::Matx33d& rectification, const cv::Matx34d& projection,
+                          const std::string& path)
+{
+    std::vector<double> d = camera.distortion;
+    std::string model = "plumb_bob";
+    if (d.size() <= 5) {
+        d.resize(5, 0.0);
+    } else if (d.size() == 8) {
+        model = "rational_polynomial";
+    } else {
+        fail(path, 0, "distortion",
+             std::to_string(d.size()) + " coefficients have no ROS distortion model "
+             "(plumb_bob takes 5, rational_polynomial 8)");
+    }
+    std::string text = fmt::format("image_width: {}\nimage_height: {}\ncamera_name: {}\n",
+                                   size.width, size.height, name);
+    text += rosMatrix("camera_matrix", camera.camera_matrix);
+    text += "distortion_model: " + model + "\n";
+    text += fmt::format("distortion_coefficients:\n  rows: 1\n  cols: {}\n  data: {}\n", d.size(),
+                        formatList(d.data(), static_cast<int>(d.size()), 8, 9));
+    text += rosMatrix("rectification_matrix", rectification);
+    text += rosMatrix("projection_matrix", projection);
+    return text;
+}
+
+void writeText(const std::string& path, const std::string& text)
+{
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    if (out)
+        out << text;
+    if (!out || !out.flush())
+        fail(path, 0, "", std::string("cannot write: ") + std::strerror(errno));
+}
+
+// ---------------------------------------------------------------------------------------
+// OpenCV FileStorage
+
+cv::Mat readMatrix(const cv::FileStorage& fs, const std::string& path, const char* key, int rows,
+                   int cols)
+{
+    const cv::FileNode node = fs[key];
+    if (node.empty())
+        fail(path, 0, key, "missing key");
+    cv::Mat m;
+    try {
+        node >> m;
+    } catch (const cv::Exception& error) {
+        fail(path, 0, key, "not a matrix: " + error.err);
+    }
+    if (m.empty() || (rows > 0 && (m.rows != rows || m.cols != cols)))
+        fail(path, 0, key,
+             "expected a " + std::to_string(rows) + "x" + std::to_string(cols) + " matrix, got " +
+                 std::to_string(m.rows) + "x" + std::to_string(m.cols));
+    m.convertTo(m, CV_64F);
+    return m;
+}
+
+cv::FileStorage openStorage(const std::string& path)
+{
+    readText(path);   // names the file and errno when it cannot be opened
+    try {
+        cv::FileStorage fs(path, cv::FileStorage::READ);
+        if (!fs.isOpened())
+            fail(path, 0, "", "not an OpenCV FileStorage file");
+        return fs;
+    } catch (const cv::Exception& error) {
+        fail(path, 0, "", "not an OpenCV FileStorage file: " + error.err);
+    }
+}
+
+std::vector<double> distortionFrom(const cv::Mat& d, const std::string& path, const char* key)
+{
+    if (d.rows != 1 && d.cols != 1)
+        fail(path, 0, key, "expected a row or column of coefficients");
+    return {d.ptr<double>(), d.ptr<double>() + d.total()};
+}
+
+} // namespace
+
+StereoCalibration importRosCameraInfo(const std::string& left_path, const std::string& right_path)
+{
+    const RosCamera left = RosReader(left_path).read();
+    const RosCamera right = RosReader(right_path).read();
+    if (left.image_size != right.image_size)
+        fail(right_path, 0, "image_width",
+             "the right camera's images are " + std::to_string(right.image_size.width) + "x" +
+                 std::to_string(right.image_size.height) + " but the left's (" + left_path +
+                 ") are " + std::to_string(left.image_size.width) + "x" +
+                 std::to_string(left.image_size.height));
+    if (left.projection(0, 3) != 0.0 && right.projection(0, 3) == 0.0)
+        fail(left_path, 0, "projection_matrix",
+             "this is the right camera of the pair (Tx = " + fmt::format("{}", left.projection(0, 3)) +
+                 " is not 0): are the left and right files swapped?");
+
+    StereoCalibration c;
+    c.left = left.intrinsics;
+    c.right = right.intrinsics;
+    c.R1 = left.rectification;
+    c.R2 = right.rectification;
+    c.P1 = left.projection;
+    c.P2 = right.projection;
+    // Both rectified frames are the same up to the baseline: X_rect_right = X_rect_left +
+    // (Tx, Ty, 0), X_rect = R_i X_i.
+    c.R = c.R2.t() * c.R1;
+    const cv::Vec3d shift(c.P2(0, 3) / c.P2(0, 0), c.P2(1, 3) / c.P2(1, 1), 0.0);
+    c.T = c.R2.t() * shift;
+    c.Q = disparityToDepth(c.P1, c.P2);
+    finish(c, left.image_size, left_path + " + " + right_path);
+    return c;
+}
+
+void exportRosCameraInfo(const StereoCalibration& calibration, const std::string& left_path,
+                         const std::string& right_path, const std::string& camera_name)
+{
+    const cv::Size size = calibration.rectified.image_size;
+    std::string left_text, right_text;
+    if (calibration.kind == StereoCalibration::Kind::Full) {
+        left_text = rosCameraText(camera_name + "/left", size, calibration.left, calibration.R1,
+                                  calibration.P1, left_path);
+        right_text = rosCameraText(camera_name + "/right", size, calibration.right,
+                                   calibration.R2, calibration.P2, right_path);
+    } else {
+        const RectifiedGeometry& g = calibration.rectified;
+        const double cx_right = g.cx_px + g.doffs_px;
+        CameraIntrinsics left, right;
+        left.camera_matrix = {g.focal_px, 0, g.cx_px, 0, g.focal_px, g.cy_px, 0, 0, 1};
+        right.camera_matrix = {g.focal_px, 0, cx_right, 0, g.focal_px, g.cy_px, 0, 0, 1};
+        const cv::Matx34d p1(g.focal_px, 0, g.cx_px, 0, 0, g.focal_px, g.cy_px, 0, 0, 0, 1, 0);
+        const cv::Matx34d p2(g.focal_px, 0, cx_right, -g.focal_px * g.baseline_m, 0, g.focal_px,
+                             g.cy_px, 0, 0, 0, 1, 0);
+        left_text = rosCameraText(camera_name + "/left", size, left, cv::Matx33d::eye(), p1,
+                                  left_path);
+        right_text = rosCameraText(camera_name + "/right", size, right, cv::Matx33d::eye(), p2,
+                                   right_path);
+    }
+    writeText(left_path, left_text);
+    writeText(right_path, right_text);
+}
+
+StereoCalibration importOpenCvStereoCalib(const std::string& intrinsics_path,
+                                          const std::string& extrinsics_path,
+                                          cv::Size image_size, double metres_per_unit)
+{
+    if (!(metres_per_unit > 0.0) || !std::isfinite(metres_per_unit))
+        throw CalibrationError("metres per unit of T must be > 0, got " +
+                               fmt::format("{}", metres_per_unit));
+    const cv::FileStorage intrinsics = openStorage(intrinsics_path);
+    const cv::FileStorage extrinsics = openStorage(extrinsics_path);
+    StereoCalibration c;
+    c.left.camera_matrix = cv::Matx33d(readMatrix(intrinsics, intrinsics_path, "M1", 3, 3));
+    c.left.distortion = distortionFrom(readMatrix(intrinsics, intrinsics_path, "D1", 0, 0),
+                                       intrinsics_path, "D1");
+    c.right.camera_matrix = cv::Matx33d(readMatrix(intrinsics, intrinsics_path, "M2", 3, 3));
+    c.right.distortion = distortionFrom(readMatrix(intrinsics, intrinsics_path, "D2", 0, 0),
+                                        intrinsics_path, "D2");
+    c.R = cv::Matx33d(readMatrix(extrinsics, extrinsics_path, "R", 3, 3));
+    const cv::Mat t = readMatrix(extrinsics, extrinsics_path, "T", 0, 0);
+    if (t.total() != 3)
+        fail(extrinsics_path, 0, "T", "expected 3 values, got " + std::to_string(t.total()));
+    c.T = cv::Vec3d(t.ptr<double>()) * metres_per_unit;
+    c.R1 = cv::Matx33d(readMatrix(extrinsics, extrinsics_path, "R1", 3, 3));
+    c.R2 = cv::Matx33d(readMatrix(extrinsics, extrinsics_path, "R2", 3, 3));
+    c.P1 = cv::Matx34d(readMatrix(extrinsics, extrinsics_path, "P1", 3, 4));
+    c.P2 = cv::Matx34d(readMatrix(extrinsics, extrinsics_path, "P2", 3, 4));
+    c.P2(0, 3) *= metres_per_unit;
+    c.P2(1, 3) *= metres_per_unit;
+    c.Q = cv::Matx44d(readMatrix(extrinsics, extrinsics_path, "Q", 4, 4));
+    c.Q(3, 2) /= metres_per_unit;
+    c.Q(3, 3) /= metres_per_unit;
+    finish(c, image_size, intrinsics_path + " + " + extrinsics_path);
+    return c;
+}
+
+} // namespace stereod

@@ -1,0 +1,42 @@
+#pragma once
+// Other tools' stereo calibration files, to and from StereoCalibration
+// (docs/calibration.md, "Other formats"):
+//  - ROS camera_calibration: one camera_info YAML per camera (left.yaml, right.yaml), read
+//    and written;
+//  - OpenCV's stereo_calib sample: intrinsics.yml (M1 D1 M2 D2) and extrinsics.yml
+//    (R T R1 R2 P1 P2 Q), read.
+//
+// Reentrant: no state outside the arguments. Errors are CalibrationError naming the file,
+// the line where YAML gives one, the key and the problem.
+
+#include <string>
+
+#include <opencv2/core/types.hpp>
+
+#include "pipeline/calibration.hpp"
+
+namespace stereod {
+
+// Reads a ROS stereo pair of camera_info files into a full calibration. R and T are not in
+// camera_info: they follow from the rectification, R = R2^T R1 and
+// T = R2^T (Tx, Ty, 0) with Tx = P2(0,3) / P2(0,0) (ROS: -baseline, metres). Q and the
+// valid regions are derived too. Distortion models plumb_bob and rational_polynomial;
+// equidistant (fisheye) is refused.
+StereoCalibration importRosCameraInfo(const std::string& left_path, const std::string& right_path);
+
+// Writes the calibration as a ROS pair of camera_info files, `camera_name` + "/left" and
+// "/right". Full form: the cameras' intrinsics and distortion (4 or 5 coefficients as
+// plumb_bob, 8 as rational_polynomial; 12 or 14 have no ROS model and are refused),
+// R1/R2 and P1/P2. Rectified form: undistorted cameras with identity rectification.
+void exportRosCameraInfo(const StereoCalibration& calibration, const std::string& left_path,
+                         const std::string& right_path,
+                         const std::string& camera_name = "stereo");
+
+// Reads the files of OpenCV's stereo_calib sample. They do not hold the image size; and
+// T (hence P2's last column and Q) is in the unit of the square size given to the sample
+// (-s, 1 by default: squares): `metres_per_unit` converts it to metres.
+StereoCalibration importOpenCvStereoCalib(const std::string& intrinsics_path,
+                                          const std::string& extrinsics_path,
+                                          cv::Size image_size, double metres_per_unit = 1.0);
+
+} // namespace stereod

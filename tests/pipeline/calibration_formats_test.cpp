@@ -1,0 +1,313 @@
+// Other tools' calibration files: a ROS camera_info pair (read and written) and the files
+// of OpenCV's stereo_calib sample (read), with a real calibration made from OpenCV's
+// chessboard pairs. A file read back must rectify exactly as the calibration it came from.
+
+#include <cstdio>
+#include <fstream>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "pipeline/calibration.hpp"
+#include "pipeline/calibration_formats.hpp"
+#include "pipeline/chessboard_calibration.hpp"
+#include "pipeline/rectifier.hpp"
+#include "tests/pipeline/test_support.hpp"
+
+namespace stereod {
+namespace {
+
+const std::string kSamples = std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/";
+constexpr double kSquareM = 0.025;
+
+void writeFile(const std::string& path, const std::string& text)
+{
+    std::ofstream(path) << text;
+}
+
+std::string refusal(const std::function<void()>& run)
+{
+    return test::refusalMessage<CalibrationError>(run);
+}
+
+using test::contains;
+
+template <int R, int C>
+double maxDifference(const cv::Matx<double, R, C>& a, const cv::Matx<double, R, C>& b)
+{
+    return cv::norm(a, b, cv::NORM_INF);
+}
+
+class CalibrationFormatsTest : public ::testing::Test {
+protected:
+    // A real full calibration: six of OpenCV's chessboard pairs.
+    static void SetUpTestSuite()
+    {
+        std::vector<std::string> left, right;
+        for (int i = 1; i <= 6; ++i) {
+            char name[32];
+            std::snprintf(name, sizeof name, "%02d.jpg", i);
+            left.push_back(kSamples + "left" + name);
+            right.push_back(kSamples + "right" + name);
+        }
+        ChessboardCalibrationOptions options;
+        options.board = {9, 6, kSquareM};
+        calibration_ = new StereoCalibration(calibrateChessboard(left, right, options).calibration);
+    }
+    static void TearDownTestSuite()
+    {
+        delete calibration_;
+        calibration_ = nullptr;
+    }
+    static const StereoCalibration& calibration() { return *calibration_; }
+
+    // The two rectify a raw pair to the same images, to the last grey level.
+    static void expectSameRectification(const StereoCalibration& a, const StereoCalibration& b)
+    {
+        const cv::Mat left = cv::imread(kSamples + "left01.jpg", cv::IMREAD_GRAYSCALE);
+        const cv::Mat right = cv::imread(kSamples + "right01.jpg", cv::IMREAD_GRAYSCALE);
+        ASSERT_FALSE(left.empty() || right.empty());
+        const Rectifier ra(a), rb(b);
+        cv::Mat la, lb, rra, rrb;
+        ra.rectifyLeft(left, la);
+        rb.rectifyLeft(left, lb);
+        ra.rectifyRight(right, rra);
+        rb.rectifyRight(right, rrb);
+        EXPECT_EQ(cv::norm(la, lb, cv::NORM_INF), 0.0);
+        EXPECT_EQ(cv::norm(rra, rrb, cv::NORM_INF), 0.0);
+    }
+
+private:
+    static StereoCalibration* calibration_;
+};
+
+StereoCalibration* CalibrationFormatsTest::calibration_ = nullptr;
+
+TEST_F(CalibrationFormatsTest, RosCameraInfoPairRoundTrips)
+{
+    const StereoCalibration& c = calibration();
+    test::ScratchDir dir("stereod_formats");
+    const std::string left = dir.file("left.yaml"), right = dir.file("right.yaml");
+    exportRosCameraInfo(c, left, right, "rig");
+    const StereoCalibration back = importRosCameraInfo(left, right);
+
+    EXPECT_EQ(back.kind, StereoCalibration::Kind::Full);
+    EXPECT_EQ(back.rectified.image_size, c.rectified.image_size);
+    // Written in full: the same numbers back.
+    EXPECT_EQ(back.left.camera_matrix, c.left.camera_matrix);
+    EXPECT_EQ(back.right.camera_matrix, c.right.camera_matrix);
+    ASSERT_EQ(back.left.distortion.size(), 5u);   // plumb_bob: k3 = 0 added
+    for (size_t i = 0; i < 4; ++i) {
+        EXPECT_EQ(back.left.distortion[i], c.left.distortion[i]);
+        EXPECT_EQ(back.right.distortion[i], c.right.distortion[i]);
+    }
+    EXPECT_EQ(back.left.distortion[4], 0.0);
+    EXPECT_EQ(back.R1, c.R1);
+    EXPECT_EQ(back.R2, c.R2);
+    EXPECT_EQ(back.P1, c.P1);
+    EXPECT_EQ(back.P2, c.P2);
+    // Recovered from the rectification: equal to rounding.
+    EXPECT_LT(maxDifference(back.R, c.R), 1e-12);
+    EXPECT_LT(cv::norm(back.T - c.T), 1e-12 * cv::norm(c.T));
+    EXPECT_LT(maxDifference(back.Q, c.Q), 1e-9);
+    EXPECT_EQ(back.rectified.focal_px, c.rectified.focal_px);
+    EXPECT_EQ(back.rectified.baseline_m, c.rectified.baseline_m);
+    EXPECT_EQ(back.valid_roi_left, c.valid_roi_left);
+    EXPECT_EQ(back.valid_roi_right, c.valid_roi_right);
+    expectSameRectification(c, back);
+
+    const std::string text = test::readFile(left);
+    EXPECT_TRUE(contains(text, "camera_name: rig/left")) << text;
+    EXPECT_TRUE(contains(text, "distortion_model: plumb_bob")) << text;
+}
+
+TEST(CalibrationFormats, ReadsARosPairAsCameraInfoWritesIt)
+{
+    // A rectified 752x480 module as a ROS driver publishes it: no distortion, identity
+    // rectification, Tx = -fx * baseline (12 cm) in the right camera's projection. Left
+    // file in the plain layout, right one as OpenCV's FileStorage writes it.
+    test::ScratchDir dir("stereod_formats");
+    const std::string left = dir.file("left.yaml"), right = dir.file("right.yaml");
+    writeFile(left, R"(image_width: 752
+image_height: 480
+camera_name: narrow_stereo/left
+camera_matrix:
+  rows: 3
+  cols: 3
+  data: [425.0, 0.0, 376.5, 0.0, 425.0, 239.5, 0.0, 0.0, 1.0]
+distortion_model: plumb_bob
+distortion_coefficients:
+  rows: 1
+  cols: 5
+  data: [0.0, 0.0, 0.0, 0.0, 0.0]
+rectification_matrix:
+  rows: 3
+  cols: 3
+  data: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+projection_matrix:
+  rows: 3
+  cols: 4
+  data: [425.0, 0.0, 376.5, 0.0, 0.0, 425.0, 239.5, 0.0, 0.0, 0.0, 1.0, 0.0]
+)");
+    writeFile(right, R"(%YAML:1.0
+image_width: 752
+image_height: 480
+camera_name: narrow_stereo/right
+camera_matrix: !!opencv-matrix
+  rows: 3
+  cols: 3
+  dt: d
+  data: [425.0, 0.0, 376.5, 0.0, 425.0, 239.5, 0.0, 0.0, 1.0]
+distortion_model: plumb_bob
+distortion_coefficients: [0.0, 0.0, 0.0, 0.0, 0.0]
+rectification_matrix: !!opencv-matrix
+  rows: 3
+  cols: 3
+  dt: d
+  data: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+projection_matrix: !!opencv-matrix
+  rows: 3
+  cols: 4
+  dt: d
+  data: [425.0, 0.0, 376.5, -51.0, 0.0, 425.0, 239.5, 0.0, 0.0, 0.0, 1.0, 0.0]
+)");
+    const StereoCalibration c = importRosCameraInfo(left, right);
+    EXPECT_EQ(c.kind, StereoCalibration::Kind::Full);
+    EXPECT_EQ(c.rectified.image_size, cv::Size(752, 480));
+    EXPECT_DOUBLE_EQ(c.rectified.focal_px, 425.0);
+    EXPECT_DOUBLE_EQ(c.rectified.baseline_m, 0.12);
+    EXPECT_DOUBLE_EQ(c.rectified.cx_px, 376.5);
+    EXPECT_DOUBLE_EQ(c.rectified.doffs_px, 0.0);
+    EXPECT_EQ(c.R, cv::Matx33d::eye());
+    EXPECT_DOUBLE_EQ(c.T[0], -0.12);
+    EXPECT_EQ(c.valid_roi_left, cv::Rect(0, 0, 752, 480));
+    // Through our own file format, as the service would get it.
+    const std::string ours = dir.file("calibration.yaml");
+    saveCalibration(c, ours);
+    EXPECT_EQ(loadCalibration(ours).rectified.baseline_m, c.rectified.baseline_m);
+}
+
+TEST(CalibrationFormats, WritesARectifiedOnlyCalibrationAsARosPair)
+{
+    const StereoCalibration c = makeRectifiedCalibration({640, 480}, 500.0, 0.1, 320.0, 240.0, 4.0);
+    test::ScratchDir dir("stereod_formats");
+    const std::string left = dir.file("left.yaml"), right = dir.file("right.yaml");
+    exportRosCameraInfo(c, left, right);
+    const StereoCalibration back = importRosCameraInfo(left, right);
+    EXPECT_DOUBLE_EQ(back.rectified.focal_px, 500.0);
+    EXPECT_DOUBLE_EQ(back.rectified.baseline_m, 0.1);
+    EXPECT_DOUBLE_EQ(back.rectified.cx_px, 320.0);
+    EXPECT_DOUBLE_EQ(back.rectified.cy_px, 240.0);
+    EXPECT_DOUBLE_EQ(back.rectified.doffs_px, 4.0);
+}
+
+TEST(CalibrationFormats, RefusesRosFilesItCannotUseNamingFileAndKey)
+{
+    test::ScratchDir dir("stereod_formats");
+    const std::string left = dir.file("left.yaml"), right = dir.file("right.yaml");
+    exportRosCameraInfo(makeRectifiedCalibration({640, 480}, 500.0, 0.1), left, right);
+    const std::string good_left = test::readFile(left);
+
+    std::string message = refusal([&] { importRosCameraInfo(right, left); });
+    EXPECT_TRUE(contains(message, right)) << message;
+    EXPECT_TRUE(contains(message, "swapped")) << message;
+
+    const std::string fisheye = dir.file("fisheye.yaml");
+    std::string text = good_left;
+    text.replace(text.find("plumb_bob"), 9, "equidistant");
+    writeFile(fisheye, text);
+    message = refusal([&] { importRosCameraInfo(fisheye, right); });
+    EXPECT_TRUE(contains(message, fisheye + ":")) << message;
+    EXPECT_TRUE(contains(message, "distortion_model: 'equidistant' is not supported")) << message;
+
+    const std::string wide = dir.file("wide.yaml");
+    text = good_left;
+    text.replace(text.find("image_width: 640"), 16, "image_width: 800");
+    writeFile(wide, text);
+    message = refusal([&] { importRosCameraInfo(wide, right); });
+    EXPECT_TRUE(contains(message, "640x480 but the left's (" + wide + ") are 800x480")) << message;
+
+    const std::string short_p = dir.file("short.yaml");
+    text = good_left;
+    text.replace(text.find("projection_matrix"), 17, "projection_matrx");
+    writeFile(short_p, text);
+    message = refusal([&] { importRosCameraInfo(short_p, right); });
+    EXPECT_TRUE(contains(message, short_p + ": projection_matrix: missing key")) << message;
+
+    message = refusal([&] { importRosCameraInfo(dir.file("none.yaml"), right); });
+    EXPECT_TRUE(contains(message, "none.yaml: cannot open: No such file or directory")) << message;
+}
+
+// Writes the two files exactly as OpenCV's stereo_calib sample does (FileStorage, the same
+// keys), with T in squares as the sample gives it when run with its default -s 1.
+void writeStereoCalibFiles(const StereoCalibration& c, const std::string& intrinsics,
+                           const std::string& extrinsics)
+{
+    cv::FileStorage fs(intrinsics, cv::FileStorage::WRITE);
+    fs << "M1" << cv::Mat(c.left.camera_matrix) << "D1" << cv::Mat(c.left.distortion).t()
+       << "M2" << cv::Mat(c.right.camera_matrix) << "D2" << cv::Mat(c.right.distortion).t();
+    fs.release();
+    cv::Matx34d p2 = c.P2;
+    p2(0, 3) /= kSquareM;
+    cv::Matx44d q = c.Q;
+    q(3, 2) *= kSquareM;
+    q(3, 3) *= kSquareM;
+    fs.open(extrinsics, cv::FileStorage::WRITE);
+    fs << "R" << cv::Mat(c.R) << "T" << cv::Mat(c.T / kSquareM) << "R1" << cv::Mat(c.R1)
+       << "R2" << cv::Mat(c.R2) << "P1" << cv::Mat(c.P1) << "P2" << cv::Mat(p2) << "Q"
+       << cv::Mat(q);
+    fs.release();
+}
+
+TEST_F(CalibrationFormatsTest, ReadsOpenCvStereoCalibFilesInMetres)
+{
+    const StereoCalibration& c = calibration();
+    test::ScratchDir dir("stereod_formats");
+    const std::string intrinsics = dir.file("intrinsics.yml"), extrinsics = dir.file("extrinsics.yml");
+    writeStereoCalibFiles(c, intrinsics, extrinsics);
+    const StereoCalibration back =
+        importOpenCvStereoCalib(intrinsics, extrinsics, c.rectified.image_size, kSquareM);
+    EXPECT_EQ(back.left.camera_matrix, c.left.camera_matrix);
+    EXPECT_EQ(back.right.distortion, c.right.distortion);
+    EXPECT_EQ(back.R, c.R);
+    EXPECT_LT(cv::norm(back.T - c.T), 1e-12 * cv::norm(c.T));
+    EXPECT_LT(maxDifference(back.P2, c.P2), 1e-12);
+    EXPECT_LT(maxDifference(back.Q, c.Q), 1e-9);
+    EXPECT_NEAR(back.rectified.baseline_m, c.rectified.baseline_m, 1e-12);
+    expectSameRectification(c, back);
+
+    // Read as squares (the unit left at 1): the baseline is 1/0.025 times larger.
+    const StereoCalibration squares =
+        importOpenCvStereoCalib(intrinsics, extrinsics, c.rectified.image_size);
+    EXPECT_NEAR(squares.rectified.baseline_m, c.rectified.baseline_m / kSquareM, 1e-9);
+}
+
+TEST_F(CalibrationFormatsTest, RefusesOpenCvFilesItCannotUse)
+{
+    const StereoCalibration& c = calibration();
+    test::ScratchDir dir("stereod_formats");
+    const std::string intrinsics = dir.file("intrinsics.yml"), extrinsics = dir.file("extrinsics.yml");
+    writeStereoCalibFiles(c, intrinsics, extrinsics);
+    const std::string partial = dir.file("partial.yml");
+    cv::FileStorage fs(partial, cv::FileStorage::WRITE);
+    fs << "R" << cv::Mat(c.R);
+    fs.release();
+
+    std::string message = refusal(
+        [&] { importOpenCvStereoCalib(intrinsics, partial, c.rectified.image_size); });
+    EXPECT_TRUE(contains(message, partial + ": T: missing key")) << message;
+
+    message = refusal([&] { importOpenCvStereoCalib(intrinsics, dir.file("no.yml"), {640, 480}); });
+    EXPECT_TRUE(contains(message, "no.yml: cannot open")) << message;
+
+    // An image size the principal points do not fit.
+    message = refusal([&] { importOpenCvStereoCalib(intrinsics, extrinsics, {320, 240}); });
+    EXPECT_TRUE(contains(message, intrinsics + " + " + extrinsics)) << message;
+}
+
+} // namespace
+} // namespace stereod

@@ -1,0 +1,63 @@
+#pragma once
+// Small things the pipeline tests share: a directory of their own for the files a test
+// writes, reading a file back whole, and the message of an expected refusal.
+//
+// ScratchDir is thread-bound (one per test); the functions are reentrant.
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iterator>
+#include <string>
+
+#include <gtest/gtest.h>
+
+namespace stereod::test {
+
+class ScratchDir {
+public:
+    explicit ScratchDir(const std::string& prefix)
+        : path_(std::filesystem::temp_directory_path() /
+                (prefix + "_" + std::to_string(::getpid())))
+    {
+        std::filesystem::create_directories(path_);
+    }
+    ~ScratchDir() { std::filesystem::remove_all(path_); }
+    ScratchDir(const ScratchDir&) = delete;
+    ScratchDir& operator=(const ScratchDir&) = delete;
+
+    std::string file(const std::string& name) const { return (path_ / name).string(); }
+
+private:
+    std::filesystem::path path_;
+};
+
+// The whole content of a file; empty when it cannot be read.
+inline std::string readFile(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// Runs `run`, which must throw an `Error`; returns its message (a test failure, and "",
+// when nothing is thrown).
+template <typename Error>
+std::string refusalMessage(const std::function<void()>& run)
+{
+    try {
+        run();
+    } catch (const Error& error) {
+        return error.what();
+    }
+    ADD_FAILURE() << "no refusal";
+    return {};
+}
+
+inline bool contains(const std::string& text, const std::string& part)
+{
+    return text.find(part) != std::string::npos;
+}
+
+} // namespace stereod::test
