@@ -35,6 +35,7 @@ struct CameraStatus {
     uint64_t frames = 0;       // frames delivered
     uint64_t dropped = 0;      // frames lost before pairing (gaps, pool exhausted)
     uint64_t bad_frames = 0;   // corrupt or unreadable frames skipped
+    uint64_t unpaired = 0;     // frames stereo sync dropped without a partner
 };
 
 struct SourceStatus {
@@ -47,6 +48,13 @@ struct SourceStatus {
     double skew_mean_ms = 0.0;       // |right - left| capture time of delivered pairs
     double skew_p99_ms = 0.0;
     double skew_max_ms = 0.0;
+    // Stereo sync found the two cameras' frames consistently apart (capture/stereo_sync.hpp):
+    // the estimate of right minus left, in ms, known modulo the frame period.
+    bool clock_offset_detected = false;
+    double clock_offset_ms = 0.0;
+    // Conditions that do not stop the source but hurt depth, one sentence each (a control
+    // the two cameras accepted differently, a clock offset, stamps taken at dequeue).
+    std::vector<std::string> warnings;
 };
 
 // Thread-safety: start()/stop() from one controlling thread; status() from any thread.
