@@ -440,6 +440,127 @@ KeyDef choiceKey(std::string path, bool live, Access access, Names<Enum> names)
     return def;
 }
 
+// An optional device setting: `keep` (unset: the device keeps its own value) or a value
+// that `parse` reads (nothing when the text is not one); `show` renders a set value.
+constexpr std::string_view kKeep = "keep";
+
+template <class Access, class Parse, class Show>
+KeyDef keepKey(std::string path, bool live, Access access, std::string problem,
+               std::string expected, Parse parse, Show show)
+{
+    KeyDef def{std::move(path), live, {}, {}};
+    def.read = [access, problem, expected, parse](const YAML::Node& node, ServiceConfig& config,
+                                                  const ReadContext&) -> ReadResult {
+        if (node.IsScalar() && node.Scalar() == kKeep) {
+            access(config).reset();
+            return std::nullopt;
+        }
+        auto value = node.IsScalar() ? parse(node.Scalar()) : std::nullopt;
+        if (!value) {
+            return ReadFailure{problem, expected};
+        }
+        access(config) = *value;
+        return std::nullopt;
+    };
+    def.show = [access, show](const ServiceConfig& config) {
+        return access(config) ? show(*access(config)) : std::string(kKeep);
+    };
+    return def;
+}
+
+template <class Access> KeyDef keepIntegerKey(std::string path, Access access, std::string unit)
+{
+    return keepKey(
+        std::move(path), kRestart, access, "not keep or an integer",
+        "keep, or an integer" + (unit.empty() ? std::string() : " in " + unit),
+        [](std::string_view text) -> std::optional<int32_t> {
+            const auto value = parseInteger(text);
+            if (!value || *value < std::numeric_limits<int32_t>::min() ||
+                *value > std::numeric_limits<int32_t>::max()) {
+                return std::nullopt;
+            }
+            return static_cast<int32_t>(*value);
+        },
+        [](int32_t value) { return std::to_string(value); });
+}
+
+template <class Access> KeyDef keepBoolKey(std::string path, Access access)
+{
+    return keepKey(
+        std::move(path), kRestart, access, "not keep, true or false", "keep, true or false",
+        [](std::string_view text) { return parseBool(text); },
+        [](bool value) { return std::string(value ? "true" : "false"); });
+}
+
+const Names<PowerLineFrequency>& powerLineNames()
+{
+    static const Names<PowerLineFrequency> names = {{"disabled", PowerLineFrequency::Disabled},
+                                                    {"50hz", PowerLineFrequency::Hz50},
+                                                    {"60hz", PowerLineFrequency::Hz60},
+                                                    {"auto", PowerLineFrequency::Auto}};
+    return names;
+}
+
+KeyDef powerLineKey()
+{
+    std::vector<std::string> known{std::string(kKeep)};
+    for (const auto& entry : powerLineNames()) {
+        known.push_back(entry.first);
+    }
+    return keepKey(
+        "source.cameras.controls.power_line_frequency", kRestart,
+        [](auto& c) -> auto& { return c.source.cameras.controls.power_line; }, "unknown value",
+        listNames(known),
+        [](std::string_view text) -> std::optional<PowerLineFrequency> {
+            for (const auto& [name, value] : powerLineNames()) {
+                if (text == name) {
+                    return value;
+                }
+            }
+            return std::nullopt;
+        },
+        [](PowerLineFrequency value) {
+            for (const auto& [name, entry] : powerLineNames()) {
+                if (entry == value) {
+                    return name;
+                }
+            }
+            return std::string("?");
+        });
+}
+
+// A list of user or group ids: `[1000, 1001]`, or empty (`[]` or nothing). The id
+// 4294967295 is (uid_t)-1, "no id", so it is refused.
+template <class Access> KeyDef idListKey(std::string path, bool live, Access access)
+{
+    KeyDef def{std::move(path), live, {}, {}};
+    def.read = [access](const YAML::Node& node, ServiceConfig& config,
+                        const ReadContext&) -> ReadResult {
+        const std::string expected = "a list of numeric ids from 0 to 4294967294, like [1000, 1001]";
+        std::vector<uint32_t> ids;
+        if (!node.IsNull() && !node.IsSequence()) {
+            return ReadFailure{"not a list", expected};
+        }
+        for (const auto& item : node) {
+            const auto value = item.IsScalar() ? parseInteger(item.Scalar()) : std::nullopt;
+            if (!value || *value < 0 || *value >= int64_t{std::numeric_limits<uint32_t>::max()}) {
+                return ReadFailure{"not a list of ids", expected};
+            }
+            ids.push_back(static_cast<uint32_t>(*value));
+        }
+        access(config) = std::move(ids);
+        return std::nullopt;
+    };
+    def.show = [access](const ServiceConfig& config) {
+        std::string text = "[";
+        for (const uint32_t id : access(config)) {
+            text += (text.size() > 1 ? ", " : "") + std::to_string(id);
+        }
+        return text + "]";
+    };
+    return def;
+}
+
 // The matcher's name sets two fields: the OpenCV matcher and, for SGBM, its mode.
 struct AlgorithmName {
     std::string name;
@@ -521,7 +642,9 @@ std::vector<KeyDef> buildKeyTable()
 
     add(choiceKey(
         "source.type", kRestart, [](auto& c) -> auto& { return c.source.kind; },
-        Names<SourceKind>{{"replay", SourceKind::Replay}}));
+        Names<SourceKind>{{"replay", SourceKind::Replay},
+                          {"v4l2", SourceKind::V4l2},
+                          {"side_by_side", SourceKind::SideBySide}}));
     add(textKey(
         "source.replay.path", kRestart, [](auto& c) -> auto& { return c.source.replay.path; },
         true));
@@ -533,6 +656,46 @@ std::vector<KeyDef> buildKeyTable()
         "frames per second"));
     add(boolKey(
         "source.replay.loop", kRestart, [](auto& c) -> auto& { return c.source.replay.loop; }));
+    add(textKey(
+        "source.cameras.left", kRestart, [](auto& c) -> auto& { return c.source.cameras.left; },
+        false));
+    add(textKey(
+        "source.cameras.right", kRestart, [](auto& c) -> auto& { return c.source.cameras.right; },
+        false));
+    add(textKey(
+        "source.cameras.device", kRestart,
+        [](auto& c) -> auto& { return c.source.cameras.device; }, false));
+    add(choiceKey(
+        "source.cameras.format", kRestart, [](auto& c) -> auto& { return c.source.cameras.format; },
+        Names<PixelFormatChoice>{{"auto", PixelFormatChoice::Auto},
+                                 {"grey", PixelFormatChoice::Grey},
+                                 {"yuyv", PixelFormatChoice::Yuyv},
+                                 {"mjpeg", PixelFormatChoice::Mjpeg}}));
+    add(integerKey(
+        "source.cameras.width", kRestart, [](auto& c) -> auto& { return c.source.cameras.width; }));
+    add(integerKey(
+        "source.cameras.height", kRestart,
+        [](auto& c) -> auto& { return c.source.cameras.height; }));
+    add(realKey(
+        "source.cameras.fps", kRestart, [](auto& c) -> auto& { return c.source.cameras.fps; },
+        "frames per second"));
+    add(boolKey(
+        "source.cameras.lock_exposure", kRestart,
+        [](auto& c) -> auto& { return c.source.cameras.lock_exposure; }));
+    add(keepBoolKey("source.cameras.controls.auto_exposure",
+                    [](auto& c) -> auto& { return c.source.cameras.controls.auto_exposure; }));
+    add(keepIntegerKey(
+        "source.cameras.controls.exposure_us",
+        [](auto& c) -> auto& { return c.source.cameras.controls.exposure_us; }, "us"));
+    add(keepIntegerKey(
+        "source.cameras.controls.gain",
+        [](auto& c) -> auto& { return c.source.cameras.controls.gain; }, "device units"));
+    add(keepBoolKey("source.cameras.controls.auto_white_balance",
+                    [](auto& c) -> auto& { return c.source.cameras.controls.auto_white_balance; }));
+    add(keepIntegerKey(
+        "source.cameras.controls.white_balance_k",
+        [](auto& c) -> auto& { return c.source.cameras.controls.white_balance_k; }, "kelvin"));
+    add(powerLineKey());
     add(integerKey(
         "source.ring_capacity", kRestart, [](auto& c) -> auto& { return c.source.ring_capacity; }));
     add(realKey(
@@ -629,6 +792,10 @@ std::vector<KeyDef> buildKeyTable()
     add(realKey(
         "socket.idle_timeout_s", kRestart, [](auto& c) -> auto& { return c.socket.idle_timeout_s; },
         "s"));
+    add(idListKey(
+        "socket.allow_uids", kRestart, [](auto& c) -> auto& { return c.socket.allow_uids; }));
+    add(idListKey(
+        "socket.allow_gids", kRestart, [](auto& c) -> auto& { return c.socket.allow_gids; }));
 
     add(realKey(
         "publish.readings_max_hz", kLive,
@@ -1006,6 +1173,66 @@ void checkPath(Checker& checker, const std::string& key, const std::string& path
     }
 }
 
+void checkCameras(Checker& checker, const SourceConfig& source)
+{
+    const CamerasConfig& cameras = source.cameras;
+    checker.integer("source.cameras.width", cameras.width, 16, 16384, " px");
+    checker.integer("source.cameras.height", cameras.height, 16, 16384, " px");
+    checker.real("source.cameras.fps", cameras.fps, above(0, 1000, " frames/s"));
+    const CameraControls& controls = cameras.controls;
+    if (controls.exposure_us) {
+        checker.integer("source.cameras.controls.exposure_us", *controls.exposure_us, 1, 10000000,
+                        " us");
+    }
+    if (controls.gain) {
+        checker.integer("source.cameras.controls.gain", *controls.gain, 0,
+                        std::numeric_limits<int>::max(), " (device units)");
+    }
+    if (controls.white_balance_k) {
+        checker.integer("source.cameras.controls.white_balance_k", *controls.white_balance_k,
+                        1000, 20000, " K");
+    }
+    if (cameras.lock_exposure && controls.auto_exposure.value_or(false)) {
+        checker.fail("source.cameras.lock_exposure",
+                     "contradicts source.cameras.controls.auto_exposure: true",
+                     "false, or auto_exposure keep or false");
+    }
+
+    if (source.kind == SourceKind::V4l2) {
+        constexpr std::string_view kDevice =
+            "a V4L2 device path, e.g. /dev/v4l/by-id/usb-...-video-index0 (stereoctl devices "
+            "lists them)";
+        if (cameras.left.empty()) {
+            checker.fail("source.cameras.left", "empty with source.type v4l2", kDevice);
+        }
+        if (cameras.right.empty()) {
+            checker.fail("source.cameras.right", "empty with source.type v4l2", kDevice);
+        }
+        if (!cameras.left.empty() && cameras.left == cameras.right) {
+            checker.fail("source.cameras.right", "the same device as source.cameras.left",
+                         "the other camera of the rig");
+        }
+        // A partner more than half a period away may belong to the next frame: pairs
+        // must not be able to mix up instants.
+        const double half_period_ms = 500.0 / cameras.fps;
+        if (checker.usable({"source.max_skew_ms", "source.cameras.fps"}) &&
+            source.max_skew_ms >= half_period_ms) {
+            checker.fail("source.max_skew_ms", "not below half the frame period",
+                         "< " + formatNumber(half_period_ms) +
+                             " ms at source.cameras.fps " + formatNumber(cameras.fps));
+        }
+    } else if (source.kind == SourceKind::SideBySide) {
+        if (cameras.device.empty()) {
+            checker.fail("source.cameras.device", "empty with source.type side_by_side",
+                         "the V4L2 device path of the side-by-side camera");
+        }
+        if (cameras.width % 2 != 0) {
+            checker.fail("source.cameras.width", "odd with source.type side_by_side",
+                         "an even width: the frame holds two halves");
+        }
+    }
+}
+
 void checkSource(Checker& checker, const SourceConfig& source, const std::string& calibration)
 {
     checker.integer("source.ring_capacity", source.ring_capacity, 2, 64, " pairs");
@@ -1014,21 +1241,18 @@ void checkSource(Checker& checker, const SourceConfig& source, const std::string
     checker.real("source.stall_timeout_ms", source.stall_timeout_ms, closed(100, 600000, " ms"));
     checker.real("source.replay.fps", source.replay.fps, above(0, 1000, " fps"));
 
+    checkCameras(checker, source);
+
     constexpr std::string_view kRecording =
         "a recording directory (frames.csv, left/, right/) or a folder of left*/right* images";
     constexpr std::string_view kCalibration = "a calibration file (docs/calibration.md)";
     if (!source.replay.path.empty()) {
         checkPath(checker, "source.replay.path", source.replay.path, true, kRecording);
     }
+    // Without a calibration key the recording's own calibration.yaml is used; with
+    // neither, the service runs uncalibrated (docs/service.md), which is no error.
     if (!calibration.empty()) {
         checkPath(checker, "calibration", calibration, false, kCalibration);
-    } else if (!source.replay.path.empty() && checker.usable({"source.replay.path"})) {
-        // Without a calibration key the recording's own calibration.yaml is used.
-        std::error_code error;
-        if (!fs::exists(fs::path(source.replay.path) / "calibration.yaml", error)) {
-            checker.fail("calibration", "not set, and source.replay.path holds no calibration.yaml",
-                         kCalibration);
-        }
     }
 }
 
@@ -1231,6 +1455,12 @@ void overrideKeys(ServiceConfig& config, const ConfigOverrides& overrides, KeyLo
         locations.overridden[key] = option;
     };
     apply(overrides.replay_path, config.source.replay.path, "source.replay.path", "--replay", true);
+    if (!overrides.replay_path.empty()) {
+        // --replay replaces the configured source, cameras included.
+        config.source.kind = SourceKind::Replay;
+        locations.lines.erase("source.type");
+        locations.overridden["source.type"] = "--replay";
+    }
     apply(overrides.calibration_path, config.calibration_path, "calibration", "--calib", true);
     apply(overrides.socket_path, config.socket.path, "socket.path", "--socket", true);
     apply(overrides.log_level, config.log_level, "log_level", "--log-level", false);

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "capture/v4l2_camera.hpp"
 #include "pipeline/stereo_processor.hpp"
 
 namespace stereod {
@@ -26,7 +27,11 @@ private:
     std::vector<std::string> problems_;
 };
 
-enum class SourceKind { Replay };          // cameras come with the V4L2 backend
+enum class SourceKind {
+    Replay,      // a recording on disk (source.replay)
+    V4l2,        // two V4L2 cameras, paired by stereo sync (source.cameras.left/right)
+    SideBySide,  // one V4L2 device whose frames hold left|right halves (source.cameras.device)
+};
 enum class ReplayPacing {
     Paced,     // frames delivered at their recorded times, like real cameras
     Lockstep,  // as fast as the worker consumes, nothing dropped, repeatable
@@ -39,9 +44,24 @@ struct ReplayConfig {
     bool loop = true;
 };
 
+// The V4L2 cameras of source.type v4l2 (two devices) or side_by_side (one device). The
+// controls are applied alike to both cameras; an unset control keeps the device's value.
+struct CamerasConfig {
+    std::string left;                 // device path (/dev/videoN or /dev/v4l/by-id/...)
+    std::string right;
+    std::string device;               // side_by_side: the one device
+    PixelFormatChoice format = PixelFormatChoice::Auto;
+    int width = 640;                  // px of each device's frame (side_by_side: both halves)
+    int height = 480;
+    double fps = 30.0;                // asked frame rate
+    CameraControls controls;
+    bool lock_exposure = false;       // manual exposure, frozen (controls.exposure_us if set)
+};
+
 struct SourceConfig {
     SourceKind kind = SourceKind::Replay;
     ReplayConfig replay;
+    CamerasConfig cameras;
     int ring_capacity = 4;            // pairs queued between source and worker
     double max_skew_ms = 5.0;         // pairs further apart give no reading (out of sync)
     double stall_timeout_ms = 2000.0; // no pair for this long: the source counts as down
@@ -54,6 +74,11 @@ struct SocketConfig {
     int max_clients = 64;
     uint32_t max_request_bytes = 65536;
     double idle_timeout_s = 0.0;      // 0: clients may stay idle
+    // Who may talk to the service, on top of the file mode: when either list is not
+    // empty, a peer (by SO_PEERCRED) is served only if its uid is in allow_uids or its
+    // primary or a supplementary gid is in allow_gids; others get `not_allowed`.
+    std::vector<uint32_t> allow_uids;
+    std::vector<uint32_t> allow_gids;
 };
 
 struct PublishConfig {

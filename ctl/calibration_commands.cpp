@@ -18,6 +18,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "ctl/calibration_report.hpp"
 #include "ctl/commands.hpp"
 #include "ctl/exit_codes.hpp"
 #include "pipeline/calibration_formats.hpp"
@@ -144,7 +145,8 @@ void printReport(const ChessboardCalibrationResult& r, const std::string& out_pa
     }
 }
 
-json reportJson(const ChessboardCalibrationResult& r, const CalibrateOptions& options)
+json reportJson(const ChessboardCalibrationResult& r, const CalibrateOptions& options,
+               const json& extra_json)
 {
     json rejected = json::array();
     json pairs = json::array();
@@ -169,7 +171,7 @@ json reportJson(const ChessboardCalibrationResult& r, const CalibrateOptions& op
     if (!options.preview_path.empty()) {
         files["preview"] = options.preview_path;
     }
-    return {{"rms_px", r.rms_px},
+    json report = {{"rms_px", r.rms_px},
             {"epipolar_error_px", r.epipolar_error_px},
             {"epipolar_distance_px", r.epipolar_distance_px},
             {"pairs_used", r.pairs_used},
@@ -187,9 +189,40 @@ json reportJson(const ChessboardCalibrationResult& r, const CalibrateOptions& op
             {"alpha", options.alpha},
             {"pairs", pairs},
             {"files", files}};
+    if (extra_json.is_object()) {
+        report.update(extra_json);
+    }
+    return report;
 }
 
 } // namespace
+
+ChessboardCalibrationOptions chessboardOptions(const CalibrateOptions& options)
+{
+    if (options.board.empty() || !options.square_m) {
+        throw UsageError("a chessboard calibration needs --board COLSxROWS and --square-m S");
+    }
+    ChessboardCalibrationOptions calibration_options;
+    calibration_options.board = parseBoard(options.board, *options.square_m);
+    calibration_options.alpha = options.alpha;
+    calibration_options.min_pairs = options.min_pairs;
+    validateChessboardOptions(calibration_options);
+    return calibration_options;
+}
+
+void finishChessboardCalibration(const ChessboardCalibrationResult& result,
+                                 const CalibrateOptions& options, const json& extra_json)
+{
+    saveCalibration(result.calibration, options.out_path);
+    if (!options.preview_path.empty()) {
+        writeRectifiedPreview(result, options.preview_path);
+    }
+    if (options.json) {
+        fmt::print("{}\n", reportJson(result, options, extra_json).dump(2));
+    } else {
+        printReport(result, options.out_path, options.preview_path);
+    }
+}
 
 int runChessboardCalibration(const CalibrateOptions& options)
 {
@@ -198,10 +231,7 @@ int runChessboardCalibration(const CalibrateOptions& options)
         throw UsageError("chessboard calibration needs --left GLOB --right GLOB --board COLSxROWS "
                          "--square-m S");
     }
-    ChessboardCalibrationOptions calibration_options;
-    calibration_options.board = parseBoard(options.board, *options.square_m);
-    calibration_options.alpha = options.alpha;
-    calibration_options.min_pairs = options.min_pairs;
+    const ChessboardCalibrationOptions calibration_options = chessboardOptions(options);
     const std::vector<std::string> left = expandGlob(options.left_glob, "--left");
     const std::vector<std::string> right = expandGlob(options.right_glob, "--right");
     if (left.size() != right.size()) {
@@ -212,15 +242,7 @@ int runChessboardCalibration(const CalibrateOptions& options)
 
     const ChessboardCalibrationResult result =
         calibrateChessboard(left, right, calibration_options, printProgress);
-    saveCalibration(result.calibration, options.out_path);
-    if (!options.preview_path.empty()) {
-        writeRectifiedPreview(result, options.preview_path);
-    }
-    if (options.json) {
-        fmt::print("{}\n", reportJson(result, options).dump(2));
-    } else {
-        printReport(result, options.out_path, options.preview_path);
-    }
+    finishChessboardCalibration(result, options, json::object());
     return kExitOk;
 }
 

@@ -4,6 +4,8 @@
 //
 // Reentrant, except that `watch` changes the process's signal mask while it runs.
 
+#include <cstddef>
+#include <cstdint>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -96,6 +98,18 @@ struct CalibrateOptions {
     std::vector<std::string> from_ros;      // left.yaml, right.yaml (camera_info)
     std::vector<std::string> from_opencv;   // intrinsics.yml, extrinsics.yml (stereo_calib)
     double unit_m = 1.0;              // metres per unit of stereo_calib's T
+    // The live chessboard form (--live): raw pairs from the running service.
+    bool live = false;
+    ServiceOptions service;
+    int count = 0;                    // accepted pairs to collect
+    std::string save_pairs_dir;       // where accepted pairs go; default next to out_path
+    std::optional<double> timeout_s;  // stop collecting after this long; none: until Ctrl-C
+    double max_hz = 4.0;              // pairs asked of the service per second
+};
+
+// `stereoctl devices`: exit 0 when a capture device was found, 1 when none.
+struct DevicesOptions {
+    bool json = false;
 };
 
 struct ExportRosOptions {
@@ -105,7 +119,27 @@ struct ExportRosOptions {
     std::string camera_name = "stereo";
 };
 
+// `stereoctl board-distance`: a chessboard's distance by its pose over the nearest-object
+// region. Exit 0 with a distance, 1 when the board is not found or not in the region.
+struct BoardDistanceOptions {
+    std::string left_path;            // raw (unrectified) left image
+    std::string calib_path;           // full calibration that records its board
+    std::string config_path;          // a service configuration whose region to use
+    bool json = false;
+};
+
+// `stereoctl record`: the service's raw pairs written as a recording.
+struct RecordOptions {
+    ServiceOptions service;
+    std::string out_dir;              // must not exist, or be empty
+    std::optional<uint64_t> frames;   // stop after this many pairs; none: until stopped
+    std::size_t queue_pairs = 32;     // pairs buffered between the socket and the disk
+    bool json = false;
+};
+
 int runDistance(const DistanceOptions& options);
+// ctl/devices_command.cpp
+int runDevices(const DevicesOptions& options);
 int runStatus(const StatusOptions& options);
 int runWatch(const WatchOptions& options);
 int runSnapshot(const SnapshotOptions& options);
@@ -114,7 +148,13 @@ int runCalibrate(const CalibrateOptions& options);
 // ctl/calibration_commands.cpp: the chessboard form of `calibrate`, its imports (the image
 // size parsed from --size for --from-opencv) and `export-ros`.
 int runChessboardCalibration(const CalibrateOptions& options);
+// ctl/live_calibration.cpp: `calibrate --live`.
+int runLiveCalibration(const CalibrateOptions& options);
 int runCalibrationImport(const CalibrateOptions& options, cv::Size image_size);
 int runExportRos(const ExportRosOptions& options);
+// ctl/record_command.cpp
+int runRecord(const RecordOptions& options);
+// ctl/board_distance_command.cpp
+int runBoardDistance(const BoardDistanceOptions& options);
 
 } // namespace stereod

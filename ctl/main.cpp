@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <exception>
 #include <functional>
+#include <limits>
 #include <string>
 #include <utility>
 #include <vector>
@@ -88,7 +89,29 @@ struct Options {
     DepthOptions depth;
     CalibrateOptions calibrate;
     ExportRosOptions export_ros;
+    BoardDistanceOptions board_distance;
+    DevicesOptions devices;
+    RecordOptions record;
 };
+
+CLI::App* declareRecord(CLI::App& app, RecordOptions& o)
+{
+    CLI::App* cmd = addServiceCommand(
+        app, "record",
+        "record the service's raw pairs as a recording (frames.csv, left/, right/, "
+        "calibration.yaml) until --frames, Ctrl-C or the service ends (exit 0 done, 2 cannot "
+        "write, 3 service gone)",
+        o.service, &o.json, "print the summary as JSON");
+    cmd->add_option("--out", o.out_dir, "recording directory to create (new or empty)")
+        ->required();
+    cmd->add_option("--frames", o.frames, "stop after this many pairs")
+        ->check(CLI::Range(uint64_t{1}, std::numeric_limits<uint64_t>::max()));
+    cmd->add_option("--queue", o.queue_pairs,
+                    "pairs held between the socket and the disk; more are dropped and counted")
+        ->check(CLI::Range(std::size_t{1}, std::size_t{4096}))
+        ->capture_default_str();
+    return cmd;
+}
 
 CLI::App* declareDistance(CLI::App& app, DistanceOptions& o)
 {
@@ -185,17 +208,44 @@ CLI::App* declareCalibrate(CLI::App& app, CalibrateOptions& o)
     CLI::Option* json = cmd->add_flag("--json", o.json,
                                       "print rms_px, epipolar_error_px, pairs_used, "
                                       "pairs_rejected, baseline_m and the per-pair table as JSON");
-    const std::vector<CLI::Option*> chessboard = {left, right, board, square};
-    for (CLI::Option* required : chessboard) {
-        for (CLI::Option* other : chessboard) {
-            if (other != required) {
-                required->needs(other);
-            }
-        }
+    // The chessboard forms: images from files (--left --right), or --live from the service.
+    CLI::Option* live = cmd->add_flag("--live", o.live,
+                                      "collect the chessboard pairs from the running service's "
+                                      "raw frames (needs --count, --board, --square-m)");
+    CLI::Option* count =
+        cmd->add_option("--count", o.count, "with --live: accepted pairs to collect")
+            ->check(CLI::Range(3, 1000));
+    cmd->add_option("--socket", o.service.socket_path,
+                    "with --live: the service's Unix socket (also from STEREOD_SOCKET)")
+        ->envname("STEREOD_SOCKET")
+        ->capture_default_str();
+    CLI::Option* timeout_ms =
+        cmd->add_option("--timeout-ms", o.service.timeout_ms,
+                        "with --live: limit on each wait for the service")
+            ->check(kPositive)
+            ->capture_default_str();
+    CLI::Option* save_pairs = cmd->add_option(
+        "--save-pairs", o.save_pairs_dir,
+        "with --live: directory for the accepted pairs, left_NNN.png and right_NNN.png "
+        "(default: beside --out, OUT-pairs/)");
+    CLI::Option* timeout_s = cmd->add_option(
+        "--timeout-s", o.timeout_s,
+        "with --live: stop collecting after this long and calibrate with the pairs accepted "
+        "(default: until --count pairs or Ctrl-C)")
+                                 ->check(kPositive);
+    CLI::Option* max_hz =
+        cmd->add_option("--max-hz", o.max_hz, "with --live: raw pairs asked of the service per "
+                                              "second")
+            ->check(kPositive)
+            ->capture_default_str();
+    live->needs(count)->needs(board)->needs(square);
+    for (CLI::Option* live_only : {count, timeout_ms, save_pairs, timeout_s, max_hz}) {
+        live_only->needs(live);
     }
-    for (CLI::Option* extra : {preview, alpha, min_pairs, json}) {
-        extra->needs(left);
-    }
+    left->needs(right)->needs(board)->needs(square);
+    right->needs(left);
+    board->needs(square);
+    square->needs(board);
 
     CLI::Option* from_ros =
         cmd->add_option("--from-ros", o.from_ros, "import a ROS camera_info pair: LEFT.yaml "
@@ -213,7 +263,7 @@ CLI::App* declareCalibrate(CLI::App& app, CalibrateOptions& o)
     unit->needs(from_opencv);
     from_opencv->needs(size);
     // One form at a time; --size belongs to --rectified and --from-opencv.
-    const std::vector<CLI::Option*> forms = {rectified, left, from_ros, from_opencv};
+    const std::vector<CLI::Option*> forms = {rectified, left, live, from_ros, from_opencv};
     for (CLI::Option* form : forms) {
         for (CLI::Option* other : forms) {
             if (other != form) {
@@ -222,14 +272,28 @@ CLI::App* declareCalibrate(CLI::App& app, CalibrateOptions& o)
         }
     }
     rectified->needs(size);
-    for (CLI::Option* not_sized : {left, from_ros}) {
+    for (CLI::Option* not_sized : {left, live, from_ros}) {
         size->excludes(not_sized);
     }
-    cmd->callback([cmd, rectified, left, from_ros, from_opencv] {
-        if (rectified->count() + left->count() + from_ros->count() + from_opencv->count() == 0) {
+    cmd->callback([cmd, rectified, left, live, from_ros, from_opencv, board, preview, alpha,
+                   min_pairs, json] {
+        if (rectified->count() + left->count() + live->count() + from_ros->count() +
+                from_opencv->count() ==
+            0) {
             throw CLI::ValidationError(
                 cmd->get_name(), "give one form: --left/--right/--board/--square-m (chessboard), "
-                                 "--rectified, --from-ros or --from-opencv");
+                                 "--live --count/--board/--square-m (chessboard from the "
+                                 "service), --rectified, --from-ros or --from-opencv");
+        }
+        // The chessboard options belong to the two chessboard forms.
+        if (left->count() + live->count() == 0) {
+            for (CLI::Option* chessboard_only : {board, preview, alpha, min_pairs, json}) {
+                if (chessboard_only->count() > 0) {
+                    throw CLI::ValidationError(chessboard_only->get_name(),
+                                               "belongs to a chessboard calibration: --left "
+                                               "--right or --live");
+                }
+            }
         }
     });
     return cmd;
@@ -245,6 +309,30 @@ CLI::App* declareExportRos(CLI::App& app, ExportRosOptions& o)
     cmd->add_option("--camera-name", o.camera_name,
                     "camera_name prefix: NAME/left and NAME/right")
         ->capture_default_str();
+    return cmd;
+}
+
+CLI::App* declareBoardDistance(CLI::App& app, BoardDistanceOptions& o)
+{
+    CLI::App* cmd = app.add_subcommand(
+        "board-distance", "how far the chessboard in a raw left image is by its pose "
+                          "(solvePnP), over the nearest-object region (exit 0 distance, 1 no "
+                          "board in the region)");
+    cmd->add_option("LEFT", o.left_path, "raw left image")->required();
+    cmd->add_option("--calib", o.calib_path, "full calibration recording its board (YAML)")
+        ->required();
+    cmd->add_option("--config", o.config_path,
+                    "take the region and percentile from this service configuration");
+    cmd->add_flag("--json", o.json, "print the board's distance as JSON");
+    return cmd;
+}
+
+CLI::App* declareDevices(CLI::App& app, DevicesOptions& o)
+{
+    CLI::App* cmd = app.add_subcommand(
+        "devices", "list the V4L2 cameras: formats, sizes, frame rates and stable "
+                   "/dev/v4l/by-id paths (exit 1 when none is found)");
+    cmd->add_flag("--json", o.json, "print the list as JSON");
     return cmd;
 }
 
@@ -276,6 +364,10 @@ int main(int argc, char** argv)
         {declareDepth(app, o.depth), [&] { return runDepth(o.depth); }},
         {declareCalibrate(app, o.calibrate), [&] { return runCalibrate(o.calibrate); }},
         {declareExportRos(app, o.export_ros), [&] { return runExportRos(o.export_ros); }},
+        {declareBoardDistance(app, o.board_distance),
+         [&] { return runBoardDistance(o.board_distance); }},
+        {declareDevices(app, o.devices), [&] { return runDevices(o.devices); }},
+        {declareRecord(app, o.record), [&] { return runRecord(o.record); }},
     };
 
     try {

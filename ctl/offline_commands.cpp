@@ -249,6 +249,9 @@ int runDepth(const DepthOptions& options)
 
 int runCalibrate(const CalibrateOptions& options)
 {
+    if (options.live) {
+        return runLiveCalibration(options);
+    }
     if (!options.from_ros.empty()) {
         return runCalibrationImport(options, {});
     }

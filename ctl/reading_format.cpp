@@ -16,6 +16,7 @@ constexpr std::array kAllReasons = {
     NoReadingReason::TooFewValidPixels, NoReadingReason::NothingInRange,
     NoReadingReason::OutOfSync,      NoReadingReason::SourceDown,
     NoReadingReason::BadFrame,       NoReadingReason::Stale,
+    NoReadingReason::Uncalibrated,
 };
 
 bool isValid(const nlohmann::ordered_json& reading)

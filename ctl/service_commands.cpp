@@ -1,14 +1,7 @@
 // The commands that talk to the running service: distance, status, watch, snapshot.
 
-#include <poll.h>
-#include <signal.h>
-#include <sys/signalfd.h>
-#include <unistd.h>
-
 #include <bit>
-#include <cerrno>
 #include <cstdio>
-#include <system_error>
 #include <vector>
 
 #include <fmt/format.h>
@@ -18,7 +11,9 @@
 #include "ctl/commands.hpp"
 #include "ctl/exit_codes.hpp"
 #include "ctl/output.hpp"
+#include "ctl/payload.hpp"
 #include "ctl/reading_format.hpp"
+#include "ctl/signal_catcher.hpp"
 #include "pipeline/depth_io.hpp"
 
 namespace stereod {
@@ -129,11 +124,15 @@ void printStatus(const json& status)
     printStageTable(stdout, member(pipeline, "stage_ms"));
 
     const json& calibration = member(status, "calibration");
-    fmt::print("calibration: {}, f {} px, B {} m, doffs {} px, {}x{}, {}\n",
-               text(calibration, "kind"), number(calibration, "focal_px", 1),
-               number(calibration, "baseline_m", 3), number(calibration, "doffs_px", 1),
-               number(calibration, "width", 0), number(calibration, "height", 0),
-               text(calibration, "path"));
+    if (text(calibration, "kind") == "none") {
+        fmt::print("calibration: none (uncalibrated: raw frames only, no distances)\n");
+    } else {
+        fmt::print("calibration: {}, f {} px, B {} m, doffs {} px, {}x{}, {}\n",
+                   text(calibration, "kind"), number(calibration, "focal_px", 1),
+                   number(calibration, "baseline_m", 3), number(calibration, "doffs_px", 1),
+                   number(calibration, "width", 0), number(calibration, "height", 0),
+                   text(calibration, "path"));
+    }
 
     const json& clients = member(status, "clients");
     fmt::print("clients: {} connected, {} subscribed, {} frames dropped, {} disconnected as too "
@@ -144,108 +143,6 @@ void printStatus(const json& status)
     if (const json& reading = member(status, "reading"); reading.is_object()) {
         fmt::print("reading: {}\n", formatWatchLine(reading));
     }
-}
-
-// Blocks SIGINT and SIGTERM and takes them through a signalfd instead, so that `watch`
-// can end its wait cleanly; restores the mask on destruction.
-class SignalCatcher {
-public:
-    SignalCatcher()
-    {
-        sigemptyset(&signals_);
-        sigaddset(&signals_, SIGINT);
-        sigaddset(&signals_, SIGTERM);
-        if (pthread_sigmask(SIG_BLOCK, &signals_, &previous_) != 0) {
-            throw std::runtime_error("cannot block SIGINT and SIGTERM");
-        }
-        fd_ = ::signalfd(-1, &signals_, SFD_CLOEXEC | SFD_NONBLOCK);
-        if (fd_ < 0) {
-            const int error_number = errno;
-            pthread_sigmask(SIG_SETMASK, &previous_, nullptr);
-            throw std::runtime_error("cannot create a signalfd: " +
-                                     std::system_category().message(error_number));
-        }
-    }
-    ~SignalCatcher()
-    {
-        // A signal that arrived is consumed first, so that unblocking does not deliver it
-        // again and kill the process after it chose to end cleanly.
-        signalfd_siginfo info{};
-        while (::read(fd_, &info, sizeof(info)) == static_cast<ssize_t>(sizeof(info))) {
-        }
-        ::close(fd_);
-        pthread_sigmask(SIG_SETMASK, &previous_, nullptr);
-    }
-    SignalCatcher(const SignalCatcher&) = delete;
-    SignalCatcher& operator=(const SignalCatcher&) = delete;
-
-    int fd() const noexcept { return fd_; }
-
-    // True when a signal is waiting: checked between events, because the client only
-    // looks at the descriptor when it has to wait, and a busy stream may never make it.
-    bool pending() const
-    {
-        pollfd p = {fd_, POLLIN, 0};
-        return ::poll(&p, 1, 0) > 0;
-    }
-
-private:
-    sigset_t signals_{};
-    sigset_t previous_{};
-    int fd_ = -1;
-};
-
-std::size_t payloadBytes(const json& header)
-{
-    const auto bytes = header.find("bytes");
-    if (bytes == header.end()) {
-        return 0;
-    }
-    if (!bytes->is_number_unsigned()) {
-        throw ClientError("a header from the service has a \"bytes\" that is not a count: " +
-                              header.dump(),
-                          0);
-    }
-    return bytes->get<std::size_t>();
-}
-
-// One payload of a snapshot reply, checked against the size its header announces.
-struct Payload {
-    std::string name;
-    std::string format;
-    int width = 0;
-    int height = 0;
-    std::size_t points = 0;
-    std::size_t bytes = 0;
-};
-
-Payload parsePayload(const json& header)
-{
-    Payload p;
-    p.name = header.value("name", std::string());
-    p.format = header.value("format", std::string());
-    p.width = header.value("width", 0);
-    p.height = header.value("height", 0);
-    p.points = header.value("points", std::size_t{0});
-    p.bytes = payloadBytes(header);
-    return p;
-}
-
-// Reads an image payload of `type` into `image`; the header must agree with its size.
-void readImagePayload(ProtocolClient& client, const Payload& payload, int type, cv::Mat& image)
-{
-    const std::size_t expected = static_cast<std::size_t>(std::max(payload.width, 0)) *
-                                 static_cast<std::size_t>(std::max(payload.height, 0)) *
-                                 CV_ELEM_SIZE(type);
-    if (payload.width <= 0 || payload.height <= 0 || payload.bytes != expected) {
-        throw ClientError(fmt::format("the service announced a {} payload of {}x{} {} in {} "
-                                      "bytes, which does not add up",
-                                      payload.name, payload.width, payload.height, payload.format,
-                                      payload.bytes),
-                          0);
-    }
-    image.create(payload.height, payload.width, type);
-    client.readPayload(image.data, payload.bytes);
 }
 
 } // namespace

@@ -1,6 +1,7 @@
 // stereod: the stereo depth service. Command line and exit codes: docs/service.md.
 
 #include <cstdio>
+#include <cstdlib>
 #include <exception>
 #include <iostream>
 #include <string>
@@ -10,6 +11,7 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include "capture/device_list.hpp"
 #include "config/service_config.hpp"
 #include "daemon/service.hpp"
 
@@ -66,6 +68,7 @@ int main(int argc, char** argv)
                  "stereod"};
     stereod::LaunchRequest request;
     std::string check_path;
+    bool list_devices = false;
     app.set_version_flag("--version", stereod::serviceVersion());
     auto* config_option = app.add_option("--config", request.config_path,
                                          "configuration file (YAML); without it, built-in "
@@ -85,6 +88,11 @@ int main(int argc, char** argv)
         app.add_option("--log-level", request.overrides.log_level, "log level")
             ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}));
     check_option->excludes(config_option, replay_option, calib_option, socket_option, level_option);
+    auto* list_option = app.add_flag("--list-devices", list_devices,
+                                     "list the V4L2 cameras (formats, sizes, frame rates, "
+                                     "/dev/v4l/by-id paths) and exit: 0 found, 1 none");
+    list_option->excludes(config_option, check_option, replay_option, calib_option,
+                          socket_option, level_option);
     app.footer("Exit codes: 0 ok; 1 failure while running; 2 bad arguments; 3 invalid "
                "configuration; 4 calibration problem; 5 source problem; 6 socket problem.");
 
@@ -99,11 +107,24 @@ int main(int argc, char** argv)
 
     if (!check_path.empty())
         return checkConfig(check_path);
+    if (list_devices) {
+        const stereod::DeviceList devices = stereod::listCaptureDevices();
+        std::cout << stereod::formatDeviceList(devices);
+        return devices.devices.empty() ? exitCode(ExitCode::Failure) : exitCode(ExitCode::Ok);
+    }
 
     setUpLogging();
     try {
         std::unique_ptr<stereod::Service> service = stereod::launchService(request, true);
-        return exitCode(service->run());
+        const ExitCode code = service->run();
+        if (service->workerAbandoned()) {
+            // The worker is still inside a pair that would outlast the stop: end now,
+            // without the destructors that would wait for it (docs/service.md, Signals).
+            spdlog::default_logger()->flush();
+            std::fflush(nullptr);
+            std::_Exit(exitCode(code));
+        }
+        return exitCode(code);
     } catch (const stereod::StartupError& e) {
         spdlog::critical("{}", e.what());
         return exitCode(e.code());

@@ -80,7 +80,8 @@ std::optional<std::string> readPositive(const Json& request, const char* key,
 std::optional<SnapshotItem> snapshotItemFromName(std::string_view name)
 {
     for (const SnapshotItem item :
-         {SnapshotItem::Depth, SnapshotItem::Disparity, SnapshotItem::Left, SnapshotItem::Cloud}) {
+         {SnapshotItem::Depth, SnapshotItem::Disparity, SnapshotItem::Left, SnapshotItem::Cloud,
+          SnapshotItem::RawLeft, SnapshotItem::RawRight}) {
         if (name == snapshotItemName(item))
             return item;
     }
@@ -132,6 +133,8 @@ ParseResult parseSubscribe(const Json& request, const std::optional<Json>& id)
         subscribe.stream = StreamKind::Readings;
     } else if (name == streamName(StreamKind::Depth)) {
         subscribe.stream = StreamKind::Depth;
+    } else if (name == streamName(StreamKind::Raw)) {
+        subscribe.stream = StreamKind::Raw;
     } else {
         return badRequest(
             "unknown stream " + quoteText(name) + "; known: " + joinNames(knownStreams()), id);
@@ -195,6 +198,8 @@ ParseResult parseObject(const Json& request)
         return parseSubscribe(request, id);
     if (name == "reload")
         return Request{ReloadRequest{}, id};
+    if (name == "calibration")
+        return Request{CalibrationRequest{}, id};
     return ProtocolError{
         ErrorCode::UnknownCommand,
         "unknown command " + quoteText(name) + "; known: " + joinNames(knownCommands()), id};
@@ -254,13 +259,25 @@ const char* errorCodeName(ErrorCode code) noexcept
         return "invalid_config";
     case ErrorCode::Internal:
         return "internal";
+    case ErrorCode::NotAllowed:
+        return "not_allowed";
+    case ErrorCode::IdleTimeout:
+        return "idle_timeout";
     }
     return "internal";
 }
 
 const char* streamName(StreamKind stream) noexcept
 {
-    return stream == StreamKind::Depth ? "depth" : "readings";
+    switch (stream) {
+    case StreamKind::Readings:
+        return "readings";
+    case StreamKind::Depth:
+        return "depth";
+    case StreamKind::Raw:
+        return "raw";
+    }
+    return "readings";
 }
 
 const char* snapshotItemName(SnapshotItem item) noexcept
@@ -274,6 +291,10 @@ const char* snapshotItemName(SnapshotItem item) noexcept
         return "left";
     case SnapshotItem::Cloud:
         return "cloud";
+    case SnapshotItem::RawLeft:
+        return "raw_left";
+    case SnapshotItem::RawRight:
+        return "raw_right";
     }
     return "depth";
 }
@@ -281,19 +302,21 @@ const char* snapshotItemName(SnapshotItem item) noexcept
 const std::vector<std::string>& knownCommands()
 {
     static const std::vector<std::string> names = {"hello",    "distance",  "status",
-                                                   "snapshot", "subscribe", "reload"};
+                                                   "snapshot", "subscribe", "reload",
+                                                   "calibration"};
     return names;
 }
 
 const std::vector<std::string>& knownStreams()
 {
-    static const std::vector<std::string> names = {"readings", "depth"};
+    static const std::vector<std::string> names = {"readings", "depth", "raw"};
     return names;
 }
 
 const std::vector<std::string>& knownSnapshotItems()
 {
-    static const std::vector<std::string> names = {"left", "disparity", "depth", "cloud"};
+    static const std::vector<std::string> names = {"left",  "disparity", "depth",
+                                                   "cloud", "raw_left",  "raw_right"};
     return names;
 }
 
@@ -437,6 +460,39 @@ void appendDepthEventHeader(std::string& out, const DepthEventHeader& header,
     if (skipped > 0)
         object.field("skipped", skipped);
     appendReadingJson(object.openField("reading"), report, now_ns);
+    object.close();
+    out.push_back('\n');
+}
+
+void appendRawEventHeader(std::string& out, const RawEventHeader& header, uint64_t skipped)
+{
+    const uint64_t bytes =
+        static_cast<uint64_t>(header.width) * static_cast<uint64_t>(header.height);
+    JsonObjectWriter object(out);
+    object.field("event", "raw");
+    object.field("frame", header.frame);
+    object.field("left_stamp_ns", header.left_stamp_ns);
+    object.field("right_stamp_ns", header.right_stamp_ns);
+    object.field("skipped", skipped);
+    std::string& payloads = object.openField("payloads");
+    payloads.push_back('[');
+    const struct {
+        const char* name;
+        int64_t stamp_ns;
+    } sides[] = {{"raw_left", header.left_stamp_ns}, {"raw_right", header.right_stamp_ns}};
+    for (const auto& side : sides) {
+        if (&side != &sides[0])
+            payloads.push_back(',');
+        JsonObjectWriter payload(payloads);
+        payload.field("name", side.name);
+        payload.field("format", "u8_gray");
+        payload.field("width", header.width);
+        payload.field("height", header.height);
+        payload.field("bytes", bytes);
+        payload.field("stamp_ns", side.stamp_ns);
+        payload.close();
+    }
+    payloads.push_back(']');
     object.close();
     out.push_back('\n');
 }

@@ -37,15 +37,19 @@ enum class ErrorCode {
     NotAvailable,    // nothing to give yet
     InvalidConfig,   // `reload` found the configuration invalid
     Internal,        // the service failed to do something it should have
+    NotAllowed,      // the peer is not in socket.allow_uids / socket.allow_gids
+    IdleTimeout,     // nothing received for socket.idle_timeout_s
 };
 
 // "bad_json", "bad_request", ...
 const char* errorCodeName(ErrorCode code) noexcept;
 
-enum class StreamKind { Readings, Depth };
+// Raw: the pairs as captured, before rectification (two u8_gray payloads per event).
+enum class StreamKind { Readings, Depth, Raw };
 const char* streamName(StreamKind stream) noexcept;
 
-enum class SnapshotItem { Depth, Disparity, Left, Cloud };
+// RawLeft, RawRight: the pair's frames as captured, before rectification.
+enum class SnapshotItem { Depth, Disparity, Left, Cloud, RawLeft, RawRight };
 const char* snapshotItemName(SnapshotItem item) noexcept;
 
 struct HelloRequest {};
@@ -69,8 +73,11 @@ struct SubscribeRequest {
 
 struct ReloadRequest {};
 
+// The calibration in force, as the text of its file.
+struct CalibrationRequest {};
+
 using Command = std::variant<HelloRequest, DistanceRequest, StatusRequest, SnapshotRequest,
-                             SubscribeRequest, ReloadRequest>;
+                             SubscribeRequest, ReloadRequest, CalibrationRequest>;
 
 struct Request {
     Command command;
@@ -147,5 +154,20 @@ struct DepthEventHeader {
 // Appends the depth event's header line (with "skipped" when > 0), without the payload.
 void appendDepthEventHeader(std::string& out, const DepthEventHeader& header,
                             const ReadingReport& report, int64_t now_ns, uint64_t skipped);
+
+// The header line of a raw event; two u8_gray payloads of width * height bytes follow it,
+// raw_left then raw_right. Stamps are each camera's own capture stamp (Frame::
+// source_stamp_ns: CLOCK_MONOTONIC for cameras, the recorded stamp on replay).
+struct RawEventHeader {
+    uint64_t frame = 0;
+    int64_t left_stamp_ns = 0;
+    int64_t right_stamp_ns = 0;
+    int width = 0;
+    int height = 0;
+};
+
+// Appends the raw event's header line (always with "skipped"), without the payloads.
+// Allocates nothing once `out` has the capacity.
+void appendRawEventHeader(std::string& out, const RawEventHeader& header, uint64_t skipped);
 
 } // namespace stereod

@@ -14,7 +14,7 @@
 //    the front slot, which stays untouched by the writer until the reader's next
 //    latest() call. So the reader always sees a complete result, the newest published or
 //    newer, never one being written;
-//  - eventFd(), publishedCount() are safe from any thread.
+//  - eventFd(), publishedCount(), wantRawUntil() and rawWanted() are safe from any thread.
 // Memory ordering: the swaps are acq_rel exchanges of one atomic byte, so the writes to a
 // slot happen-before the reads of whoever takes that slot next.
 
@@ -59,6 +59,17 @@ struct PipelineStats {
     std::array<char, 16> matcher{}; // StereoProcessor::matcherName(), NUL-terminated
 };
 
+// A pair as captured, before rectification: copies of the source's frames, made only
+// while raw frames are wanted (Publisher::wantRawUntil()). The buffers keep their size
+// from frame to frame, so copying allocates only for the first frames of a size.
+struct RawPair {
+    bool present = false;     // false: the pair was not copied (nobody asked for raw frames)
+    cv::Mat left;             // CV_8UC1, continuous
+    cv::Mat right;            // CV_8UC1, continuous
+    int64_t left_stamp_ns = 0;  // each camera's own capture stamp (Frame::source_stamp_ns)
+    int64_t right_stamp_ns = 0;
+};
+
 // One processed pair, as the I/O thread needs it. Every buffer keeps its capacity from
 // frame to frame, so a slot allocates only for the first frames of a size.
 struct PublishedFrame {
@@ -69,6 +80,7 @@ struct PublishedFrame {
     int64_t published_ns = 0; // CLOCK_MONOTONIC when published, set by publish()
     FixedText reason_message; // why there is no reading, with numbers; may be empty
     PipelineStats stats;
+    RawPair raw;              // the pair as captured, when raw frames were wanted
 };
 
 class Publisher {
@@ -98,6 +110,16 @@ class Publisher {
     // Readable (EPOLLIN) after every publish() until clearEvent().
     int eventFd() const noexcept { return event_fd_; }
 
+    // Any thread (the I/O thread): someone wants raw frames (a raw snapshot, a raw
+    // subscriber) until `deadline_ns` (CLOCK_MONOTONIC); a later deadline extends it.
+    void wantRawUntil(int64_t deadline_ns) noexcept;
+
+    // Writer: whether to copy the pair in hand into the slot's RawPair.
+    bool rawWanted(int64_t now_ns) const noexcept
+    {
+        return now_ns < raw_wanted_until_ns_.load(std::memory_order_relaxed);
+    }
+
     // How many results were published so far; any thread.
     uint64_t publishedCount() const noexcept { return published_.load(std::memory_order_acquire); }
 
@@ -110,6 +132,7 @@ class Publisher {
     uint8_t front_ = 1;              // reader's slot
     std::atomic<uint8_t> middle_{2}; // index of the middle slot | kFresh
     std::atomic<uint64_t> published_{0};
+    std::atomic<int64_t> raw_wanted_until_ns_{0};
     int event_fd_ = -1;
 };
 

@@ -2,9 +2,13 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cstring>
+#include <fstream>
+#include <sstream>
 #include <string_view>
 #include <system_error>
+#include <thread>
 
 #include <fmt/format.h>
 #include <signal.h>
@@ -15,13 +19,12 @@
 #include <unistd.h>
 
 #include "daemon/json_writer.hpp"
+#include "daemon/camera_source_factory.hpp"
 #include "replay/replay_source.hpp"
 
 namespace stereod {
 
 namespace {
-
-constexpr int64_t kStatusIntervalNs = 2'000'000'000;
 
 sigset_t serviceSignals()
 {
@@ -58,6 +61,20 @@ void applyLogLevel(const std::string& level)
     spdlog::set_level(spdlog::level::from_str(level));
 }
 
+// The calibration file's text, read once: what is parsed is what `calibration` hands out.
+// Throws std::runtime_error naming the file and the errno text.
+std::string readCalibrationText(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    if (!in)
+        throw std::runtime_error(path + ": cannot open: " + std::system_category().message(errno));
+    std::ostringstream text;
+    text << in.rdbuf();
+    if (in.bad())
+        throw std::runtime_error(path + ": cannot read: " + std::system_category().message(errno));
+    return text.str();
+}
+
 } // namespace
 
 void blockServiceSignals()
@@ -67,16 +84,18 @@ void blockServiceSignals()
 }
 
 Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
-                 StereoCalibration calibration, ServiceOptions options)
+                 std::optional<StereoCalibration> calibration, ServiceOptions options)
     : config_(std::move(config)), options_(std::move(options)), source_(std::move(source)),
-      calibration_(std::move(calibration))
+      calibration_(std::move(calibration)), notifier_(options_.notify_systemd)
 {
     const std::string calibration_origin = options_.calibration_path.empty()
                                                ? std::string("the calibration")
                                                : options_.calibration_path;
     try {
-        checkFrameSize(calibration_, source_->frameSize(), calibration_origin);
-        processor_ = std::make_unique<StereoProcessor>(calibration_, config_.processing);
+        if (calibration_) {
+            checkFrameSize(*calibration_, source_->frameSize(), calibration_origin);
+            processor_ = std::make_unique<StereoProcessor>(*calibration_, config_.processing);
+        }
     } catch (const CalibrationError& e) {
         throw StartupError(ExitCode::Calibration, e.what());
     } catch (const std::invalid_argument& e) {
@@ -86,19 +105,29 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
         throw StartupError(ExitCode::Calibration, "cannot set up the stereo chain with " +
                                                       calibration_origin + ": " + e.what());
     }
-    initial_range_ = processor_->disparityRange();
-    initial_matcher_ = processor_->matcherName();
-    logDisparityRange(initial_range_, config_.processing.matcher, initial_matcher_);
+    if (processor_) {
+        initial_range_ = processor_->disparityRange();
+        initial_matcher_ = processor_->matcherName();
+        logDisparityRange(initial_range_, config_.processing.matcher, initial_matcher_);
+    } else {
+        initial_matcher_ = "none";
+        spdlog::warn("no calibration: running uncalibrated, serving raw frames only; every "
+                     "reading is `uncalibrated` until a calibration is given");
+    }
 
     ring_ = std::make_unique<PairRing>(static_cast<std::size_t>(config_.source.ring_capacity));
     publisher_ = std::make_unique<Publisher>();
     worker_ =
-        std::make_unique<Worker>(*ring_, *publisher_, *processor_, config_.source.max_skew_ms);
+        std::make_unique<Worker>(*ring_, *publisher_, processor_.get(), config_.source.max_skew_ms);
 
     ServerOptions server_options;
     server_options.socket = config_.socket;
     server_options.publish = config_.publish;
-    server_options.geometry = calibration_.rectified;
+    if (calibration_)
+        server_options.geometry = calibration_->rectified;
+    server_options.calibrated = calibration_.has_value();
+    server_options.calibration_path = options_.calibration_path;
+    server_options.calibration_text = options_.calibration_text;
     server_options.accept_systemd_socket = options_.notify_systemd;
     try {
         server_ = std::make_unique<SocketServer>(server_options, *publisher_,
@@ -145,12 +174,7 @@ ExitCode Service::run()
     worker_->start();
     spdlog::info("stereod {} listening on {}", serviceVersion(), config_.socket.path);
 
-    if (options_.notify_systemd) {
-        uint64_t watchdog_usec = 0;
-        if (sd_watchdog_enabled(0, &watchdog_usec) > 0)
-            watchdog_interval_ns_ = watchdog_usec * 1000;
-        sd_notify(0, "READY=1\nSTATUS=running: waiting for the first frame");
-    }
+    // READY=1 follows from onTick() once the first pair has arrived.
 
     ExitCode code = ExitCode::Ok;
     try {
@@ -173,22 +197,43 @@ void Service::onStopRequest()
 {
     uint64_t value = 0;
     [[maybe_unused]] const ssize_t got = ::read(stop_fd_.get(), &value, sizeof value);
+    if (stop_requested_ns_ == 0)
+        stop_requested_ns_ = monotonicNowNs();
     server_->requestStop();
 }
 
 void Service::shutdown() noexcept
 {
-    if (options_.notify_systemd && running_)
-        sd_notify(0, "STOPPING=1\nSTATUS=stopping");
+    if (running_)
+        notifier_.stopping();
     // The socket first, so that clients see the service gone at once (connections
     // closed, file removed); then the source (no new pairs), the ring (wakes the worker
-    // out of pop()) and the worker, which finishes the pair in hand.
+    // out of pop(); queued pairs are dropped) and the worker, which finishes the pair in
+    // hand if it can within the stop deadline.
     server_.reset();
     if (source_)
         source_->stop();
     if (ring_)
         ring_->stop();
-    if (worker_)
+    if (worker_ && running_) {
+        const int64_t since_ns = stop_requested_ns_ != 0 ? stop_requested_ns_ : monotonicNowNs();
+        const int64_t deadline_ns = since_ns + options_.stop_timeout_ms * 1'000'000;
+        while (!worker_->finished() && monotonicNowNs() < deadline_ns)
+            std::this_thread::sleep_for(std::chrono::milliseconds(2));
+        if (!worker_->finished()) {
+            worker_abandoned_ = true;
+            const int64_t busy_since_ns = worker_->busySinceNs();
+            spdlog::warn("stopping without the worker: it has been on one pair for {:.0f} ms, "
+                         "longer than the {} ms a stop may wait",
+                         busy_since_ns != 0
+                             ? static_cast<double>(monotonicNowNs() - busy_since_ns) / 1e6
+                             : 0.0,
+                         options_.stop_timeout_ms);
+        }
+    }
+    // Not abandoned: returns at once. Abandoned (a second call, from the destructor):
+    // the objects the worker uses must outlive it, so this waits for the pair in hand.
+    if (worker_ && (!worker_abandoned_ || !running_))
         worker_->join();
     if (running_)
         spdlog::info("stopped");
@@ -207,6 +252,8 @@ void Service::onSignal()
             reloadConfig();
         } else {
             spdlog::info("{}: stopping", signal_number == SIGINT ? "SIGINT" : "SIGTERM");
+            if (stop_requested_ns_ == 0)
+                stop_requested_ns_ = monotonicNowNs();
             server_->requestStop();
         }
     }
@@ -257,7 +304,10 @@ void Service::describe(Json& status, const PublishedFrame* latest, const SourceH
                        int64_t now_ns)
 {
     status["uptime_s"] = roundTo(static_cast<double>(now_ns - started_ns_) / 1e9, 1);
-    status["state"] = health.down ? "source_down" : (latest != nullptr ? "running" : "starting");
+    status["state"] = health.down     ? "source_down"
+                      : !calibration_ ? "uncalibrated"
+                      : latest != nullptr ? "running"
+                                          : "starting";
 
     const SourceStatus source_status = source_->status();
     Json source = Json::object();
@@ -274,6 +324,7 @@ void Service::describe(Json& status, const PublishedFrame* latest, const SourceH
                            {"frames", camera.frames},
                            {"dropped", camera.dropped},
                            {"bad_frames", camera.bad_frames},
+                           {"unpaired", camera.unpaired},
                            {"last_error", camera.last_error}});
     }
     source["cameras"] = std::move(cameras);
@@ -283,6 +334,9 @@ void Service::describe(Json& status, const PublishedFrame* latest, const SourceH
     source["skew_ms"] = {{"mean", roundTo(source_status.skew_mean_ms, 3)},
                          {"p99", roundTo(source_status.skew_p99_ms, 3)},
                          {"max", roundTo(source_status.skew_max_ms, 3)}};
+    source["clock_offset"] = {{"detected", source_status.clock_offset_detected},
+                              {"estimate_ms", roundTo(source_status.clock_offset_ms, 3)}};
+    source["warnings"] = source_status.warnings;
     status["source"] = std::move(source);
 
     PipelineStats stats;
@@ -313,10 +367,16 @@ void Service::describe(Json& status, const PublishedFrame* latest, const SourceH
         {"cloud", roundTo(stage.cloud_ms, 3)},     {"publish", roundTo(stats.publish_mean_ms, 3)}};
     status["pipeline"] = std::move(pipeline);
 
-    const RectifiedGeometry& geometry = calibration_.rectified;
     Json calibration = Json::object();
     calibration["path"] = options_.calibration_path;
-    calibration["kind"] = calibration_.kind == StereoCalibration::Kind::Full ? "full" : "rectified";
+    if (!calibration_) {
+        calibration["kind"] = "none";
+        status["calibration"] = std::move(calibration);
+        return;
+    }
+    const RectifiedGeometry& geometry = calibration_->rectified;
+    calibration["kind"] =
+        calibration_->kind == StereoCalibration::Kind::Full ? "full" : "rectified";
     calibration["focal_px"] = geometry.focal_px;
     calibration["baseline_m"] = geometry.baseline_m;
     calibration["doffs_px"] = geometry.doffs_px;
@@ -324,14 +384,14 @@ void Service::describe(Json& status, const PublishedFrame* latest, const SourceH
     calibration["cy_px"] = geometry.cy_px;
     calibration["width"] = geometry.image_size.width;
     calibration["height"] = geometry.image_size.height;
-    if (calibration_.rms_px)
-        calibration["rms_px"] = *calibration_.rms_px;
-    if (calibration_.epipolar_error_px)
-        calibration["epipolar_error_px"] = *calibration_.epipolar_error_px;
+    if (calibration_->rms_px)
+        calibration["rms_px"] = *calibration_->rms_px;
+    if (calibration_->epipolar_error_px)
+        calibration["epipolar_error_px"] = *calibration_->epipolar_error_px;
     status["calibration"] = std::move(calibration);
 }
 
-ReloadOutcome Service::reload()
+ReloadOutcome Service::loadAndApply()
 {
     ReloadOutcome outcome;
     if (options_.config_path.empty()) {
@@ -366,54 +426,80 @@ ReloadOutcome Service::reload()
     return outcome;
 }
 
+ReloadOutcome Service::reload()
+{
+    return reloadConfig();
+}
+
 ReloadOutcome Service::reloadConfig()
 {
-    ReloadOutcome outcome = reload();
+    notifier_.reloading();
+    ReloadOutcome outcome = loadAndApply();
     if (!outcome.ok) {
         spdlog::error("reload refused, the running configuration stays in force: {}",
                       outcome.message);
+        last_error_ = "reload refused, the running configuration stays in force: " +
+                      outcome.message;
     } else {
         spdlog::info("configuration reloaded from {}: changed: [{}]; need a restart: [{}]",
                      options_.config_path, fmt::join(outcome.changed, ", "),
                      fmt::join(outcome.restart_needed, ", "));
+        last_error_.clear();
+    }
+    if (running_) {
+        const int64_t now_ns = monotonicNowNs();
+        notifier_.reloaded(statusText(now_ns, sourceHealth(now_ns)));
     }
     return outcome;
 }
 
+std::string Service::statusText(int64_t now_ns, const SourceHealth& health)
+{
+    const PublishedFrame* latest = publisher_->latest();
+    const SourceStatus source_status = source_->status();
+    StatusFacts facts;
+    facts.source_down = health.down;
+    facts.down_reason = health.message;
+    facts.uncalibrated = !calibration_.has_value();
+    facts.source = &source_status;
+    facts.clients = server_ ? server_->counters().connected : 0;
+    if (latest != nullptr) {
+        facts.have_frame = true;
+        facts.frame = latest->result.frame;
+        // A rate measured over frames that stopped coming is no rate now.
+        const double quiet_s = static_cast<double>(now_ns - latest->published_ns) / 1e9;
+        const double fps = latest->stats.fps;
+        facts.fps = quiet_s < std::max(2.0, fps > 0.0 ? 3.0 / fps : 2.0) ? fps : 0.0;
+    }
+    facts.last_error = !last_error_.empty() ? std::string_view(last_error_)
+                                            : std::string_view(source_status.last_error);
+    return statusLine(facts);
+}
+
 void Service::onTick(int64_t now_ns)
 {
-    if (!options_.notify_systemd || !running_)
+    if (!running_ || !notifier_.enabled())
         return;
-    if (watchdog_interval_ns_ > 0 &&
-        now_ns - last_watchdog_ns_ >= static_cast<int64_t>(watchdog_interval_ns_ / 2)) {
-        // Alive means the loop turns and the worker is not stuck inside one pair.
-        const int64_t busy_since_ns = worker_->busySinceNs();
-        if (busy_since_ns == 0 ||
-            now_ns - busy_since_ns < static_cast<int64_t>(watchdog_interval_ns_)) {
-            sd_notify(0, "WATCHDOG=1");
-            last_watchdog_ns_ = now_ns;
-        }
-    }
-    if (now_ns - last_status_ns_ >= kStatusIntervalNs) {
-        last_status_ns_ = now_ns;
-        const PublishedFrame* latest = publisher_->latest();
-        const SourceHealth health = sourceHealth(now_ns);
-        const ClientCounters clients = server_->counters();
-        std::array<char, 200> text{};
-        if (health.down) {
-            std::snprintf(text.data(), text.size(), "STATUS=source down: %s; %llu clients",
-                          health.message.c_str(),
-                          static_cast<unsigned long long>(clients.connected));
-        } else if (latest == nullptr) {
-            std::snprintf(text.data(), text.size(), "STATUS=running: waiting for the first frame");
+    // READY=1 once the socket listens (it has since the constructor) and the first pair
+    // has arrived, or once the source is found down (failed, or silent for
+    // source.stall_timeout_ms): the service then runs and says why there is no reading.
+    if (!notifier_.readySent()) {
+        if (ring_->pushed() > 0) {
+            notifier_.ready(statusText(now_ns, sourceHealth(now_ns)));
         } else {
-            std::snprintf(text.data(), text.size(),
-                          "STATUS=running: %.1f fps, frame %llu, %llu clients", latest->stats.fps,
-                          static_cast<unsigned long long>(latest->result.frame),
-                          static_cast<unsigned long long>(clients.connected));
+            const SourceHealth health = sourceHealth(now_ns);
+            if (health.down)
+                notifier_.ready(statusText(now_ns, health));
         }
-        sd_notify(0, text.data());
     }
+    // The watchdog rule (daemon/systemd_notifier.hpp): this runs on the event loop, so a
+    // ping says the loop turns; it is sent only while the worker is not stuck in one
+    // pair for a whole watchdog interval.
+    notifier_.watchdog(
+        workerMakesProgress(worker_->busySinceNs(), now_ns, notifier_.watchdogIntervalNs()),
+        now_ns);
+    if (notifier_.statusDue(now_ns))
+        notifier_.status(statusText(now_ns, sourceHealth(now_ns)), now_ns);
 }
 
 std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle_signals)
@@ -436,44 +522,70 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle
     }
     applyLogLevel(config.log_level);
 
-    ReplayOptions replay;
-    replay.path = config.source.replay.path;
-    replay.pacing = config.source.replay.pacing == ReplayPacing::Lockstep
-                        ? ReplayOptions::Pacing::Lockstep
-                        : ReplayOptions::Pacing::Paced;
-    replay.loop = config.source.replay.loop;
-    replay.fps = config.source.replay.fps;
-    // Pairs in flight: the ring, the one the worker holds, the one being filled.
-    replay.pool_pairs = static_cast<std::size_t>(config.source.ring_capacity) + 2;
-    auto source = std::make_unique<ReplaySource>(replay);
-    const SourceStatus source_status = source->status();
-    if (source_status.state == SourceState::Failed || source->frameSize().empty())
-        throw StartupError(ExitCode::Source,
-                           "cannot replay " + replay.path + ": " + source_status.last_error);
+    std::unique_ptr<FrameSource> source;
+    std::string source_name;            // for messages: the recording or the cameras
+    std::string recording_calibration;  // a replay's own calibration.yaml, if any
+    if (config.source.kind == SourceKind::Replay) {
+        ReplayOptions replay;
+        replay.path = config.source.replay.path;
+        replay.pacing = config.source.replay.pacing == ReplayPacing::Lockstep
+                            ? ReplayOptions::Pacing::Lockstep
+                            : ReplayOptions::Pacing::Paced;
+        replay.loop = config.source.replay.loop;
+        replay.fps = config.source.replay.fps;
+        // Pairs in flight: the ring, the one the worker holds, the one being filled.
+        replay.pool_pairs = static_cast<std::size_t>(config.source.ring_capacity) + 2;
+        auto replay_source = std::make_unique<ReplaySource>(replay);
+        const SourceStatus source_status = replay_source->status();
+        if (source_status.state == SourceState::Failed || replay_source->frameSize().empty())
+            throw StartupError(ExitCode::Source,
+                               "cannot replay " + replay.path + ": " + source_status.last_error);
+        recording_calibration = replay_source->calibrationPath();
+        source_name = replay.path;
+        source = std::move(replay_source);
+    } else {
+        // The cameras open in run(): a camera that cannot start is a Source error there.
+        try {
+            source = makeCameraSource(config.source);
+        } catch (const std::exception& e) {
+            throw StartupError(ExitCode::Source, e.what());
+        }
+        source_name = config.source.kind == SourceKind::V4l2
+                          ? config.source.cameras.left + " and " + config.source.cameras.right
+                          : config.source.cameras.device;
+    }
 
     std::string calibration_path = config.calibration_path;
     if (calibration_path.empty())
-        calibration_path = source->calibrationPath();
-    if (calibration_path.empty())
-        throw StartupError(ExitCode::Calibration,
-                           "no calibration: give --calib FILE, set `calibration` in the "
-                           "configuration, or put calibration.yaml into " +
-                               replay.path);
-    StereoCalibration calibration;
-    try {
-        calibration = loadCalibration(calibration_path);
-    } catch (const std::exception& e) {
-        throw StartupError(ExitCode::Calibration, e.what());
+        calibration_path = recording_calibration;
+    // No calibration anywhere: a robot's first start. The service runs uncalibrated and
+    // serves raw frames, so that the rig can be calibrated from it.
+    std::optional<StereoCalibration> calibration;
+    std::string calibration_text;
+    if (!calibration_path.empty()) {
+        try {
+            calibration_text = readCalibrationText(calibration_path);
+            calibration = parseCalibration(calibration_text, calibration_path);
+        } catch (const std::exception& e) {
+            throw StartupError(ExitCode::Calibration, e.what());
+        }
+        spdlog::info("calibration {}: {}, {}x{}, focal {:.1f} px, baseline {:.4f} m",
+                     calibration_path,
+                     calibration->kind == StereoCalibration::Kind::Full ? "full" : "rectified-only",
+                     calibration->rectified.image_size.width,
+                     calibration->rectified.image_size.height, calibration->rectified.focal_px,
+                     calibration->rectified.baseline_m);
+    } else {
+        spdlog::warn("no calibration given (--calib, `calibration` in the configuration) and "
+                     "none in {}",
+                     source_name);
     }
-    spdlog::info("calibration {}: {}, {}x{}, focal {:.1f} px, baseline {:.4f} m", calibration_path,
-                 calibration.kind == StereoCalibration::Kind::Full ? "full" : "rectified-only",
-                 calibration.rectified.image_size.width, calibration.rectified.image_size.height,
-                 calibration.rectified.focal_px, calibration.rectified.baseline_m);
 
     ServiceOptions options;
     options.config_path = request.config_path;
     options.overrides = request.overrides;
     options.calibration_path = calibration_path;
+    options.calibration_text = std::move(calibration_text);
     options.handle_signals = handle_signals;
     options.notify_systemd = true;
     return std::make_unique<Service>(std::move(config), std::move(source), std::move(calibration),

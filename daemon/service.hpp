@@ -6,9 +6,13 @@
 // Life cycle: the constructor checks everything that can be checked before running
 // (frames against the calibration, the processor's settings, the socket) and throws
 // StartupError with the exit code for the problem; run() starts the source and the
-// worker, notifies systemd (READY=1) and serves until SIGTERM/SIGINT or requestStop();
-// then it stops the source, stops the ring (which wakes the worker), joins the worker,
-// closes the socket and removes its file.
+// worker and serves until SIGTERM/SIGINT or requestStop(), telling systemd how it goes
+// (daemon/systemd_notifier.hpp); then it closes the socket and removes its file, stops
+// the source and the ring (which wakes the worker), and waits for the worker to finish
+// the pair in hand, but no longer than ServiceOptions::stop_timeout_ms after the stop
+// request: a full-size frame can take more than a second to match, and a stop must not.
+// A worker still busy then is left running (workerAbandoned()); `stereod` then exits at
+// once without destroying what the worker uses.
 //
 // Thread contract: construction, run() and destruction one after the other (run() on
 // the thread that becomes the I/O thread; the signal mask of that thread matters, see
@@ -16,6 +20,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -23,6 +28,7 @@
 #include "config/service_config.hpp"
 #include "daemon/publisher.hpp"
 #include "daemon/socket_server.hpp"
+#include "daemon/systemd_notifier.hpp"
 #include "daemon/unique_fd.hpp"
 #include "daemon/worker.hpp"
 #include "pipeline/calibration.hpp"
@@ -66,21 +72,27 @@ struct ServiceOptions {
     ConfigOverrides overrides;
     // Where the calibration came from, for `status`.
     std::string calibration_path;
+    // The text of that file as loaded, for the `calibration` request (empty: the
+    // calibration did not come from a file).
+    std::string calibration_text;
     // Handle SIGTERM, SIGINT (stop) and SIGHUP (reload) through a signalfd. The caller
     // must have blocked them in every thread (block them first thing in main()).
     bool handle_signals = false;
     // Talk to systemd (READY=1, STATUS=, WATCHDOG=1); harmless without systemd.
     bool notify_systemd = false;
+    // How long after the stop request the worker may take to finish the pair in hand.
+    int64_t stop_timeout_ms = 700;
 };
 
 class Service final : private ServerBackend {
   public:
-    // Takes the source (not started) and a loaded calibration. Throws StartupError:
-    // Calibration when the source's frames do not fit the calibration or the processor
-    // refuses it, InvalidConfig when the processing settings are refused, Socket when the
-    // socket cannot be set up.
+    // Takes the source (not started) and a loaded calibration, or none: uncalibrated mode
+    // (no stereo chain; readings say `uncalibrated`, raw frames are served, `status` says
+    // "uncalibrated"). Throws StartupError: Calibration when the source's frames do not
+    // fit the calibration or the processor refuses it, InvalidConfig when the processing
+    // settings are refused, Socket when the socket cannot be set up.
     Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
-            StereoCalibration calibration, ServiceOptions options);
+            std::optional<StereoCalibration> calibration, ServiceOptions options);
     ~Service() override;
 
     Service(const Service&) = delete;
@@ -96,6 +108,12 @@ class Service final : private ServerBackend {
     // Re-reads the configuration file and applies what can change live. I/O thread.
     ReloadOutcome reloadConfig();
 
+    // After run(): the worker was still inside a pair at the stop deadline and is left
+    // running. The process must then end without destroying the service (std::_Exit):
+    // the destructor would wait for the worker. Nothing is lost: the service keeps no
+    // state on disk, and the socket is already closed and removed.
+    bool workerAbandoned() const noexcept { return worker_abandoned_; }
+
     const std::string& socketPath() const noexcept { return config_.socket.path; }
 
   private:
@@ -105,6 +123,11 @@ class Service final : private ServerBackend {
     ReloadOutcome reload() override;
     void onTick(int64_t now_ns) override;
 
+    // Reads the configuration file and applies what can change live (reloadConfig()
+    // adds the log lines and the notifications).
+    ReloadOutcome loadAndApply();
+    // The STATUS= line for systemd now.
+    std::string statusText(int64_t now_ns, const SourceHealth& health);
     void onSignal();
     void onStopRequest();
     void shutdown() noexcept;
@@ -112,8 +135,8 @@ class Service final : private ServerBackend {
     ServiceConfig config_;
     ServiceOptions options_;
     std::unique_ptr<FrameSource> source_;
-    StereoCalibration calibration_;
-    std::unique_ptr<StereoProcessor> processor_;
+    std::optional<StereoCalibration> calibration_; // none: uncalibrated mode
+    std::unique_ptr<StereoProcessor> processor_;   // null in uncalibrated mode
     std::unique_ptr<PairRing> ring_;
     std::unique_ptr<Publisher> publisher_;
     std::unique_ptr<Worker> worker_;
@@ -129,9 +152,10 @@ class Service final : private ServerBackend {
     uint64_t last_pushed_ = 0;
     int64_t last_push_change_ns_ = 0;
     // systemd notifications.
-    uint64_t watchdog_interval_ns_ = 0;
-    int64_t last_watchdog_ns_ = 0;
-    int64_t last_status_ns_ = 0;
+    SystemdNotifier notifier_;
+    std::string last_error_; // the newest error for STATUS= (a refused reload), or empty
+    int64_t stop_requested_ns_ = 0;
+    bool worker_abandoned_ = false;
 };
 
 // What `stereod` was asked to run, from its command line.
@@ -142,8 +166,9 @@ struct LaunchRequest {
 
 // Reads the configuration (file or defaults) with the overrides and validates it; opens
 // the replay; finds and loads the calibration (--calib, the file's `calibration`, or the
-// recording's calibration.yaml); builds the service. Throws StartupError with the exit
-// code for the problem.
+// recording's calibration.yaml; none of them: uncalibrated mode); builds the service.
+// Throws StartupError with the exit code for the problem (a calibration that is given but
+// unreadable, invalid or not the frame size among them).
 std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle_signals);
 
 } // namespace stereod

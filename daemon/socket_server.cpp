@@ -53,6 +53,11 @@ constexpr std::size_t kKeepOutCapacity = 8u << 20;
 // reply; read (and drop) up to this much first.
 constexpr std::size_t kCloseDrainBytes = 1 << 20;
 constexpr int kMaxEvents = 64;
+// Raw frames are copied by the worker for this long after a raw snapshot or the last tick
+// that saw a raw subscriber.
+constexpr int64_t kRawInterestNs = 2'000'000'000;
+// A raw snapshot waits at most this long for a pair with raw frames.
+constexpr int64_t kRawSnapshotWaitNs = 5'000'000'000;
 
 std::string errnoText(int error)
 {
@@ -110,6 +115,75 @@ UniqueFd systemdSocket(const std::string& path)
         }
     }
     return UniqueFd();
+}
+
+// Who is at the other end of a connection, as the kernel says: SO_PEERCRED gives the
+// process, user and group at connect time, SO_PEERGROUPS its supplementary groups.
+struct PeerCredentials {
+    pid_t pid = 0;
+    uid_t uid = static_cast<uid_t>(-1);
+    gid_t gid = static_cast<gid_t>(-1);
+    std::vector<gid_t> groups; // supplementary groups; read only when allow_gids needs them
+};
+
+// False (errno set) when the kernel cannot say who it is.
+bool readPeerCredentials(int fd, bool with_groups, PeerCredentials& peer)
+{
+    ucred credentials{};
+    socklen_t length = sizeof credentials;
+    if (::getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &credentials, &length) != 0)
+        return false;
+    peer.pid = credentials.pid;
+    peer.uid = credentials.uid;
+    peer.gid = credentials.gid;
+    if (!with_groups)
+        return true;
+    peer.groups.resize(32);
+    for (int attempt = 0; attempt < 2; ++attempt) {
+        auto bytes = static_cast<socklen_t>(peer.groups.size() * sizeof(gid_t));
+        if (::getsockopt(fd, SOL_SOCKET, SO_PEERGROUPS, peer.groups.data(), &bytes) == 0) {
+            peer.groups.resize(bytes / sizeof(gid_t));
+            return true;
+        }
+        if (errno != ERANGE)
+            break;
+        peer.groups.resize(bytes / sizeof(gid_t)); // the kernel said how many there are
+    }
+    peer.groups.clear(); // an old kernel: only the primary group counts
+    return true;
+}
+
+// Whether socket.allow_uids / socket.allow_gids let this peer in (both empty: anyone who
+// can open the socket file).
+bool peerAllowed(const SocketConfig& config, const PeerCredentials& peer)
+{
+    if (config.allow_uids.empty() && config.allow_gids.empty())
+        return true;
+    const auto listed = [](const std::vector<uint32_t>& ids, uint32_t id) {
+        return std::find(ids.begin(), ids.end(), id) != ids.end();
+    };
+    if (listed(config.allow_uids, peer.uid) || listed(config.allow_gids, peer.gid))
+        return true;
+    return std::any_of(peer.groups.begin(), peer.groups.end(),
+                       [&](gid_t group) { return listed(config.allow_gids, group); });
+}
+
+// Seconds as a person writes them: "30", "0.5".
+std::string formatSeconds(double seconds)
+{
+    std::array<char, 32> text{};
+    std::snprintf(text.data(), text.size(), "%g", seconds);
+    return text.data();
+}
+
+// Turns a fresh connection away with one error line, then closes it. The line is short
+// and the new socket's send buffer empty, so one non-blocking send takes it whole.
+void refuseConnection(UniqueFd connection, ErrorCode code, const std::string& message)
+{
+    std::string line;
+    appendJsonLine(line, errorReply(code, message, std::nullopt));
+    [[maybe_unused]] const ssize_t sent =
+        ::send(connection.get(), line.data(), line.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
 }
 
 // Removes a socket file nothing listens on; fails when something answers, or when the
@@ -383,8 +457,9 @@ void SocketServer::acceptClients()
                 return;
             // Out of descriptors (EMFILE, ENFILE) or memory: the listening socket stays
             // readable, so stop watching it until the next tick instead of spinning.
-            spdlog::error("socket {}: cannot accept a connection: {}", options_.socket.path,
-                          errnoText(error));
+            log_limiter_.log(spdlog::level::err, "socket.accept_failed", monotonicNowNs(),
+                             "socket {}: cannot accept a connection: {}", options_.socket.path,
+                             errnoText(error));
             epoll_event event{};
             event.data.u64 = kTagListen;
             ::epoll_ctl(epoll_fd_.get(), EPOLL_CTL_MOD, listen_fd_.get(), &event);
@@ -392,17 +467,40 @@ void SocketServer::acceptClients()
             return;
         }
         UniqueFd connection(fd);
+        const bool allow_list =
+            !options_.socket.allow_uids.empty() || !options_.socket.allow_gids.empty();
+        PeerCredentials peer;
+        if (!readPeerCredentials(connection.get(), !options_.socket.allow_gids.empty(), peer)) {
+            const std::string why = errnoText(errno);
+            spdlog::warn("socket {}: cannot read the credentials of a new connection: {}",
+                         options_.socket.path, why);
+            if (allow_list) {
+                refuseConnection(std::move(connection), ErrorCode::NotAllowed,
+                                 "the service cannot tell who is connecting (" + why + ")");
+                ++counters_.not_allowed;
+                continue;
+            }
+        } else if (!peerAllowed(options_.socket, peer)) {
+            refuseConnection(std::move(connection), ErrorCode::NotAllowed,
+                             "uid " + std::to_string(peer.uid) + " (gid " +
+                                 std::to_string(peer.gid) +
+                                 ") is not in socket.allow_uids and in no group of "
+                                 "socket.allow_gids");
+            ++counters_.not_allowed;
+            log_limiter_.log(spdlog::level::warn, "socket.not_allowed", monotonicNowNs(),
+                             "socket {}: refused pid {} uid {} gid {}: not in "
+                             "socket.allow_uids or socket.allow_gids",
+                             options_.socket.path, peer.pid, peer.uid, peer.gid);
+            continue;
+        }
         if (live_clients_ >= static_cast<std::size_t>(std::max(options_.socket.max_clients, 0))) {
-            std::string line;
-            appendJsonLine(line, errorReply(ErrorCode::TooManyClients,
-                                            std::to_string(options_.socket.max_clients) +
-                                                " connections are open (socket.max_clients)",
-                                            std::nullopt));
-            [[maybe_unused]] const ssize_t sent =
-                ::send(connection.get(), line.data(), line.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+            refuseConnection(std::move(connection), ErrorCode::TooManyClients,
+                             std::to_string(options_.socket.max_clients) +
+                                 " connections are open (socket.max_clients)");
             ++counters_.rejected;
-            spdlog::warn("socket {}: connection refused, {} clients already connected",
-                         options_.socket.path, live_clients_);
+            log_limiter_.log(spdlog::level::warn, "socket.too_many_clients", monotonicNowNs(),
+                             "socket {}: connection refused, {} clients already connected",
+                             options_.socket.path, live_clients_);
             continue;
         }
         const uint64_t id = kFirstClientTag + next_client_id_++;
@@ -414,7 +512,8 @@ void SocketServer::acceptClients()
         client.last_input_ns = monotonicNowNs();
         ++live_clients_;
         ++counters_.accepted;
-        spdlog::debug("client {} connected ({} open)", id - kFirstClientTag, live_clients_);
+        spdlog::info("client {} connected: pid {} uid {} gid {} ({} open)", id - kFirstClientTag,
+                     peer.pid, peer.uid, peer.gid, live_clients_);
     }
 }
 
@@ -434,13 +533,16 @@ void SocketServer::readClient(Client& client)
             // The peer shut down its side: answer a last line without its newline, then
             // keep the connection only for subscriptions and unsent replies.
             client.input_closed = true;
+            // Behind a waiting snapshot, the last line waits too (finishWaiting()).
+            if (client.waiting)
+                break;
             if (!client.in.empty() && client.in.size() < options_.socket.max_request_bytes) {
                 const std::string last = std::move(client.in);
                 client.in.clear();
                 handleRequest(client, last);
             }
             client.in.clear();
-            if (!client.dead && !client.subscribed())
+            if (!client.dead && !client.subscribed() && !client.waiting)
                 client.close_when_flushed = true;
             break;
         }
@@ -460,7 +562,7 @@ void SocketServer::handleLines(Client& client)
 {
     const std::size_t limit = options_.socket.max_request_bytes;
     std::size_t start = 0;
-    while (!client.dead && !client.input_closed) {
+    while (!client.dead && !client.input_closed && !client.waiting) {
         const std::size_t newline = client.in.find('\n', start);
         if (newline == std::string::npos)
             break;
@@ -487,14 +589,17 @@ void SocketServer::rejectTooLarge(Client& client)
                                  std::to_string(options_.socket.max_request_bytes) +
                                  " bytes (socket.max_request_bytes); closing the connection",
                              std::nullopt));
-    spdlog::warn("client {}: request line over {} bytes, connection closed",
-                 client.id - kFirstClientTag, options_.socket.max_request_bytes);
+    log_limiter_.log(spdlog::level::warn, "client.request_too_large", monotonicNowNs(),
+                     "client {}: request line over {} bytes, connection closed",
+                     client.id - kFirstClientTag, options_.socket.max_request_bytes);
     // The stream cannot be resynchronised: stop reading, send the reply, close.
     client.in.clear();
     client.input_closed = true;
     client.close_when_flushed = true;
     client.readings.active = false;
     client.depth.active = false;
+    client.raw.active = false;
+    client.waiting.reset();
 }
 
 void SocketServer::handleRequest(Client& client, std::string_view line)
@@ -509,7 +614,8 @@ void SocketServer::handleRequest(Client& client, std::string_view line)
         std::visit([&](const auto& command) { handle(client, command, request.id); },
                    request.command);
     } catch (const std::exception& e) {
-        spdlog::error("client {}: request failed: {}", client.id - kFirstClientTag, e.what());
+        log_limiter_.log(spdlog::level::err, "client.request_failed", monotonicNowNs(),
+                         "client {}: request failed: {}", client.id - kFirstClientTag, e.what());
         if (!client.dead)
             reply(client, errorReply(ErrorCode::Internal, e.what(), request.id));
     }
@@ -529,9 +635,10 @@ bool SocketServer::dropIfBacklogged(Client& client)
     if (client.unsent() <= limit)
         return false;
     ++counters_.disconnected_slow;
-    spdlog::warn("client {}: disconnected, {} bytes unsent exceed "
-                 "publish.max_client_backlog_bytes ({})",
-                 client.id - kFirstClientTag, client.unsent(), limit);
+    log_limiter_.log(spdlog::level::warn, "client.backlog", monotonicNowNs(),
+                     "client {}: disconnected, {} bytes unsent exceed "
+                     "publish.max_client_backlog_bytes ({})",
+                     client.id - kFirstClientTag, client.unsent(), limit);
     closeClient(client);
     return true;
 }
@@ -663,18 +770,38 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
     header.height = depth.empty() ? 0 : depth.rows;
     header.bytes = matBytes(depth);
 
+    const RawPair& raw = frame.raw;
+    raw_header_.clear();
+    RawEventHeader raw_header;
+    raw_header.frame = frame.result.frame;
+    raw_header.left_stamp_ns = raw.left_stamp_ns;
+    raw_header.right_stamp_ns = raw.right_stamp_ns;
+    raw_header.width = raw.left.cols;
+    raw_header.height = raw.left.rows;
+
+    serveWaitingSnapshots(&frame, nullptr, now_ns);
+
     for (auto& [id, client] : clients_) {
         if (client.dead || !client.subscribed() || dropIfBacklogged(client))
             continue;
         const bool pending = client.unsent() > 0;
         bool appended = false;
-        for (const StreamKind stream : {StreamKind::Readings, StreamKind::Depth}) {
+        for (const StreamKind stream : {StreamKind::Readings, StreamKind::Depth, StreamKind::Raw}) {
             const bool is_depth = stream == StreamKind::Depth;
-            Subscription& subscription = is_depth ? client.depth : client.readings;
+            const bool is_raw = stream == StreamKind::Raw;
+            Subscription& subscription =
+                is_raw ? client.raw : (is_depth ? client.depth : client.readings);
             if (!subscription.active)
                 continue;
-            const double config_hz =
-                is_depth ? options_.publish.depth_max_hz : options_.publish.readings_max_hz;
+            // A pair taken before the subscriber's interest reached the worker has no raw
+            // frames: it was never available to this stream, so it is not counted lost.
+            if (is_raw && !raw.present)
+                continue;
+            // The raw stream is limited only by the subscriber's own max_hz: a recorder
+            // wants every pair.
+            const double config_hz = is_raw     ? 0.0
+                                     : is_depth ? options_.publish.depth_max_hz
+                                                : options_.publish.readings_max_hz;
             // Frames this thread never saw (it was busy) are lost to a stream that wants
             // every frame.
             const bool every_frame = config_hz <= 0.0 && !subscription.max_hz;
@@ -693,7 +820,17 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
                 continue;
             }
             compactOut(client);
-            if (!is_depth) {
+            if (is_raw) {
+                if (subscription.skipped > 0) {
+                    appendRawEventHeader(client.out, raw_header, subscription.skipped);
+                } else {
+                    if (raw_header_.empty())
+                        appendRawEventHeader(raw_header_, raw_header, 0);
+                    client.out.append(raw_header_);
+                }
+                appendMatBytes(client.out, raw.left);
+                appendMatBytes(client.out, raw.right);
+            } else if (!is_depth) {
                 if (subscription.skipped > 0) {
                     appendReadingEvent(client.out, report, now_ns, subscription.skipped);
                 } else {
@@ -743,6 +880,7 @@ void SocketServer::broadcastSourceDown(const SourceHealth& health, int64_t now_n
 void SocketServer::onTick()
 {
     const int64_t now_ns = monotonicNowNs();
+    log_limiter_.flush(now_ns);
     if (listen_paused_) {
         epoll_event event{};
         event.events = EPOLLIN;
@@ -758,15 +896,27 @@ void SocketServer::onTick()
         spdlog::info("frame source producing again");
     }
     source_was_down_ = health.down;
+    refreshRawInterest(now_ns);
+    serveWaitingSnapshots(nullptr, &health, now_ns);
 
     if (options_.socket.idle_timeout_s > 0.0) {
         const auto idle_ns = static_cast<int64_t>(options_.socket.idle_timeout_s * 1e9);
         for (auto& [id, client] : clients_) {
-            if (!client.dead && !client.subscribed() && client.unsent() == 0 &&
+            if (!client.dead && !client.subscribed() && !client.waiting && client.unsent() == 0 &&
                 now_ns - client.last_input_ns > idle_ns) {
-                spdlog::debug("client {}: idle for {} s, closed", id - kFirstClientTag,
-                              options_.socket.idle_timeout_s);
-                closeClient(client);
+                spdlog::info("client {}: nothing received for {} s (socket.idle_timeout_s), "
+                             "disconnected",
+                             id - kFirstClientTag, options_.socket.idle_timeout_s);
+                ++counters_.idle_closed;
+                reply(client, errorReply(ErrorCode::IdleTimeout,
+                                         "nothing received for " +
+                                             formatSeconds(options_.socket.idle_timeout_s) +
+                                             " s (socket.idle_timeout_s); closing the connection",
+                                         std::nullopt));
+                client.in.clear();
+                client.input_closed = true;
+                client.close_when_flushed = true;
+                writeClient(client);
             }
         }
     }
@@ -781,7 +931,10 @@ ReadingReport SocketServer::currentReading(const PublishedFrame* latest, double 
     if (latest == nullptr) {
         report.has_frame = false;
         report.reading.valid = false;
-        if (health.down) {
+        if (!options_.calibrated && !health.down) {
+            report.reading.reason = NoReadingReason::Uncalibrated;
+            message = reasonText(NoReadingReason::Uncalibrated);
+        } else if (health.down) {
             report.reading.reason = NoReadingReason::SourceDown;
             message = std::string(reasonText(NoReadingReason::SourceDown)) + ": " + health.message;
         } else {
@@ -804,6 +957,10 @@ ReadingReport SocketServer::currentReading(const PublishedFrame* latest, double 
         refuse(NoReadingReason::SourceDown);
         return report;
     }
+    // Without a calibration no reading will ever carry a distance: that is the reason to
+    // give, whatever the age of the frame.
+    if (report.reading.reason == NoReadingReason::Uncalibrated)
+        return report;
     const double age_ms = static_cast<double>(now_ns - report.reading.stamp_ns) / 1e6;
     if (age_ms > max_age_ms) {
         std::array<char, 160> text{};
@@ -817,7 +974,9 @@ ReadingReport SocketServer::currentReading(const PublishedFrame* latest, double 
 
 void SocketServer::handle(Client& client, const HelloRequest&, const std::optional<Json>& id)
 {
-    reply(client, helloReply(id));
+    Json answer = helloReply(id);
+    answer["calibrated"] = options_.calibrated;
+    reply(client, answer);
 }
 
 void SocketServer::handle(Client& client, const DistanceRequest& request,
@@ -855,7 +1014,9 @@ void SocketServer::handle(Client& client, const StatusRequest&, const std::optio
                          {"frames_dropped", clients.frames_dropped},
                          {"disconnected_slow", clients.disconnected_slow},
                          {"accepted", clients.accepted},
-                         {"rejected", clients.rejected}};
+                         {"rejected", clients.rejected},
+                         {"not_allowed", clients.not_allowed},
+                         {"idle_closed", clients.idle_closed}};
     std::string message;
     status["reading"] = readingToJson(
         currentReading(latest, options_.publish.max_reading_age_ms, health, now_ns, message),
@@ -868,11 +1029,32 @@ void SocketServer::handle(Client& client, const StatusRequest&, const std::optio
 void SocketServer::handle(Client& client, const SnapshotRequest& request,
                           const std::optional<Json>& id)
 {
+    const bool wants_raw =
+        std::any_of(request.items.begin(), request.items.end(), [](SnapshotItem item) {
+            return item == SnapshotItem::RawLeft || item == SnapshotItem::RawRight;
+        });
+    const int64_t now_ns = monotonicNowNs();
     const PublishedFrame* latest = publisher_.latest();
+    if (wants_raw) {
+        publisher_.wantRawUntil(now_ns + kRawInterestNs);
+        // The newest pair has raw frames only if someone asked for them recently; else
+        // the next pair will (answered by serveWaitingSnapshots()).
+        if (latest == nullptr || !latest->raw.present) {
+            client.waiting = WaitingSnapshot{request, id, now_ns};
+            return;
+        }
+    }
     if (latest == nullptr) {
         reply(client, errorReply(ErrorCode::NotAvailable, "no frame processed yet", id));
         return;
     }
+    sendSnapshot(client, request, id, *latest);
+}
+
+void SocketServer::sendSnapshot(Client& client, const SnapshotRequest& request,
+                                const std::optional<Json>& id, const PublishedFrame& frame)
+{
+    const PublishedFrame* latest = &frame;
     const int64_t now_ns = monotonicNowNs();
     const DepthResult& result = latest->result;
     const struct {
@@ -923,6 +1105,15 @@ void SocketServer::handle(Client& client, const SnapshotRequest& request,
             payloads.push_back(std::move(payload));
             break;
         }
+        case SnapshotItem::RawLeft:
+        case SnapshotItem::RawRight: {
+            const bool left = item == SnapshotItem::RawLeft;
+            Json payload = imagePayload(snapshotItemName(item), "u8_gray",
+                                        left ? latest->raw.left : latest->raw.right);
+            payload["stamp_ns"] = left ? latest->raw.left_stamp_ns : latest->raw.right_stamp_ns;
+            payloads.push_back(std::move(payload));
+            break;
+        }
         }
     }
     answer["payloads"] = std::move(payloads);
@@ -943,6 +1134,77 @@ void SocketServer::handle(Client& client, const SnapshotRequest& request,
         case SnapshotItem::Cloud:
             client.out.append(reinterpret_cast<const char*>(result.cloud.data()), cloud_bytes);
             break;
+        case SnapshotItem::RawLeft:
+            appendMatBytes(client.out, latest->raw.left);
+            break;
+        case SnapshotItem::RawRight:
+            appendMatBytes(client.out, latest->raw.right);
+            break;
+        }
+    }
+}
+
+void SocketServer::finishWaiting(Client& client, const PublishedFrame* frame,
+                                 std::string_view error)
+{
+    const WaitingSnapshot waiting = std::move(*client.waiting);
+    client.waiting.reset();
+    try {
+        if (frame != nullptr)
+            sendSnapshot(client, waiting.request, waiting.id, *frame);
+        else
+            reply(client, errorReply(ErrorCode::NotAvailable, error, waiting.id));
+    } catch (const std::exception& e) {
+        log_limiter_.log(spdlog::level::err, "client.request_failed", monotonicNowNs(),
+                         "client {}: request failed: {}", client.id - kFirstClientTag, e.what());
+        reply(client, errorReply(ErrorCode::Internal, e.what(), waiting.id));
+    }
+    if (client.dead)
+        return;
+    if (client.input_closed) {
+        // The peer closed its side while its snapshot waited: serve what it sent last.
+        while (!client.dead && !client.waiting && !client.in.empty()) {
+            const std::size_t newline = client.in.find('\n');
+            const std::string line = client.in.substr(0, newline);
+            client.in.erase(0, newline == std::string::npos ? client.in.size() : newline + 1);
+            if (line.size() < options_.socket.max_request_bytes)
+                handleRequest(client, line);
+        }
+        if (!client.dead && !client.subscribed() && !client.waiting)
+            client.close_when_flushed = true;
+    } else {
+        handleLines(client);
+    }
+    if (!client.dead)
+        writeClient(client);
+}
+
+void SocketServer::serveWaitingSnapshots(const PublishedFrame* frame, const SourceHealth* health,
+                                         int64_t now_ns)
+{
+    for (auto& [id, client] : clients_) {
+        if (client.dead || !client.waiting)
+            continue;
+        if (frame != nullptr && frame->raw.present) {
+            finishWaiting(client, frame, {});
+        } else if (health != nullptr && health->down) {
+            finishWaiting(client, nullptr,
+                          "no raw frames: " + std::string(reasonText(NoReadingReason::SourceDown)) +
+                              ": " + health->message);
+        } else if (now_ns - client.waiting->since_ns > kRawSnapshotWaitNs) {
+            finishWaiting(client, nullptr,
+                          "no raw frames: no pair arrived within " +
+                              std::to_string(kRawSnapshotWaitNs / 1'000'000'000) + " s");
+        }
+    }
+}
+
+void SocketServer::refreshRawInterest(int64_t now_ns)
+{
+    for (const auto& [id, client] : clients_) {
+        if (!client.dead && client.raw.active) {
+            publisher_.wantRawUntil(now_ns + kRawInterestNs);
+            return;
         }
     }
 }
@@ -950,8 +1212,11 @@ void SocketServer::handle(Client& client, const SnapshotRequest& request,
 void SocketServer::handle(Client& client, const SubscribeRequest& request,
                           const std::optional<Json>& id)
 {
-    Subscription& subscription =
-        request.stream == StreamKind::Depth ? client.depth : client.readings;
+    Subscription& subscription = request.stream == StreamKind::Raw     ? client.raw
+                                 : request.stream == StreamKind::Depth ? client.depth
+                                                                       : client.readings;
+    if (request.stream == StreamKind::Raw)
+        publisher_.wantRawUntil(monotonicNowNs() + kRawInterestNs);
     subscription = Subscription{};
     subscription.active = true;
     subscription.max_hz = request.max_hz;
@@ -971,6 +1236,22 @@ void SocketServer::handle(Client& client, const ReloadRequest&, const std::optio
     Json answer = okReply(id);
     answer["changed"] = outcome.changed;
     answer["restart_needed"] = outcome.restart_needed;
+    reply(client, answer);
+}
+
+void SocketServer::handle(Client& client, const CalibrationRequest&, const std::optional<Json>& id)
+{
+    Json answer = okReply(id);
+    answer["calibrated"] = options_.calibrated;
+    if (options_.calibrated) {
+        if (options_.calibration_text.empty()) {
+            reply(client, errorReply(ErrorCode::NotAvailable,
+                                     "the calibration in force was not read from a file", id));
+            return;
+        }
+        answer["path"] = options_.calibration_path;
+        answer["text"] = options_.calibration_text;
+    }
     reply(client, answer);
 }
 

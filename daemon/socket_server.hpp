@@ -27,6 +27,7 @@
 #include <sys/types.h>
 
 #include "config/service_config.hpp"
+#include "daemon/log_limiter.hpp"
 #include "daemon/protocol.hpp"
 #include "daemon/publisher.hpp"
 #include "daemon/unique_fd.hpp"
@@ -78,6 +79,12 @@ struct ServerOptions {
     SocketConfig socket;
     PublishConfig publish;
     RectifiedGeometry geometry; // the calibration summary of snapshot replies
+    // False in uncalibrated mode: readings say `uncalibrated`, only raw frames are served.
+    bool calibrated = true;
+    // The calibration in force, for the `calibration` request: its file and the file's
+    // text as read at start-up (empty when it did not come from a file).
+    std::string calibration_path;
+    std::string calibration_text;
     // Use the listening socket systemd hands over (socket activation) when there is one
     // for socket.path; the file then belongs to systemd and is left in place at exit.
     bool accept_systemd_socket = false;
@@ -88,6 +95,8 @@ struct ClientCounters {
     uint64_t subscribers = 0;       // connections with at least one subscription
     uint64_t accepted = 0;          // connections accepted since start
     uint64_t rejected = 0;          // turned away with too_many_clients
+    uint64_t not_allowed = 0;       // turned away by socket.allow_uids / allow_gids
+    uint64_t idle_closed = 0;       // disconnected after socket.idle_timeout_s of silence
     uint64_t frames_dropped = 0;    // events skipped for subscribers with unsent data
     uint64_t disconnected_slow = 0; // subscribers dropped past the backlog limit
 };
@@ -133,6 +142,15 @@ class SocketServer {
         uint64_t last_sequence = 0;   // publisher sequence of the last frame considered
     };
 
+    // A snapshot with raw items that waits for the next pair carrying raw frames (raw
+    // frames are copied only once someone asks). The client's later requests wait too,
+    // so that replies keep their order.
+    struct WaitingSnapshot {
+        SnapshotRequest request;
+        std::optional<Json> id;
+        int64_t since_ns = 0;
+    };
+
     struct Client {
         UniqueFd fd;
         uint64_t id = 0;
@@ -146,9 +164,11 @@ class SocketServer {
         int64_t last_input_ns = 0;
         Subscription readings;
         Subscription depth;
+        Subscription raw;
+        std::optional<WaitingSnapshot> waiting;
 
         std::size_t unsent() const noexcept { return out.size() - out_sent; }
-        bool subscribed() const noexcept { return readings.active || depth.active; }
+        bool subscribed() const noexcept { return readings.active || depth.active || raw.active; }
     };
 
     void addToEpoll(int fd, uint64_t tag, uint32_t events);
@@ -188,6 +208,20 @@ class SocketServer {
     void handle(Client& client, const SnapshotRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const SubscribeRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const ReloadRequest& request, const std::optional<Json>& id);
+    void handle(Client& client, const CalibrationRequest& request, const std::optional<Json>& id);
+
+    // Answers a snapshot from `frame` (its raw frames must be present when asked for).
+    void sendSnapshot(Client& client, const SnapshotRequest& request,
+                      const std::optional<Json>& id, const PublishedFrame& frame);
+    // Answers the client's waiting snapshot from `frame` (nullptr: with `error`), then
+    // serves the requests that queued up behind it.
+    void finishWaiting(Client& client, const PublishedFrame* frame, std::string_view error);
+    // Raw snapshots waiting: answered from a frame with raw frames, or refused once the
+    // source is down or the wait is too long.
+    void serveWaitingSnapshots(const PublishedFrame* frame, const SourceHealth* health,
+                               int64_t now_ns);
+    // Keeps the worker copying raw frames while raw subscribers exist.
+    void refreshRawInterest(int64_t now_ns);
 
     ServerOptions options_;
     Publisher& publisher_;
@@ -210,11 +244,14 @@ class SocketServer {
     std::vector<char> read_buffer_; // recv() target, reused
     std::string reading_event_;     // the frame's reading event line, built once per frame
     std::string depth_header_;      // the frame's depth event header, built once per frame
+    std::string raw_header_;        // the frame's raw event header, built once per frame
     std::size_t live_clients_ = 0;  // connections not closed yet
     bool listen_paused_ = false;    // out of descriptors: accept again on the next tick
     uint64_t last_dispatched_sequence_ = 0;
     bool source_was_down_ = false;
     ClientCounters counters_;
+    // Per-client and accept errors: one line per kind and 5 s, the rest counted.
+    LogLimiter log_limiter_;
 };
 
 } // namespace stereod

@@ -14,9 +14,6 @@ namespace stereod {
 
 namespace {
 
-// At most one log line per this interval for failing frames; the others are counted.
-constexpr int64_t kFailureLogIntervalNs = 5'000'000'000;
-
 // A result that carries no distance carries no depth either: a robot reading the depth
 // stream must not act on numbers the reading refuses.
 void clearDepth(DepthResult& result)
@@ -49,7 +46,19 @@ void logDisparityRange(const DisparityRange& range, const MatcherSettings& setti
                      settings.max_num_disparities);
 }
 
-Worker::Worker(PairRing& ring, Publisher& publisher, StereoProcessor& processor, double max_skew_ms)
+void copyRawPair(const StereoPair& pair, RawPair& raw)
+{
+    raw.present = false;
+    if (!pair.left || !pair.right)
+        return;
+    pair.left->image.copyTo(raw.left);
+    pair.right->image.copyTo(raw.right);
+    raw.left_stamp_ns = pair.left->source_stamp_ns;
+    raw.right_stamp_ns = pair.right->source_stamp_ns;
+    raw.present = true;
+}
+
+Worker::Worker(PairRing& ring, Publisher& publisher, StereoProcessor* processor, double max_skew_ms)
     : ring_(ring), publisher_(publisher), processor_(processor), max_skew_ms_(max_skew_ms)
 {
     refreshRange();
@@ -87,8 +96,8 @@ void Worker::updateSettings(const ProcessorSettings& settings)
 
 void Worker::refreshRange()
 {
-    stats_.range = processor_.disparityRange();
-    const std::string name = processor_.matcherName();
+    stats_.range = processor_ != nullptr ? processor_->disparityRange() : DisparityRange{};
+    const std::string name = processor_ != nullptr ? processor_->matcherName() : "none";
     stats_.matcher.fill('\0');
     std::memcpy(stats_.matcher.data(), name.data(),
                 std::min(name.size(), stats_.matcher.size() - 1));
@@ -98,10 +107,10 @@ void Worker::applyPendingSettings()
 {
     std::unique_ptr<ProcessorSettings> settings(
         pending_settings_.exchange(nullptr, std::memory_order_acq_rel));
-    if (!settings)
+    if (!settings || processor_ == nullptr)
         return;
     try {
-        processor_.updateSettings(*settings);
+        processor_->updateSettings(*settings);
         refreshRange();
         spdlog::info("new processing settings in force");
         logDisparityRange(stats_.range, settings->matcher, stats_.matcher.data());
@@ -114,6 +123,10 @@ void Worker::applyPendingSettings()
 void Worker::run()
 {
     while (std::optional<StereoPair> pair = ring_.pop()) {
+        // Once stopped, the pairs still queued are given back unprocessed: nobody waits
+        // for their results, and the stop must not wait for them either.
+        if (ring_.stopped())
+            continue;
         busy_since_ns_.store(monotonicNowNs(), std::memory_order_release);
         // processPair() turns failures of the chain into readings; this catches what is
         // left (the conversion for sending, say), so that nothing leaves the thread.
@@ -127,23 +140,13 @@ void Worker::run()
         }
         busy_since_ns_.store(0, std::memory_order_release);
     }
+    finished_.store(true, std::memory_order_release);
 }
 
 void Worker::logFailure(uint64_t frame, const char* what)
 {
-    const int64_t now_ns = monotonicNowNs();
-    if (last_failure_log_ns_ != 0 && now_ns - last_failure_log_ns_ < kFailureLogIntervalNs) {
-        ++failures_not_logged_;
-        return;
-    }
-    if (failures_not_logged_ > 0)
-        spdlog::error("frame {}: the pair could not be processed: {} ({} more failures since "
-                      "the last message)",
-                      frame, what, failures_not_logged_);
-    else
-        spdlog::error("frame {}: the pair could not be processed: {}", frame, what);
-    last_failure_log_ns_ = now_ns;
-    failures_not_logged_ = 0;
+    log_limiter_.log(spdlog::level::err, "worker.pair_failed", monotonicNowNs(),
+                     "frame {}: the pair could not be processed: {}", frame, what);
 }
 
 void Worker::processPair(StereoPair& pair)
@@ -154,16 +157,25 @@ void Worker::processPair(StereoPair& pair)
     slot.skew_ns = pair.skewNs();
     const int64_t stamp_ns = pair.stampNs();
     const uint64_t frame = pair.index;
+    if (publisher_.rawWanted(monotonicNowNs()))
+        copyRawPair(pair, slot.raw);
+    else
+        slot.raw.present = false;
 
     bool processed = false;
-    if (!pair.left || !pair.right) {
+    if (processor_ == nullptr) {
+        refuseReading(result.reading, NoReadingReason::Uncalibrated);
+        slot.reason_message.assign(
+            "uncalibrated: the service runs without a calibration (raw frames only); "
+            "calibrate with `stereoctl calibrate` and restart with it");
+    } else if (!pair.left || !pair.right) {
         refuseReading(result.reading, NoReadingReason::BadFrame);
         slot.reason_message.assign("the frame pair could not be processed: a frame is missing");
     } else {
         try {
-            processor_.process(pair.left->image, pair.right->image, stamp_ns, frame, result);
+            processor_->process(pair.left->image, pair.right->image, stamp_ns, frame, result);
             processed = true;
-            const cv::Size calibrated = processor_.calibration().rectified.image_size;
+            const cv::Size calibrated = processor_->calibration().rectified.image_size;
             if (result.reading.reason == NoReadingReason::BadFrame &&
                 (pair.left->image.size() != calibrated || pair.right->image.size() != calibrated))
                 slot.reason_message.format(
@@ -193,7 +205,8 @@ void Worker::processPair(StereoPair& pair)
 
     const double skew_ms = std::abs(static_cast<double>(slot.skew_ns)) / 1e6;
     const double max_skew_ms = max_skew_ms_.load(std::memory_order_relaxed);
-    if (skew_ms > max_skew_ms && reading.reason != NoReadingReason::BadFrame) {
+    if (skew_ms > max_skew_ms && reading.reason != NoReadingReason::BadFrame &&
+        reading.reason != NoReadingReason::Uncalibrated) {
         refuseReading(reading, NoReadingReason::OutOfSync);
         slot.reason_message.format("%s: %.1f ms apart, %.1f ms allowed",
                                    reasonText(NoReadingReason::OutOfSync), skew_ms, max_skew_ms);

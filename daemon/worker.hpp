@@ -9,8 +9,15 @@
 // right after processing. A reading without a distance never carries depth: the depth,
 // disparity and cloud of such a result are cleared.
 //
+// Raw frames: while the publisher says they are wanted (Publisher::rawWanted()), the pair
+// is copied as captured into the slot's RawPair before it goes back to its source.
+//
+// Uncalibrated mode (no processor): the worker runs no stereo chain; every pair gives an
+// `uncalibrated` reading (with its stamp and frame number) and, when wanted, its raw
+// frames, so that a calibration can be made from the running service.
+//
 // Thread contract: start(), join() and the destructor from the controlling thread;
-// setMaxSkewMs(), updateSettings() and busySinceNs() from any thread; the processor and
+// setMaxSkewMs(), updateSettings(), busySinceNs() and finished() from any thread; the processor and
 // the publisher's write side are used by the worker thread only while it runs.
 
 #include <array>
@@ -21,6 +28,7 @@
 #include <thread>
 
 #include "capture/frame_source.hpp"
+#include "daemon/log_limiter.hpp"
 #include "daemon/publisher.hpp"
 #include "pipeline/stereo_processor.hpp"
 
@@ -70,11 +78,16 @@ template <std::size_t N> double perSecond(const RecentValues<int64_t, N>& times_
                : 0.0;
 }
 
+// Copies the pair's frames into `raw` (as captured, with each camera's own stamp) and
+// marks it present; a missing frame leaves it not present. Allocates only when the
+// buffers do not have the frames' size yet.
+void copyRawPair(const StereoPair& pair, RawPair& raw);
+
 class Worker {
   public:
-    // Borrows all three until the worker is destroyed. `max_skew_ms`: pairs further apart
-    // give out_of_sync readings.
-    Worker(PairRing& ring, Publisher& publisher, StereoProcessor& processor, double max_skew_ms);
+    // Borrows all three until the worker is destroyed; `processor` may be null
+    // (uncalibrated mode). `max_skew_ms`: pairs further apart give out_of_sync readings.
+    Worker(PairRing& ring, Publisher& publisher, StereoProcessor* processor, double max_skew_ms);
     // Stops the ring (waking the thread) and joins it.
     ~Worker();
 
@@ -99,6 +112,10 @@ class Worker {
     // waits for a pair. For the watchdog: a worker stuck in one pair is not alive.
     int64_t busySinceNs() const noexcept { return busy_since_ns_.load(std::memory_order_acquire); }
 
+    // Whether the thread has left its loop (the ring is stopped and the pair in hand is
+    // done): join() then returns at once. Any thread; for a stop with a deadline.
+    bool finished() const noexcept { return finished_.load(std::memory_order_acquire); }
+
   private:
     static constexpr std::size_t kWindow = 32; // frames in the rolling means
 
@@ -110,19 +127,19 @@ class Worker {
 
     PairRing& ring_;
     Publisher& publisher_;
-    StereoProcessor& processor_;
+    StereoProcessor* processor_; // null: uncalibrated
     std::thread thread_;
     std::atomic<double> max_skew_ms_;
     std::atomic<ProcessorSettings*> pending_settings_{nullptr}; // owned; see updateSettings()
     std::atomic<int64_t> busy_since_ns_{0};
+    std::atomic<bool> finished_{false};
 
     // Worker thread only.
     PipelineStats stats_;
     RecentValues<double, kWindow> rectify_ms_, match_ms_, depth_ms_, nearest_ms_, cloud_ms_,
         publish_ms_;
     RecentValues<int64_t, kWindow> processed_ns_; // when each pair was done, for the rate
-    int64_t last_failure_log_ns_ = 0;
-    uint64_t failures_not_logged_ = 0;
+    LogLimiter log_limiter_; // failing pairs: one line per 5 s, the rest counted
 };
 
 } // namespace stereod

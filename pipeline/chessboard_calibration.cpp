@@ -47,7 +47,9 @@ std::string formatPx(double value)
     return text;
 }
 
-void validateOptions(const ChessboardCalibrationOptions& o)
+} // namespace
+
+void validateChessboardOptions(const ChessboardCalibrationOptions& o)
 {
     const ChessboardSpec& b = o.board;
     if (b.cols < 3 || b.rows < 3)
@@ -69,6 +71,8 @@ void validateOptions(const ChessboardCalibrationOptions& o)
     if (!(o.outlier_mads > 0.0) || !(o.outlier_floor_px >= 0.0))
         throw std::invalid_argument("outlier_mads must be > 0 and outlier_floor_px >= 0");
 }
+
+namespace {
 
 cv::Size innerCorners(const ChessboardSpec& board)
 {
@@ -335,18 +339,23 @@ cv::Rect validRectifiedRegion(const CameraIntrinsics& camera, const cv::Matx33d&
     return r;
 }
 
-bool findBoardCorners(const cv::Mat& gray, cv::Size inner_corners,
-                      std::vector<cv::Point2f>& corners)
+namespace {
+
+bool detectBoard(const cv::Mat& gray, cv::Size inner_corners, std::vector<cv::Point2f>& corners)
 {
-    corners.clear();
-    if (gray.type() != CV_8UC1)
-        throw std::invalid_argument("findBoardCorners: expected an 8-bit grayscale image");
     if (!cv::findChessboardCorners(gray, inner_corners, corners,
                                    cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE |
                                        cv::CALIB_CB_FAST_CHECK)) {
         corners.clear();
         return false;
     }
+    return true;
+}
+
+// cornerSubPix on each corner with the window findBoardCorners describes.
+void refineBoardCorners(const cv::Mat& gray, cv::Size inner_corners,
+                        std::vector<cv::Point2f>& corners)
+{
     const std::vector<double> room = foreignLineDistances(corners, inner_corners);
     std::vector<cv::Point2f> one(1);
     for (size_t i = 0; i < corners.size(); ++i) {
@@ -356,6 +365,51 @@ bool findBoardCorners(const cv::Mat& gray, cv::Size inner_corners,
         cv::cornerSubPix(gray, one, {half, half}, {-1, -1}, kSubpixCriteria);
         corners[i] = one[0];
     }
+}
+
+void checkGray(const cv::Mat& gray, const char* where)
+{
+    if (gray.type() != CV_8UC1)
+        throw std::invalid_argument(std::string(where) + ": expected an 8-bit grayscale image");
+}
+
+} // namespace
+
+bool findBoardCorners(const cv::Mat& gray, cv::Size inner_corners,
+                      std::vector<cv::Point2f>& corners)
+{
+    corners.clear();
+    checkGray(gray, "findBoardCorners");
+    if (!detectBoard(gray, inner_corners, corners))
+        return false;
+    refineBoardCorners(gray, inner_corners, corners);
+    return true;
+}
+
+bool findBoardCornersFast(const cv::Mat& gray, cv::Size inner_corners,
+                          std::vector<cv::Point2f>& corners, int detect_width_px)
+{
+    corners.clear();
+    checkGray(gray, "findBoardCornersFast");
+    if (detect_width_px < 1)
+        throw std::invalid_argument("findBoardCornersFast: detection width must be >= 1 px, got " +
+                                    std::to_string(detect_width_px));
+    if (gray.cols <= detect_width_px)
+        return findBoardCorners(gray, inner_corners, corners);
+    const double scale = static_cast<double>(gray.cols) / detect_width_px;
+    cv::Mat small;
+    cv::resize(gray, small,
+               {detect_width_px, std::max(1, static_cast<int>(std::lround(gray.rows / scale)))},
+               0.0, 0.0, cv::INTER_AREA);
+    if (!detectBoard(small, inner_corners, corners))
+        return false;
+    // Pixel centres: small (x + 0.5) * scale is full-size x + 0.5, per axis.
+    const double scale_x = static_cast<double>(gray.cols) / small.cols;
+    const double scale_y = static_cast<double>(gray.rows) / small.rows;
+    for (cv::Point2f& c : corners)
+        c = {static_cast<float>((c.x + 0.5) * scale_x - 0.5),
+             static_cast<float>((c.y + 0.5) * scale_y - 0.5)};
+    refineBoardCorners(gray, inner_corners, corners);
     return true;
 }
 
@@ -363,7 +417,7 @@ ChessboardCalibrationResult calibrateFromCorners(std::vector<PairReport> pairs,
                                                  cv::Size image_size,
                                                  const ChessboardCalibrationOptions& options)
 {
-    validateOptions(options);
+    validateChessboardOptions(options);
     const ChessboardSpec& board = options.board;
     const cv::Size grid = innerCorners(board);
     const size_t corner_count = static_cast<size_t>(board.cols * board.rows);
@@ -478,7 +532,7 @@ ChessboardCalibrationResult calibrateChessboard(const std::vector<std::string>& 
                                                 const ChessboardCalibrationOptions& options,
                                                 const CornerProgressCallback& progress)
 {
-    validateOptions(options);
+    validateChessboardOptions(options);
     if (left_paths.empty())
         throw ChessboardCalibrationError("no image pairs given");
     if (left_paths.size() != right_paths.size())

@@ -110,6 +110,11 @@ struct CornerProgress {
 };
 using CornerProgressCallback = std::function<void(const CornerProgress&)>;
 
+// Checks options before any image is searched (a caller that collects views first, as
+// live calibration does, refuses a bad board at once). Throws std::invalid_argument
+// naming the option; calibrateFromCorners and calibrateChessboard check the same.
+void validateChessboardOptions(const ChessboardCalibrationOptions& options);
+
 // Finds the board's inner corners in a grayscale image, refined to sub-pixel accuracy:
 // cv::findChessboardCorners, then cv::cornerSubPix on each corner with a half window of
 // 0.3 times the distance from the corner to the nearest board line that does not pass
@@ -120,6 +125,15 @@ using CornerProgressCallback = std::function<void(const CornerProgress&)>;
 // not found. `gray` must be CV_8UC1 (std::invalid_argument otherwise).
 bool findBoardCorners(const cv::Mat& gray, cv::Size inner_corners,
                       std::vector<cv::Point2f>& corners);
+
+// As findBoardCorners, for images that arrive faster than a full-size search keeps up
+// with (live calibration): the board is searched in a copy shrunk to `detect_width_px`
+// wide (area interpolation), and the corners found there are scaled back and refined at
+// full size exactly as findBoardCorners refines them. An image no wider than
+// `detect_width_px` is searched at full size. A board too small to be found in the shrunk
+// copy is not found.
+bool findBoardCornersFast(const cv::Mat& gray, cv::Size inner_corners,
+                          std::vector<cv::Point2f>& corners, int detect_width_px = 640);
 
 // The rectified pixels of one camera that have raw image data, as an axis-aligned
 // rectangle: every pixel inside maps into the raw image (checked pixel by pixel, unlike

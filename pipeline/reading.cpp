@@ -13,6 +13,7 @@ const char* reasonCode(NoReadingReason reason) noexcept
     case NoReadingReason::SourceDown: return "source_down";
     case NoReadingReason::BadFrame: return "bad_frame";
     case NoReadingReason::Stale: return "stale";
+    case NoReadingReason::Uncalibrated: return "uncalibrated";
     }
     return "unknown";
 }
@@ -28,6 +29,7 @@ const char* reasonText(NoReadingReason reason) noexcept
     case NoReadingReason::SourceDown: return "frame source down";
     case NoReadingReason::BadFrame: return "the frame pair could not be processed";
     case NoReadingReason::Stale: return "the latest reading is too old";
+    case NoReadingReason::Uncalibrated: return "the service runs without a calibration";
     }
     return "unknown";
 }
@@ -39,6 +41,7 @@ bool meansNotProducing(NoReadingReason reason) noexcept
     case NoReadingReason::OutOfSync:
     case NoReadingReason::SourceDown:
     case NoReadingReason::Stale:
+    case NoReadingReason::Uncalibrated:
         return true;
     default:
         return false;

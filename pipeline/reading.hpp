@@ -15,6 +15,7 @@ enum class NoReadingReason {
     SourceDown,         // the frame source failed, stalled or finished
     BadFrame,           // the pair could not be processed (size mismatch, corrupt data)
     Stale,              // the latest reading is older than the caller allows
+    Uncalibrated,       // the service runs without a calibration (raw frames only)
 };
 
 // Stable machine code for the protocol ("too_few_valid_pixels", ...).

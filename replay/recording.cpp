@@ -10,8 +10,12 @@
 #include <string_view>
 #include <system_error>
 
+#include <fstream>
+
+#include <fcntl.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <unistd.h>
 
 namespace stereod {
 
@@ -265,6 +269,49 @@ Recording scanPairFolder(const fs::path& dir, double nominal_fps)
     return recording;
 }
 
+// Writes all of `size` bytes to `fd`; false with errno set when a write fails.
+bool writeAll(int fd, const void* data, std::size_t size)
+{
+    const auto* bytes = static_cast<const char*>(data);
+    while (size > 0) {
+        const ssize_t written = ::write(fd, bytes, size);
+        if (written < 0) {
+            if (errno == EINTR)
+                continue;
+            return false;
+        }
+        if (written == 0) {
+            errno = EIO;
+            return false;
+        }
+        bytes += written;
+        size -= static_cast<std::size_t>(written);
+    }
+    return true;
+}
+
+// Creates `path` (never replacing a file) with `size` bytes. On failure the partial file
+// is removed and RecordingError carries the errno and the file's name.
+void writeNewFile(const std::string& path, const void* data, std::size_t size)
+{
+    const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+    if (fd < 0) {
+        const int error = errno;
+        throw RecordingError(error, path + ": cannot create: " + errnoText(error));
+    }
+    bool ok = writeAll(fd, data, size);
+    int error = ok ? 0 : errno;
+    // close() reports errors of writes the file system deferred (NFS, quotas).
+    if (::close(fd) != 0 && ok) {
+        ok = false;
+        error = errno;
+    }
+    if (!ok) {
+        ::unlink(path.c_str());
+        throw RecordingError(error, path + ": cannot write: " + errnoText(error));
+    }
+}
+
 } // namespace
 
 Recording openRecording(const std::string& path, double nominal_fps)
@@ -310,28 +357,46 @@ RecordingWriter::RecordingWriter(const std::string& dir, const std::string& cali
             throw RecordingError(ec.value(), "cannot copy calibration " + calibration_path +
                                                  " to " + target.string() + ": " + ec.message());
     }
-    csv_.open(csv_path_, std::ios::out | std::ios::trunc);
-    if (!csv_)
-        throw RecordingError(errno != 0 ? errno : EIO,
-                             csv_path_ + ": cannot create: " + errnoText(errno != 0 ? errno : EIO));
-    csv_ << kFramesCsvHeader << '\n';
-    csv_.flush();
-    if (!csv_)
-        throw RecordingError(EIO, csv_path_ + ": cannot write: " + errnoText(errno != 0 ? errno : EIO));
+    csv_fd_ = ::open(csv_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_APPEND | O_CLOEXEC, 0644);
+    if (csv_fd_ < 0) {
+        const int error = errno;
+        throw RecordingError(error, csv_path_ + ": cannot create: " + errnoText(error));
+    }
+    const std::string header = std::string(kFramesCsvHeader) + '\n';
+    if (!writeAll(csv_fd_, header.data(), header.size())) {
+        const int error = errno;
+        ::close(csv_fd_);
+        csv_fd_ = -1;
+        throw RecordingError(error, csv_path_ + ": cannot write: " + errnoText(error));
+    }
+    csv_bytes_ = header.size();
+}
+
+RecordingWriter::~RecordingWriter()
+{
+    if (csv_fd_ >= 0)
+        ::close(csv_fd_);
+}
+
+void RecordingWriter::writeCalibrationText(const std::string& yaml_text)
+{
+    const std::string path = (fs::path(dir_) / kCalibrationName).string();
+    writeNewFile(path, yaml_text.data(), yaml_text.size());
 }
 
 void RecordingWriter::writeImage(const std::string& relative_name, const cv::Mat& image)
 {
     const std::string path = (fs::path(dir_) / relative_name).string();
-    bool written = false;
+    bool encoded = false;
     std::string reason = "the PNG encoder refused it";
     try {
-        written = cv::imwrite(path, image, png_params_);
+        encoded = cv::imencode(".png", image, png_buffer_, png_params_);
     } catch (const cv::Exception& e) {
         reason = e.what();
     }
-    if (!written)
-        throw RecordingError(EIO, path + ": cannot write: " + reason);
+    if (!encoded)
+        throw RecordingError(EINVAL, path + ": cannot encode: " + reason);
+    writeNewFile(path, png_buffer_.data(), png_buffer_.size());
 }
 
 uint64_t RecordingWriter::write(const cv::Mat& left, const cv::Mat& right,
@@ -358,19 +423,27 @@ uint64_t RecordingWriter::write(const cv::Mat& left, const cv::Mat& right,
     const std::string left_name = std::string("left/") + name;
     const std::string right_name = std::string("right/") + name;
     writeImage(left_name, left);
-    writeImage(right_name, right);
+    try {
+        writeImage(right_name, right);
+    } catch (const RecordingError&) {
+        ::unlink((fs::path(dir_) / left_name).c_str());
+        throw;
+    }
 
-    // One row, one write: the stream holds the whole line and flush() hands it to the
-    // kernel at once, so a killed process never leaves half a row behind.
+    // One row, one write(): a killed process never leaves half a row behind. A write that
+    // fails part way (a full disk) is cut back to the last complete row.
     const std::string row = std::to_string(next_index_) + ',' + std::to_string(left_stamp_ns) +
                             ',' + std::to_string(right_stamp_ns) + ',' + left_name + ',' +
                             right_name + '\n';
-    csv_.write(row.data(), static_cast<std::streamsize>(row.size()));
-    csv_.flush();
-    if (!csv_)
-        throw RecordingError(EIO, csv_path_ + ": cannot append pair " +
-                                      std::to_string(next_index_) + ": " +
-                                      errnoText(errno != 0 ? errno : EIO));
+    if (!writeAll(csv_fd_, row.data(), row.size())) {
+        const int error = errno;
+        [[maybe_unused]] const int cut = ::ftruncate(csv_fd_, static_cast<off_t>(csv_bytes_));
+        ::unlink((fs::path(dir_) / left_name).c_str());
+        ::unlink((fs::path(dir_) / right_name).c_str());
+        throw RecordingError(error, csv_path_ + ": cannot append pair " +
+                                        std::to_string(next_index_) + ": " + errnoText(error));
+    }
+    csv_bytes_ += row.size();
     if (next_index_ == 0)
         size_ = left.size();
     return next_index_++;

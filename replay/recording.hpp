@@ -14,7 +14,6 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <fstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -71,9 +70,13 @@ inline constexpr const char* kCalibrationName = "calibration.yaml";
 // EINVAL for a bad header, no usable row, unequal left/right counts or fps <= 0.
 Recording openRecording(const std::string& path, double nominal_fps);
 
-// Writes pairs as a recording. Every pair's images are written first, then its row is
-// appended to frames.csv and flushed, so a process killed at any point leaves a readable
-// recording of the pairs completed so far.
+// Writes pairs as a recording. Every pair's images are written completely first (each
+// with one write() loop and a checked close()), then its row is appended to frames.csv
+// with a single write(), so a process killed at any point leaves a readable recording of
+// the pairs completed so far. No file is ever overwritten: images are created with
+// O_EXCL. A failed write (ENOSPC, EDQUOT, EIO, ...) throws RecordingError with that errno
+// and the file's name; the half-written image is removed and a half-written row cut off,
+// so the recording stays readable up to the last complete pair.
 //
 // Thread-bound: one thread writes; the writer is not shared.
 class RecordingWriter {
@@ -82,6 +85,7 @@ public:
     // `calibration_path` in as calibration.yaml unless it is empty. Refuses a directory
     // that already holds a frames.csv (EEXIST). Throws RecordingError.
     explicit RecordingWriter(const std::string& dir, const std::string& calibration_path = {});
+    ~RecordingWriter();
 
     RecordingWriter(const RecordingWriter&) = delete;
     RecordingWriter& operator=(const RecordingWriter&) = delete;
@@ -93,6 +97,11 @@ public:
     uint64_t write(const cv::Mat& left, const cv::Mat& right, int64_t left_stamp_ns,
                    int64_t right_stamp_ns);
 
+    // Writes `yaml_text` as DIR/calibration.yaml (a calibration that came as text, e.g.
+    // from the service). Refuses to replace one that is there (EEXIST). Throws
+    // RecordingError.
+    void writeCalibrationText(const std::string& yaml_text);
+
     uint64_t pairsWritten() const noexcept { return next_index_; }
     const std::string& directory() const noexcept { return dir_; }
 
@@ -101,10 +110,12 @@ private:
 
     std::string dir_;
     std::string csv_path_;
-    std::ofstream csv_;
+    int csv_fd_ = -1;                   // frames.csv, O_APPEND
+    uint64_t csv_bytes_ = 0;            // its length after the last complete row
     cv::Size size_;                     // size of the first pair; every pair must match
     uint64_t next_index_ = 0;
     std::vector<int> png_params_;
+    std::vector<uchar> png_buffer_;     // encoded image, reused from pair to pair
 };
 
 } // namespace stereod

@@ -5,10 +5,12 @@ set -euo pipefail
 
 packages=(
   build-essential cmake ninja-build pkg-config git
-  libopencv-dev libv4l-dev libeigen3-dev libyaml-cpp-dev libspdlog-dev libsystemd-dev
+  libopencv-dev libv4l-dev libturbojpeg0-dev libeigen3-dev libyaml-cpp-dev libspdlog-dev libsystemd-dev
   nlohmann-json3-dev libcli11-dev
   libgtest-dev libgmock-dev libbenchmark-dev
+  clang libclang-rt-dev   # scripts/fuzz.sh: clang with libFuzzer and its sanitizer runtimes
   opencv-doc
+  systemd   # systemd-analyze, systemd-sysusers, systemd-tmpfiles: the unit checks (tests/daemon)
 )
 
 as_root() {

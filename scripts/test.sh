@@ -31,6 +31,7 @@ case "$sanitize" in
     export ASAN_OPTIONS="detect_leaks=1:abort_on_error=1:strict_string_checks=1"
     export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
     export LSAN_OPTIONS="suppressions=$STEREOD_ROOT/tests/sanitizers/lsan.supp"
+    ctest_args=(-LE soak "${ctest_args[@]}")   # the 60 s soak runs in the normal pass only
     ;;
   thread)
     dir="$STEREOD_ROOT/build-tsan"

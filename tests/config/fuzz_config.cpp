@@ -1,11 +1,8 @@
 // libFuzzer entry point for the configuration loader: any bytes must give either a
 // configuration or a ConfigError, never a crash, a hang or another exception.
 //
-// Not part of the normal build. The loader needs nothing from the pipeline but its
-// headers, so from the project root, with clang:
-//   clang++ -std=c++20 -g -O1 -fsanitize=fuzzer,address,undefined -I. -I/usr/include/opencv4
-//       tests/config/fuzz_config.cpp config/service_config.cpp -lyaml-cpp -o fuzz_config
-//   ./fuzz_config -max_len=4096 -dict=tests/config/fuzz_config.dict corpus/
+// Built with clang by tests/fuzz/CMakeLists.txt and run by scripts/fuzz.sh [SECONDS]
+// from the seeds in tests/fuzz/corpus/config/ with tests/config/fuzz_config.dict.
 
 #include <cstddef>
 #include <cstdint>

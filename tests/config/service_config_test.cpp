@@ -232,8 +232,8 @@ INSTANTIATE_TEST_SUITE_P(
     Values, ConfigRejects,
     ::testing::Values(
         // source
-        RejectedCase{"source:\n  type: v4l2\n", "source.type", 2,
-                     "unknown value (got v4l2, expected replay"},
+        RejectedCase{"source:\n  type: usb\n", "source.type", 2,
+                     "unknown value (got usb, expected replay, v4l2 or side_by_side"},
         RejectedCase{"source:\n  ring_capacity: 1\n", "source.ring_capacity", 2,
                      "out of range (got 1, expected 2 to 64 pairs)"},
         RejectedCase{"source:\n  ring_capacity: 65\n", "source.ring_capacity", 2, "got 65"},
@@ -497,25 +497,25 @@ TEST(ConfigPaths, RelativePathsResolveAgainstTheFilesDirectory)
               (dir.path() / "calib/rig.yaml").string());
 }
 
-TEST(ConfigPaths, ARecordingWithoutCalibrationNeedsTheCalibrationKey)
+TEST(ConfigPaths, ARecordingWithoutCalibrationRunsUncalibrated)
 {
     TempDir dir;
     fs::create_directories(dir.path() / "plain");
     const fs::path file = dir.write("robot.yaml", "source:\n  replay:\n    path: plain\n");
-    try {
-        loadConfig(file.string());
-        FAIL() << "accepted a recording without any calibration";
-    } catch (const ConfigError& error) {
-        ASSERT_EQ(error.problems().size(), 1u) << error.what();
-        EXPECT_EQ(error.problems()[0].rfind(file.string() + ": calibration: not set, and "
-                                                            "source.replay.path holds no "
-                                                            "calibration.yaml",
-                                            0),
-                  0u)
-            << error.problems()[0];
-    }
+    // No calibration anywhere is the uncalibrated mode of a robot's first start.
+    EXPECT_EQ(loadConfig(file.string()).calibration_path, "");
     dir.write("plain/calibration.yaml", "focal_px: 500\n");
     EXPECT_NO_THROW(loadConfig(file.string()));
+    // A calibration that is named must exist.
+    const fs::path named = dir.write("named.yaml", "calibration: missing.yaml\n");
+    try {
+        loadConfig(named.string());
+        FAIL() << "accepted a calibration file that does not exist";
+    } catch (const ConfigError& error) {
+        ASSERT_EQ(error.problems().size(), 1u) << error.what();
+        EXPECT_NE(error.problems()[0].find("calibration"), std::string::npos)
+            << error.problems()[0];
+    }
 
     // A path that is a file, not a directory.
     const fs::path wrong = dir.write("wrong.yaml", "source:\n  replay:\n    path: robot.yaml\n");
@@ -648,6 +648,27 @@ TEST(ConfigDiff, EveryKeyIsClassified)
         const bool restart = key.path.rfind("source.", 0) == 0 || key.path == "calibration" ||
                              key.path.rfind("socket.", 0) == 0;
         EXPECT_EQ(key.live, !restart) << key.path;
+    }
+}
+
+TEST(ConfigSocket, AllowListsAreListsOfNumericIds)
+{
+    const ServiceConfig config = parseConfig(
+        "socket:\n  allow_uids: [1000, 0]\n  allow_gids:\n    - 27\n", "t.yaml");
+    EXPECT_EQ(config.socket.allow_uids, (std::vector<uint32_t>{1000, 0}));
+    EXPECT_EQ(config.socket.allow_gids, (std::vector<uint32_t>{27}));
+    const ConfigChange change = diffConfig(defaultConfig(), config);
+    EXPECT_EQ(change.changed, (std::vector<std::string>{"socket.allow_uids", "socket.allow_gids"}));
+    EXPECT_EQ(change.restart_needed, change.changed);
+    EXPECT_TRUE(parseConfig("socket:\n  allow_uids: []\n  allow_gids:\n", "t.yaml")
+                    .socket.allow_uids.empty());
+
+    for (const std::string list : {"1000", "[-1]", "[4294967295]", "[root]", "[[1]]", "{a: 1}"}) {
+        const auto problems = problemsOf("socket:\n  allow_uids: " + list + "\n");
+        ASSERT_EQ(problems.size(), 1u) << list;
+        EXPECT_NE(problems[0].find("t.yaml:2: socket.allow_uids: "), std::string::npos)
+            << problems[0];
+        EXPECT_NE(problems[0].find("numeric ids"), std::string::npos) << problems[0];
     }
 }
 

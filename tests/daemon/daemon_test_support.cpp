@@ -264,4 +264,21 @@ bool TestClient::waitForClose()
     }
 }
 
+std::unique_ptr<TestClient> connectWhenListening(ChildProcess& service,
+                                                 const std::string& socket_path)
+{
+    std::unique_ptr<TestClient> client;
+    waitUntil([&] {
+        if (!service.running())
+            return true;
+        try {
+            client = std::make_unique<TestClient>(socket_path);
+            return true;
+        } catch (const std::exception&) {
+            return false;
+        }
+    });
+    return client;
+}
+
 } // namespace stereod::test

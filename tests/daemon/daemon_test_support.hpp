@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <string_view>
@@ -122,5 +123,10 @@ bool waitUntil(Condition condition, std::chrono::milliseconds limit = TestClient
     }
     return true;
 }
+
+// A client of the service `service` started, once its socket answers; nullptr when the
+// service exits first or the wait limit passes.
+std::unique_ptr<TestClient> connectWhenListening(ChildProcess& service,
+                                                 const std::string& socket_path);
 
 } // namespace stereod::test

@@ -3,12 +3,8 @@
 // result (an error that quotes the input, a reading with a message made of the input)
 // must be one line of valid JSON.
 //
-// Not part of the normal build. The parser needs nothing from the pipeline but
-// reading.cpp, so from the project root, with clang:
-//   clang++ -std=c++20 -g -O1 -fsanitize=fuzzer,address,undefined -I. \
-//       -DSTEREOD_VERSION='"fuzz"' tests/daemon/fuzz_protocol.cpp daemon/protocol.cpp \
-//       daemon/json_writer.cpp pipeline/reading.cpp -o fuzz_protocol
-//   ./fuzz_protocol -max_len=4096 -dict=tests/daemon/fuzz_protocol.dict corpus/
+// Built with clang by tests/fuzz/CMakeLists.txt and run by scripts/fuzz.sh [SECONDS]
+// from the seeds in tests/fuzz/corpus/protocol/ with tests/daemon/fuzz_protocol.dict.
 
 #include <cstddef>
 #include <cstdint>

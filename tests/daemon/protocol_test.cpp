@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -61,6 +62,23 @@ TEST(ProtocolParse, KnownCommands)
         std::get<SubscribeRequest>(parseOk(R"({"cmd":"subscribe","stream":"readings"})").command)
             .stream,
         StreamKind::Readings);
+}
+
+TEST(ProtocolParse, RawFramesAndCalibration)
+{
+    EXPECT_TRUE(
+        std::holds_alternative<CalibrationRequest>(parseOk(R"({"cmd":"calibration"})").command));
+    const Request raw = parseOk(R"({"cmd":"subscribe","stream":"raw","max_hz":2})");
+    ASSERT_TRUE(std::holds_alternative<SubscribeRequest>(raw.command));
+    EXPECT_EQ(std::get<SubscribeRequest>(raw.command).stream, StreamKind::Raw);
+    EXPECT_DOUBLE_EQ(std::get<SubscribeRequest>(raw.command).max_hz.value_or(0), 2.0);
+    const Request snapshot = parseOk(R"({"cmd":"snapshot","items":["raw_right","raw_left"]})");
+    ASSERT_TRUE(std::holds_alternative<SnapshotRequest>(snapshot.command));
+    const std::vector<SnapshotItem> expected = {SnapshotItem::RawRight, SnapshotItem::RawLeft};
+    EXPECT_EQ(std::get<SnapshotRequest>(snapshot.command).items, expected);
+    // The default stays the processed result's four items.
+    EXPECT_EQ(std::get<SnapshotRequest>(parseOk(R"({"cmd":"snapshot"})").command).items.size(),
+              4u);
 }
 
 TEST(ProtocolParse, SnapshotItemsKeepTheirOrderWithoutRepeats)
@@ -255,9 +273,10 @@ TEST(ProtocolReplies, HelloListsCommandsStreamsAndItems)
     EXPECT_FALSE(reply.contains("id"));
     EXPECT_EQ(reply["service"], "stereod");
     EXPECT_EQ(reply["protocol"], kProtocolVersion);
-    EXPECT_EQ(reply["commands"].size(), 6u);
-    EXPECT_EQ(reply["streams"], Json::parse(R"(["readings","depth"])"));
-    EXPECT_EQ(reply["snapshot_items"], Json::parse(R"(["left","disparity","depth","cloud"])"));
+    EXPECT_EQ(reply["commands"].size(), 7u);
+    EXPECT_EQ(reply["streams"], Json::parse(R"(["readings","depth","raw"])"));
+    EXPECT_EQ(reply["snapshot_items"],
+              Json::parse(R"(["left","disparity","depth","cloud","raw_left","raw_right"])"));
 }
 
 TEST(ProtocolReplies, ErrorCodeNamesAreTheDocumentedOnes)
@@ -270,6 +289,8 @@ TEST(ProtocolReplies, ErrorCodeNamesAreTheDocumentedOnes)
     EXPECT_STREQ(errorCodeName(ErrorCode::NotAvailable), "not_available");
     EXPECT_STREQ(errorCodeName(ErrorCode::InvalidConfig), "invalid_config");
     EXPECT_STREQ(errorCodeName(ErrorCode::Internal), "internal");
+    EXPECT_STREQ(errorCodeName(ErrorCode::NotAllowed), "not_allowed");
+    EXPECT_STREQ(errorCodeName(ErrorCode::IdleTimeout), "idle_timeout");
 }
 
 Reading validReading()
@@ -414,6 +435,33 @@ TEST(ProtocolEvents, DepthEventHeaderGivesThePayloadSize)
     EXPECT_EQ(event["bytes"], 2846040);
     EXPECT_EQ(event["skipped"], 2);
     EXPECT_EQ(event["reading"]["valid"], true);
+}
+
+TEST(ProtocolEvents, RawEventHeaderFollowsTheContract)
+{
+    RawEventHeader header;
+    header.frame = 42;
+    header.left_stamp_ns = 81263511234;
+    header.right_stamp_ns = 81263512001;
+    header.width = 640;
+    header.height = 480;
+    std::string out;
+    appendRawEventHeader(out, header, 3);
+    ASSERT_EQ(out.back(), '\n');
+    EXPECT_EQ(out.find('\n'), out.size() - 1);
+    Json event = parseStrict(out);
+    EXPECT_EQ(event["event"], "raw");
+    EXPECT_EQ(event["frame"], 42);
+    EXPECT_EQ(event["left_stamp_ns"], 81263511234);
+    EXPECT_EQ(event["right_stamp_ns"], 81263512001);
+    EXPECT_EQ(event["skipped"], 3);
+    ASSERT_EQ(event["payloads"].size(), 2u);
+    EXPECT_EQ(event["payloads"][0],
+              Json::parse(R"({"name":"raw_left","format":"u8_gray","width":640,"height":480,)"
+                          R"("bytes":307200,"stamp_ns":81263511234})"));
+    EXPECT_EQ(event["payloads"][1]["name"], "raw_right");
+    EXPECT_EQ(event["payloads"][1]["stamp_ns"], 81263512001);
+    EXPECT_EQ(event["payloads"][1]["bytes"], 307200);
 }
 
 TEST(JsonWriter, NumbersAndStrings)

@@ -3,6 +3,7 @@
 // demand, and the tests talk the protocol of docs/protocol.md to it.
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -14,6 +15,7 @@
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
+#include <grp.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
@@ -107,7 +109,9 @@ class ServiceTest : public ::testing::Test {
                                          std::move(options));
     }
 
-    void start(const ServiceConfig& config, ServiceOptions options = {})
+    // Runs the service on its own thread; clients may connect as soon as this returns (the
+    // socket listens from construction on).
+    void launch(const ServiceConfig& config, ServiceOptions options = {})
     {
         socket_path_ = config.socket.path;
         service_ = makeService(config, std::move(options));
@@ -118,6 +122,11 @@ class ServiceTest : public ::testing::Test {
                 run_error_ = e.what();
             }
         });
+    }
+
+    void start(const ServiceConfig& config, ServiceOptions options = {})
+    {
+        launch(config, std::move(options));
         // Answered only once run() has started the source and the loop turns.
         TestClient probe(socket_path_);
         ASSERT_EQ(probe.request({{"cmd", "hello"}})["ok"], true);
@@ -193,7 +202,8 @@ TEST_F(ServiceTest, HelloEchoesTheId)
     EXPECT_EQ(reply["id"], "abc-1");
     EXPECT_EQ(reply["service"], "stereod");
     EXPECT_EQ(reply["protocol"], 1);
-    EXPECT_EQ(reply["streams"], Json::parse(R"(["readings","depth"])"));
+    EXPECT_EQ(reply["streams"], Json::parse(R"(["readings","depth","raw"])"));
+    EXPECT_EQ(reply["calibrated"], true);
 }
 
 TEST_F(ServiceTest, SocketFileHasTheConfiguredMode)
@@ -205,6 +215,102 @@ TEST_F(ServiceTest, SocketFileHasTheConfiguredMode)
     ASSERT_EQ(::lstat(socket_path_.c_str(), &info), 0);
     EXPECT_TRUE(S_ISSOCK(info.st_mode));
     EXPECT_EQ(info.st_mode & 0777, 0600u);
+}
+
+TEST_F(ServiceTest, SocketFileHasTheConfiguredGroup)
+{
+    // A group other than our own that this process may give the file to: any group as
+    // root, else one of its supplementary groups. Named, so that the lookup is tested too.
+    std::vector<gid_t> candidates;
+    if (::geteuid() == 0) {
+        ::setgrent();
+        while (const group* entry = ::getgrent())
+            candidates.push_back(entry->gr_gid);
+        ::endgrent();
+    } else {
+        candidates.resize(static_cast<std::size_t>(std::max(::getgroups(0, nullptr), 0)));
+        candidates.resize(static_cast<std::size_t>(
+            std::max(::getgroups(static_cast<int>(candidates.size()), candidates.data()), 0)));
+    }
+    const auto other = std::find_if(candidates.begin(), candidates.end(), [](gid_t gid) {
+        return gid != ::getegid() && ::getgrgid(gid) != nullptr;
+    });
+    if (other == candidates.end())
+        GTEST_SKIP() << "no group other than the test's own that it may give a file to";
+    ServiceConfig config = baseConfig();
+    config.socket.group = ::getgrgid(*other)->gr_name;
+    config.socket.mode = 0660;
+    start(config);
+    struct stat info {};
+    ASSERT_EQ(::lstat(socket_path_.c_str(), &info), 0);
+    EXPECT_EQ(info.st_gid, *other) << "group " << config.socket.group;
+    EXPECT_EQ(info.st_mode & 0777, 0660u);
+}
+
+TEST_F(ServiceTest, PeerNotInTheAllowListsIsRefusedWithTheReason)
+{
+    ServiceConfig config = baseConfig();
+    config.socket.allow_uids = {static_cast<uint32_t>(::geteuid()) + 1};
+    config.socket.allow_gids = {static_cast<uint32_t>(::getegid()) + 1};
+    launch(config);
+    for (int i = 0; i < 3; ++i) {
+        TestClient client(socket_path_);
+        client.sendJson({{"cmd", "hello"}});
+        const Json reply = client.readJson();
+        EXPECT_EQ(reply["ok"], false);
+        EXPECT_EQ(reply["error"]["code"], "not_allowed");
+        EXPECT_NE(reply["error"]["message"].get<std::string>().find(
+                      "uid " + std::to_string(::geteuid())),
+                  std::string::npos)
+            << reply.dump();
+        EXPECT_TRUE(client.waitForClose());
+    }
+}
+
+TEST_F(ServiceTest, PeerInAnAllowedGroupIsServed)
+{
+    ServiceConfig config = baseConfig();
+    config.socket.allow_uids = {static_cast<uint32_t>(::geteuid()) + 1};
+    config.socket.allow_gids = {static_cast<uint32_t>(::getegid())};
+    start(config);
+    TestClient client(socket_path_);
+    EXPECT_EQ(client.request({{"cmd", "hello"}})["ok"], true);
+    EXPECT_EQ(status(client)["clients"]["not_allowed"], 0);
+}
+
+TEST_F(ServiceTest, SilentClientIsToldAndDisconnectedAfterTheIdleTimeout)
+{
+    ServiceConfig config = baseConfig();
+    config.socket.idle_timeout_s = 1.0;
+    start(config);
+    TestClient busy(socket_path_);
+    TestClient subscriber(socket_path_);
+    ASSERT_EQ(subscriber.request({{"cmd", "subscribe"}, {"stream", "readings"}})["ok"], true);
+    TestClient silent(socket_path_); // connects and sends nothing
+    const auto connected = std::chrono::steady_clock::now();
+    // The busy client keeps talking, more often than the timeout.
+    std::atomic<bool> done{false};
+    std::thread talker([&] {
+        while (!done.load()) {
+            EXPECT_EQ(busy.request({{"cmd", "hello"}})["ok"], true);
+            std::this_thread::sleep_for(100ms);
+        }
+    });
+    const Json reply = silent.readJson();
+    EXPECT_GE(std::chrono::steady_clock::now() - connected, 1s);
+    EXPECT_EQ(reply["ok"], false);
+    EXPECT_EQ(reply["error"]["code"], "idle_timeout");
+    EXPECT_NE(reply["error"]["message"].get<std::string>().find("socket.idle_timeout_s"),
+              std::string::npos)
+        << reply.dump();
+    EXPECT_TRUE(silent.waitForClose());
+    done.store(true);
+    talker.join();
+    // A subscriber waits for events, which is not idleness.
+    EXPECT_EQ(subscriber.request({{"cmd", "hello"}})["ok"], true);
+    const Json clients = status(busy)["clients"];
+    EXPECT_EQ(clients["idle_closed"], 1) << clients.dump();
+    EXPECT_EQ(clients["connected"], 2) << clients.dump();
 }
 
 TEST_F(ServiceTest, BeforeTheFirstFrame)
@@ -616,6 +722,69 @@ TEST_F(ServiceTest, OversizedLineIsRefusedAndClosesOnlyThatConnection)
     EXPECT_EQ(other.request({{"cmd", "hello"}})["ok"], true);
     TestClient later(socket_path_);
     EXPECT_EQ(later.request({{"cmd", "hello"}})["ok"], true);
+}
+
+TEST_F(ServiceTest, MultiMegabyteLineWithoutNewlineIsRefusedAtTheDefaultLimit)
+{
+    start(); // socket.max_request_bytes at its default, 64 KiB
+    TestClient client(socket_path_);
+    // 8 MiB, no newline. The service stops reading at the limit and closes, so the send
+    // may fail part-way (EPIPE, ECONNRESET): what matters is the reply.
+    const std::string flood(8u << 20, '{');
+    try {
+        client.send(flood);
+    } catch (const std::runtime_error&) {
+    }
+    const Json reply = client.readJson();
+    EXPECT_EQ(reply["ok"], false);
+    EXPECT_EQ(reply["error"]["code"], "request_too_large");
+    EXPECT_NE(reply["error"]["message"].get<std::string>().find("65536"), std::string::npos)
+        << reply.dump();
+    EXPECT_TRUE(client.waitForClose());
+    TestClient next(socket_path_);
+    EXPECT_EQ(next.request({{"cmd", "hello"}})["ok"], true);
+}
+
+TEST_F(ServiceTest, TruncatedAndBinaryRequestsGetOneErrorPerLine)
+{
+    start();
+    {
+        // A request cut short: held until its newline comes, then answered.
+        TestClient client(socket_path_);
+        client.send(R"({"cmd":"hel)");
+        std::this_thread::sleep_for(50ms);
+        client.send(R"(lo","id":9})" "\n");
+        const Json reply = client.readJson();
+        EXPECT_EQ(reply["ok"], true);
+        EXPECT_EQ(reply["id"], 9);
+    }
+    {
+        // Cut short for good: the writer shuts its side; the half line is answered.
+        TestClient client(socket_path_);
+        client.send(R"({"cmd":"distance","max_ag)");
+        ASSERT_EQ(::shutdown(client.fd(), SHUT_WR), 0);
+        EXPECT_EQ(client.readJson()["error"]["code"], "bad_json");
+        EXPECT_TRUE(client.waitForClose());
+    }
+    {
+        // Binary noise, every byte value, cut into lines at its newlines: one reply per
+        // line, each an error, and the connection goes on.
+        TestClient client(socket_path_);
+        cv::RNG random(5);
+        std::string noise;
+        for (int i = 0; i < 20000; ++i)
+            noise.push_back(static_cast<char>(random.uniform(0, 256)));
+        noise += "\n";
+        const auto lines = static_cast<std::size_t>(std::count(noise.begin(), noise.end(), '\n'));
+        client.send(noise);
+        for (std::size_t i = 0; i < lines; ++i) {
+            const Json reply = client.readJson();
+            ASSERT_EQ(reply["ok"], false) << "line " << i;
+            const std::string code = reply["error"]["code"];
+            EXPECT_TRUE(code == "bad_json" || code == "bad_request") << code;
+        }
+        EXPECT_EQ(client.request({{"cmd", "hello"}, {"id", "after"}})["id"], "after");
+    }
 }
 
 TEST_F(ServiceTest, PeerThatHangsUpMidReplyDoesNotHurtTheService)

@@ -119,10 +119,11 @@ TEST_F(StereodCli, EachStartUpProblemHasItsExitCode)
     EXPECT_EQ(result.exit_code, 3) << result.err;
     EXPECT_NE(result.err.find("nearest.percentile"), std::string::npos) << result.err;
 
-    // 4: the calibration, missing, unreadable or not of the frames' size.
-    result = run({"--replay", replay_, "--socket", socket_});
+    // 4: a calibration given but missing, unreadable or not of the frames' size (none at
+    // all is the uncalibrated mode, tests/ctl/record_e2e_test.cpp).
+    result = run({"--replay", replay_, "--calib", dir_.file("missing.yaml"), "--socket", socket_});
     EXPECT_EQ(result.exit_code, 4) << result.err;
-    EXPECT_NE(result.err.find("calibration"), std::string::npos) << result.err;
+    EXPECT_NE(result.err.find("missing.yaml"), std::string::npos) << result.err;
     const std::string garbage = dir_.file("garbage.yaml");
     std::ofstream(garbage) << "stereod_calibration: 1\nkind: rectified\n";
     result = run({"--replay", replay_, "--calib", garbage, "--socket", socket_});
@@ -163,17 +164,7 @@ TEST_F(StereodCli, ServesAReplayAndStopsOnSigterm)
         std::ifstream file(dir_.file("stereod.log"));
         return std::string(std::istreambuf_iterator<char>(file), {});
     };
-    std::unique_ptr<TestClient> client;
-    ASSERT_TRUE(waitUntil([&] {
-        if (!service.running())
-            return true;
-        try {
-            client = std::make_unique<TestClient>(socket_);
-            return true;
-        } catch (const std::exception&) {
-            return false;
-        }
-    })) << log();
+    std::unique_ptr<TestClient> client = test::connectWhenListening(service, socket_);
     ASSERT_TRUE(client) << "stereod exited during start-up:\n" << log();
     Json reading;
     ASSERT_TRUE(waitUntil([&] {

@@ -1,0 +1,428 @@
+// `stereoctl record`: the service's raw pairs (the `raw` stream of docs/protocol.md) written
+// as a recording (replay/recording.hpp) that the replay source plays back.
+//
+// Two threads: this one reads the stream off the socket into a bounded pool of pair
+// buffers; a writer thread encodes and writes them with RecordingWriter. When every buffer
+// is full (the disk is slower than the cameras), the pair is read past and counted as
+// dropped: the socket is always drained, so the service never holds a backlog for us
+// (and its own backlog bound protects its worker anyway).
+
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <deque>
+#include <filesystem>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <system_error>
+#include <thread>
+#include <vector>
+
+#include <fmt/format.h>
+#include <opencv2/core.hpp>
+
+#include "ctl/client.hpp"
+#include "ctl/commands.hpp"
+#include "ctl/exit_codes.hpp"
+#include "ctl/payload.hpp"
+#include "ctl/signal_catcher.hpp"
+#include "replay/recording.hpp"
+
+namespace stereod {
+
+namespace {
+
+using json = nlohmann::ordered_json;
+namespace fs = std::filesystem;
+
+struct PairBuffer {
+    cv::Mat left;
+    cv::Mat right;
+    int64_t left_stamp_ns = 0;
+    int64_t right_stamp_ns = 0;
+};
+
+// Pair buffers travelling between the socket reader and the writer thread: a fixed set,
+// each either free or queued for writing.
+//
+// Thread-safe: every member function may be called from either thread.
+class PairQueue {
+public:
+    explicit PairQueue(std::size_t capacity) : buffers_(capacity)
+    {
+        for (std::size_t i = 0; i < capacity; ++i) {
+            free_.push_back(i);
+        }
+    }
+
+    // A free buffer for the reader to fill, or none when all are queued or being written.
+    std::optional<std::size_t> takeFree()
+    {
+        std::lock_guard lock(mutex_);
+        if (free_.empty()) {
+            return std::nullopt;
+        }
+        const std::size_t index = free_.back();
+        free_.pop_back();
+        return index;
+    }
+    // The reader could not fill it after all.
+    void giveBack(std::size_t index)
+    {
+        std::lock_guard lock(mutex_);
+        free_.push_back(index);
+    }
+    void push(std::size_t index)
+    {
+        {
+            std::lock_guard lock(mutex_);
+            ready_.push_back(index);
+        }
+        changed_.notify_all();
+    }
+    // The next buffer to write; none once close() was called and nothing is left.
+    std::optional<std::size_t> pop()
+    {
+        std::unique_lock lock(mutex_);
+        changed_.wait(lock, [&] { return !ready_.empty() || closed_; });
+        if (ready_.empty()) {
+            return std::nullopt;
+        }
+        const std::size_t index = ready_.front();
+        ready_.pop_front();
+        return index;
+    }
+    // The writer is done with it.
+    void release(std::size_t index) { giveBack(index); }
+    // No more pairs will come; pop() drains what is queued, then returns none.
+    void close()
+    {
+        {
+            std::lock_guard lock(mutex_);
+            closed_ = true;
+        }
+        changed_.notify_all();
+    }
+    std::size_t queued() const
+    {
+        std::lock_guard lock(mutex_);
+        return ready_.size();
+    }
+    std::size_t capacity() const noexcept { return buffers_.size(); }
+    // Owned by whoever took the index: the reader between takeFree() and push(), the
+    // writer between pop() and release().
+    PairBuffer& buffer(std::size_t index) { return buffers_[index]; }
+
+private:
+    std::vector<PairBuffer> buffers_;
+    mutable std::mutex mutex_;
+    std::condition_variable changed_;
+    std::vector<std::size_t> free_;   // guarded by mutex_
+    std::deque<std::size_t> ready_;   // guarded by mutex_
+    bool closed_ = false;             // guarded by mutex_
+};
+
+// The writer thread: writes queued pairs until the queue is closed and drained, or a write
+// fails (then it stops and keeps the error; the reader sees failed()).
+//
+// Thread contract: constructed and joined by the reader thread; written() and failed()
+// from any thread.
+class PairWriter {
+public:
+    PairWriter(RecordingWriter& writer, PairQueue& queue) : writer_(writer), queue_(queue)
+    {
+        thread_ = std::thread([this] { run(); });
+    }
+    // Closes the queue (pairs queued are still written) and waits for the thread.
+    ~PairWriter()
+    {
+        queue_.close();
+        join();
+    }
+    PairWriter(const PairWriter&) = delete;
+    PairWriter& operator=(const PairWriter&) = delete;
+
+    void join()
+    {
+        if (thread_.joinable()) {
+            thread_.join();
+        }
+    }
+    uint64_t written() const noexcept { return written_.load(std::memory_order_acquire); }
+    bool failed() const noexcept { return failed_.load(std::memory_order_acquire); }
+    // The failure, once failed() is true.
+    std::string error() const
+    {
+        std::lock_guard lock(error_mutex_);
+        return error_;
+    }
+
+private:
+    void run()
+    {
+        while (const std::optional<std::size_t> index = queue_.pop()) {
+            if (!failed()) {
+                const PairBuffer& pair = queue_.buffer(*index);
+                try {
+                    writer_.write(pair.left, pair.right, pair.left_stamp_ns, pair.right_stamp_ns);
+                    written_.fetch_add(1, std::memory_order_acq_rel);
+                } catch (const std::exception& e) {
+                    {
+                        std::lock_guard lock(error_mutex_);
+                        error_ = e.what();
+                    }
+                    failed_.store(true, std::memory_order_release);
+                }
+            }
+            queue_.release(*index);
+        }
+    }
+
+    RecordingWriter& writer_;
+    PairQueue& queue_;
+    std::thread thread_;
+    std::atomic<uint64_t> written_{0};
+    std::atomic<bool> failed_{false};
+    mutable std::mutex error_mutex_;
+    std::string error_;               // guarded by error_mutex_
+};
+
+// A new directory, or an existing empty one: a user's data is never overwritten.
+void checkOutputDirectory(const std::string& dir)
+{
+    std::error_code error;
+    const fs::file_status status = fs::symlink_status(dir, error);
+    if (error && error != std::errc::no_such_file_or_directory) {
+        throw UsageError("cannot check --out " + dir + ": " + error.message());
+    }
+    if (!fs::exists(status)) {
+        return;
+    }
+    if (!fs::is_directory(status)) {
+        throw UsageError("refusing --out " + dir + ": it exists and is not a directory");
+    }
+    if (!fs::is_empty(dir, error) || error) {
+        throw UsageError("refusing --out " + dir +
+                         ": the directory is not empty (a recording is never written over "
+                         "existing files; choose a new directory)");
+    }
+}
+
+// Why the recording ended.
+enum class Ending { Frames, Signal, ServiceGone, WriteFailed };
+
+const char* endingName(Ending ending)
+{
+    switch (ending) {
+    case Ending::Frames:
+        return "frames";
+    case Ending::Signal:
+        return "signal";
+    case Ending::ServiceGone:
+        return "service_gone";
+    case Ending::WriteFailed:
+        return "write_failed";
+    }
+    return "frames";
+}
+
+struct Counts {
+    uint64_t received = 0;         // pairs read whole off the socket into a buffer
+    uint64_t service_skipped = 0;  // the events' "skipped": pairs the service did not send us
+    uint64_t queue_dropped = 0;    // pairs read past because every buffer was full
+};
+
+// The progress line: on a terminal rewritten in place every second, else a line every
+// five seconds (a log).
+class Progress {
+public:
+    Progress() : terminal_(::isatty(STDERR_FILENO) == 1) {}
+
+    void update(const Counts& counts, uint64_t written, std::size_t queued, std::size_t capacity,
+                bool final_line)
+    {
+        const auto now = std::chrono::steady_clock::now();
+        const auto interval = terminal_ ? std::chrono::seconds(1) : std::chrono::seconds(5);
+        if (!final_line && now - last_ < interval) {
+            return;
+        }
+        last_ = now;
+        const std::string line = fmt::format(
+            "recording: {} pairs written, {} received, {} dropped ({} by the service, {} queue "
+            "full), queue {}/{}",
+            written, counts.received, counts.service_skipped + counts.queue_dropped,
+            counts.service_skipped, counts.queue_dropped, queued, capacity);
+        if (terminal_) {
+            fmt::print(stderr, "\r{}\033[K{}", line, final_line ? "\n" : "");
+        } else {
+            fmt::print(stderr, "{}\n", line);
+        }
+        std::fflush(stderr);
+    }
+
+private:
+    bool terminal_;
+    std::chrono::steady_clock::time_point last_{};
+};
+
+// Reads the two payloads of a raw event into `pair`; false (payloads read past) when the
+// event does not carry exactly raw_left and raw_right.
+bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair)
+{
+    const auto payloads = event.find("payloads");
+    if (payloads == event.end() || !payloads->is_array()) {
+        throw ClientError("a raw event from " + client.socketPath() + " has no payloads list", 0);
+    }
+    bool complete = true;
+    int sides = 0;
+    for (const json& header : *payloads) {
+        const Payload payload = parsePayload(header);
+        const bool left = payload.name == "raw_left";
+        const bool right = payload.name == "raw_right";
+        if (pair == nullptr || (!left && !right) || payload.format != "u8_gray") {
+            client.skipPayload(payload.bytes);
+            complete = complete && (left || right);
+            continue;
+        }
+        readImagePayload(client, payload, CV_8UC1, left ? pair->left : pair->right);
+        (left ? pair->left_stamp_ns : pair->right_stamp_ns) = payload.stamp_ns;
+        ++sides;
+    }
+    return pair != nullptr && complete && sides == 2;
+}
+
+// The calibration in force in the service, as file text; empty when it runs uncalibrated.
+std::string serviceCalibration(ProtocolClient& client)
+{
+    try {
+        const json reply = client.request({{"cmd", "calibration"}});
+        if (!reply.value("calibrated", false)) {
+            return {};
+        }
+        return reply.value("text", std::string());
+    } catch (const ServiceError& error) {
+        // A service older than the `calibration` request, or one whose calibration did not
+        // come from a file: record without it, and say so.
+        fmt::print(stderr, "stereoctl: recording without calibration.yaml: {}\n", error.what());
+        return {};
+    }
+}
+
+} // namespace
+
+int runRecord(const RecordOptions& options)
+{
+    if (options.queue_pairs == 0) {
+        throw UsageError("--queue must be at least 1 pair");
+    }
+    checkOutputDirectory(options.out_dir);
+    SignalCatcher signals;
+    ProtocolClient client(options.service.socket_path,
+                          std::chrono::milliseconds(options.service.timeout_ms));
+    client.setCancelFd(signals.fd());
+
+    const std::string calibration_text = serviceCalibration(client);
+    RecordingWriter writer(options.out_dir);
+    if (!calibration_text.empty()) {
+        writer.writeCalibrationText(calibration_text);
+    } else {
+        fmt::print(stderr, "stereoctl: the service runs uncalibrated: the recording has no "
+                           "calibration.yaml\n");
+    }
+
+    PairQueue queue(options.queue_pairs);
+    PairWriter pair_writer(writer, queue);
+    Counts counts;
+    Progress progress;
+    Ending ending = Ending::Frames;
+    std::string gone_reason;
+
+    try {
+        client.request({{"cmd", "subscribe"}, {"stream", "raw"}});
+        // Pairs come as fast as the cameras deliver, or not at all while the source is
+        // down: only the service going away, a signal or the disk ends the wait.
+        client.setTimeout(ProtocolClient::kWaitForever);
+        while (!options.frames || counts.received < *options.frames) {
+            if (pair_writer.failed()) {
+                ending = Ending::WriteFailed;
+                break;
+            }
+            if (signals.pending()) {
+                ending = Ending::Signal;
+                break;
+            }
+            const json event = client.readJson();
+            if (event.value("event", std::string()) != "raw") {
+                client.skipPayload(payloadBytes(event));
+                continue;
+            }
+            counts.service_skipped += event.value("skipped", uint64_t{0});
+            const std::optional<std::size_t> slot = queue.takeFree();
+            if (!slot) {
+                readRawPair(client, event, nullptr);
+                ++counts.queue_dropped;
+            } else if (readRawPair(client, event, &queue.buffer(*slot))) {
+                queue.push(*slot);
+                ++counts.received;
+            } else {
+                queue.giveBack(*slot);
+            }
+            progress.update(counts, pair_writer.written(), queue.queued(), queue.capacity(),
+                            false);
+        }
+    } catch (const ClientCancelled&) {
+        ending = Ending::Signal;
+    } catch (const ClientError& error) {
+        ending = Ending::ServiceGone;
+        gone_reason = error.what();
+    }
+    // Whatever ended it, what was received is written out and the recording closed.
+    queue.close();
+    pair_writer.join();
+    if (pair_writer.failed()) {
+        ending = Ending::WriteFailed;
+    }
+    progress.update(counts, pair_writer.written(), 0, queue.capacity(), true);
+
+    const uint64_t written = pair_writer.written();
+    const uint64_t dropped = counts.service_skipped + counts.queue_dropped;
+    if (options.json) {
+        json summary = {{"dir", options.out_dir},
+                        {"pairs", written},
+                        {"dropped", dropped},
+                        {"service_skipped", counts.service_skipped},
+                        {"queue_dropped", counts.queue_dropped},
+                        {"calibration", !calibration_text.empty()},
+                        {"ended", endingName(ending)}};
+        if (ending == Ending::WriteFailed) {
+            summary["error"] = pair_writer.error();
+        } else if (ending == Ending::ServiceGone) {
+            summary["error"] = gone_reason;
+        }
+        fmt::print("{}\n", summary.dump());
+    } else {
+        fmt::print("recorded {} pairs to {} ({} dropped: {} skipped by the service, {} with the "
+                   "queue full)\n",
+                   written, options.out_dir, dropped, counts.service_skipped,
+                   counts.queue_dropped);
+    }
+    switch (ending) {
+    case Ending::WriteFailed:
+        fmt::print(stderr, "stereoctl: recording stopped: {}\n", pair_writer.error());
+        return kExitUsage;
+    case Ending::ServiceGone:
+        fmt::print(stderr, "stereoctl: recording ended, the service went away: {}\n",
+                   gone_reason);
+        return kExitUnreachable;
+    case Ending::Frames:
+    case Ending::Signal:
+        break;
+    }
+    return kExitOk;
+}
+
+} // namespace stereod

@@ -1,0 +1,48 @@
+#include "ctl/signal_catcher.hpp"
+
+#include <poll.h>
+#include <pthread.h>
+#include <sys/signalfd.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <stdexcept>
+#include <system_error>
+
+namespace stereod {
+
+SignalCatcher::SignalCatcher()
+{
+    sigemptyset(&signals_);
+    sigaddset(&signals_, SIGINT);
+    sigaddset(&signals_, SIGTERM);
+    if (pthread_sigmask(SIG_BLOCK, &signals_, &previous_) != 0) {
+        throw std::runtime_error("cannot block SIGINT and SIGTERM");
+    }
+    fd_ = ::signalfd(-1, &signals_, SFD_CLOEXEC | SFD_NONBLOCK);
+    if (fd_ < 0) {
+        const int error_number = errno;
+        pthread_sigmask(SIG_SETMASK, &previous_, nullptr);
+        throw std::runtime_error("cannot create a signalfd: " +
+                                 std::system_category().message(error_number));
+    }
+}
+
+SignalCatcher::~SignalCatcher()
+{
+    // A signal that arrived is consumed first, so that unblocking does not deliver it
+    // again and kill the process after it chose to end cleanly.
+    signalfd_siginfo info{};
+    while (::read(fd_, &info, sizeof(info)) == static_cast<ssize_t>(sizeof(info))) {
+    }
+    ::close(fd_);
+    pthread_sigmask(SIG_SETMASK, &previous_, nullptr);
+}
+
+bool SignalCatcher::pending() const
+{
+    pollfd p = {fd_, POLLIN, 0};
+    return ::poll(&p, 1, 0) > 0;
+}
+
+} // namespace stereod

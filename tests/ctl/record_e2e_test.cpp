@@ -1,0 +1,380 @@
+// Raw frames from the service, its uncalibrated mode, and `stereoctl record`, as separate
+// processes: stereod replays a recording made from Middlebury tsukuba (each pair a
+// different brightness, so that pairs can be told apart by their pixels, and stamps that
+// identify them), and the tests check what comes out against what went in.
+
+#include <signal.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "capture/frame_source.hpp"
+#include "ctl/client.hpp"
+#include "pipeline/calibration.hpp"
+#include "replay/recording.hpp"
+#include "replay/replay_source.hpp"
+#include "tests/ctl/process.hpp"
+
+namespace stereod {
+namespace {
+
+using namespace std::chrono_literals;
+using Json = nlohmann::ordered_json;
+using test::ChildProcess;
+using test::ProcessResult;
+using test::runProcess;
+using test::stereoctlPath;
+using test::stereodPath;
+namespace fs = std::filesystem;
+
+const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba";
+const cv::Size kSize(384, 288);
+constexpr double kFocalPx = 615.0;
+constexpr double kBaselineM = 0.013;
+constexpr int kSourcePairs = 6;
+// 20 pairs per second, each right frame a few microseconds after its left one: stamps no
+// clock of this machine would give, so equal stamps mean the recorded ones went through.
+constexpr int64_t kFirstStampNs = 7'000'000'123;
+constexpr int64_t kPeriodNs = 50'000'000;
+constexpr auto kStartLimit = 60s;
+
+struct SourcePair {
+    cv::Mat left, right;
+    int64_t left_stamp_ns = 0, right_stamp_ns = 0;
+};
+
+bool sameImage(const cv::Mat& a, const cv::Mat& b)
+{
+    return a.size() == b.size() && a.type() == b.type() && cv::norm(a, b, cv::NORM_INF) == 0.0;
+}
+
+class RecordE2e : public ::testing::Test {
+protected:
+    void SetUp() override
+    {
+        const cv::Mat left = cv::imread(kTsukuba + "/im3.png", cv::IMREAD_GRAYSCALE);
+        const cv::Mat right = cv::imread(kTsukuba + "/im4.png", cv::IMREAD_GRAYSCALE);
+        ASSERT_FALSE(left.empty());
+        ASSERT_FALSE(right.empty());
+        calibration_ = dir_.file("calib.yaml");
+        saveCalibration(makeRectifiedCalibration(kSize, kFocalPx, kBaselineM), calibration_);
+        for (int i = 0; i < kSourcePairs; ++i) {
+            SourcePair pair;
+            // Darker by 3 grey levels per pair: still the scene, but every pair its own.
+            left.convertTo(pair.left, CV_8U, 1.0, -3.0 * i);
+            right.convertTo(pair.right, CV_8U, 1.0, -3.0 * i);
+            pair.left_stamp_ns = kFirstStampNs + i * kPeriodNs;
+            pair.right_stamp_ns = pair.left_stamp_ns + 1000 + i;
+            source_.push_back(pair);
+        }
+    }
+
+    void TearDown() override
+    {
+        if (service_ && service_->running()) {
+            service_->sendSignal(SIGTERM);
+            service_->waitFor(10s);
+        }
+        if (HasFailure()) {
+            std::cerr << "--- stereod log ---\n" << readFile(log_) << "------------------\n";
+        }
+    }
+
+    static std::string readFile(const std::string& path)
+    {
+        std::ifstream in(path, std::ios::binary);
+        std::stringstream text;
+        text << in.rdbuf();
+        return text.str();
+    }
+
+    // Writes the source recording (with calibration.yaml when `calibrated`) and starts
+    // stereod on it; returns once it answers `hello`.
+    void startService(bool calibrated)
+    {
+        recording_ = dir_.file("src");
+        {
+            RecordingWriter writer(recording_, calibrated ? calibration_ : std::string());
+            for (const SourcePair& pair : source_)
+                writer.write(pair.left, pair.right, pair.left_stamp_ns, pair.right_stamp_ns);
+        }
+        socket_ = dir_.file("s.sock");
+        log_ = dir_.file("stereod.log");
+        service_ = std::make_unique<ChildProcess>(
+            std::vector<std::string>{stereodPath(), "--replay", recording_, "--socket", socket_},
+            log_);
+        const auto deadline = std::chrono::steady_clock::now() + kStartLimit;
+        std::string problem;
+        while (std::chrono::steady_clock::now() < deadline) {
+            ASSERT_TRUE(service_->running()) << "stereod exited during start-up";
+            try {
+                ProtocolClient client(socket_, 2000ms);
+                if (client.request({{"cmd", "hello"}}).value("ok", false))
+                    return;
+            } catch (const std::exception& e) {
+                problem = e.what();
+            }
+            std::this_thread::sleep_for(20ms);
+        }
+        FAIL() << "stereod never answered: " << problem;
+    }
+
+    // The source pair with these stamps, or nullptr.
+    const SourcePair* pairWithStamps(int64_t left_stamp_ns, int64_t right_stamp_ns) const
+    {
+        for (const SourcePair& pair : source_) {
+            if (pair.left_stamp_ns == left_stamp_ns && pair.right_stamp_ns == right_stamp_ns)
+                return &pair;
+        }
+        return nullptr;
+    }
+
+    // Reads a u8_gray payload announced by `descriptor`.
+    static cv::Mat readGray(ProtocolClient& client, const Json& descriptor)
+    {
+        EXPECT_EQ(descriptor.value("format", ""), "u8_gray");
+        cv::Mat image(descriptor.value("height", 0), descriptor.value("width", 0), CV_8UC1);
+        EXPECT_EQ(descriptor.value("bytes", std::size_t{0}), image.total());
+        client.readPayload(image.data, image.total());
+        return image;
+    }
+
+    // Every recorded pair is a source pair: same stamps, same pixels.
+    void expectSourcePairs(const std::string& dir, std::size_t expected_at_least)
+    {
+        const Recording recording = openRecording(dir, 10.0);
+        EXPECT_EQ(recording.bad_rows, 0u);
+        EXPECT_GE(recording.entries.size(), expected_at_least);
+        for (const RecordingEntry& entry : recording.entries) {
+            const SourcePair* source = pairWithStamps(entry.left_stamp_ns, entry.right_stamp_ns);
+            ASSERT_NE(source, nullptr) << "row " << entry.index << ": stamps "
+                                       << entry.left_stamp_ns << "/" << entry.right_stamp_ns
+                                       << " are no recorded pair's";
+            EXPECT_TRUE(sameImage(cv::imread(entry.left_path, cv::IMREAD_UNCHANGED), source->left))
+                << entry.left_path;
+            EXPECT_TRUE(
+                sameImage(cv::imread(entry.right_path, cv::IMREAD_UNCHANGED), source->right))
+                << entry.right_path;
+        }
+    }
+
+    ProcessResult ctl(std::vector<std::string> args,
+                      const std::vector<std::string>& env = {}) const
+    {
+        args.insert(args.begin(), stereoctlPath());
+        args.push_back("--socket");
+        args.push_back(socket_);
+        return runProcess(args, env);
+    }
+
+    test::TempDir dir_;
+    std::vector<SourcePair> source_;
+    std::string calibration_, recording_, socket_, log_;
+    std::unique_ptr<ChildProcess> service_;
+};
+
+TEST_F(RecordE2e, RawSnapshotIsTheRecordedPairAsCaptured)
+{
+    startService(true);
+    ProtocolClient client(socket_, 30000ms);
+    Json hello = client.request({{"cmd", "hello"}});
+    const auto items = hello["snapshot_items"].get<std::vector<std::string>>();
+    EXPECT_NE(std::find(items.begin(), items.end(), "raw_left"), items.end());
+    EXPECT_NE(std::find(items.begin(), items.end(), "raw_right"), items.end());
+    const auto streams = hello["streams"].get<std::vector<std::string>>();
+    EXPECT_NE(std::find(streams.begin(), streams.end(), "raw"), streams.end());
+    EXPECT_EQ(hello["calibrated"], true);
+
+    // Twice: the first waits for the next pair (raw frames are copied only once asked
+    // for), the second is answered from the newest result at once.
+    for (int round = 0; round < 2; ++round) {
+        Json reply = client.request(
+            {{"cmd", "snapshot"}, {"items", Json::array({"raw_left", "raw_right"})}});
+        ASSERT_EQ(reply["ok"], true) << reply.dump();
+        ASSERT_EQ(reply["payloads"].size(), 2u);
+        Json left_descriptor = reply["payloads"][0];
+        Json right_descriptor = reply["payloads"][1];
+        EXPECT_EQ(left_descriptor["name"], "raw_left");
+        EXPECT_EQ(right_descriptor["name"], "raw_right");
+        const cv::Mat left = readGray(client, left_descriptor);
+        const cv::Mat right = readGray(client, right_descriptor);
+        const SourcePair* source = pairWithStamps(left_descriptor.value("stamp_ns", int64_t{0}),
+                                                  right_descriptor.value("stamp_ns", int64_t{0}));
+        ASSERT_NE(source, nullptr) << reply.dump();
+        EXPECT_TRUE(sameImage(left, source->left));
+        EXPECT_TRUE(sameImage(right, source->right));
+    }
+}
+
+TEST_F(RecordE2e, RawStreamCarriesTheRecordedStampsAndPixels)
+{
+    startService(true);
+    ProtocolClient client(socket_, 30000ms);
+    Json reply = client.request({{"cmd", "subscribe"}, {"stream", "raw"}});
+    ASSERT_EQ(reply["ok"], true) << reply.dump();
+    EXPECT_EQ(reply["stream"], "raw");
+    std::map<int64_t, int> seen;
+    for (int event_count = 0; event_count < 2 * kSourcePairs; ++event_count) {
+        Json event = client.readJson();
+        ASSERT_EQ(event["event"], "raw") << event.dump();
+        ASSERT_EQ(event["payloads"].size(), 2u);
+        const int64_t left_stamp = event.value("left_stamp_ns", int64_t{0});
+        const int64_t right_stamp = event.value("right_stamp_ns", int64_t{0});
+        const cv::Mat left = readGray(client, event["payloads"][0]);
+        const cv::Mat right = readGray(client, event["payloads"][1]);
+        EXPECT_EQ(event["payloads"][0].value("stamp_ns", int64_t{0}), left_stamp);
+        EXPECT_EQ(event["payloads"][1].value("stamp_ns", int64_t{0}), right_stamp);
+        const SourcePair* source = pairWithStamps(left_stamp, right_stamp);
+        ASSERT_NE(source, nullptr) << event.dump();
+        EXPECT_TRUE(sameImage(left, source->left));
+        EXPECT_TRUE(sameImage(right, source->right));
+        ++seen[left_stamp];
+    }
+    // Two loops of a six-pair recording: most pairs come by (a busy machine may skip some).
+    EXPECT_GE(seen.size(), static_cast<std::size_t>(kSourcePairs / 2));
+}
+
+TEST_F(RecordE2e, UncalibratedServiceServesRawFramesAndNoDistance)
+{
+    startService(false);
+    ProtocolClient client(socket_, 30000ms);
+    EXPECT_EQ(client.request({{"cmd", "hello"}})["calibrated"], false);
+
+    Json reading = client.request({{"cmd", "distance"}})["reading"];
+    EXPECT_EQ(reading["valid"], false);
+    EXPECT_EQ(reading["reason"]["code"], "uncalibrated") << reading.dump();
+
+    Json status = client.request({{"cmd", "status"}})["status"];
+    EXPECT_EQ(status["state"], "uncalibrated") << status.dump();
+    EXPECT_EQ(status["calibration"]["kind"], "none");
+
+    Json calibration = client.request({{"cmd", "calibration"}});
+    EXPECT_EQ(calibration["ok"], true);
+    EXPECT_EQ(calibration["calibrated"], false);
+
+    Json snapshot = client.request({{"cmd", "snapshot"}, {"items", Json::array({"raw_left"})}});
+    ASSERT_EQ(snapshot["ok"], true) << snapshot.dump();
+    Json descriptor = snapshot["payloads"][0];
+    const cv::Mat left = readGray(client, descriptor);
+    bool matched = false;
+    for (const SourcePair& pair : source_)
+        matched = matched || (pair.left_stamp_ns == descriptor.value("stamp_ns", int64_t{0}) &&
+                              sameImage(left, pair.left));
+    EXPECT_TRUE(matched) << snapshot.dump();
+
+    // The command line: exit 2 (the service is not producing distances) and the reason.
+    const ProcessResult distance = ctl({"distance"});
+    EXPECT_EQ(distance.exit_code, 2) << distance.out << distance.err;
+    EXPECT_NE(distance.out.find("calibration"), std::string::npos) << distance.out;
+}
+
+TEST_F(RecordE2e, RecordingReplaysAsTheSamePairs)
+{
+    startService(true);
+    const std::string out = dir_.file("rec");
+    const ProcessResult recorded = ctl({"record", "--out", out, "--frames", "8", "--json"});
+    ASSERT_EQ(recorded.exit_code, 0) << recorded.out << recorded.err;
+    const Json summary = Json::parse(recorded.out);
+    EXPECT_EQ(summary["pairs"], 8);
+    EXPECT_EQ(summary["ended"], "frames");
+    EXPECT_EQ(summary["calibration"], true);
+    EXPECT_NE(recorded.err.find("recording: "), std::string::npos) << recorded.err;
+
+    expectSourcePairs(out, 8);
+    // The calibration in force, as its file says it.
+    EXPECT_EQ(readFile(out + "/calibration.yaml"), readFile(calibration_));
+    EXPECT_NO_THROW(loadCalibration(out + "/calibration.yaml"));
+
+    // Through the replay source, as stereod would play it: the same pairs, in order.
+    const Recording recording = openRecording(out, 10.0);
+    ReplayOptions options;
+    options.path = out;
+    options.pacing = ReplayOptions::Pacing::Lockstep;
+    options.loop = false;
+    ReplaySource replay(options);
+    PairRing ring(4);
+    ASSERT_EQ(replay.start(ring), 0) << replay.status().last_error;
+    for (const RecordingEntry& entry : recording.entries) {
+        std::optional<StereoPair> pair = ring.pop();
+        ASSERT_TRUE(pair && pair->left && pair->right);
+        EXPECT_EQ(pair->left->source_stamp_ns, entry.left_stamp_ns);
+        EXPECT_EQ(pair->right->source_stamp_ns, entry.right_stamp_ns);
+        const SourcePair* source = pairWithStamps(entry.left_stamp_ns, entry.right_stamp_ns);
+        ASSERT_NE(source, nullptr);
+        EXPECT_TRUE(sameImage(pair->left->image, source->left));
+        EXPECT_TRUE(sameImage(pair->right->image, source->right));
+    }
+    replay.stop();
+
+    // Never over a user's data.
+    const ProcessResult again = ctl({"record", "--out", out, "--frames", "1"});
+    EXPECT_EQ(again.exit_code, 2) << again.out << again.err;
+    EXPECT_NE(again.err.find("not empty"), std::string::npos) << again.err;
+}
+
+TEST_F(RecordE2e, KilledRecorderLeavesARecordingThatReplays)
+{
+    startService(true);
+    const std::string out = dir_.file("killed");
+    ChildProcess recorder({stereoctlPath(), "record", "--out", out, "--socket", socket_},
+                          dir_.file("record.log"));
+    // Until a few rows are there, then kill -9 in the middle of whatever it does.
+    const auto deadline = std::chrono::steady_clock::now() + 60s;
+    std::size_t rows = 0;
+    while (std::chrono::steady_clock::now() < deadline && rows < 4) {
+        const std::string csv = readFile(out + "/frames.csv");
+        rows = static_cast<std::size_t>(std::count(csv.begin(), csv.end(), '\n'));
+        rows = rows > 0 ? rows - 1 : 0;
+        std::this_thread::sleep_for(5ms);
+    }
+    ASSERT_GE(rows, 4u) << readFile(dir_.file("record.log"));
+    recorder.sendSignal(SIGKILL);
+    ASSERT_TRUE(recorder.waitFor(10s));
+
+    // Every row's images are complete; at most the pair in flight has no row.
+    expectSourcePairs(out, 4);
+    const Recording recording = openRecording(out, 10.0);
+    std::size_t left_files = 0;
+    for (const auto& file : fs::directory_iterator(out + "/left"))
+        left_files += file.path().extension() == ".png" ? 1 : 0;
+    EXPECT_LE(left_files, recording.entries.size() + 1);
+}
+
+TEST_F(RecordE2e, FullDiskStopsTheRecordingAndNotTheService)
+{
+    startService(true);
+    const std::string out = dir_.file("full");
+    // Room for the header, the calibration and a few pairs (each about 2 x 90 kB of PNG).
+    const ProcessResult recorded =
+        ctl({"record", "--out", out, "--json"},
+            {"LD_PRELOAD=" STEREOD_DISK_FULL_PRELOAD, "STEREOD_TEST_FULL_DIR=" + out,
+             "STEREOD_TEST_FULL_BYTES=600000", "ASAN_OPTIONS=verify_asan_link_order=0"});
+    ASSERT_EQ(recorded.exit_code, 2) << recorded.out << recorded.err;
+    EXPECT_NE(recorded.err.find("No space left on device"), std::string::npos) << recorded.err;
+    EXPECT_NE(recorded.err.find(out + "/"), std::string::npos) << recorded.err;
+    const Json summary = Json::parse(recorded.out);
+    EXPECT_EQ(summary["ended"], "write_failed");
+
+    // What was written before the disk filled up is a recording.
+    expectSourcePairs(out, 1);
+
+    // The service never noticed.
+    ProtocolClient client(socket_, 30000ms);
+    Json reading = client.request({{"cmd", "distance"}})["reading"];
+    EXPECT_EQ(reading["valid"], true) << reading.dump();
+    EXPECT_TRUE(service_->running());
+}
+
+} // namespace
+} // namespace stereod

@@ -1,0 +1,332 @@
+// stereod on cameras, as a separate process: the fake V4L2 device (tests/fake_v4l2) is
+// preloaded into the unchanged stereod and serves Middlebury tsukuba as two cameras (GREY,
+// YUYV, MJPEG) or one side-by-side camera. The distance equals the offline reading of the
+// same images; `status` shows the cameras and the pairing skew; a camera unplugged under
+// the running service turns readings into source_down with the reason while the service
+// keeps answering, and depth comes back after the replug.
+
+#include <fcntl.h>
+#include <signal.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "ctl/client.hpp"
+#include "pipeline/calibration.hpp"
+#include "tests/ctl/process.hpp"
+#include "tests/fake_v4l2/fake_v4l2.hpp"
+
+namespace stereod {
+namespace {
+
+using namespace std::chrono_literals;
+using Json = nlohmann::ordered_json;
+using test::ChildProcess;
+using test::ProcessResult;
+using test::runProcess;
+
+const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba";
+// The rig of tests/ctl/e2e_test.cpp: tsukuba's disparities are depths of 0.5 to 1.6 m.
+constexpr double kFocalPx = 615.0;
+constexpr double kBaselineM = 0.013;
+constexpr const char* kLeft = "/dev/video-e2e-left";
+constexpr const char* kRight = "/dev/video-e2e-right";
+constexpr const char* kSideBySide = "/dev/video-e2e-sbs";
+// Liveness bounds, generous for sanitizer builds: reaching them means "never happened".
+constexpr auto kStartLimit = 60s;
+constexpr auto kEventLimit = 30s;
+
+class StereodCamerasE2e : public ::testing::Test {
+protected:
+    void SetUp() override
+    {
+        left_ = dir_.file("left.png");
+        right_ = dir_.file("right.png");
+        std::filesystem::copy_file(kTsukuba + "/im3.png", left_);
+        std::filesystem::copy_file(kTsukuba + "/im4.png", right_);
+        const cv::Mat left = cv::imread(left_, cv::IMREAD_GRAYSCALE);
+        const cv::Mat right = cv::imread(right_, cv::IMREAD_GRAYSCALE);
+        ASSERT_FALSE(left.empty());
+        size_ = left.size();
+        cv::Mat whole;
+        cv::hconcat(left, right, whole);
+        ASSERT_TRUE(cv::imwrite(dir_.file("sbs.png"), whole));
+        calibration_ = dir_.file("calib.yaml");
+        saveCalibration(makeRectifiedCalibration(size_, kFocalPx, kBaselineM), calibration_);
+        socket_ = dir_.file("s.sock");
+        log_ = dir_.file("stereod.log");
+        fifo_ = dir_.file("fake.fifo");
+    }
+
+    void TearDown() override
+    {
+        if (service_ && service_->running()) {
+            service_->sendSignal(SIGTERM);
+            service_->waitFor(10s);
+        }
+        if (HasFailure())
+            std::cerr << "--- stereod log ---\n" << serviceLog() << "------------------\n";
+    }
+
+    std::string sizeText() const
+    {
+        return std::to_string(size_.width) + "x" + std::to_string(size_.height);
+    }
+
+    std::string sideBySideSizeText() const
+    {
+        return std::to_string(2 * size_.width) + "x" + std::to_string(size_.height);
+    }
+
+    // Describes the fake devices and starts stereod on them with `source_yaml` (the
+    // `source:` section).
+    void startService(const std::string& devices_yaml, const std::string& source_yaml)
+    {
+        const std::string description = dir_.file("devices.yaml");
+        std::ofstream(description) << "control: " << fifo_ << "\nseed: 3\ndevices:\n"
+                                   << devices_yaml;
+        const std::string config = dir_.file("stereod.yaml");
+        std::ofstream(config) << source_yaml << "calibration: " << calibration_
+                              << "\nsocket:\n  path: " << socket_ << "\n";
+
+        // The child gets the fake preloaded; this process must not (it would serve the
+        // same devices and read the same control FIFO), so the environment is restored
+        // right after the start.
+        std::vector<std::pair<std::string, std::optional<std::string>>> saved;
+        for (const std::string& entry :
+             fake_v4l2::childEnvironment(STEREOD_FAKE_V4L2_LIBRARY, description)) {
+            const std::string name = entry.substr(0, entry.find('='));
+            const char* old = std::getenv(name.c_str());
+            saved.emplace_back(name, old != nullptr ? std::optional<std::string>(old)
+                                                    : std::nullopt);
+            ::setenv(name.c_str(), entry.substr(name.size() + 1).c_str(), 1);
+        }
+        service_ = std::make_unique<ChildProcess>(
+            std::vector<std::string>{test::stereodPath(), "--config", config}, log_);
+        for (const auto& [name, value] : saved) {
+            if (value)
+                ::setenv(name.c_str(), value->c_str(), 1);
+            else
+                ::unsetenv(name.c_str());
+        }
+    }
+
+    static std::string cameraDevices(const std::string& fourcc)
+    {
+        std::ostringstream out;
+        for (const char* path : {kLeft, kRight}) {
+            out << "  - path: " << path << "\n"
+                << "    images: " << (path == kLeft ? "LEFT" : "RIGHT") << "\n"
+                << "    fps: [15]\n"
+                << "    jitter_ms: 0.5\n"
+                << "    formats:\n      - { fourcc: " << fourcc << ", sizes: [SIZE] }\n";
+        }
+        return out.str();
+    }
+
+    std::string withPaths(std::string yaml) const
+    {
+        const auto replace = [&](const std::string& from, const std::string& to) {
+            for (std::size_t at = yaml.find(from); at != std::string::npos;
+                 at = yaml.find(from, at + to.size()))
+                yaml.replace(at, from.size(), to);
+        };
+        replace("LEFT", left_);
+        replace("RIGHT", right_);
+        replace("SBSIZE", sideBySideSizeText());
+        replace("SIZE", sizeText());
+        return yaml;
+    }
+
+    std::string cameraSource(const std::string& format) const
+    {
+        return "source:\n  type: v4l2\n  max_skew_ms: 5\n  cameras:\n    left: " +
+               std::string(kLeft) + "\n    right: " + kRight + "\n    format: " + format +
+               "\n    width: " + std::to_string(size_.width) +
+               "\n    height: " + std::to_string(size_.height) + "\n    fps: 15\n";
+    }
+
+    std::string serviceLog() const
+    {
+        std::ifstream in(log_);
+        std::stringstream text;
+        text << in.rdbuf();
+        return text.str();
+    }
+
+    Json request(const Json& request) const
+    {
+        ProtocolClient client(socket_, 5000ms);
+        return client.request(request);
+    }
+
+    // The reading of `distance` once it satisfies `done`, or fails the test.
+    template <typename Done> Json waitForReading(Done done, const char* what)
+    {
+        const auto deadline = std::chrono::steady_clock::now() + kStartLimit;
+        std::string last;
+        while (std::chrono::steady_clock::now() < deadline) {
+            if (!service_->running()) {
+                ADD_FAILURE() << "stereod exited:\n" << serviceLog();
+                return Json();
+            }
+            try {
+                Json reading = request({{"cmd", "distance"}})["reading"];
+                if (done(reading))
+                    return reading;
+                last = reading.dump();
+            } catch (const std::exception& e) {
+                last = e.what();
+            }
+            std::this_thread::sleep_for(20ms);
+        }
+        ADD_FAILURE() << "never " << what << "; last: " << last;
+        return Json();
+    }
+
+    Json waitForDistance()
+    {
+        return waitForReading([](Json& r) { return r.value("valid", false); },
+                              "a valid distance");
+    }
+
+    // The offline reading of the same pair through `stereoctl depth`.
+    double offlineDistance() const
+    {
+        const ProcessResult offline = runProcess(
+            {test::stereoctlPath(), "depth", left_, right_, "--calib", calibration_, "--json"});
+        EXPECT_EQ(offline.exit_code, 0) << offline.err;
+        return Json::parse(offline.out)["reading"]["distance_m"].get<double>();
+    }
+
+    // Sends a command to the fake inside stereod through its control FIFO.
+    void fakeCommand(const std::string& line) const
+    {
+        const auto deadline = std::chrono::steady_clock::now() + kEventLimit;
+        int fd = -1;
+        while ((fd = ::open(fifo_.c_str(), O_WRONLY | O_NONBLOCK | O_CLOEXEC)) < 0 &&
+               std::chrono::steady_clock::now() < deadline)
+            std::this_thread::sleep_for(10ms); // ENXIO until the fake reads the FIFO
+        ASSERT_GE(fd, 0) << "cannot open the fake's control FIFO " << fifo_;
+        const std::string text = line + "\n";
+        EXPECT_EQ(::write(fd, text.data(), text.size()), static_cast<ssize_t>(text.size()));
+        ::close(fd);
+    }
+
+    test::TempDir dir_;
+    std::string left_, right_, calibration_, socket_, log_, fifo_;
+    cv::Size size_;
+    std::unique_ptr<ChildProcess> service_;
+};
+
+// Each pixel format, end to end to the distance: equal to the offline reading of the
+// same images (MJPEG within its compression loss).
+TEST_F(StereodCamerasE2e, EachPixelFormatGivesTheOfflineDistance)
+{
+    const double offline_m = offlineDistance();
+    const struct {
+        const char* fourcc;
+        const char* format;
+        double tolerance_m;
+    } cases[] = {{"GREY", "grey", 0.0015}, {"YUYV", "yuyv", 0.0015}, {"MJPG", "mjpeg", 0.02}};
+    for (const auto& c : cases) {
+        SCOPED_TRACE(c.format);
+        startService(withPaths(cameraDevices(c.fourcc)), cameraSource(c.format));
+        Json reading = waitForDistance();
+        ASSERT_TRUE(reading.is_object());
+        EXPECT_NEAR(reading["distance_m"].get<double>(), offline_m, c.tolerance_m);
+
+        Json status = request({{"cmd", "status"}})["status"];
+        Json source = status["source"];
+        EXPECT_EQ(source["kind"], "v4l2");
+        EXPECT_EQ(source["state"], "running");
+        ASSERT_EQ(source["cameras"].size(), 2u);
+        EXPECT_EQ(source["cameras"][0]["name"], "left");
+        EXPECT_EQ(source["cameras"][1]["state"], "running");
+        EXPECT_GT(source["pairs"].get<uint64_t>(), 0u);
+        EXPECT_LE(source["skew_ms"]["max"].get<double>(), 5.0);
+        EXPECT_FALSE(source["clock_offset"]["detected"].get<bool>());
+
+        // Only that it ends: the clean exit status on SIGTERM is checked by
+        // tests/ctl/e2e_test.cpp; here the preloaded fake's own threads may take the signal.
+        service_->sendSignal(SIGTERM);
+        ASSERT_TRUE(service_->waitFor(10s).has_value()) << serviceLog();
+        service_.reset();
+    }
+}
+
+TEST_F(StereodCamerasE2e, SideBySideCameraGivesTheOfflineDistance)
+{
+    const double offline_m = offlineDistance();
+    startService(withPaths("  - path: " + std::string(kSideBySide) +
+                           "\n    images: " + dir_.file("sbs.png") +
+                           "\n    fps: [15]\n    formats:\n      - { fourcc: YUYV, sizes: "
+                           "[SBSIZE] }\n"),
+                 "source:\n  type: side_by_side\n  cameras:\n    device: " +
+                     std::string(kSideBySide) + "\n    width: " +
+                     std::to_string(2 * size_.width) + "\n    height: " +
+                     std::to_string(size_.height) + "\n    fps: 15\n");
+    Json reading = waitForDistance();
+    ASSERT_TRUE(reading.is_object());
+    EXPECT_NEAR(reading["distance_m"].get<double>(), offline_m, 0.0015);
+    Json source = request({{"cmd", "status"}})["status"]["source"];
+    EXPECT_EQ(source["kind"], "side-by-side");
+    EXPECT_EQ(source["state"], "running");
+}
+
+// A camera unplugged under the running service: `distance` says source_down with the
+// camera and the reason, `status` shows it, the service keeps answering; after the
+// replug the camera is reopened and valid readings come back.
+TEST_F(StereodCamerasE2e, UnpluggedCameraGivesSourceDownUntilReplugged)
+{
+    startService(withPaths(cameraDevices("YUYV")), cameraSource("auto"));
+    Json before = waitForDistance();
+    ASSERT_TRUE(before.is_object());
+
+    fakeCommand(std::string("unplug ") + kRight);
+    Json down = waitForReading(
+        [](Json& r) {
+            return !r.value("valid", true) &&
+                   r.value("reason", Json::object()).value("code", "") == "source_down";
+        },
+        "source_down after the unplug");
+    ASSERT_TRUE(down.is_object());
+    const std::string message = down["reason"].value("message", "");
+    EXPECT_NE(message.find("right camera"), std::string::npos) << down.dump();
+    Json source = request({{"cmd", "status"}})["status"]["source"];
+    EXPECT_EQ(source["state"], "failed") << source.dump();
+    EXPECT_EQ(source["cameras"][1]["state"], "failed");
+    EXPECT_EQ(source["cameras"][0]["state"], "running");
+    EXPECT_NE(source["last_error"].get<std::string>().find(kRight), std::string::npos)
+        << source.dump();
+    // The CLI tells the robot the same, with the exit code of "not producing".
+    const ProcessResult ctl =
+        runProcess({test::stereoctlPath(), "distance", "--socket", socket_});
+    EXPECT_EQ(ctl.exit_code, 2) << ctl.out << ctl.err;
+
+    fakeCommand(std::string("replug ") + kRight);
+    const uint64_t frame_before = before["frame"].get<uint64_t>();
+    Json after = waitForReading(
+        [&](Json& r) {
+            return r.value("valid", false) && r.value("frame", uint64_t{0}) > frame_before;
+        },
+        "a valid distance after the replug");
+    ASSERT_TRUE(after.is_object());
+    EXPECT_NEAR(after["distance_m"].get<double>(), before["distance_m"].get<double>(), 0.0015);
+    EXPECT_EQ(request({{"cmd", "status"}})["status"]["source"]["state"], "running");
+}
+
+} // namespace
+} // namespace stereod
