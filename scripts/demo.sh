@@ -1,9 +1,22 @@
 #!/usr/bin/env bash
-# Sets up, builds, and runs stereod on the built-in default: a replay of a real stereo
-# recording (Middlebury 2006 "Aloe", shipped by Debian's opencv-doc package), then asks
-# it for the nearest-object distance with stereoctl, as a robot would.
+# Sets up, builds, and runs the classical stereo pipeline end to end on real data, with
+# no camera: the 13 stereo chessboard pairs of Debian's opencv-doc package are used to
+# calibrate the rig (stereoctl calibrate), then replayed as a recording through stereod
+# with that calibration, and stereoctl asks for the nearest-object distance as a robot
+# would, next to what the board's pose says it is.
+#
+#   scripts/demo.sh          the chessboard flow above
+#   scripts/demo.sh --aloe   Middlebury 2006 "Aloe" (rectified, with ground truth)
 set -euo pipefail
 source "$(dirname "$0")/common.sh"
+
+scene=chessboard
+case "${1:-}" in
+  "") ;;
+  --aloe) scene=aloe ;;
+  -h|--help) sed -n '2,9p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+  *) echo "demo.sh: unknown option '$1' (try --help)" >&2; exit 2 ;;
+esac
 
 "$STEREOD_ROOT/scripts/setup.sh"
 build="$STEREOD_ROOT/build"
@@ -11,11 +24,90 @@ echo "== build ($build)"
 build_tree "$build" -DSTEREOD_BUILD_TESTS=OFF -DSTEREOD_BUILD_BENCH=OFF
 
 demo="$build/demo"
-recording="$demo/aloe"
 samples="$(opencv_samples_dir)"
 socket="$demo/stereod.sock"
 stereod="$build/daemon/stereod"
 stereoctl="$build/ctl/stereoctl"
+mkdir -p "$demo"
+
+# Starts stereod on recording $1 with config $2 and waits (up to $3 half-seconds) for a
+# valid reading; the service is stopped when the script ends.
+start_service() {
+  echo "== stereod (socket $socket)"
+  rm -f "$socket"
+  "$stereod" --config "$2" --replay "$1" --socket "$socket" > "$demo/stereod.log" 2>&1 &
+  pid=$!
+  trap 'kill -TERM $pid 2>/dev/null; wait $pid 2>/dev/null || true' EXIT
+  local status=1
+  for _ in $(seq 1 "$3"); do
+    if ! kill -0 "$pid" 2>/dev/null; then
+      echo "stereod exited early; its log:" >&2; cat "$demo/stereod.log" >&2; exit 1
+    fi
+    set +e; "$stereoctl" distance --socket "$socket" >/dev/null 2>&1; status=$?; set -e
+    [ "$status" -eq 0 ] && break
+    sleep 0.5
+  done
+}
+
+show_service() {
+  echo "== stereoctl status"
+  "$stereoctl" status --socket "$socket" || true
+  echo "== stereoctl snapshot"
+  "$stereoctl" snapshot --socket "$socket" --colormap "$demo/depth-colormap.png" \
+    --depth "$demo/depth.png" --left "$demo/left.png" || true
+}
+
+if [ "$scene" = chessboard ]; then
+  recording="$demo/chessboard"
+  echo "== calibration from the 13 stereo chessboard pairs ($samples)"
+  rm -rf "$recording"
+  mkdir -p "$recording/left" "$recording/right"
+  # 9x6 inner corners; the square size is not in the images: 25 mm is assumed, and it
+  # sets the scale of the baseline and so of every distance below.
+  "$stereoctl" calibrate --left "$samples/left[0-9][0-9].jpg" \
+    --right "$samples/right[0-9][0-9].jpg" --board 9x6 --square-m 0.025 \
+    --out "$recording/calibration.yaml" --preview "$demo/rectified-preview.png"
+
+  # The recording: the raw pairs, two a second, in the recording format (frames.csv +
+  # left/ + right/ + calibration.yaml). The frames link to the packaged images.
+  echo "== recording ($recording)"
+  lefts=()
+  i=0
+  {
+    echo "index,left_stamp_ns,right_stamp_ns,left,right"
+    for left in "$samples"/left[0-9][0-9].jpg; do
+      right="$samples/right${left##*/left}"
+      name=$(printf '%06d.jpg' "$i")
+      ln -s "$left" "$recording/left/$name"
+      ln -s "$right" "$recording/right/$name"
+      stamp=$((i * 500000000))
+      echo "$i,$stamp,$stamp,left/$name,right/$name"
+      lefts+=("$left")
+      i=$((i + 1))
+    done
+  } > "$recording/frames.csv"
+
+  config="$STEREOD_ROOT/config/examples/chessboard-demo.yaml"
+  start_service "$recording" "$config" 60
+  show_service
+  echo "== stereoctl distance --json"
+  set +e; reading=$("$stereoctl" distance --socket "$socket" --json); status=$?; set -e
+  echo "$reading"
+  echo "== stereoctl distance"
+  "$stereoctl" distance --socket "$socket" || true
+  frame=$(printf '%s' "$reading" | tr -d ' \n' | sed -n 's/.*"frame":\([0-9]*\).*/\1/p')
+  if [ "$status" -eq 0 ] && [ -n "$frame" ]; then
+    pair="${lefts[$((frame % ${#lefts[@]}))]}"
+    measured=$(printf '%s' "$reading" | tr -d ' \n' | sed -n 's/.*"distance_m":\([0-9.]*\).*/\1/p')
+    echo "== what the board's pose says (frame $frame: ${pair##*/})"
+    "$stereoctl" board-distance "$pair" --calib "$recording/calibration.yaml" \
+      --config "$config" || true
+    echo "stereoctl distance: $measured m (frame $frame)"
+  fi
+  exit "$status"
+fi
+
+recording="$demo/aloe"
 
 # The recording: a static scene seen for one second at 10 fps, in the recording format
 # (frames.csv + left/ + right/). The frames link to the packaged images; nothing is copied.
@@ -38,29 +130,8 @@ mkdir -p "$recording/left" "$recording/right"
 "$stereoctl" calibrate --rectified --focal-px 3740 --baseline-m 0.160 --size 1282x1110 \
   --doffs-px 270 --out "$recording/calibration.yaml"
 
-echo "== stereod (socket $socket)"
-rm -f "$socket"
-"$stereod" --config "$STEREOD_ROOT/config/examples/aloe-demo.yaml" --replay "$recording" \
-  --socket "$socket" > "$demo/stereod.log" 2>&1 &
-pid=$!
-trap 'kill -TERM $pid 2>/dev/null; wait $pid 2>/dev/null || true' EXIT
-
-# The first frames take a moment (full-size SGBM); wait for a valid reading.
-status=1
-for _ in $(seq 1 120); do
-  if ! kill -0 "$pid" 2>/dev/null; then
-    echo "stereod exited early; its log:" >&2; cat "$demo/stereod.log" >&2; exit 1
-  fi
-  set +e; "$stereoctl" distance --socket "$socket" >/dev/null 2>&1; status=$?; set -e
-  [ "$status" -eq 0 ] && break
-  sleep 0.5
-done
-
-echo "== stereoctl status"
-"$stereoctl" status --socket "$socket" || true
-echo "== stereoctl snapshot"
-"$stereoctl" snapshot --socket "$socket" --colormap "$demo/depth-colormap.png" \
-  --depth "$demo/depth.png" --left "$demo/left.png" || true
+start_service "$recording" "$STEREOD_ROOT/config/examples/aloe-demo.yaml" 120
+show_service
 echo "== stereoctl distance --json"
 "$stereoctl" distance --socket "$socket" --json || true
 echo "== stereoctl distance"
