@@ -137,7 +137,7 @@ void ProtocolClient::waitFor(short events, const char* doing)
         int remaining_ms = timeout_ms;
         if (timeout_ms >= 0) {
             const auto left =
-                std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now());
+                std::chrono::ceil<std::chrono::milliseconds>(deadline - Clock::now());
             remaining_ms = static_cast<int>(std::max<long long>(left.count(), 0));
         }
         const int ready = ::poll(fds, count, remaining_ms);

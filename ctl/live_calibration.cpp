@@ -339,6 +339,8 @@ int runLiveCalibration(const CalibrateOptions& options)
                               : std::nullopt;
         const std::chrono::milliseconds wait_limit(options.service.timeout_ms);
         RawPair pair;
+        // Set while the wait in progress is the one the deadline cut short.
+        std::optional<Clock::time_point> waiting_until;
         try {
             for (;;) {
                 if (deadline) {
@@ -349,17 +351,24 @@ int runLiveCalibration(const CalibrateOptions& options)
                         break;
                     }
                     client.setTimeout(std::min(wait_limit, left));
+                    waiting_until = left < wait_limit ? deadline : std::nullopt;
                 }
                 json event;
                 try {
                     event = client.readJson();
                 } catch (const ClientError&) {
-                    if (deadline && Clock::now() >= *deadline) {
+                    // A wait the deadline cut short is the timeout the person asked for; a
+                    // wait under the normal limit that ran out is a service gone quiet, and
+                    // a connection lost before the deadline is an error either way.
+                    if (waiting_until && Clock::now() >= *waiting_until) {
                         stop = Stop::Timeout;
                         break;
                     }
                     throw;
                 }
+                // The deadline bounds the wait for the next frame; a frame that has begun
+                // arriving is read whole under the normal limit, never cut off by it.
+                client.setTimeout(wait_limit);
                 if (event.value("event", std::string()) != "raw") {
                     client.skipPayload(payloadBytes(event));
                     continue;
