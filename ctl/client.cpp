@@ -277,8 +277,22 @@ nlohmann::ordered_json ProtocolClient::readJson()
 
 nlohmann::ordered_json ProtocolClient::request(const nlohmann::ordered_json& request)
 {
-    sendRequest(request);
-    nlohmann::ordered_json reply = readJson();
+    nlohmann::ordered_json reply;
+    try {
+        sendRequest(request);
+        reply = readJson();
+    } catch (const ClientError& e) {
+        // A service that refuses a client (not allowed, too many clients) answers on
+        // accept and closes: the send then fails with a broken pipe, but the answer is
+        // waiting to be read and says why.
+        if (e.errorNumber() != EPIPE && e.errorNumber() != ECONNRESET)
+            throw;
+        try {
+            reply = readJson();
+        } catch (const ClientError&) {
+            throw e;
+        }
+    }
     const auto ok = reply.find("ok");
     if (ok == reply.end() || !ok->is_boolean()) {
         throw ClientError("the reply from " + socket_path_ + " has no boolean \"ok\"", 0);

@@ -21,6 +21,7 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include "ctl/client.hpp"
 #include "daemon/service.hpp"
 #include "tests/ctl/process.hpp"
 #include "tests/daemon/daemon_test_support.hpp"
@@ -253,9 +254,9 @@ TEST_F(ServiceTest, PeerNotInTheAllowListsIsRefusedWithTheReason)
     config.socket.allow_uids = {static_cast<uint32_t>(::geteuid()) + 1};
     config.socket.allow_gids = {static_cast<uint32_t>(::getegid()) + 1};
     launch(config);
+    // The refusal comes on accept, before any request.
     for (int i = 0; i < 3; ++i) {
         TestClient client(socket_path_);
-        client.sendJson({{"cmd", "hello"}});
         const Json reply = client.readJson();
         EXPECT_EQ(reply["ok"], false);
         EXPECT_EQ(reply["error"]["code"], "not_allowed");
@@ -264,6 +265,18 @@ TEST_F(ServiceTest, PeerNotInTheAllowListsIsRefusedWithTheReason)
                   std::string::npos)
             << reply.dump();
         EXPECT_TRUE(client.waitForClose());
+    }
+    // stereoctl's client, sending its request into the closing connection, reports the
+    // refusal, not the broken pipe.
+    for (int i = 0; i < 3; ++i) {
+        ProtocolClient client(socket_path_, std::chrono::milliseconds(5000));
+        std::this_thread::sleep_for(std::chrono::milliseconds(20 * i));
+        try {
+            client.request({{"cmd", "hello"}});
+            ADD_FAILURE() << "a refused peer was served";
+        } catch (const ServiceError& e) {
+            EXPECT_EQ(e.code(), "not_allowed") << e.what();
+        }
     }
 }
 
