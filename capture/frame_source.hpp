@@ -35,6 +35,7 @@ struct CameraStatus {
     uint64_t frames = 0;       // frames delivered
     uint64_t dropped = 0;      // frames lost before pairing (gaps, pool exhausted)
     uint64_t bad_frames = 0;   // corrupt or unreadable frames skipped
+    std::string last_bad_frame; // why the latest bad frame was skipped; empty when none
     uint64_t unpaired = 0;     // frames stereo sync dropped without a partner
 };
 

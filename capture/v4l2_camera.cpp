@@ -196,7 +196,7 @@ public:
             out.camera.last_error = last_error_;
             out.format = format_;
             out.controls = controls_;
-            out.last_bad_frame = last_bad_frame_;
+            out.camera.last_bad_frame = last_bad_frame_;
         }
         out.camera.name = name_;
         out.device = settings_.device;
@@ -276,6 +276,7 @@ private:
         stream_start_ns_ = monotonicNowNs();
         stalled_ = false;
         exhausted_ = false;
+        bad_since_good_ = 0;
 
         for (const ControlReading& control : controls) {
             if (control.requested && !control.error.empty())
@@ -398,15 +399,16 @@ private:
         empty_since_ns_ = 0;
         if (silent_ms >= stall_timeout_ms_ && !stalled_ && !exhausted_) {
             stalled_ = true;
+            const std::string what = silenceText(silent_ms);
             setState(SourceState::Stalled,
-                     fmt::format("{}: no frame for {} ms (stall timeout {} ms)", settings_.device,
-                                 silent_ms, stall_timeout_ms_));
-            spdlog::warn("camera {}: no frame for {} ms", name_, silent_ms);
+                     fmt::format("{}: {} (stall timeout {} ms)", settings_.device, what,
+                                 stall_timeout_ms_));
+            spdlog::warn("camera {}: {}", name_, what);
         }
         const int64_t reopen_ms =
             std::max<int64_t>(int64_t{kStallReopenFactor} * stall_timeout_ms_, kMinStallReopenMs);
         if (stalled_ && silent_ms >= reopen_ms) {
-            failDevice(fmt::format("{}: no frame for {} ms, reopening", settings_.device, silent_ms));
+            failDevice(fmt::format("{}: {}, reopening", settings_.device, silenceText(silent_ms)));
             return;
         }
 
@@ -519,6 +521,7 @@ private:
 
         frames_.fetch_add(1, std::memory_order_relaxed);
         last_frame_ns_.store(now_ns, std::memory_order_relaxed);
+        bad_since_good_ = 0;
         updateFps(now_ns);
         if (stalled_ || exhausted_ || state_.load(std::memory_order_relaxed) != SourceState::Running) {
             stalled_ = false;
@@ -536,8 +539,20 @@ private:
         return true;
     }
 
+    // What the camera has not delivered for `silent_ms`: nothing at all, or only frames
+    // that were bad (a stream of them is no picture either, but a different fault).
+    std::string silenceText(int64_t silent_ms) const
+    {
+        if (bad_since_good_ == 0)
+            return fmt::format("no frame for {} ms", silent_ms);
+        std::lock_guard lock(status_mutex_);
+        return fmt::format("no good frame for {} ms: {} bad (latest: {})", silent_ms,
+                           bad_since_good_, last_bad_frame_);
+    }
+
     bool skipBad(BufferSet& set, uint32_t index, const char* why)
     {
+        ++bad_since_good_;
         bad_frames_.fetch_add(1, std::memory_order_relaxed);
         {
             std::lock_guard lock(status_mutex_);
@@ -588,6 +603,7 @@ private:
     uint64_t next_sequence_ = 0;
     int64_t stream_start_ns_ = 0;
     bool stalled_ = false;
+    uint64_t bad_since_good_ = 0;             // bad frames since the last good one
     bool exhausted_ = false;
     bool warned_stamps_ = false;
     int64_t fps_window_start_ns_ = 0;

@@ -105,7 +105,6 @@ struct V4l2CameraStatus {
     uint64_t pool_exhausted = 0;              // frames lost because every buffer was held
     uint64_t reopens = 0;                     // successful reopens after a failure
     uint64_t sequence_gaps = 0;               // frames the driver skipped (sequence gaps)
-    std::string last_bad_frame;               // why the latest bad frame was skipped
 };
 
 // A frame from one camera of a rig. The frame carries stamp_ns (CLOCK_MONOTONIC: the

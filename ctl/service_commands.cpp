@@ -79,10 +79,10 @@ const json& member(const json& object, const char* key)
 
 void printCamera(const json& camera)
 {
-    std::string line = fmt::format("  {:<8} {:<10} {:>6} {:>8} {:>8} {:>5}", text(camera, "name"),
-                                   text(camera, "state"), number(camera, "fps", 1),
-                                   number(camera, "frames", 0), number(camera, "dropped", 0),
-                                   number(camera, "bad_frames", 0));
+    std::string line = fmt::format(
+        "  {:<8} {:<10} {:>6} {:>8} {:>8} {:>5} {:>8}", text(camera, "name"), text(camera, "state"),
+        number(camera, "fps", 1), number(camera, "frames", 0), number(camera, "dropped", 0),
+        number(camera, "bad_frames", 0), number(camera, "unpaired", 0));
     if (const std::string error = optionalText(camera, "last_error"); !error.empty()) {
         line += "  " + error;
     }
@@ -101,8 +101,8 @@ void printStatus(const json& status)
     if (const std::string error = optionalText(source, "last_error"); !error.empty()) {
         fmt::print("  last error: {}\n", error);
     }
-    fmt::print("  {:<8} {:<10} {:>6} {:>8} {:>8} {:>5}  {}\n", "camera", "state", "fps", "frames",
-               "dropped", "bad", "last error");
+    fmt::print("  {:<8} {:<10} {:>6} {:>8} {:>8} {:>5} {:>8}  {}\n", "camera", "state", "fps",
+               "frames", "dropped", "bad", "unpaired", "last error");
     if (const json& cameras = member(source, "cameras"); cameras.is_array()) {
         for (const json& camera : cameras) {
             printCamera(camera);
@@ -114,6 +114,18 @@ void printStatus(const json& status)
     const json& skew = member(source, "skew_ms");
     fmt::print("  pairing skew: mean {} ms, p99 {} ms, max {} ms\n", number(skew, "mean", 2),
                number(skew, "p99", 2), number(skew, "max", 2));
+    if (const json& offset = member(source, "clock_offset");
+        offset.is_object() && offset.value("detected", false)) {
+        fmt::print("  clock offset between the cameras: right - left = {} ms (modulo the frame "
+                   "period)\n",
+                   number(offset, "estimate_ms", 2));
+    }
+    if (const json& warnings = member(source, "warnings"); warnings.is_array()) {
+        for (const json& warning : warnings) {
+            if (warning.is_string())
+                fmt::print("  warning: {}\n", warning.get<std::string>());
+        }
+    }
 
     const json& pipeline = member(status, "pipeline");
     fmt::print("pipeline: {} frames, {} fps, matcher {}, {} disparities from {}, closest depth {} "

@@ -324,6 +324,7 @@ void Service::describe(Json& status, const PublishedFrame* latest, const SourceH
                            {"frames", camera.frames},
                            {"dropped", camera.dropped},
                            {"bad_frames", camera.bad_frames},
+                           {"last_bad_frame", camera.last_bad_frame},
                            {"unpaired", camera.unpaired},
                            {"last_error", camera.last_error}});
     }
@@ -478,6 +479,12 @@ std::string Service::statusText(int64_t now_ns, const SourceHealth& health)
 
 void Service::onTick(int64_t now_ns)
 {
+    if (running_ && source_counters_.due(now_ns)) {
+        for (const SourceCounterWatch::Report& report :
+             source_counters_.look(source_->status(), now_ns))
+            spdlog::log(report.bad_frames ? spdlog::level::warn : spdlog::level::info, "{}",
+                        report.text);
+    }
     if (!running_ || !notifier_.enabled())
         return;
     // READY=1 once the socket listens (it has since the constructor) and the first pair

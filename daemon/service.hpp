@@ -28,6 +28,7 @@
 #include "config/service_config.hpp"
 #include "daemon/publisher.hpp"
 #include "daemon/socket_server.hpp"
+#include "daemon/source_counter_watch.hpp"
 #include "daemon/systemd_notifier.hpp"
 #include "daemon/unique_fd.hpp"
 #include "daemon/worker.hpp"
@@ -153,6 +154,7 @@ class Service final : private ServerBackend {
     int64_t last_push_change_ns_ = 0;
     // systemd notifications.
     SystemdNotifier notifier_;
+    SourceCounterWatch source_counters_; // bad/dropped/unpaired frames into the log
     std::string last_error_; // the newest error for STATUS= (a refused reload), or empty
     int64_t stop_requested_ns_ = 0;
     bool worker_abandoned_ = false;

@@ -205,7 +205,7 @@ TEST_F(V4l2CameraTest, CorruptFramesAreCountedAndSkipped)
         const V4l2CameraStatus status = camera.status();
         EXPECT_EQ(status.camera.bad_frames, 3u);
         EXPECT_EQ(status.camera.state, SourceState::Running);
-        EXPECT_FALSE(status.last_bad_frame.empty());
+        EXPECT_FALSE(status.camera.last_bad_frame.empty());
     }
 }
 

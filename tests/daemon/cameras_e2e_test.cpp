@@ -123,7 +123,9 @@ protected:
         }
     }
 
-    static std::string cameraDevices(const std::string& fourcc)
+    // `right_extra`: more keys of the right camera's description (phase_ms, ...).
+    static std::string cameraDevices(const std::string& fourcc,
+                                     const std::string& right_extra = {})
     {
         std::ostringstream out;
         for (const char* path : {kLeft, kRight}) {
@@ -131,7 +133,8 @@ protected:
                 << "    images: " << (path == kLeft ? "LEFT" : "RIGHT") << "\n"
                 << "    fps: [15]\n"
                 << "    jitter_ms: 0.5\n"
-                << "    formats:\n      - { fourcc: " << fourcc << ", sizes: [SIZE] }\n";
+                << "    formats:\n      - { fourcc: " << fourcc << ", sizes: [SIZE] }\n"
+                << (path == kRight ? right_extra : std::string());
         }
         return out.str();
     }
@@ -326,6 +329,94 @@ TEST_F(StereodCamerasE2e, UnpluggedCameraGivesSourceDownUntilReplugged)
     ASSERT_TRUE(after.is_object());
     EXPECT_NEAR(after["distance_m"].get<double>(), before["distance_m"].get<double>(), 0.0015);
     EXPECT_EQ(request({{"cmd", "status"}})["status"]["source"]["state"], "running");
+}
+
+// A camera that sends nothing but bad frames for seconds on end: the service keeps
+// running, `status` counts them with the reason and says the camera gives no good frame
+// (not "no frame"), readings come back valid afterwards, and the journal gets one line
+// per camera per 5 s, not one per frame.
+TEST_F(StereodCamerasE2e, CorruptFramesAreCountedAndLoggedOncePerInterval)
+{
+    startService(withPaths(cameraDevices("MJPG")), cameraSource("mjpeg"));
+    ASSERT_TRUE(waitForDistance().is_object());
+    const auto start = std::chrono::steady_clock::now();
+    fakeCommand(std::string("corrupt ") + kRight + " 90 truncated"); // 6 s at 15 fps
+
+    Json camera;
+    bool said_no_good_frame = false;
+    const auto deadline = start + kEventLimit;
+    while (std::chrono::steady_clock::now() < deadline) {
+        camera = request({{"cmd", "status"}})["status"]["source"]["cameras"][1];
+        const std::string error = camera.value("last_error", std::string());
+        said_no_good_frame |= error.find("no good frame for") != std::string::npos &&
+                              error.find("bad (latest: ") != std::string::npos;
+        EXPECT_EQ(error.find("no frame for"), std::string::npos) << error;
+        if (camera.value("bad_frames", uint64_t{0}) >= 90)
+            break;
+        std::this_thread::sleep_for(100ms);
+    }
+    EXPECT_EQ(camera.value("bad_frames", uint64_t{0}), 90u) << camera.dump();
+    EXPECT_FALSE(camera.value("last_bad_frame", std::string()).empty()) << camera.dump();
+    EXPECT_TRUE(said_no_good_frame) << serviceLog();
+    const Json after = waitForReading(
+        [](Json& r) { return r.value("valid", false); }, "a valid distance after the bad frames");
+    EXPECT_TRUE(after.is_object());
+
+    // Every bad frame is in some line, and the lines are no more than one per 5 s.
+    std::this_thread::sleep_for(5500ms);
+    const double elapsed_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    std::istringstream log(serviceLog());
+    int lines = 0;
+    uint64_t counted = 0;
+    for (std::string line; std::getline(log, line);) {
+        const std::size_t at = line.find("camera right: ");
+        if (at == std::string::npos || line.find("bad frame") == std::string::npos)
+            continue;
+        ++lines;
+        counted += std::stoull(line.substr(at + 14));
+        EXPECT_NE(line.find("latest: "), std::string::npos) << line;
+    }
+    EXPECT_EQ(counted, 90u) << serviceLog();
+    EXPECT_GE(lines, 1);
+    EXPECT_LE(lines, static_cast<int>(elapsed_s / 5.0) + 2) << serviceLog();
+}
+
+// The right camera captures 12 ms after the left, beyond max_skew 5 ms: no pair is made of
+// frames that far apart, so there is no reading, and `stereoctl status` names the offset
+// instead of leaving a person to guess why.
+TEST_F(StereodCamerasE2e, ClockOffsetBetweenTheCamerasIsShownNotAbsorbed)
+{
+    startService(withPaths(cameraDevices("YUYV", "    phase_ms: 12\n")), cameraSource("auto"));
+    Json source;
+    const auto deadline = std::chrono::steady_clock::now() + kStartLimit;
+    while (std::chrono::steady_clock::now() < deadline) {
+        try {
+            source = request({{"cmd", "status"}})["status"]["source"];
+            if (source["clock_offset"].value("detected", false))
+                break;
+        } catch (const ClientError&) {
+            // not listening yet
+        }
+        std::this_thread::sleep_for(50ms);
+    }
+    ASSERT_TRUE(source["clock_offset"].value("detected", false)) << source.dump();
+    EXPECT_NEAR(source["clock_offset"]["estimate_ms"].get<double>(), 12.0, 1.5);
+    EXPECT_EQ(source["pairs"], 0u);
+
+    const ProcessResult status =
+        runProcess({test::stereoctlPath(), "status", "--socket", socket_});
+    EXPECT_EQ(status.exit_code, 0) << status.err;
+    EXPECT_NE(status.out.find("clock offset between the cameras: right - left = 1"),
+              std::string::npos)
+        << status.out;
+    EXPECT_NE(status.out.find("  warning: "), std::string::npos) << status.out;
+    EXPECT_NE(status.out.find("unpaired"), std::string::npos) << status.out;
+
+    const ProcessResult distance =
+        runProcess({test::stereoctlPath(), "distance", "--socket", socket_, "--json"});
+    EXPECT_NE(distance.exit_code, 0) << distance.out;
+    EXPECT_FALSE(Json::parse(distance.out).value("valid", true)) << distance.out;
 }
 
 } // namespace
