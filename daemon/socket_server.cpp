@@ -512,8 +512,11 @@ void SocketServer::acceptClients()
         client.last_input_ns = monotonicNowNs();
         ++live_clients_;
         ++counters_.accepted;
-        spdlog::info("client {} connected: pid {} uid {} gid {} ({} open)", id - kFirstClientTag,
-                     peer.pid, peer.uid, peer.gid, live_clients_);
+        // Per uid: a client reconnecting in a loop shows as one line per interval with
+        // its count, and every other user still gets its own line.
+        log_limiter_.log(spdlog::level::info, fmt::format("client.connected.uid{}", peer.uid),
+                         monotonicNowNs(), "client {} connected: pid {} uid {} gid {} ({} open)",
+                         id - kFirstClientTag, peer.pid, peer.uid, peer.gid, live_clients_);
     }
 }
 
