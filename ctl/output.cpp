@@ -37,12 +37,12 @@ void printStageTable(std::FILE* out, const nlohmann::ordered_json& stage_ms)
             rows.emplace_back(stage, it->get<double>());
         }
     }
-    for (const auto& [stage, value] : stage_ms.items()) {
-        const bool known = std::find_if(kStageOrder.begin(), kStageOrder.end(), [&](const char* s) {
-                               return stage == s;
-                           }) != kStageOrder.end();
-        if (!known && value.is_number()) {
-            rows.emplace_back(stage, value.get<double>());
+    for (const auto& item : stage_ms.items()) {
+        const std::string& stage = item.key();
+        const bool known = std::find(kStageOrder.begin(), kStageOrder.end(), stage) !=
+                           kStageOrder.end();
+        if (!known && item.value().is_number()) {
+            rows.emplace_back(stage, item.value().get<double>());
         }
     }
     double total_ms = 0.0;

