@@ -1,0 +1,499 @@
+#include "pipeline/sgm/census_sgm.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "pipeline/sgm/band_pool.hpp"
+#include "pipeline/sgm/speckle_filter.hpp"
+
+namespace stereod::sgm {
+namespace {
+
+// Disparities are kept in fixed point between the winner and the output: 16 x pixels.
+constexpr int kSubpixel = 16;
+constexpr int16_t kInvalid = std::numeric_limits<int16_t>::min();
+
+// Rows a band runs its top-down paths before its first own row. Past about 24 rows the
+// path costs no longer depend on where the path started (measured: the disparities of a
+// 2-band run equal a 1-band run's on 99.9 % of the pixels with 32 rows).
+constexpr int kBandWarmupRows = 32;
+
+[[noreturn]] void invalid(const std::string& key, const std::string& problem)
+{
+    throw std::invalid_argument("matcher." + key + ": " + problem);
+}
+
+int roundUp(int value, int step)
+{
+    return (value + step - 1) / step * step;
+}
+
+int censusBits(const CensusSgmSettings& s)
+{
+    return s.census_width * s.census_height - 1;
+}
+
+// The work of one band: its rows' costs and paths. Sized once for the widest row.
+struct BandScratch {
+    std::vector<uint8_t> cost;                 // width * lanes
+    std::vector<uint16_t> sum;                 // width * lanes
+    std::vector<uint8_t> row_scratch;          // two path blocks
+    std::vector<uint8_t> above[3][2];          // per path from above: previous, current row
+    std::vector<uint8_t> p2_above[3];          // width, per path from above
+    std::vector<uint8_t> p2_forward, p2_backward;
+    std::vector<Winner> winners;
+    std::vector<uint32_t> right_best;
+    std::vector<uint32_t> winners_scratch;
+};
+
+} // namespace
+
+void validateCensusSgmSettings(const CensusSgmSettings& s)
+{
+    if (s.width < 1 || s.height < 1)
+        invalid("size", "the image must be at least 1x1, got " + std::to_string(s.width) +
+                            "x" + std::to_string(s.height));
+    if (s.num_disparities < 16 || s.num_disparities > 256 || s.num_disparities % 16 != 0)
+        invalid("num_disparities", "must be a multiple of 16 within 16..256 for census-sgm, got " +
+                                       std::to_string(s.num_disparities));
+    if (s.min_disparity < -1024 || s.min_disparity > 1024)
+        invalid("min_disparity", "must be within -1024..1024, got " +
+                                     std::to_string(s.min_disparity));
+    if (s.census_width < 3 || s.census_width % 2 == 0 || s.census_height < 1 ||
+        s.census_height % 2 == 0)
+        invalid("census", "window sides must be odd, at least 3x1, got " +
+                              std::to_string(s.census_width) + "x" +
+                              std::to_string(s.census_height));
+    if (censusBits(s) > 64)
+        invalid("census", "window " + std::to_string(s.census_width) + "x" +
+                              std::to_string(s.census_height) + " has more than 64 neighbours");
+    if (s.paths != 3 && s.paths != 5)
+        invalid("paths", "must be 3 or 5, got " + std::to_string(s.paths));
+    if (s.p1 < 1 || s.p2 <= s.p1)
+        invalid("p2", "must be greater than p1 >= 1, got p1 " + std::to_string(s.p1) +
+                          ", p2 " + std::to_string(s.p2));
+    // 8-bit path costs: the largest census cost plus P2 must stay within 255.
+    if (censusBits(s) + s.p2 > 255)
+        invalid("p2", "census cost " + std::to_string(censusBits(s)) + " + p2 " +
+                          std::to_string(s.p2) + " must be <= 255");
+    if (s.p2_gradient_scale < 0)
+        invalid("p2_gradient_scale", "must be >= 0 (0: no adaptation), got " +
+                                         std::to_string(s.p2_gradient_scale));
+    if (s.uniqueness_percent < 0 || s.uniqueness_percent > 100)
+        invalid("uniqueness_ratio", "must be within 0..100, got " +
+                                        std::to_string(s.uniqueness_percent));
+    if (s.speckle_window_px < 0 || s.speckle_range_px < 0)
+        invalid("speckle_window_px", "speckle window and range must be >= 0");
+    if (s.edge_margin_px < 0)
+        invalid("edge_margin_px", "must be >= 0, got " + std::to_string(s.edge_margin_px));
+    if (s.threads < 1 || s.threads > 64)
+        invalid("threads", "must be within 1..64, got " + std::to_string(s.threads));
+    if (s.census_height / 2 >= s.height || s.census_width / 2 >= s.width)
+        invalid("census", "window does not fit in the image");
+}
+
+size_t censusSgmMemoryBytes(const CensusSgmSettings& s)
+{
+    const size_t w = static_cast<size_t>(s.width);
+    const size_t h = static_cast<size_t>(s.height);
+    const size_t lanes = static_cast<size_t>(roundUp(s.num_disparities, kLaneAlign));
+    const size_t planes = static_cast<size_t>((censusBits(s) + 7) / 8);
+    const size_t padded = (w + static_cast<size_t>(s.census_width)) *
+                          (h + static_cast<size_t>(s.census_height));
+    const size_t image = 2 * padded + 3 * planes * w * h;           // padded inputs, census
+    const size_t output = w * h * (2 * sizeof(int16_t) + 2) +       // fixed point x2, conf, flags
+                          speckleFilterBytes(s.width, s.height);
+    const size_t above = s.paths == 5 ? 3 : 1;
+    const size_t band = w * lanes * (1 + sizeof(uint16_t)) + 2 * pathBlockBytes(static_cast<int>(lanes)) +
+                        above * 2 * w * pathBlockBytes(static_cast<int>(lanes)) +
+                        w * (above + 2) + w * (sizeof(Winner) + sizeof(uint32_t)) +
+                        winnersScratch(s.width, s.min_disparity, static_cast<int>(lanes)) * sizeof(uint32_t);
+    return image + output + band * static_cast<size_t>(s.threads);
+}
+
+struct CensusSgm::Impl {
+    explicit Impl(const CensusSgmSettings& s)
+        : settings(s),
+          kernels(s.use_simd ? &simdKernels() : &scalarKernels()),
+          lanes(roundUp(s.num_disparities, kLaneAlign)),
+          planes((censusBits(s) + 7) / 8),
+          rx(s.census_width / 2),
+          ry(s.census_height / 2),
+          padded_stride(static_cast<size_t>(s.width + 2 * rx)),
+          pool(s.threads),
+          speckle(s.width, s.height)
+    {
+        const size_t area = static_cast<size_t>(s.width) * static_cast<size_t>(s.height);
+        const size_t padded_rows = static_cast<size_t>(s.height + 2 * ry);
+        padded_left.assign(padded_stride * padded_rows, 0);
+        padded_right.assign(padded_stride * padded_rows, 0);
+        // Each census plane has a margin before and after it: the SIMD cost kernel reads
+        // a little outside the row for the lanes whose right pixel is outside the image.
+        plane_margin = static_cast<size_t>(lanes + std::abs(s.min_disparity) + 2 * kLaneAlign);
+        plane_stride = area + 2 * plane_margin;
+        census_left.assign(plane_stride * static_cast<size_t>(planes), 0);
+        census_right.assign(plane_stride * static_cast<size_t>(planes), 0);
+        census_right_reversed.assign(plane_stride * static_cast<size_t>(planes), 0);
+        fixed.assign(area, kInvalid);
+        filtered.assign(area, kInvalid);
+
+        const size_t row_cells = static_cast<size_t>(s.width) * static_cast<size_t>(lanes);
+        const size_t row_blocks = static_cast<size_t>(s.width) * pathBlockBytes(lanes);
+        bands.resize(static_cast<size_t>(s.threads));
+        for (BandScratch& b : bands) {
+            b.cost.assign(row_cells, 0);
+            b.sum.assign(row_cells, 0);
+            b.row_scratch.assign(2 * pathBlockBytes(lanes), 255);
+            for (int i = 0; i < abovePaths(); ++i) {
+                b.above[i][0].assign(row_blocks, 255);
+                b.above[i][1].assign(row_blocks, 255);
+                b.p2_above[i].assign(static_cast<size_t>(s.width), 0);
+            }
+            b.p2_forward.assign(static_cast<size_t>(s.width), 0);
+            b.p2_backward.assign(static_cast<size_t>(s.width), 0);
+            b.winners.assign(static_cast<size_t>(s.width), Winner{});
+            b.right_best.assign(static_cast<size_t>(s.width), 0);
+            b.winners_scratch.assign(winnersScratch(s.width, s.min_disparity, lanes), 0);
+        }
+        // P2 by intensity step along the path (see CensusSgmSettings::p2_gradient_scale).
+        for (int g = 0; g < 256; ++g) {
+            double p2 = s.p2;
+            if (s.p2_gradient_scale > 0)
+                p2 = s.p2 / (1.0 + static_cast<double>(g) / s.p2_gradient_scale);
+            p2_by_step[g] = static_cast<uint8_t>(
+                std::clamp(static_cast<int>(std::lround(p2)), s.p1 + 1, s.p2));
+        }
+    }
+
+    int abovePaths() const { return settings.paths == 5 ? 3 : 1; }
+
+    // Copies an image into its padded buffer, replicating the border pixels.
+    void pad(const uint8_t* image, size_t stride, std::vector<uint8_t>& padded, int y0, int y1)
+    {
+        const int w = settings.width;
+        for (int py = y0; py < y1; ++py) {
+            const int y = std::clamp(py - ry, 0, settings.height - 1);
+            const uint8_t* src = image + static_cast<size_t>(y) * stride;
+            uint8_t* dst = padded.data() + static_cast<size_t>(py) * padded_stride;
+            std::fill(dst, dst + rx, src[0]);
+            std::copy(src, src + w, dst + rx);
+            std::fill(dst + rx + w, dst + 2 * rx + w, src[w - 1]);
+        }
+    }
+
+    // Row y of census plane p.
+    uint8_t* planeRow(std::vector<uint8_t>& census, int p, int y) const
+    {
+        return census.data() + static_cast<size_t>(p) * plane_stride + plane_margin +
+               static_cast<size_t>(y) * static_cast<size_t>(settings.width);
+    }
+
+    void censusRows(const std::vector<uint8_t>& padded, std::vector<uint8_t>& census, int y0,
+                    int y1)
+    {
+        uint8_t* plane_rows[8];
+        for (int y = y0; y < y1; ++y) {
+            for (int p = 0; p < planes; ++p)
+                plane_rows[p] = planeRow(census, p, y);
+            const uint8_t* center = padded.data() +
+                                    static_cast<size_t>(y + ry) * padded_stride +
+                                    static_cast<size_t>(rx);
+            kernels->census_row(center, padded_stride, settings.width, settings.census_width,
+                                settings.census_height, plane_rows);
+        }
+    }
+
+    void reverseRightRows(int y0, int y1)
+    {
+        const int w = settings.width;
+        for (int y = y0; y < y1; ++y)
+            for (int p = 0; p < planes; ++p) {
+                const uint8_t* row = planeRow(census_right, p, y);
+                std::reverse_copy(row, row + w, planeRow(census_right_reversed, p, y));
+            }
+    }
+
+    // The P2 of every pixel of row y for a step from (x + dx, y + dy) onto (x, y).
+    void penalties(const uint8_t* left, size_t stride, int y, int dx, int dy, uint8_t* p2) const
+    {
+        const int w = settings.width;
+        const uint8_t* row = left + static_cast<size_t>(y) * stride;
+        const int yp = std::clamp(y + dy, 0, settings.height - 1);
+        const uint8_t* from_row = left + static_cast<size_t>(yp) * stride;
+        for (int x = 0; x < w; ++x) {
+            const int xp = std::clamp(x + dx, 0, w - 1);
+            p2[x] = p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(from_row[xp]))];
+        }
+    }
+
+    void matchBand(int band, const uint8_t* left, size_t stride, const CensusSgmOutput& out)
+    {
+        const CensusSgmSettings& s = settings;
+        BandScratch& b = bands[static_cast<size_t>(band)];
+        const int y0 = s.height * band / s.threads;
+        const int y1 = s.height * (band + 1) / s.threads;
+        const int first_row = std::max(0, y0 - kBandWarmupRows);
+        const uint8_t* left_planes[8];
+        const uint8_t* right_planes[8];
+        const uint8_t* right_reversed[8];
+        static constexpr int kAboveDx[3] = {0, -1, 1};
+        const int above = abovePaths();
+        const uint8_t cost_invalid = static_cast<uint8_t>(censusBits(s));
+
+        for (int y = first_row; y < y1; ++y) {
+            for (int p = 0; p < planes; ++p) {
+                left_planes[p] = planeRow(census_left, p, y);
+                right_planes[p] = planeRow(census_right, p, y);
+                right_reversed[p] = planeRow(census_right_reversed, p, y);
+            }
+            const CensusRows rows{left_planes, right_planes, right_reversed, planes};
+            kernels->cost_row(rows, s.width, s.min_disparity, s.num_disparities, lanes,
+                              cost_invalid, b.cost.data());
+
+            const int parity = (y - first_row) & 1;
+            for (int i = 0; i < above; ++i) {
+                penalties(left, stride, y, kAboveDx[i], -1, b.p2_above[i].data());
+                const uint8_t* prev = y == first_row ? nullptr : b.above[i][parity ^ 1].data();
+                kernels->path_from_above(b.cost.data(), b.p2_above[i].data(),
+                                         static_cast<uint8_t>(s.p1), s.width, lanes,
+                                         kAboveDx[i], i == 0, prev, b.above[i][parity].data(),
+                                         b.sum.data());
+            }
+            if (y < y0)
+                continue;   // warming up the paths from above for this band's first row
+
+            penalties(left, stride, y, -1, 0, b.p2_forward.data());
+            penalties(left, stride, y, 1, 0, b.p2_backward.data());
+            kernels->path_along_row(b.cost.data(), b.p2_forward.data(),
+                                    static_cast<uint8_t>(s.p1), s.width, lanes, true, false,
+                                    b.row_scratch.data(), b.sum.data());
+            kernels->path_along_row(b.cost.data(), b.p2_backward.data(),
+                                    static_cast<uint8_t>(s.p1), s.width, lanes, false, false,
+                                    b.row_scratch.data(), b.sum.data());
+            kernels->winners(b.sum.data(), s.width, s.min_disparity, s.num_disparities, lanes,
+                             b.winners.data(), b.right_best.data(), b.winners_scratch.data());
+            decideRow(b, y, out);
+        }
+    }
+
+    // Turns the winners of row y into fixed-point disparities, confidences and flags.
+    void decideRow(const BandScratch& b, int y, const CensusSgmOutput& out)
+    {
+        const CensusSgmSettings& s = settings;
+        const int n = s.num_disparities;
+        const size_t row_offset = static_cast<size_t>(y) * static_cast<size_t>(s.width);
+        int16_t* disparity = fixed.data() + row_offset;
+        uint8_t* confidence = out.confidence + row_offset;
+        uint8_t* range_limit = out.range_limit + row_offset;
+        for (int x = 0; x < s.width; ++x) {
+            disparity[x] = kInvalid;
+            confidence[x] = 0;
+            range_limit[x] = 0;
+            const Winner w = b.winners[static_cast<size_t>(x)];
+            const int k = w.best_lane;
+            // The lanes this pixel could search: its right pixel x - d must be in the image.
+            const int searchable = std::min(n - 1, x - s.min_disparity);
+            if (searchable < 0)
+                continue;
+            if (searchable == n - 1 && k == n - 1) {
+                // The best match is at the near end of the range: the surface may be
+                // nearer than the range sees, and no number from the edge is trustworthy.
+                range_limit[x] = 1;
+                continue;
+            }
+            if (searchable < n - 1 && k > searchable - s.edge_margin_px)
+                continue;   // its true match may lie beyond the left edge of the right image
+            const uint32_t best = w.best_sum;
+            const uint32_t second = w.second_sum;
+            if (second * 100u <= best * static_cast<uint32_t>(100 + s.uniqueness_percent))
+                continue;
+            int lr_diff = 0;
+            if (s.lr_max_diff_px >= 0) {
+                const int xr = x - s.min_disparity - k;
+                const uint32_t right = b.right_best[static_cast<size_t>(xr)];
+                if (right == 0xFFFFFFFFu)
+                    continue;
+                lr_diff = std::abs(static_cast<int>(right & 0xFFFFu) - k);
+                if (lr_diff > s.lr_max_diff_px)
+                    continue;
+            }
+            const uint16_t* sum = b.sum.data() + static_cast<size_t>(x) * static_cast<size_t>(lanes);
+            int offset16 = 0;
+            int curvature = 0;
+            if (k > 0 && k < n - 1) {
+                const int below = sum[k - 1], at = sum[k], above = sum[k + 1];
+                curvature = below + above - 2 * at;
+                if (curvature > 0) {
+                    // Rounded to the nearest 1/16 px: (below - above) / (2 curvature) * 16.
+                    const int numerator = (below - above) * kSubpixel;
+                    const int half = curvature;   // half of the denominator 2 * curvature
+                    offset16 = (numerator >= 0 ? numerator + half : numerator - half) /
+                               (2 * curvature);
+                }
+            }
+            disparity[x] = static_cast<int16_t>((s.min_disparity + k) * kSubpixel + offset16);
+            confidence[x] = confidenceOf(best, second, curvature, lr_diff,
+                                         static_cast<double>(searchable + 1) / n);
+        }
+    }
+
+    // 1..255 from the three signs of a trustworthy match: how much better the best sum is
+    // than the best non-adjacent one, how sharp the minimum is, and whether the right
+    // view agrees exactly; scaled down where the left edge cut the search.
+    uint8_t confidenceOf(uint32_t best, uint32_t second, int curvature, int lr_diff,
+                         double searchable_fraction) const
+    {
+        const double margin = second == 0xFFFFu ? 1.0
+                                                : static_cast<double>(second - best) /
+                                                      std::max(1.0, static_cast<double>(best));
+        const double uniqueness = std::min(1.0, margin / 0.5);
+        const double sharpness =
+            std::min(1.0, static_cast<double>(curvature) / (2.0 * settings.p1 * settings.paths));
+        const double agreement = lr_diff == 0 ? 1.0 : lr_diff == 1 ? 0.7 : 0.4;
+        const double c = 255.0 * uniqueness * (0.5 + 0.5 * sharpness) * agreement *
+                         std::min(1.0, searchable_fraction);
+        return static_cast<uint8_t>(std::clamp(static_cast<int>(std::lround(c)), 1, 255));
+    }
+
+    // 3x3 median around each valid pixel, rows y0..y1-1; a missing neighbour counts as
+    // the centre's value, so that holes neither pull a disparity down (too far) nor up.
+    // The one-pixel image border is copied as it is. Written as a min/max network over
+    // whole rows so that the compiler vectorizes it.
+    void medianRows(int y0, int y1)
+    {
+        const int w = settings.width, h = settings.height;
+        for (int y = y0; y < y1; ++y) {
+            const size_t at = static_cast<size_t>(y) * static_cast<size_t>(w);
+            const int16_t* row = fixed.data() + at;
+            int16_t* dst = filtered.data() + at;
+            if (y == 0 || y == h - 1 || w < 3) {
+                std::copy(row, row + w, dst);
+                continue;
+            }
+            const int16_t* up = row - w;
+            const int16_t* down = row + w;
+            dst[0] = row[0];
+            dst[w - 1] = row[w - 1];
+            for (int x = 1; x < w - 1; ++x) {
+                const int16_t c = row[x];
+                const auto pick = [c](int16_t v) { return v == kInvalid ? c : v; };
+                int16_t p[9] = {pick(up[x - 1]), pick(up[x]),     pick(up[x + 1]),
+                                pick(row[x - 1]), c,              pick(row[x + 1]),
+                                pick(down[x - 1]), pick(down[x]), pick(down[x + 1])};
+                dst[x] = c == kInvalid ? kInvalid : medianOf9(p);
+            }
+        }
+    }
+
+    // Paeth's median-of-9 network: 19 compare-exchanges.
+    static int16_t medianOf9(int16_t* p)
+    {
+        const auto sort2 = [](int16_t& a, int16_t& b) {
+            const int16_t lo = std::min(a, b);
+            b = std::max(a, b);
+            a = lo;
+        };
+        sort2(p[1], p[2]); sort2(p[4], p[5]); sort2(p[7], p[8]);
+        sort2(p[0], p[1]); sort2(p[3], p[4]); sort2(p[6], p[7]);
+        sort2(p[1], p[2]); sort2(p[4], p[5]); sort2(p[7], p[8]);
+        sort2(p[0], p[3]); sort2(p[5], p[8]); sort2(p[4], p[7]);
+        sort2(p[3], p[6]); sort2(p[1], p[4]); sort2(p[2], p[5]);
+        sort2(p[4], p[7]); sort2(p[4], p[2]); sort2(p[6], p[4]);
+        sort2(p[4], p[2]);
+        return p[4];
+    }
+
+    void finishRows(const std::vector<int16_t>& source, int y0, int y1, const CensusSgmOutput& out)
+    {
+        const size_t w = static_cast<size_t>(settings.width);
+        constexpr float kNone = std::numeric_limits<float>::infinity();
+        for (size_t i = static_cast<size_t>(y0) * w; i < static_cast<size_t>(y1) * w; ++i) {
+            const int16_t d = source[i];
+            if (d == kInvalid) {
+                out.disparity_px[i] = kNone;
+                out.confidence[i] = 0;
+            } else {
+                out.disparity_px[i] = static_cast<float>(d) * (1.0f / kSubpixel);
+            }
+        }
+    }
+
+    CensusSgmSettings settings;
+    const SgmKernels* kernels;
+    int lanes;
+    int planes;
+    int rx, ry;
+    size_t padded_stride;
+    uint8_t p2_by_step[256] = {};
+    std::vector<uint8_t> padded_left, padded_right;
+    size_t plane_margin = 0, plane_stride = 0;
+    std::vector<uint8_t> census_left, census_right;   // planes x (margin, height x width, margin)
+    std::vector<uint8_t> census_right_reversed;       // each row backwards
+    std::vector<int16_t> fixed, filtered;             // 16 x disparity, kInvalid = none
+    std::vector<BandScratch> bands;
+    BandPool pool;
+    SpeckleFilter speckle;
+};
+
+CensusSgm::CensusSgm(const CensusSgmSettings& settings)
+{
+    validateCensusSgmSettings(settings);
+    impl_ = std::make_unique<Impl>(settings);
+}
+
+CensusSgm::~CensusSgm() = default;
+
+void CensusSgm::compute(const uint8_t* left, const uint8_t* right, size_t stride,
+                        const CensusSgmOutput& out)
+{
+    Impl& m = *impl_;
+    const CensusSgmSettings& s = m.settings;
+    const int bands = s.threads;
+    const int padded_rows = s.height + 2 * m.ry;
+
+    m.pool.run(bands, [&](int band) {
+        const int y0 = padded_rows * band / bands;
+        const int y1 = padded_rows * (band + 1) / bands;
+        m.pad(left, stride, m.padded_left, y0, y1);
+        m.pad(right, stride, m.padded_right, y0, y1);
+    });
+    m.pool.run(bands, [&](int band) {
+        const int y0 = s.height * band / bands;
+        const int y1 = s.height * (band + 1) / bands;
+        m.censusRows(m.padded_left, m.census_left, y0, y1);
+        m.censusRows(m.padded_right, m.census_right, y0, y1);
+        m.reverseRightRows(y0, y1);
+    });
+    m.pool.run(bands, [&](int band) { m.matchBand(band, left, stride, out); });
+
+    std::vector<int16_t>* result = &m.fixed;
+    if (s.median) {
+        m.pool.run(bands, [&](int band) {
+            m.medianRows(s.height * band / bands, s.height * (band + 1) / bands);
+        });
+        result = &m.filtered;
+    }
+    if (s.speckle_window_px > 0)
+        m.speckle.apply(result->data(), kInvalid,
+                        s.speckle_range_px * kSubpixel, s.speckle_window_px);
+    m.pool.run(bands, [&](int band) {
+        m.finishRows(*result, s.height * band / bands, s.height * (band + 1) / bands, out);
+    });
+}
+
+const CensusSgmSettings& CensusSgm::settings() const
+{
+    return impl_->settings;
+}
+
+const char* CensusSgm::target() const
+{
+    return impl_->kernels->target;
+}
+
+} // namespace stereod::sgm

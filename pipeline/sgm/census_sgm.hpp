@@ -1,0 +1,98 @@
+#pragma once
+// Census + semi-global matching (Zabih & Woodfill's census transform, Hirschmüller's SGM)
+// on rectified 8-bit images: our own matcher, the service's default.
+//
+// The chain, per frame:
+//  1. census transform of both images (window census_width x census_height, each
+//     neighbour compared with the centre: up to 64 bits per pixel);
+//  2. one row at a time, the Hamming cost of every disparity, and path costs along
+//     `paths` directions (3: left->right, right->left, top->bottom; 5 adds the two
+//     diagonals from above), all in one top-to-bottom pass, so no W x H x D volume is
+//     ever kept: memory grows with W x D;
+//  3. winner-takes-all on the summed paths, a uniqueness test against the best
+//     non-adjacent disparity, parabolic sub-pixel, the right view's disparity from the
+//     same sums and a left-right check;
+//  4. a 3x3 median and speckle removal;
+//  5. a confidence per pixel, and a flag where the best match sits at the near end of the
+//     range (the surface may be nearer than the range can see).
+//
+// The core depends on the standard library and Highway only (no OpenCV), so that it
+// builds for any target Highway supports; the kernels (sgm_kernels.hpp) run on SIMD, and
+// a scalar reference gives the same disparities bit for bit.
+//
+// Thread-bound: one CensusSgm serves one caller thread; inside compute() it splits the
+// image into horizontal bands over its own `threads` worker threads (started once). Each
+// band starts its top-down paths `kBandWarmupRows` rows early so that the bands join
+// without a visible seam. All buffers are allocated in the constructor: compute()
+// allocates nothing.
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "pipeline/sgm/sgm_kernels.hpp"
+
+namespace stereod::sgm {
+
+struct CensusSgmSettings {
+    int width = 0;                  // image size in pixels
+    int height = 0;
+    int min_disparity = 0;          // disparities min_disparity .. + num_disparities - 1
+    int num_disparities = 64;       // a multiple of 16, 16..256
+    int census_width = 7;           // odd; census_width * census_height - 1 <= 64 bits
+    int census_height = 5;          // odd
+    int paths = 5;                  // 3 or 5 (see above)
+    int p1 = 9;                     // penalty for a 1 px disparity step, census bits
+    int p2 = 96;                    // penalty for a larger step, before adaptation
+    // P2 is lowered where the image changes along the path (a likely depth edge):
+    // P2 / (1 + |dI| / p2_gradient_scale), never below p1 + 1. 0 turns adaptation off.
+    int p2_gradient_scale = 16;
+    int uniqueness_percent = 10;    // best non-adjacent sum must exceed best by this much
+    int lr_max_diff_px = 1;         // left-right check tolerance; < 0 turns it off
+    bool median = true;             // 3x3 median of the disparities
+    int speckle_window_px = 100;    // smaller connected regions are removed; 0: off
+    int speckle_range_px = 2;       // disparity step allowed inside a region
+    // Pixels whose search range is cut by the left image edge (x < min_disparity +
+    // num_disparities - 1) keep a disparity only when it lies this far below the cut.
+    int edge_margin_px = 4;
+    int threads = 1;                // worker threads inside compute()
+    bool use_simd = true;           // false: the scalar reference kernels
+};
+
+// Throws std::invalid_argument naming the setting when the settings cannot work.
+void validateCensusSgmSettings(const CensusSgmSettings& settings);
+
+// Where compute() writes; every array is width * height, row-major, caller-owned.
+struct CensusSgmOutput {
+    float* disparity_px;            // pixels; +inf where nothing trustworthy was found
+    uint8_t* confidence;            // 0 where invalid, else 1..255 (see docs/protocol.md)
+    uint8_t* range_limit;           // 1 where the best match is at the near end of the range
+};
+
+// Bytes of working memory a matcher with these settings allocates.
+size_t censusSgmMemoryBytes(const CensusSgmSettings& settings);
+
+class CensusSgm {
+public:
+    // Validates (std::invalid_argument), allocates every buffer and starts the threads.
+    explicit CensusSgm(const CensusSgmSettings& settings);
+    ~CensusSgm();
+
+    CensusSgm(const CensusSgm&) = delete;
+    CensusSgm& operator=(const CensusSgm&) = delete;
+
+    // left, right: rectified 8-bit images of settings.width x settings.height, rows
+    // `stride` bytes apart.
+    void compute(const uint8_t* left, const uint8_t* right, size_t stride,
+                 const CensusSgmOutput& out);
+
+    const CensusSgmSettings& settings() const;
+    // The kernels' target: "AVX2", "SSE4", "NEON", ..., or "scalar".
+    const char* target() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+} // namespace stereod::sgm
