@@ -1,5 +1,7 @@
 #include "config/service_config.hpp"
 
+#include "pipeline/census_sgm_matcher.hpp"
+
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
@@ -571,6 +573,7 @@ struct AlgorithmName {
 const std::vector<AlgorithmName>& algorithmNames()
 {
     static const std::vector<AlgorithmName> names = {
+        {"census-sgm", MatcherKind::CensusSgm, SgbmMode::Sgbm},
         {"sgbm", MatcherKind::Sgbm, SgbmMode::Sgbm},
         {"sgbm-3way", MatcherKind::Sgbm, SgbmMode::ThreeWay},
         {"sgbm-hh", MatcherKind::Sgbm, SgbmMode::Hh},
@@ -584,7 +587,7 @@ std::string algorithmName(const MatcherSettings& matcher)
 {
     for (const auto& entry : algorithmNames()) {
         if (entry.kind == matcher.kind &&
-            (matcher.kind == MatcherKind::Bm || entry.mode == matcher.sgbm_mode)) {
+            (matcher.kind != MatcherKind::Sgbm || entry.mode == matcher.sgbm_mode)) {
             return entry.name;
         }
     }
@@ -748,6 +751,24 @@ std::vector<KeyDef> buildKeyTable()
     add(integerKey(
         "matcher.texture_threshold", kLive,
         [](auto& c) -> auto& { return c.processing.matcher.texture_threshold; }));
+    add(autoIntegerKey(
+        "matcher.census_width", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.census_width; },
+        "auto or an odd number of pixels"));
+    add(autoIntegerKey(
+        "matcher.census_height", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.census_height; },
+        "auto or an odd number of pixels"));
+    add(autoIntegerKey(
+        "matcher.paths", kLive, [](auto& c) -> auto& { return c.processing.matcher.paths; },
+        "auto, 3 or 5"));
+    add(autoIntegerKey(
+        "matcher.p2_gradient_scale", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.p2_gradient_scale; },
+        "auto or grey levels"));
+    add(autoIntegerKey(
+        "matcher.threads", kLive, [](auto& c) -> auto& { return c.processing.matcher.threads; },
+        "auto (the cores available) or a number of threads"));
 
     add(realKey(
         "nearest.roi.x", kLive, [](auto& c) -> auto& { return c.processing.nearest.roi.x; },
@@ -776,6 +797,12 @@ std::vector<KeyDef> buildKeyTable()
     add(integerKey(
         "nearest.min_pixels", kLive,
         [](auto& c) -> auto& { return c.processing.nearest.min_pixels; }));
+    add(integerKey(
+        "nearest.min_confidence", kLive,
+        [](auto& c) -> auto& { return c.processing.nearest.min_confidence; }));
+    add(realKey(
+        "nearest.range_limit_fraction", kLive,
+        [](auto& c) -> auto& { return c.processing.nearest.range_limit_fraction; }, ""));
     add(boolKey(
         "point_cloud", kLive, [](auto& c) -> auto& { return c.processing.compute_cloud; }));
 
@@ -1256,6 +1283,22 @@ void checkSource(Checker& checker, const SourceConfig& source, const std::string
     }
 }
 
+// census-sgm's own limits are the matcher's (one place): its first refusal, by key.
+void checkCensusSgm(Checker& checker, const MatcherSettings& matcher)
+{
+    try {
+        validateCensusSgm(matcher);
+    } catch (const std::invalid_argument& e) {
+        const std::string message = e.what();
+        const size_t colon = message.find(": ");
+        if (colon == std::string::npos)
+            checker.fail("matcher.algorithm", message, "settings census-sgm can work with");
+        else
+            checker.fail(message.substr(0, colon), message.substr(colon + 2),
+                         "see docs/configuration.md");
+    }
+}
+
 void checkMatcher(Checker& checker, const MatcherSettings& matcher)
 {
     checker.real("matcher.min_depth_m", matcher.min_depth_m, above(0, 1000, " m"));
@@ -1280,6 +1323,22 @@ void checkMatcher(Checker& checker, const MatcherSettings& matcher)
     checker.integer("matcher.min_disparity", matcher.min_disparity, -kMaxDisparities,
                     kMaxDisparities, " px");
 
+    checker.integer("matcher.uniqueness_ratio", matcher.uniqueness_ratio, 0, 100, " percent");
+    checker.integer("matcher.speckle_window_px", matcher.speckle_window_px, 0, 1000000, " px");
+    checker.integer("matcher.speckle_range_px", matcher.speckle_range_px, 0, kMaxDisparities,
+                    " px");
+    if (matcher.lr_max_diff_px < -1 || matcher.lr_max_diff_px > kMaxDisparities) {
+        checker.fail("matcher.lr_max_diff_px", "out of range",
+                     "-1 (off) or 0 to " + std::to_string(kMaxDisparities) + " px");
+    }
+
+    if (matcher.kind == MatcherKind::CensusSgm) {
+        if (checker.usable({"matcher.num_disparities", "matcher.max_num_disparities",
+                            "matcher.min_disparity", "matcher.uniqueness_ratio",
+                            "matcher.speckle_window_px", "matcher.speckle_range_px"}))
+            checkCensusSgm(checker, matcher);
+        return;
+    }
     // OpenCV's limits: StereoBM takes odd blocks of 5..255, StereoSGBM odd blocks >= 1;
     // beyond 31 px SGBM only blurs depth edges and costs time.
     const bool bm = matcher.kind == MatcherKind::Bm;
@@ -1294,14 +1353,6 @@ void checkMatcher(Checker& checker, const MatcherSettings& matcher)
         checker.fail("matcher.block_size", "out of range", block_expected);
     }
 
-    checker.integer("matcher.uniqueness_ratio", matcher.uniqueness_ratio, 0, 100, " percent");
-    checker.integer("matcher.speckle_window_px", matcher.speckle_window_px, 0, 1000000, " px");
-    checker.integer("matcher.speckle_range_px", matcher.speckle_range_px, 0, kMaxDisparities,
-                    " px");
-    if (matcher.lr_max_diff_px < -1 || matcher.lr_max_diff_px > kMaxDisparities) {
-        checker.fail("matcher.lr_max_diff_px", "out of range",
-                     "-1 (off) or 0 to " + std::to_string(kMaxDisparities) + " px");
-    }
 
     // SGBM keeps its path costs in 16 bits, so penalties stay below 32768.
     constexpr int kMaxPenalty = 32767;
@@ -1363,6 +1414,9 @@ void checkNearest(Checker& checker, const NearestSettings& nearest)
                  closed(0, 1, " of the region's pixels"));
     checker.integer("nearest.min_pixels", nearest.min_pixels, 1, std::numeric_limits<int>::max(),
                     " px");
+    checker.integer("nearest.min_confidence", nearest.min_confidence, 0, 255, "");
+    checker.real("nearest.range_limit_fraction", nearest.range_limit_fraction,
+                 closed(0, 1, " of the region's pixels"));
 }
 
 void checkSocket(Checker& checker, const SocketConfig& socket)

@@ -70,7 +70,7 @@ struct DepthOptions {
     std::string calib_path;
     std::string config_path;          // a service configuration whose processing to use
     RectifiedOptions geometry;
-    std::string matcher;              // "", "bm", "sgbm", "sgbm-3way"
+    std::string matcher;              // "", "census-sgm", "bm", "sgbm", "sgbm-3way"
     std::optional<int> max_disparity;
     std::optional<double> min_depth_m;
     std::string roi;                  // "x,y,w,h" in fractions of the image
@@ -78,6 +78,7 @@ struct DepthOptions {
     std::string depth_path;
     std::string cloud_path;
     std::string colormap_path;
+    std::string confidence_path;
     bool json = false;
 };
 

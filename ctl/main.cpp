@@ -153,8 +153,9 @@ CLI::App* declareDepth(CLI::App& app, DepthOptions& o)
     calib->excludes(rectified);
     cmd->add_option("--config", o.config_path,
                     "take the processing settings from this service configuration");
-    cmd->add_option("--matcher", o.matcher, "bm, sgbm or sgbm-3way")
-        ->check(CLI::IsMember({"bm", "sgbm", "sgbm-3way"}));
+    cmd->add_option("--matcher", o.matcher,
+                    "OpenCV's sgbm (the default), sgbm-3way or bm, or our census-sgm")
+        ->check(CLI::IsMember({"census-sgm", "bm", "sgbm", "sgbm-3way"}));
     cmd->add_option("--max-disparity", o.max_disparity,
                     "disparities searched, rounded up to a multiple of 16 (instead of deriving "
                     "them from the closest depth)")
@@ -168,6 +169,8 @@ CLI::App* declareDepth(CLI::App& app, DepthOptions& o)
     cmd->add_option("--depth", o.depth_path, "write the depth (.png, uint16 mm)");
     cmd->add_option("--cloud", o.cloud_path, "write the point cloud (.ply)");
     cmd->add_option("--colormap", o.colormap_path, "write the colourised depth (.png)");
+    cmd->add_option("--confidence", o.confidence_path,
+                    "write the per-pixel match confidence (.png, 0 = no disparity, 1..255)");
     cmd->add_flag("--json", o.json,
                   "print the reading, stage timings, disparity range and matcher as JSON");
     return cmd;

@@ -105,7 +105,9 @@ ProcessorSettings depthSettings(const DepthOptions& options)
                                      ? defaultConfig().processing
                                      : loadConfig(options.config_path).processing;
     MatcherSettings& matcher = settings.matcher;
-    if (options.matcher == "bm") {
+    if (options.matcher == "census-sgm") {
+        matcher.kind = MatcherKind::CensusSgm;
+    } else if (options.matcher == "bm") {
         matcher.kind = MatcherKind::Bm;
     } else if (options.matcher == "sgbm") {
         matcher.kind = MatcherKind::Sgbm;
@@ -221,6 +223,10 @@ int runDepth(const DepthOptions& options)
         const auto [near_m, far_m] = depthDisplayRange(result.depth_m);
         writeColorizedDepth(options.colormap_path, result.depth_m, near_m, far_m);
         written.emplace_back("colormap", options.colormap_path);
+    }
+    if (!options.confidence_path.empty()) {
+        writeConfidencePng(options.confidence_path, result.confidence);
+        written.emplace_back("confidence", options.confidence_path);
     }
 
     if (options.json) {

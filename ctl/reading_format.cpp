@@ -16,7 +16,7 @@ constexpr std::array kAllReasons = {
     NoReadingReason::TooFewValidPixels, NoReadingReason::NothingInRange,
     NoReadingReason::OutOfSync,      NoReadingReason::SourceDown,
     NoReadingReason::BadFrame,       NoReadingReason::Stale,
-    NoReadingReason::Uncalibrated,
+    NoReadingReason::Uncalibrated,   NoReadingReason::NearerThanRange,
 };
 
 bool isValid(const nlohmann::ordered_json& reading)

@@ -224,6 +224,14 @@ std::size_t formatReasonMessage(const Reading& reading, char* buffer, std::size_
             reasonText(reading.reason), reading.in_range_fraction * reading.region_pixels,
             reading.min_pixels, 100.0 * reading.valid_fraction, 100.0 * reading.in_range_fraction);
         break;
+    case NoReadingReason::NearerThanRange:
+        written = std::snprintf(buffer, size,
+                                "%s: nearer than %.3f m (%.1f %% of the region at the range's near "
+                                "limit); raise matcher.num_disparities or lower matcher.min_depth_m "
+                                "to measure it",
+                                reasonText(reading.reason), reading.nearer_than_m,
+                                100.0 * reading.range_limit_fraction);
+        break;
     default:
         written = std::snprintf(buffer, size, "%s", reasonText(reading.reason));
         break;
@@ -407,6 +415,9 @@ void appendReadingJson(std::string& out, const ReadingReport& report, int64_t no
     object.field("valid_fraction", roundTo(reading.valid_fraction, 4));
     object.field("in_range_fraction", roundTo(reading.in_range_fraction, 4));
     object.field("region_pixels", reading.region_pixels);
+    object.field("range_limit_fraction", roundTo(reading.range_limit_fraction, 4));
+    if (reading.reason == NoReadingReason::NearerThanRange)
+        object.field("nearer_than_m", roundTo(reading.nearer_than_m, 4));
     if (!valid) {
         const NoReadingReason reason =
             reading.reason == NoReadingReason::None ? NoReadingReason::BadFrame : reading.reason;

@@ -294,6 +294,14 @@ void writeDepthPng(const std::string& path, const cv::Mat& depth_m)
     writeImage(path, depth_mm);
 }
 
+void writeConfidencePng(const std::string& path, const cv::Mat& confidence)
+{
+    requireType(confidence, CV_8UC1, path, "CV_8UC1 confidence map");
+    if (extensionOf(path) != "png")
+        ioError(path, "a confidence map is written as .png (uint8, 0 = no disparity)");
+    writeImage(path, confidence);
+}
+
 cv::Mat readDepthPng(const std::string& path)
 {
     const cv::Mat depth_mm = readUint16Png(path);

@@ -29,6 +29,9 @@ void depthToMillimetres(const cv::Mat& depth_m, cv::Mat& depth_mm);
 // Reads a depth .png (uint16 millimetres) back to CV_32FC1 metres, 0 = invalid.
 cv::Mat readDepthPng(const std::string& path);
 
+// Per-pixel match confidence (CV_8UC1: 0 = no disparity, 1..255) as an 8-bit .png.
+void writeConfidencePng(const std::string& path, const cv::Mat& confidence);
+
 // Binary little-endian .ply, float x y z intensity.
 void writePly(const std::string& path, const std::vector<CloudPoint>& cloud);
 

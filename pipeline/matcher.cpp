@@ -1,5 +1,7 @@
 #include "pipeline/matcher.hpp"
 
+#include "pipeline/census_sgm_matcher.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -49,22 +51,39 @@ int effectiveP2(const MatcherSettings& s)
     return s.p2 > 0 ? s.p2 : 32 * s.block_size * s.block_size;
 }
 
+// OpenCV's matchers say nothing about how sure they are: every reported pixel gets 255.
+void fullConfidenceWhereValid(const cv::Mat& disparity_px, cv::Mat& confidence)
+{
+    confidence.create(disparity_px.size(), CV_8UC1);
+    for (int y = 0; y < disparity_px.rows; ++y) {
+        const float* d = disparity_px.ptr<float>(y);
+        uint8_t* c = confidence.ptr<uint8_t>(y);
+        for (int x = 0; x < disparity_px.cols; ++x)
+            c[x] = std::isfinite(d[x]) ? 255 : 0;
+    }
+}
+
 // Both OpenCV matchers share the fixed-point output and its conversion.
 class FixedPointMatcher : public Matcher {
 public:
-    void compute(const cv::Mat& left, const cv::Mat& right, cv::Mat& disparity_px) override
+    void compute(const cv::Mat& left, const cv::Mat& right, MatchOutput& out) override
     {
         CV_Assert(left.type() == CV_8UC1 && right.type() == CV_8UC1 &&
                   left.size() == right.size());
+        out.range_limit.create(left.size(), CV_8UC1);
+        out.range_limit.setTo(0);
         if (left.cols <= range_.min_disparity + range_.num_disparities - 1) {
             // No column has its whole range inside the right image: nothing can be matched.
-            disparity_px.create(left.size(), CV_32FC1);
-            disparity_px.setTo(std::numeric_limits<float>::infinity());
+            out.disparity_px.create(left.size(), CV_32FC1);
+            out.disparity_px.setTo(std::numeric_limits<float>::infinity());
+            out.confidence.create(left.size(), CV_8UC1);
+            out.confidence.setTo(0);
             return;
         }
         // fixed_ keeps its buffer between frames: create() inside compute() is a no-op.
         engine()->compute(left, right, fixed_);
-        fixedPointToPixels(fixed_, range_, disparity_px);
+        fixedPointToPixels(fixed_, range_, out.disparity_px);
+        fullConfidenceWhereValid(out.disparity_px, out.confidence);
     }
 
 protected:
@@ -149,7 +168,8 @@ private:
 
 void validateMatcherSettings(const MatcherSettings& s)
 {
-    if (s.kind != MatcherKind::Bm && s.kind != MatcherKind::Sgbm)
+    if (s.kind != MatcherKind::Bm && s.kind != MatcherKind::Sgbm &&
+        s.kind != MatcherKind::CensusSgm)
         invalid("kind", "unknown matcher");
     if (s.num_disparities == 0 && !(s.min_depth_m > 0.0 && std::isfinite(s.min_depth_m)))
         invalid("min_depth_m", "must be a finite number > 0, got " + std::to_string(s.min_depth_m));
@@ -166,6 +186,10 @@ void validateMatcherSettings(const MatcherSettings& s)
     // Disparities are stored as 16 x d in a 16-bit integer.
     inRange("max_num_disparities", s.max_num_disparities, 16, 1024);
     inRange("min_disparity", s.min_disparity, -1024, 1024);
+    if (s.kind == MatcherKind::CensusSgm) {
+        validateCensusSgm(s);
+        return;
+    }
     if (s.block_size % 2 == 0)
         invalid("block_size", "must be odd, got " + std::to_string(s.block_size));
     if (s.kind == MatcherKind::Bm)
@@ -200,6 +224,8 @@ std::unique_ptr<Matcher> makeMatcher(const MatcherSettings& settings, const Disp
         throw std::invalid_argument("disparity range: num_disparities must be a positive "
                                     "multiple of 16, got " +
                                     std::to_string(range.num_disparities));
+    if (settings.kind == MatcherKind::CensusSgm)
+        return makeCensusSgmMatcher(settings, range);
     if (settings.kind == MatcherKind::Bm)
         return std::make_unique<BmMatcher>(settings, range);
     return std::make_unique<SgbmMatcher>(settings, range);
@@ -207,6 +233,8 @@ std::unique_ptr<Matcher> makeMatcher(const MatcherSettings& settings, const Disp
 
 std::string matcherName(const MatcherSettings& settings)
 {
+    if (settings.kind == MatcherKind::CensusSgm)
+        return "census-sgm";
     if (settings.kind == MatcherKind::Bm)
         return "bm";
     switch (settings.sgbm_mode) {

@@ -16,22 +16,34 @@
 
 namespace stereod {
 
+// What a matcher gives for one pair; buffers are reused when they already have the size.
+struct MatchOutput {
+    // CV_32FC1, pixels; +inf where no trustworthy match was found (Middlebury convention).
+    cv::Mat disparity_px;
+    // CV_8UC1: 0 where disparity_px is invalid, else 1..255, how much the match can be
+    // trusted (census-sgm: from uniqueness, sharpness of the minimum and left-right
+    // agreement; OpenCV's matchers give none: 255 for every reported pixel).
+    cv::Mat confidence;
+    // CV_8UC1: 1 where the best match sits at the near end of the disparity range, so the
+    // surface may be nearer than the range can see (its disparity_px is invalid).
+    cv::Mat range_limit;
+};
+
 class Matcher {
 public:
     virtual ~Matcher() = default;
 
-    // left, right: rectified CV_8UC1 images of the same size.
-    // disparity_px: CV_32FC1 of that size, in pixels; +inf where no trustworthy match was
-    // found (Middlebury convention), including the left-most min_disparity +
-    // num_disparities - 1 columns, whose full disparity range lies outside the right image.
-    // Reuses disparity_px when it already has the right size and type.
-    virtual void compute(const cv::Mat& left, const cv::Mat& right, cv::Mat& disparity_px) = 0;
+    // left, right: rectified CV_8UC1 images of the same size. Columns whose whole search
+    // range lies outside the right image (x < min_disparity + num_disparities - 1) are
+    // invalid for OpenCV's matchers; census-sgm searches the part that is inside and
+    // keeps a disparity only well below where the image edge cut the search.
+    virtual void compute(const cv::Mat& left, const cv::Mat& right, MatchOutput& out) = 0;
 
     // Applies new parameters of the same matcher kind (and SGBM mode) without rebuilding.
     // The settings must have passed validateMatcherSettings().
     virtual void configure(const MatcherSettings& settings, const DisparityRange& range) = 0;
 
-    // "bm", "sgbm", "sgbm-3way", "sgbm-hh", "sgbm-hh4".
+    // "census-sgm", "bm", "sgbm", "sgbm-3way", "sgbm-hh", "sgbm-hh4".
     virtual std::string name() const = 0;
 
     virtual MatcherKind kind() const = 0;

@@ -42,6 +42,9 @@ void validateNearestSettings(const NearestSettings& s)
     if (!(s.percentile >= 0.0 && s.percentile <= 100.0))
         invalid("percentile", "must be within 0..100, got " + std::to_string(s.percentile));
     fraction("min_valid_fraction", s.min_valid_fraction);
+    fraction("range_limit_fraction", s.range_limit_fraction);
+    if (s.min_confidence < 0 || s.min_confidence > 255)
+        invalid("min_confidence", "must be within 0..255, got " + std::to_string(s.min_confidence));
     if (s.min_pixels < 1)
         invalid("min_pixels", "must be >= 1, got " + std::to_string(s.min_pixels));
 }
@@ -68,10 +71,13 @@ NearestObjectFinder::NearestObjectFinder(size_t max_region_pixels)
     in_range_.reserve(max_region_pixels);
 }
 
-Reading NearestObjectFinder::find(const cv::Mat& depth_m, const NearestSettings& settings,
-                                  int64_t stamp_ns, uint64_t frame)
+Reading NearestObjectFinder::find(const cv::Mat& depth_m, const cv::Mat& confidence,
+                                  const cv::Mat& range_limit, const NearestSettings& settings,
+                                  double closest_depth_m, int64_t stamp_ns, uint64_t frame)
 {
     CV_Assert(depth_m.type() == CV_32FC1);
+    CV_Assert(confidence.empty() || (confidence.type() == CV_8UC1 && confidence.size() == depth_m.size()));
+    CV_Assert(range_limit.empty() || (range_limit.type() == CV_8UC1 && range_limit.size() == depth_m.size()));
     Reading reading;
     reading.valid = false;
     reading.stamp_ns = stamp_ns;
@@ -93,12 +99,20 @@ Reading NearestObjectFinder::find(const cv::Mat& depth_m, const NearestSettings&
 
     const float lo = static_cast<float>(settings.min_depth_m);
     const float hi = static_cast<float>(settings.max_depth_m);
+    const uint8_t min_confidence = static_cast<uint8_t>(std::clamp(settings.min_confidence, 0, 255));
     size_t valid = 0;
+    size_t at_limit = 0;
     for (int y = region.y; y < region.y + region.height; ++y) {
         const float* z = depth_m.ptr<float>(y);
+        const uint8_t* conf = confidence.empty() ? nullptr : confidence.ptr<uint8_t>(y);
+        const uint8_t* limit = range_limit.empty() ? nullptr : range_limit.ptr<uint8_t>(y);
         for (int x = region.x; x < region.x + region.width; ++x) {
+            if (limit != nullptr && limit[x] != 0)
+                ++at_limit;
             const float depth = z[x];
             if (!(depth > 0.0f) || !std::isfinite(depth))
+                continue;
+            if (conf != nullptr && conf[x] < min_confidence)
                 continue;
             ++valid;
             if (depth >= lo && depth <= hi)
@@ -108,6 +122,16 @@ Reading NearestObjectFinder::find(const cv::Mat& depth_m, const NearestSettings&
     const double total = static_cast<double>(region_pixels);
     reading.valid_fraction = static_cast<double>(valid) / total;
     reading.in_range_fraction = static_cast<double>(in_range_.size()) / total;
+    reading.range_limit_fraction = static_cast<double>(at_limit) / total;
+
+    // Checked first: a near obstacle shows up as invalid pixels at the range's edge, and
+    // a valid number from whatever lies behind it would hide it.
+    if (at_limit >= static_cast<size_t>(settings.min_pixels) &&
+        reading.range_limit_fraction >= settings.range_limit_fraction) {
+        reading.reason = NoReadingReason::NearerThanRange;
+        reading.nearer_than_m = closest_depth_m;
+        return reading;
+    }
 
     if (reading.valid_fraction < settings.min_valid_fraction || valid == 0) {
         reading.reason = NoReadingReason::TooFewValidPixels;

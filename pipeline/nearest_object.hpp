@@ -38,11 +38,22 @@ public:
     // depth_m: CV_32FC1, metres, invalid = 0 (NaN and +inf count as invalid too).
     // Fills every field of the reading: stamp_ns, frame, the fractions, region_pixels and
     // min_valid_fraction, and either distance_m or the reason there is none:
+    //  - range_limit_fraction of the region (and min_pixels) at the range's near limit
+    //    -> NearerThanRange, nearer_than_m = closest_depth_m;
     //  - fewer than min_valid_fraction of the region valid -> TooFewValidPixels;
     //  - fewer than min_pixels within [min_depth_m, max_depth_m] -> NothingInRange;
     //  - else the configured percentile of the in-range depths.
-    Reading find(const cv::Mat& depth_m, const NearestSettings& settings, int64_t stamp_ns,
+    // confidence (CV_8UC1, or empty: all trusted) drops pixels below min_confidence;
+    // range_limit (CV_8UC1, or empty: none) flags pixels matched at the range's near end.
+    Reading find(const cv::Mat& depth_m, const cv::Mat& confidence, const cv::Mat& range_limit,
+                 const NearestSettings& settings, double closest_depth_m, int64_t stamp_ns,
                  uint64_t frame);
+    // The same without confidence or range flags (OpenCV's matchers, tests).
+    Reading find(const cv::Mat& depth_m, const NearestSettings& settings, int64_t stamp_ns,
+                 uint64_t frame)
+    {
+        return find(depth_m, cv::Mat(), cv::Mat(), settings, 0.0, stamp_ns, frame);
+    }
 
 private:
     std::vector<float> in_range_;   // the region's in-range depths, reused

@@ -23,6 +23,13 @@ struct NearestSettings {
     double min_valid_fraction = 0.10;
     // At least this many in-range pixels are needed for a reading.
     int min_pixels = 50;
+    // Pixels whose match confidence (0..255, see MatchOutput) is below this are left out
+    // of the statistic, as if they had no depth. 0 keeps every reported pixel.
+    int min_confidence = 0;
+    // When at least this fraction of the region (and min_pixels pixels) has its best match
+    // at the near end of the disparity range, something may be nearer than the range can
+    // see: the reading is "nearer than <closest depth>", never a number from the edge.
+    double range_limit_fraction = 0.02;
 };
 
 } // namespace stereod

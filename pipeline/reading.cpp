@@ -14,6 +14,7 @@ const char* reasonCode(NoReadingReason reason) noexcept
     case NoReadingReason::BadFrame: return "bad_frame";
     case NoReadingReason::Stale: return "stale";
     case NoReadingReason::Uncalibrated: return "uncalibrated";
+    case NoReadingReason::NearerThanRange: return "nearer_than_range";
     }
     return "unknown";
 }
@@ -30,6 +31,8 @@ const char* reasonText(NoReadingReason reason) noexcept
     case NoReadingReason::BadFrame: return "the frame pair could not be processed";
     case NoReadingReason::Stale: return "the latest reading is too old";
     case NoReadingReason::Uncalibrated: return "the service runs without a calibration";
+    case NoReadingReason::NearerThanRange:
+        return "something in the region is nearer than the disparity range can see";
     }
     return "unknown";
 }

@@ -14,6 +14,8 @@ enum class NoReadingReason {
     OutOfSync,          // the pair's capture times differ by more than allowed
     SourceDown,         // the frame source failed, stalled or finished
     BadFrame,           // the pair could not be processed (size mismatch, corrupt data)
+    NearerThanRange,    // much of the region matches at the near end of the disparity range:
+                        // something is nearer than the service can measure (nearer_than_m)
     Stale,              // the latest reading is older than the caller allows
     Uncalibrated,       // the service runs without a calibration (raw frames only)
 };
@@ -37,6 +39,10 @@ struct Reading {
     double min_valid_fraction = 0.0;   // the threshold in force, to explain a refusal
     uint32_t min_pixels = 0;           // in-range pixels needed, to explain a refusal
     uint32_t region_pixels = 0;        // size of the region of interest in pixels
+    double range_limit_fraction = 0.0; // of the region's pixels, those at the range's near limit
+    // NearerThanRange: the closest depth the disparity range can see, in metres; the
+    // obstacle is nearer than this.
+    double nearer_than_m = 0.0;
 };
 
 } // namespace stereod

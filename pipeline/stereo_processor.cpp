@@ -151,6 +151,10 @@ struct StereoProcessor::Impl {
         out.left_rectified.setTo(0);
         out.disparity.create(size, CV_32FC1);
         out.disparity.setTo(std::numeric_limits<float>::infinity());
+        out.confidence.create(size, CV_8UC1);
+        out.confidence.setTo(0);
+        out.range_limit.create(size, CV_8UC1);
+        out.range_limit.setTo(0);
         out.depth_m.create(size, CV_32FC1);
         out.depth_m.setTo(0);
         out.cloud.clear();
@@ -212,13 +216,19 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& right, int64_t
     }
     const Clock::time_point t1 = Clock::now();
 
-    p.matcher->compute(out.left_rectified, right_rectified, out.disparity);
+    // The matcher writes into the result's buffers (headers shared, nothing copied).
+    MatchOutput match{out.disparity, out.confidence, out.range_limit};
+    p.matcher->compute(out.left_rectified, right_rectified, match);
+    out.disparity = match.disparity_px;
+    out.confidence = match.confidence;
+    out.range_limit = match.range_limit;
     const Clock::time_point t2 = Clock::now();
 
     disparityToDepth(out.disparity, p.calibration.rectified, out.depth_m);
     const Clock::time_point t3 = Clock::now();
 
-    out.reading = p.nearest.find(out.depth_m, p.settings.nearest, stamp_ns, frame);
+    out.reading = p.nearest.find(out.depth_m, out.confidence, out.range_limit, p.settings.nearest,
+                                 p.range.closest_depth_m, stamp_ns, frame);
     const Clock::time_point t4 = Clock::now();
 
     if (p.settings.compute_cloud)

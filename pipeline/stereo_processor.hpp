@@ -49,6 +49,8 @@ struct CloudPoint {
 struct DepthResult {
     cv::Mat left_rectified;            // CV_8UC1
     cv::Mat disparity;                 // CV_32FC1, pixels; invalid = +inf (Middlebury)
+    cv::Mat confidence;                // CV_8UC1, 0 invalid, 1..255 (see MatchOutput)
+    cv::Mat range_limit;               // CV_8UC1, 1 where matched at the range's near end
     cv::Mat depth_m;                   // CV_32FC1, metres; invalid = 0
     std::vector<CloudPoint> cloud;     // valid depths only; capacity kept across frames
     Reading reading;
@@ -92,7 +94,7 @@ public:
     const StereoCalibration& calibration() const;
     const ProcessorSettings& settings() const;
     DisparityRange disparityRange() const;
-    // A name for logs and status: "sgbm", "sgbm-3way", "bm".
+    // A name for logs and status: "census-sgm", "sgbm", "sgbm-3way", "bm".
     std::string matcherName() const;
 
 private:

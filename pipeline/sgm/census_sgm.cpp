@@ -55,7 +55,8 @@ struct BandScratch {
 
 void validateCensusSgmSettings(const CensusSgmSettings& s)
 {
-    if (s.width < 1 || s.height < 1)
+    const bool sized = s.width != 0 || s.height != 0;   // 0x0: the size is not known yet
+    if (sized && (s.width < 1 || s.height < 1))
         invalid("size", "the image must be at least 1x1, got " + std::to_string(s.width) +
                             "x" + std::to_string(s.height));
     if (s.num_disparities < 16 || s.num_disparities > 256 || s.num_disparities % 16 != 0)
@@ -93,7 +94,7 @@ void validateCensusSgmSettings(const CensusSgmSettings& s)
         invalid("edge_margin_px", "must be >= 0, got " + std::to_string(s.edge_margin_px));
     if (s.threads < 1 || s.threads > 64)
         invalid("threads", "must be within 1..64, got " + std::to_string(s.threads));
-    if (s.census_height / 2 >= s.height || s.census_width / 2 >= s.width)
+    if (sized && (s.census_height / 2 >= s.height || s.census_width / 2 >= s.width))
         invalid("census", "window does not fit in the image");
 }
 

@@ -59,7 +59,8 @@ struct CensusSgmSettings {
     bool use_simd = true;           // false: the scalar reference kernels
 };
 
-// Throws std::invalid_argument naming the setting when the settings cannot work.
+// Throws std::invalid_argument naming the setting when the settings cannot work. A size
+// of 0x0 skips the checks that need the image size.
 void validateCensusSgmSettings(const CensusSgmSettings& settings);
 
 // Where compute() writes; every array is width * height, row-major, caller-owned.

@@ -97,29 +97,47 @@ TEST(MatcherSettings, RejectsWhatOpenCvCannotRun)
         return "";
     };
     EXPECT_EQ(message(MatcherSettings{}), "");
-    MatcherSettings s;
+    MatcherSettings opencv;   // OpenCV's SGBM: its own limits
+    opencv.kind = MatcherKind::Sgbm;
+    EXPECT_EQ(message(opencv), "");
+    MatcherSettings s = opencv;
     s.block_size = 4;
     EXPECT_EQ(message(s), "matcher.block_size: must be odd, got 4");
-    s = MatcherSettings{};
+    s = opencv;
     s.kind = MatcherKind::Bm;
     s.block_size = 3;
     EXPECT_EQ(message(s), "matcher.block_size: must be within 5..255, got 3");
-    s = MatcherSettings{};
+    s = opencv;
     s.block_size = 33;
     EXPECT_EQ(message(s), "matcher.block_size: must be within 1..31, got 33");
-    s = MatcherSettings{};
+    s = opencv;
     s.num_disparities = 20;
     EXPECT_EQ(message(s), "matcher.num_disparities: must be 0 (derived from min_depth_m) or a "
                           "positive multiple of 16, got 20");
-    s = MatcherSettings{};
+    s = opencv;
     s.p1 = 900;   // p2 defaults to 800
     EXPECT_EQ(message(s), "matcher.p2: must be greater than p1 (800 <= 900)");
-    s = MatcherSettings{};
+    s = opencv;
     s.min_depth_m = 0.0;
     EXPECT_NE(message(s).find("matcher.min_depth_m"), std::string::npos);
-    s = MatcherSettings{};
+    s = opencv;
     s.pre_filter_cap = 0;
     EXPECT_EQ(message(s), "matcher.pre_filter_cap: must be within 1..63, got 0");
+
+    // census-sgm: its own limits, named by key.
+    MatcherSettings census;
+    census.kind = MatcherKind::CensusSgm;
+    EXPECT_EQ(message(census), "");
+    s = census;
+    s.paths = 4;
+    EXPECT_EQ(message(s), "matcher.paths: must be 3 or 5, got 4");
+    s = census;
+    s.p2 = 250;   // with a 7x5 census (34 bits) the 8-bit path costs would overflow
+    EXPECT_NE(message(s).find("matcher.p2: census cost"), std::string::npos);
+    s = census;
+    s.num_disparities = 512;
+    s.max_num_disparities = 512;
+    EXPECT_NE(message(s).find("at most 256"), std::string::npos);
 }
 
 class Processor : public ::testing::Test {
@@ -165,6 +183,7 @@ TEST_F(Processor, ProducesAReadingWithStampAndTimings)
 
 TEST_F(Processor, LeftColumnsThatCannotBeMatchedAreInvalid)
 {
+    // OpenCV's matchers leave the whole band invalid.
     StereoProcessor p(calibration_, settings_);
     DepthResult out;
     p.process(left_, right_, 0, 0, out);
@@ -172,7 +191,31 @@ TEST_F(Processor, LeftColumnsThatCannotBeMatchedAreInvalid)
         for (int x = 0; x < 15; ++x) {
             ASSERT_TRUE(std::isinf(out.disparity.at<float>(y, x))) << x << "," << y;
             ASSERT_EQ(out.depth_m.at<float>(y, x), 0.0f);
+            ASSERT_EQ(out.confidence.at<uint8_t>(y, x), 0);
         }
+}
+
+// census-sgm searches what lies inside the image where the edge cuts the range, and keeps a
+// disparity only well below the cut (a true match beyond the edge would read too far).
+TEST_F(Processor, LeftBandKeepsOnlyDisparitiesWellBelowTheCut)
+{
+    settings_.matcher.kind = MatcherKind::CensusSgm;
+    StereoProcessor p(calibration_, settings_);
+    DepthResult out;
+    p.process(left_, right_, 0, 0, out);
+    int kept = 0;
+    for (int y = 0; y < out.disparity.rows; ++y)
+        for (int x = 0; x < 15; ++x) {
+            const float d = out.disparity.at<float>(y, x);
+            if (std::isinf(d)) {
+                ASSERT_EQ(out.confidence.at<uint8_t>(y, x), 0);
+                continue;
+            }
+            ++kept;
+            ASSERT_LE(d, static_cast<float>(x - 4) + 0.5f) << x << "," << y;
+            ASSERT_GT(out.confidence.at<uint8_t>(y, x), 0);
+        }
+    EXPECT_GT(kept, 0);
 }
 
 TEST_F(Processor, DepthAndCloudFollowTheGeometry)
@@ -290,8 +333,19 @@ TEST_F(Processor, CloudSkippedWhenNotWanted)
 
 TEST_F(Processor, UpdateSettingsAppliesLiveAndRejectsInvalid)
 {
+    settings_.matcher.kind = MatcherKind::CensusSgm;
     StereoProcessor p(calibration_, settings_);
     ProcessorSettings bad = settings_;
+    bad.matcher.paths = 4;
+    EXPECT_THROW(p.updateSettings(bad), std::invalid_argument);
+    EXPECT_EQ(p.settings().matcher.paths, settings_.matcher.paths);
+    EXPECT_EQ(p.matcherName(), "census-sgm");
+
+    ProcessorSettings sgbm = settings_;
+    sgbm.matcher.kind = MatcherKind::Sgbm;
+    p.updateSettings(sgbm);
+    EXPECT_EQ(p.matcherName(), "sgbm");
+    bad = sgbm;
     bad.matcher.block_size = 6;
     EXPECT_THROW(p.updateSettings(bad), std::invalid_argument);
     EXPECT_EQ(p.settings().matcher.block_size, settings_.matcher.block_size);
@@ -315,7 +369,7 @@ TEST_F(Processor, UpdateSettingsAppliesLiveAndRejectsInvalid)
     for (int x = 0; x < 31; ++x)
         EXPECT_TRUE(std::isinf(out.disparity.at<float>(100, x))) << x;
 
-    ProcessorSettings three_way = settings_;
+    ProcessorSettings three_way = sgbm;
     three_way.matcher.sgbm_mode = SgbmMode::ThreeWay;
     p.updateSettings(three_way);
     EXPECT_EQ(p.matcherName(), "sgbm-3way");

@@ -1,0 +1,113 @@
+#include "pipeline/census_sgm_matcher.hpp"
+
+#include <sched.h>
+
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+
+namespace stereod {
+namespace {
+
+class CensusSgmMatcher final : public Matcher {
+public:
+    CensusSgmMatcher(const MatcherSettings& settings, const DisparityRange& range)
+    {
+        configure(settings, range);
+    }
+
+    void compute(const cv::Mat& left, const cv::Mat& right, MatchOutput& out) override
+    {
+        CV_Assert(left.type() == CV_8UC1 && right.type() == CV_8UC1 &&
+                  left.size() == right.size() && left.step == right.step);
+        if (!core_ || core_->settings().width != left.cols ||
+            core_->settings().height != left.rows) {
+            sgm::CensusSgmSettings sized = settings_;
+            sized.width = left.cols;
+            sized.height = left.rows;
+            core_ = std::make_unique<sgm::CensusSgm>(sized);
+        }
+        out.disparity_px.create(left.size(), CV_32FC1);
+        out.confidence.create(left.size(), CV_8UC1);
+        out.range_limit.create(left.size(), CV_8UC1);
+        CV_Assert(out.disparity_px.isContinuous() && out.confidence.isContinuous() &&
+                  out.range_limit.isContinuous());
+        core_->compute(left.data, right.data, left.step,
+                       {out.disparity_px.ptr<float>(), out.confidence.ptr<uint8_t>(),
+                        out.range_limit.ptr<uint8_t>()});
+    }
+
+    void configure(const MatcherSettings& settings, const DisparityRange& range) override
+    {
+        settings_ = censusSgmSettings(settings, range);
+        sgm::validateCensusSgmSettings(settings_);
+        core_.reset();   // rebuilt, with its buffers, on the next pair
+    }
+
+    std::string name() const override { return "census-sgm"; }
+    MatcherKind kind() const override { return MatcherKind::CensusSgm; }
+
+private:
+    sgm::CensusSgmSettings settings_;
+    std::unique_ptr<sgm::CensusSgm> core_;
+};
+
+} // namespace
+
+int availableCores()
+{
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    if (sched_getaffinity(0, sizeof(set), &set) == 0)
+        return std::max(1, CPU_COUNT(&set));
+    return 1;
+}
+
+sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& s, const DisparityRange& range)
+{
+    sgm::CensusSgmSettings c;   // its defaults are the tuned values
+    c.width = 0;
+    c.height = 0;
+    c.min_disparity = range.min_disparity;
+    c.num_disparities = range.num_disparities;
+    if (s.census_width != 0)
+        c.census_width = s.census_width;
+    if (s.census_height != 0)
+        c.census_height = s.census_height;
+    if (s.paths != 0)
+        c.paths = s.paths;
+    if (s.p1 != 0)
+        c.p1 = s.p1;
+    if (s.p2 != 0)
+        c.p2 = s.p2;
+    if (s.p2_gradient_scale > 0)
+        c.p2_gradient_scale = s.p2_gradient_scale;
+    c.uniqueness_percent = s.uniqueness_ratio;
+    c.lr_max_diff_px = s.lr_max_diff_px;
+    c.speckle_window_px = s.speckle_window_px;
+    c.speckle_range_px = s.speckle_range_px;
+    c.threads = s.threads > 0 ? s.threads : std::min(availableCores(), 8);
+    return c;
+}
+
+void validateCensusSgm(const MatcherSettings& settings)
+{
+    DisparityRange range;
+    range.min_disparity = settings.min_disparity;
+    // The range comes from the calibration later; any valid count checks the rest.
+    range.num_disparities = settings.num_disparities > 0 ? settings.num_disparities : 16;
+    if (range.num_disparities > 256 || settings.max_num_disparities > 256)
+        throw std::invalid_argument("matcher.max_num_disparities: census-sgm searches at most "
+                                    "256 disparities, got " +
+                                    std::to_string(std::max(range.num_disparities,
+                                                            settings.max_num_disparities)));
+    sgm::validateCensusSgmSettings(censusSgmSettings(settings, range));
+}
+
+std::unique_ptr<Matcher> makeCensusSgmMatcher(const MatcherSettings& settings,
+                                              const DisparityRange& range)
+{
+    return std::make_unique<CensusSgmMatcher>(settings, range);
+}
+
+} // namespace stereod

@@ -1,0 +1,27 @@
+#pragma once
+// Our census + semi-global matcher (pipeline/sgm) behind the Matcher interface: the
+// service's default. The core is sized for one image size; it is set up on the first
+// pair of a size (the only allocation) and again after configure().
+
+#include <memory>
+
+#include "pipeline/matcher.hpp"
+#include "pipeline/sgm/census_sgm.hpp"
+
+namespace stereod {
+
+// The core's settings for these matcher settings and range (image size left 0x0):
+// automatic values (0) replaced by the tuned defaults, threads 0 by the cores this
+// process may run on.
+sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& settings, const DisparityRange& range);
+
+// Throws std::invalid_argument naming the matcher.* setting that cannot work.
+void validateCensusSgm(const MatcherSettings& settings);
+
+std::unique_ptr<Matcher> makeCensusSgmMatcher(const MatcherSettings& settings,
+                                              const DisparityRange& range);
+
+// The cores this process may run on (its CPU affinity), at least 1.
+int availableCores();
+
+} // namespace stereod

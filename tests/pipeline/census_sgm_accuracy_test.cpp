@@ -1,0 +1,221 @@
+// census-sgm against ground truth on every real scene of shared/data, beside OpenCV's
+// StereoSGBM 3-way computed in the same test with the reference settings of
+// shared/data/README.md. Metrics over the pixels with ground truth:
+//   bad-2: of the reported pixels, the % more than 2 px off;
+//   density: the % that got a disparity; correct: density x (1 - bad-2);
+//   too far: of the reported pixels, the % whose disparity is more than 2 px too small
+//   (the error that hides an obstacle).
+// And the hostile case of a surface nearer than the disparity range.
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "pipeline/calibration.hpp"
+#include "pipeline/depth_io.hpp"
+#include "pipeline/stereo_processor.hpp"
+
+namespace stereod {
+namespace {
+
+namespace fs = std::filesystem;
+const std::string kData = std::string(STEREOD_SHARED_DATA_DIR) + "/";
+
+struct Scene {
+    std::string name;
+    std::string left, right, truth;
+    double divisor = 1.0;   // ground truth value / divisor = disparity; 0 or inf unknown
+};
+
+std::vector<Scene> scenes()
+{
+    std::vector<Scene> list = {
+        {"tsukuba", "middlebury/tsukuba/im3.png", "middlebury/tsukuba/im4.png",
+         "middlebury/tsukuba/disp3.pgm", 16},
+        {"venus", "middlebury/venus/im2.png", "middlebury/venus/im6.png",
+         "middlebury/venus/disp2.pgm", 8},
+    };
+    for (const char* n : {"Art", "Books", "Dolls", "Laundry", "Moebius", "Reindeer"}) {
+        const std::string d = std::string("middlebury2005/") + n + "/";
+        list.push_back({n, d + "view1.png", d + "view5.png", d + "disp1.png", 3});
+    }
+    for (const char* n :
+         {"Adirondack", "ArtL", "Jadeplant", "Motorcycle", "Piano", "Pipes", "Playroom"}) {
+        const std::string d = std::string("middlebury2014/") + n + "/";
+        list.push_back({n, d + "im0.png", d + "im1.png", d + "disp0GT.pfm", 1});
+    }
+    list.push_back({"eth3d", "eth3d/playground_1l/im0.png", "eth3d/playground_1l/im1.png",
+                    "eth3d/playground_1l/disp0.pfm", 1});
+    const std::string kitti = "kitti2012/000070/";
+    if (fs::is_directory(kData + kitti + "disp_noc"))
+        for (const auto& entry : fs::directory_iterator(kData + kitti + "disp_noc")) {
+            const std::string file = entry.path().filename().string();
+            list.push_back({"kitti", kitti + "image_0/" + file, kitti + "image_1/" + file,
+                            kitti + "disp_noc/" + file, 256});
+        }
+    return list;
+}
+
+// Ground truth in pixels, 0 where unknown.
+cv::Mat loadTruth(const Scene& s)
+{
+    const std::string path = kData + s.truth;
+    cv::Mat truth;
+    if (path.ends_with(".pfm")) {
+        truth = readDisparity(path);
+    } else {
+        const cv::Mat raw = cv::imread(path, cv::IMREAD_UNCHANGED);
+        raw.convertTo(truth, CV_32FC1, 1.0 / s.divisor);
+    }
+    const cv::Mat known = (truth > 0) & (truth < 1e6);
+    truth.setTo(0, ~known);
+    return truth;
+}
+
+struct Metrics {
+    double bad2 = 0, density = 0, too_far = 0;
+    double correct() const { return density * (1.0 - bad2 / 100.0); }
+};
+
+// disparity: CV_32FC1, pixels; not finite or <= 0: not reported.
+Metrics score(const cv::Mat& disparity, const cv::Mat& truth)
+{
+    long known = 0, reported = 0, bad = 0, far = 0;
+    for (int y = 0; y < truth.rows; ++y)
+        for (int x = 0; x < truth.cols; ++x) {
+            const float g = truth.at<float>(y, x);
+            if (!(g > 0))
+                continue;
+            ++known;
+            const float d = disparity.at<float>(y, x);
+            if (!std::isfinite(d) || d <= 0)
+                continue;
+            ++reported;
+            bad += std::abs(d - g) > 2.0f;
+            far += d - g < -2.0f;
+        }
+    Metrics m;
+    m.bad2 = 100.0 * bad / std::max(1L, reported);
+    m.density = 100.0 * reported / std::max(1L, known);
+    m.too_far = 100.0 * far / std::max(1L, reported);
+    return m;
+}
+
+cv::Mat openCvThreeWay(const cv::Mat& left, const cv::Mat& right, int num_disparities)
+{
+    auto sgbm = cv::StereoSGBM::create(0, num_disparities, 5, 200, 800, 1, 0, 10, 100, 2,
+                                       cv::StereoSGBM::MODE_SGBM_3WAY);
+    cv::Mat fixed, pixels;
+    sgbm->compute(left, right, fixed);
+    fixed.convertTo(pixels, CV_32FC1, 1.0 / 16.0);
+    return pixels;
+}
+
+// Our processor through a rectified-only calibration (f*B = 10 px*m, doffs 0) and a fixed
+// range, as a user runs `stereoctl depth --rectified --matcher census-sgm`.
+cv::Mat censusSgm(const cv::Mat& left, const cv::Mat& right, int num_disparities, int threads)
+{
+    ProcessorSettings settings;
+    settings.matcher.kind = MatcherKind::CensusSgm;
+    settings.matcher.num_disparities = num_disparities;
+    settings.matcher.threads = threads;
+    settings.compute_cloud = false;
+    StereoProcessor processor(makeRectifiedCalibration(left.size(), 100.0, 0.1), settings);
+    DepthResult out;
+    processor.process(left, right, 1, 0, out);
+    EXPECT_EQ(out.reading.reason == NoReadingReason::BadFrame, false);
+    return out.disparity.clone();
+}
+
+TEST(CensusSgmAccuracy, EveryRealSceneAgainstOpenCvThreeWay)
+{
+    const std::vector<Scene> list = scenes();
+    ASSERT_GE(list.size(), 17u) << "shared data missing under " << kData;
+    double ours_bad2 = 0, ours_far = 0, ref_bad2 = 0, ref_far = 0;
+    int worse_bad2 = 0, fewer_correct = 0;
+    for (const Scene& s : list) {
+        const cv::Mat left = cv::imread(kData + s.left, cv::IMREAD_GRAYSCALE);
+        const cv::Mat right = cv::imread(kData + s.right, cv::IMREAD_GRAYSCALE);
+        ASSERT_FALSE(left.empty() || right.empty()) << s.name;
+        const cv::Mat truth = loadTruth(s);
+        double largest = 0;
+        cv::minMaxLoc(truth, nullptr, &largest);
+        // The reference's range: the largest true disparity x 1.05, in steps of 16.
+        const int n = std::max(16, static_cast<int>(std::ceil(largest * 1.05 / 16.0)) * 16);
+        const Metrics ours = score(censusSgm(left, right, n, 2), truth);
+        const Metrics ref = score(openCvThreeWay(left, right, n), truth);
+        std::printf("[accuracy] %-10s %3d disp | census-sgm bad-2 %5.2f %% density %5.1f %% "
+                    "too far %4.2f %% correct %5.1f %% | sgbm-3way bad-2 %5.2f %% density "
+                    "%5.1f %% too far %4.2f %% correct %5.1f %%\n",
+                    s.name.c_str(), n, ours.bad2, ours.density, ours.too_far, ours.correct(),
+                    ref.bad2, ref.density, ref.too_far, ref.correct());
+        ours_bad2 += ours.bad2;
+        ours_far += ours.too_far;
+        ref_bad2 += ref.bad2;
+        ref_far += ref.too_far;
+        worse_bad2 += ours.bad2 > ref.bad2;
+        fewer_correct += ours.correct() < ref.correct() - 5.0;
+        // Held on every scene: never much worse than the reference on either count.
+        EXPECT_LE(ours.bad2, ref.bad2 + 1.0) << s.name;
+        EXPECT_GE(ours.correct(), ref.correct() - 10.0) << s.name;
+    }
+    const double count = static_cast<double>(list.size());
+    std::printf("[accuracy] mean over %zu scenes: census-sgm bad-2 %.2f %% too far %.2f %% | "
+                "sgbm-3way bad-2 %.2f %% too far %.2f %% | ratio %.2f, %.2f | %d scenes worse "
+                "bad-2, %d with over 5 points fewer correct\n",
+                list.size(), ours_bad2 / count, ours_far / count, ref_bad2 / count,
+                ref_far / count, ours_bad2 / ref_bad2, ours_far / ref_far, worse_bad2,
+                fewer_correct);
+    EXPECT_LE(ours_bad2, 0.65 * ref_bad2);
+    EXPECT_LE(ours_far, 0.7 * ref_far);
+}
+
+// The hostile case: Tsukuba enlarged 3x seen by a rig with f 3000 px and B 0.1 m, its
+// nearest surface at 7.13 m, searched with 32 disparities, which reach 9.4 m only. The
+// truth is nearer than the range: the reading must say so, never give a number from the
+// edge of the range (OpenCV's SGBM reads a valid 9.68 m here).
+TEST(CensusSgmAccuracy, SurfaceNearerThanTheRangeReadsNearerThanRange)
+{
+    cv::Mat left = cv::imread(kData + "middlebury/tsukuba/im3.png", cv::IMREAD_GRAYSCALE);
+    cv::Mat right = cv::imread(kData + "middlebury/tsukuba/im4.png", cv::IMREAD_GRAYSCALE);
+    ASSERT_FALSE(left.empty() || right.empty());
+    cv::resize(left, left, {}, 3.0, 3.0, cv::INTER_CUBIC);
+    cv::resize(right, right, {}, 3.0, 3.0, cv::INTER_CUBIC);
+    ProcessorSettings settings;
+    settings.matcher.kind = MatcherKind::CensusSgm;
+    settings.matcher.num_disparities = 32;
+    settings.compute_cloud = false;
+    settings.nearest.max_depth_m = 100.0;
+    StereoProcessor processor(makeRectifiedCalibration(left.size(), 3000.0, 0.1), settings);
+    DepthResult out;
+    processor.process(left, right, 1, 0, out);
+    const double closest = processor.disparityRange().closest_depth_m;
+    std::printf("[accuracy] enlarged tsukuba, 32 disparities (closest %.2f m): %s, %.1f %% of "
+                "the region at the range limit\n",
+                closest, reasonCode(out.reading.reason),
+                100.0 * out.reading.range_limit_fraction);
+    EXPECT_FALSE(out.reading.valid);
+    EXPECT_EQ(out.reading.reason, NoReadingReason::NearerThanRange);
+    EXPECT_NEAR(out.reading.nearer_than_m, closest, 1e-9);
+    EXPECT_NEAR(closest, 3000.0 * 0.1 / 31.0, 1e-6);
+
+    // With a range that reaches it, the same scene reads a number near the truth.
+    settings.matcher.num_disparities = 64;
+    StereoProcessor wide(makeRectifiedCalibration(left.size(), 3000.0, 0.1), settings);
+    wide.process(left, right, 1, 0, out);
+    ASSERT_TRUE(out.reading.valid) << reasonCode(out.reading.reason);
+    EXPECT_LT(out.reading.distance_m, 8.0);
+    EXPECT_GT(out.reading.distance_m, 6.5);
+}
+
+} // namespace
+} // namespace stereod
