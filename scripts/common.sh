@@ -24,3 +24,25 @@ build_tree() {
     cmake --build "$dir" -j "$STEREOD_JOBS"
   fi
 }
+
+# Runs a command as root: directly when root, else through sudo.
+as_root() {
+  if [ "$(id -u)" -eq 0 ]; then "$@"; else sudo "$@"; fi
+}
+
+# ensure_packages TAG PACKAGE...: installs the Debian packages that are missing (apt-get,
+# as root), saying so under TAG; says "all packages present" when nothing is missing.
+ensure_packages() {
+  local tag="$1"; shift
+  local missing=() p
+  for p in "$@"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  if [ ${#missing[@]} -gt 0 ]; then
+    echo "$tag: installing ${missing[*]}"
+    as_root apt-get update -q
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}"
+  else
+    echo "$tag: all packages present"
+  fi
+}

@@ -326,7 +326,9 @@ struct CensusSgm::Impl {
             const uint16_t* sum = b.sum.data() + static_cast<size_t>(x) * static_cast<size_t>(lanes);
             int offset16 = 0;
             int curvature = 0;
-            if (k > 0 && k < n - 1) {
+            // The parabola needs both neighbours searched: not at either end of the range,
+            // nor at the last lane the left image edge lets this pixel search.
+            if (k > 0 && k < std::min(n - 1, searchable)) {
                 const int below = sum[k - 1], at = sum[k], above = sum[k + 1];
                 curvature = below + above - 2 * at;
                 if (curvature > 0) {

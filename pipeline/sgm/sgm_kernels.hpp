@@ -84,8 +84,9 @@ struct SgmKernels {
                            uint16_t* sum);
 
     // A path coming from the previous row: from (x + dx, y - 1) onto (x, y), dx in -1..1.
-    // prev: the previous row's path blocks for this path, or nullptr on the path's first
-    // row (then L = C). Writes this row's blocks to cur (same layout) and adds into sum
+    // prev: the previous row's path blocks for this path, written by the same kernels (a
+    // block's pad bytes may carry what the next step needs), or nullptr on the path's
+    // first row (then L = C). Writes this row's blocks to cur (same layout) and adds into sum
     // (or stores when `first`).
     void (*path_from_above)(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width,
                             int lanes, int dx, bool first, const uint8_t* prev,

@@ -75,26 +75,29 @@ void CensusRow(const uint8_t* center, size_t stride, int width, int census_width
     const int ry = census_height / 2;
     const int bits = census_width * census_height - 1;
     const int plane_count = (bits + 7) / 8;
+    // The offset of the neighbour behind census bit `bit`: raster order over the window,
+    // the centre skipped.
+    const int centre = ry * census_width + rx;
+    const auto offset = [&](int bit) {
+        const int index = bit < centre ? bit : bit + 1;
+        return static_cast<std::ptrdiff_t>(index / census_width - ry) *
+                   static_cast<std::ptrdiff_t>(stride) +
+               (index % census_width - rx);
+    };
     int x = 0;
     for (; x + n <= width; x += n) {
         const auto c = hn::LoadU(d, center + x);
-        hn::Vec<D8> acc[8];
-        for (int p = 0; p < plane_count; ++p)
-            acc[p] = hn::Zero(d);
-        int bit = 0;
-        for (int dy = -ry; dy <= ry; ++dy)
-            for (int dx = -rx; dx <= rx; ++dx) {
-                if (dy == 0 && dx == 0)
-                    continue;
-                const uint8_t* neighbour = center + static_cast<std::ptrdiff_t>(dy) *
-                                                        static_cast<std::ptrdiff_t>(stride) + dx;
+        // One plane (8 neighbours) at a time: scalable vector types cannot form arrays.
+        for (int p = 0; p < plane_count; ++p) {
+            auto acc = hn::Zero(d);
+            for (int bit = 8 * p; bit < std::min(bits, 8 * p + 8); ++bit) {
+                const uint8_t* neighbour = center + offset(bit);
                 const auto darker = hn::Lt(hn::LoadU(d, neighbour + x), c);
-                acc[bit / 8] = hn::Or(acc[bit / 8],
-                                      hn::IfThenElseZero(darker, hn::Set(d, static_cast<uint8_t>(1u << (bit % 8)))));
-                ++bit;
+                acc = hn::Or(acc, hn::IfThenElseZero(
+                                      darker, hn::Set(d, static_cast<uint8_t>(1u << (bit % 8)))));
             }
-        for (int p = 0; p < plane_count; ++p)
-            hn::StoreU(acc[p], d, planes[p] + x);
+            hn::StoreU(acc, d, planes[p] + x);
+        }
     }
     for (; x < width; ++x) {   // the tail, one pixel at a time
         uint8_t bytes[8] = {};

@@ -13,7 +13,6 @@ size_t speckleFilterBytes(int width, int height)
 
 SpeckleFilter::SpeckleFilter(int width, int height)
     : width_(width),
-      height_(height),
       label_(static_cast<size_t>(width) * static_cast<size_t>(height)),
       stack_(label_.size()),
       removed_(label_.size() + 1)

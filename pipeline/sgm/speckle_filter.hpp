@@ -23,7 +23,7 @@ public:
     void apply(int16_t* disparity, int16_t invalid, int max_step, int max_size);
 
 private:
-    int width_, height_;
+    int width_;
     std::vector<uint32_t> label_;     // region of each pixel; 0 = not yet visited
     std::vector<uint32_t> stack_;     // pixels waiting to be visited
     std::vector<uint8_t> removed_;    // per region label: removed

@@ -1,0 +1,354 @@
+// The SIMD kernels against the scalar reference, kernel by kernel: the contract in
+// sgm_kernels.hpp says both compute exactly the same integers. Rows are deterministic
+// pseudo-random texture; widths include tiny ones and ones that are no multiple of a
+// vector, disparity counts 16..256, and the first disparity zero, positive and negative.
+// Buffers are sized exactly as the contract asks (and no larger), so that the
+// AddressSanitizer run also catches a kernel reading or writing outside them.
+
+#include <algorithm>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "pipeline/sgm/sgm_kernels.hpp"
+#include "tests/pipeline/sgm/synthetic_pair.hpp"
+
+namespace stereod::sgm {
+namespace {
+
+using test::Random;
+
+constexpr int kWidths[] = {1, 2, 5, 16, 31, 32, 33, 63, 100};
+constexpr int kNumDisparities[] = {16, 64, 128, 256};
+constexpr int kMinDisparities[] = {0, 7, -5};
+
+// Census window sides (bits = w * h - 1: 2 to 62, i.e. 1 to 8 planes) with path penalties
+// that keep the largest cost + P2 within 255, the settings' invariant; the last one sits
+// right at it.
+struct CostModel {
+    int census_width, census_height;
+    uint8_t p1, p2;
+    int bits() const { return census_width * census_height - 1; }
+    int planes() const { return (bits() + 7) / 8; }
+};
+constexpr CostModel kCostModels[] = {{7, 5, 9, 96}, {3, 1, 1, 40}, {9, 7, 7, 193}};
+
+int lanesFor(int num_disparities)
+{
+    return (num_disparities + kLaneAlign - 1) / kLaneAlign * kLaneAlign;
+}
+
+std::string describe(int width, int num_disparities, int min_disparity)
+{
+    return "width " + std::to_string(width) + ", num_disparities " +
+           std::to_string(num_disparities) + ", min_disparity " + std::to_string(min_disparity);
+}
+
+template <typename T> void fillRandom(std::vector<T>& v, Random& random, int lo, int hi)
+{
+    for (T& x : v)
+        x = static_cast<T>(random.uniform(lo, hi));
+}
+
+// Census planes of one row pair: the right row is the left one shifted by a few pixels
+// with some bits flipped, so that the costs have real minima, not only noise.
+struct CensusRowPair {
+    std::vector<std::vector<uint8_t>> left, right;
+    // right_reversed: exactly the bytes the contract requires to be readable, from
+    // min_disparity - 1 to width + min_disparity + lanes around its start; values outside
+    // the row are garbage on purpose.
+    std::vector<std::vector<uint8_t>> reversed_storage;
+    std::vector<const uint8_t*> left_ptr, right_ptr, reversed_ptr;
+    CensusRows rows;
+
+    CensusRowPair(int width, int min_disparity, int lanes, int planes, Random& random)
+    {
+        const int shift = random.uniform(0, 12);
+        const int lo = std::min(0, min_disparity - 1);
+        const int hi = std::max(width, width + min_disparity + lanes);
+        left.resize(static_cast<size_t>(planes));
+        right.resize(static_cast<size_t>(planes));
+        reversed_storage.resize(static_cast<size_t>(planes));
+        for (int p = 0; p < planes; ++p) {
+            auto& l = left[static_cast<size_t>(p)];
+            auto& r = right[static_cast<size_t>(p)];
+            auto& rr = reversed_storage[static_cast<size_t>(p)];
+            l.resize(static_cast<size_t>(width));
+            r.resize(static_cast<size_t>(width));
+            fillRandom(l, random, 0, 255);
+            for (int x = 0; x < width; ++x) {
+                const int from = std::min(width - 1, x + shift);
+                r[static_cast<size_t>(x)] = static_cast<uint8_t>(
+                    l[static_cast<size_t>(from)] ^
+                    (1u << random.uniform(0, 7)) * static_cast<unsigned>(random.uniform(0, 1)));
+            }
+            rr.resize(static_cast<size_t>(hi - lo));
+            fillRandom(rr, random, 0, 255);
+            for (int j = 0; j < width; ++j)
+                rr[static_cast<size_t>(j - lo)] = r[static_cast<size_t>(width - 1 - j)];
+            left_ptr.push_back(l.data());
+            right_ptr.push_back(r.data());
+            reversed_ptr.push_back(rr.data() - lo);
+        }
+        rows = CensusRows{left_ptr.data(), right_ptr.data(), reversed_ptr.data(), planes};
+    }
+};
+
+// A cost row as the matcher makes it: the scalar reference's costs of a census row pair.
+std::vector<uint8_t> costRow(int width, int min_disparity, int num_disparities,
+                             const CostModel& model, Random& random)
+{
+    const int lanes = lanesFor(num_disparities);
+    const CensusRowPair census(width, min_disparity, lanes, model.planes(), random);
+    std::vector<uint8_t> cost(static_cast<size_t>(width) * static_cast<size_t>(lanes));
+    scalarKernels().cost_row(census.rows, width, min_disparity, num_disparities, lanes,
+                             static_cast<uint8_t>(model.bits()), cost.data());
+    return cost;
+}
+
+// P2 per pixel, lowered at random as the gradient adaptation does, never below p1 + 1.
+std::vector<uint8_t> penalties(int width, const CostModel& model, Random& random)
+{
+    std::vector<uint8_t> p2(static_cast<size_t>(width));
+    fillRandom(p2, random, model.p1 + 1, model.p2);
+    return p2;
+}
+
+TEST(SgmKernelsTest, SimdTargetIsNamed)
+{
+    const char* target = simdKernels().target;
+    ASSERT_NE(target, nullptr);
+    EXPECT_STRNE(target, "");
+    EXPECT_STREQ(scalarKernels().target, "scalar");
+    // scripts/cross-aarch64.sh reads this line.
+    std::printf("simd target: %s\n", target);
+}
+
+TEST(SgmKernelsTest, CensusRowMatchesScalar)
+{
+    Random random(1);
+    const int windows[][2] = {{7, 5}, {9, 7}, {3, 1}, {5, 5}, {3, 3}, {1, 3}};
+    for (const auto& window : windows)
+        for (int width : {1, 2, 5, 31, 32, 33, 63, 64, 65, 100}) {
+            const int census_width = window[0], census_height = window[1];
+            const int rx = census_width / 2, ry = census_height / 2;
+            const int planes = (census_width * census_height - 1 + 7) / 8;
+            SCOPED_TRACE("census " + std::to_string(census_width) + "x" +
+                         std::to_string(census_height) + ", width " + std::to_string(width));
+            // An image padded by the window's half sides, three rows of census.
+            const int rows = 3;
+            const size_t stride = static_cast<size_t>(width + 2 * rx);
+            std::vector<uint8_t> image(stride * static_cast<size_t>(rows + 2 * ry));
+            fillRandom(image, random, 0, 255);
+            for (size_t i = 0; i < image.size(); i += 7)
+                image[i] = 128; // some equal neighbours: not darker, bit clear
+            for (int y = 0; y < rows; ++y) {
+                const uint8_t* center =
+                    image.data() + static_cast<size_t>(y + ry) * stride + static_cast<size_t>(rx);
+                std::vector<std::vector<uint8_t>> expected(static_cast<size_t>(planes)),
+                    actual(static_cast<size_t>(planes));
+                std::vector<uint8_t*> expected_ptr, actual_ptr;
+                for (int p = 0; p < planes; ++p) {
+                    expected[static_cast<size_t>(p)].assign(static_cast<size_t>(width), 0xA5);
+                    actual[static_cast<size_t>(p)].assign(static_cast<size_t>(width), 0x5A);
+                    expected_ptr.push_back(expected[static_cast<size_t>(p)].data());
+                    actual_ptr.push_back(actual[static_cast<size_t>(p)].data());
+                }
+                scalarKernels().census_row(center, stride, width, census_width, census_height,
+                                           expected_ptr.data());
+                simdKernels().census_row(center, stride, width, census_width, census_height,
+                                         actual_ptr.data());
+                for (int p = 0; p < planes; ++p)
+                    ASSERT_EQ(actual[static_cast<size_t>(p)], expected[static_cast<size_t>(p)])
+                        << "plane " << p << ", row " << y;
+            }
+        }
+}
+
+TEST(SgmKernelsTest, CostRowMatchesScalar)
+{
+    Random random(2);
+    for (const CostModel& model : kCostModels)
+        for (int width : kWidths)
+            for (int num_disparities : kNumDisparities)
+                for (int min_disparity : kMinDisparities) {
+                    SCOPED_TRACE(describe(width, num_disparities, min_disparity) + ", planes " +
+                                 std::to_string(model.planes()));
+                    const int lanes = lanesFor(num_disparities);
+                    const CensusRowPair census(width, min_disparity, lanes, model.planes(), random);
+                    const size_t cells = static_cast<size_t>(width) * static_cast<size_t>(lanes);
+                    std::vector<uint8_t> expected(cells, 0xA5), actual(cells, 0x5A);
+                    const auto invalid = static_cast<uint8_t>(model.bits());
+                    scalarKernels().cost_row(census.rows, width, min_disparity, num_disparities,
+                                             lanes, invalid, expected.data());
+                    simdKernels().cost_row(census.rows, width, min_disparity, num_disparities,
+                                           lanes, invalid, actual.data());
+                    ASSERT_EQ(actual, expected);
+                }
+}
+
+void expectPathAlongRowMatches(bool forward)
+{
+    Random random(forward ? 3 : 4);
+    for (const CostModel& model : kCostModels)
+        for (int width : kWidths)
+            for (int num_disparities : kNumDisparities)
+                for (int min_disparity : kMinDisparities)
+                    for (bool first : {true, false}) {
+                        SCOPED_TRACE(describe(width, num_disparities, min_disparity) +
+                                     (first ? ", first path" : ", adding"));
+                        const int lanes = lanesFor(num_disparities);
+                        const auto cost =
+                            costRow(width, min_disparity, num_disparities, model, random);
+                        const auto p2 = penalties(width, model, random);
+                        // The sums the earlier paths left; the kernel adds to them.
+                        std::vector<uint16_t> expected(cost.size());
+                        fillRandom(expected, random, 0, 1200);
+                        std::vector<uint16_t> actual = expected;
+                        // Scratch: two path blocks, garbage in; the kernel sets the pads.
+                        std::vector<uint8_t> scratch_a(2 * pathBlockBytes(lanes));
+                        fillRandom(scratch_a, random, 0, 255);
+                        std::vector<uint8_t> scratch_b = scratch_a;
+                        scalarKernels().path_along_row(cost.data(), p2.data(), model.p1, width,
+                                                       lanes, forward, first, scratch_a.data(),
+                                                       expected.data());
+                        simdKernels().path_along_row(cost.data(), p2.data(), model.p1, width, lanes,
+                                                     forward, first, scratch_b.data(),
+                                                     actual.data());
+                        ASSERT_EQ(actual, expected);
+                    }
+}
+
+TEST(SgmKernelsTest, PathAlongRowLeftToRightMatchesScalar)
+{
+    expectPathAlongRowMatches(true);
+}
+
+TEST(SgmKernelsTest, PathAlongRowRightToLeftMatchesScalar)
+{
+    expectPathAlongRowMatches(false);
+}
+
+// L values of every block of a row of path blocks, and the pads around them that the next
+// row's L[k - 1] and L[k + 1] read: the contract keeps those at 255.
+void expectBlocksMatch(const std::vector<uint8_t>& actual, const std::vector<uint8_t>& expected,
+                       int width, int lanes)
+{
+    const size_t block = pathBlockBytes(lanes);
+    for (int x = 0; x < width; ++x) {
+        const uint8_t* a = actual.data() + static_cast<size_t>(x) * block;
+        const uint8_t* e = expected.data() + static_cast<size_t>(x) * block;
+        ASSERT_TRUE(std::equal(a + kPathPad, a + kPathPad + lanes, e + kPathPad))
+            << "path costs of pixel " << x;
+        for (const uint8_t* b : {a, e}) {
+            ASSERT_EQ(b[kPathPad - 1], 255)
+                << "pad before pixel " << x << (b == a ? " (simd)" : " (scalar)");
+            ASSERT_EQ(b[kPathPad + lanes], 255)
+                << "pad after pixel " << x << (b == a ? " (simd)" : " (scalar)");
+        }
+    }
+}
+
+TEST(SgmKernelsTest, PathFromAboveMatchesScalar)
+{
+    Random random(5);
+    constexpr int kRows = 4; // the path's first row (no previous row), then three more
+    for (const CostModel& model : kCostModels)
+        for (int dx : {-1, 0, 1})
+            for (int width : kWidths)
+                for (int num_disparities : kNumDisparities)
+                    for (int min_disparity : kMinDisparities) {
+                        SCOPED_TRACE(describe(width, num_disparities, min_disparity) + ", dx " +
+                                     std::to_string(dx));
+                        const int lanes = lanesFor(num_disparities);
+                        const size_t blocks = static_cast<size_t>(width) * pathBlockBytes(lanes);
+                        // Each implementation keeps its own previous row, as the matcher does.
+                        std::vector<uint8_t> expected_rows[2], actual_rows[2];
+                        for (auto* rows : {expected_rows, actual_rows})
+                            for (int i = 0; i < 2; ++i) {
+                                rows[i].resize(blocks);
+                                fillRandom(rows[i], random, 0, 255);
+                            }
+                        for (int y = 0; y < kRows; ++y) {
+                            SCOPED_TRACE("row " + std::to_string(y));
+                            const auto cost =
+                                costRow(width, min_disparity, num_disparities, model, random);
+                            const auto p2 = penalties(width, model, random);
+                            const bool first = y % 2 == 0; // stores on even rows, adds on odd
+                            std::vector<uint16_t> expected(cost.size());
+                            fillRandom(expected, random, 0, 1200);
+                            std::vector<uint16_t> actual = expected;
+                            const int cur = y & 1;
+                            const uint8_t* expected_prev =
+                                y == 0 ? nullptr : expected_rows[cur ^ 1].data();
+                            const uint8_t* actual_prev =
+                                y == 0 ? nullptr : actual_rows[cur ^ 1].data();
+                            scalarKernels().path_from_above(
+                                cost.data(), p2.data(), model.p1, width, lanes, dx, first,
+                                expected_prev, expected_rows[cur].data(), expected.data());
+                            simdKernels().path_from_above(cost.data(), p2.data(), model.p1, width,
+                                                          lanes, dx, first, actual_prev,
+                                                          actual_rows[cur].data(), actual.data());
+                            ASSERT_NO_FATAL_FAILURE(expectBlocksMatch(
+                                actual_rows[cur], expected_rows[cur], width, lanes));
+                            ASSERT_EQ(actual, expected);
+                        }
+                    }
+}
+
+TEST(SgmKernelsTest, WinnersMatchesScalar)
+{
+    Random random(6);
+    for (int width : kWidths)
+        for (int num_disparities : kNumDisparities)
+            for (int min_disparity : kMinDisparities)
+                for (int levels : {3, 4000}) {
+                    // 3 levels: many equal sums (ties go to the smallest lane); 4000: few.
+                    SCOPED_TRACE(describe(width, num_disparities, min_disparity) + ", levels " +
+                                 std::to_string(levels));
+                    const int lanes = lanesFor(num_disparities);
+                    std::vector<uint16_t> sum(static_cast<size_t>(width) *
+                                              static_cast<size_t>(lanes));
+                    for (int x = 0; x < width; ++x) {
+                        uint16_t* s =
+                            sum.data() + static_cast<size_t>(x) * static_cast<size_t>(lanes);
+                        const int best = random.uniform(0, num_disparities - 1);
+                        for (int k = 0; k < lanes; ++k) {
+                            // A valley around a random best lane, noise on top; the padding
+                            // lanes past num_disparities hold the smallest sums of all, which
+                            // the kernels must ignore.
+                            const int valley = std::abs(k - best) * 40 +
+                                               random.uniform(0, levels - 1) * (4000 / levels);
+                            s[k] = static_cast<uint16_t>(
+                                k >= num_disparities ? 0 : std::min(65000, 500 + valley));
+                        }
+                    }
+                    std::vector<Winner> expected(static_cast<size_t>(width), Winner{1, 2, 3});
+                    std::vector<Winner> actual(static_cast<size_t>(width), Winner{4, 5, 6});
+                    std::vector<uint32_t> expected_right(static_cast<size_t>(width), 7);
+                    std::vector<uint32_t> actual_right(static_cast<size_t>(width), 8);
+                    std::vector<uint32_t> scratch(winnersScratch(width, min_disparity, lanes));
+                    fillRandom(scratch, random, 0, 1 << 30);
+                    scalarKernels().winners(sum.data(), width, min_disparity, num_disparities,
+                                            lanes, expected.data(), expected_right.data(),
+                                            scratch.data());
+                    fillRandom(scratch, random, 0, 1 << 30);
+                    simdKernels().winners(sum.data(), width, min_disparity, num_disparities, lanes,
+                                          actual.data(), actual_right.data(), scratch.data());
+                    for (int x = 0; x < width; ++x) {
+                        const Winner& e = expected[static_cast<size_t>(x)];
+                        const Winner& a = actual[static_cast<size_t>(x)];
+                        ASSERT_EQ(a.best_lane, e.best_lane) << "pixel " << x;
+                        ASSERT_EQ(a.best_sum, e.best_sum) << "pixel " << x;
+                        ASSERT_EQ(a.second_sum, e.second_sum) << "pixel " << x;
+                    }
+                    ASSERT_EQ(actual_right, expected_right);
+                }
+}
+
+} // namespace
+} // namespace stereod::sgm
