@@ -6,7 +6,6 @@
 //    files into ours; `stereoctl export-ros`: ours out as a ROS camera_info pair
 //    (pipeline/calibration_formats.hpp).
 
-#include <glob.h>
 
 #include <algorithm>
 #include <charconv>
@@ -22,6 +21,7 @@
 #include "ctl/commands.hpp"
 #include "ctl/exit_codes.hpp"
 #include "pipeline/calibration_formats.hpp"
+#include "ctl/file_patterns.hpp"
 #include "pipeline/chessboard_calibration.hpp"
 
 namespace stereod {
@@ -29,30 +29,6 @@ namespace stereod {
 namespace {
 
 using json = nlohmann::ordered_json;
-
-// The files a shell-style pattern matches, sorted byte by byte (pairs are taken in this
-// order on both sides).
-std::vector<std::string> expandGlob(const std::string& pattern, const char* option)
-{
-    glob_t matches{};
-    const int status = ::glob(pattern.c_str(), GLOB_ERR, nullptr, &matches);
-    std::vector<std::string> paths;
-    if (status == 0) {
-        for (size_t i = 0; i < matches.gl_pathc; ++i) {
-            paths.emplace_back(matches.gl_pathv[i]);
-        }
-    }
-    ::globfree(&matches);
-    if (status == GLOB_NOMATCH) {
-        throw UsageError(fmt::format("{} '{}' matches no file", option, pattern));
-    }
-    if (status != 0) {
-        throw UsageError(fmt::format("{} '{}': cannot read a directory of the pattern", option,
-                                     pattern));
-    }
-    std::sort(paths.begin(), paths.end());
-    return paths;
-}
 
 // "9x6" -> 9 inner corners per row, 6 rows.
 ChessboardSpec parseBoard(const std::string& text, double square_m)

@@ -129,6 +129,17 @@ struct BoardDistanceOptions {
     bool json = false;
 };
 
+// `stereoctl check-calibration`: how well a calibration still rectifies a rig's pairs.
+// Exit 0 ok, 1 degraded or failed, 2 unknown (no verdict) or bad arguments.
+struct CheckCalibrationOptions {
+    std::string left_glob;            // raw left images
+    std::string right_glob;           // raw right images, paired in sorted order
+    std::string calib_path;           // full calibration (YAML)
+    bool fix = false;                 // estimate a corrected rectification ...
+    std::string out_path;             // ... and write it here (a new file)
+    bool json = false;
+};
+
 // `stereoctl record`: the service's raw pairs written as a recording.
 struct RecordOptions {
     ServiceOptions service;
@@ -157,5 +168,7 @@ int runExportRos(const ExportRosOptions& options);
 int runRecord(const RecordOptions& options);
 // ctl/board_distance_command.cpp
 int runBoardDistance(const BoardDistanceOptions& options);
+// ctl/check_calibration_command.cpp
+int runCheckCalibration(const CheckCalibrationOptions& options);
 
 } // namespace stereod

@@ -92,6 +92,7 @@ struct Options {
     BoardDistanceOptions board_distance;
     DevicesOptions devices;
     RecordOptions record;
+    CheckCalibrationOptions check_calibration;
 };
 
 CLI::App* declareRecord(CLI::App& app, RecordOptions& o)
@@ -330,6 +331,27 @@ CLI::App* declareBoardDistance(CLI::App& app, BoardDistanceOptions& o)
     return cmd;
 }
 
+CLI::App* declareCheckCalibration(CLI::App& app, CheckCalibrationOptions& o)
+{
+    CLI::App* cmd = app.add_subcommand(
+        "check-calibration",
+        "how well a calibration still rectifies the rig's pairs: the row offset of matching "
+        "features after rectification (exit 0 ok, 1 degraded or failed, 2 no verdict)");
+    cmd->add_option("--left", o.left_glob, "raw left images: a glob, quoted, sorted")->required();
+    cmd->add_option("--right", o.right_glob, "raw right images, paired in sorted order")
+        ->required();
+    cmd->add_option("--calib", o.calib_path, "the full calibration to check (YAML)")->required();
+    CLI::Option* fix = cmd->add_flag(
+        "--fix", o.fix,
+        "estimate the small turn of the right camera that brings the rows back, and write "
+        "the corrected calibration to --out (never to the checked file)");
+    cmd->add_option("--out", o.out_path, "where --fix writes the corrected calibration (new file)")
+        ->needs(fix);
+    fix->needs(cmd->get_option("--out"));
+    cmd->add_flag("--json", o.json, "print the figures per pair and overall as JSON");
+    return cmd;
+}
+
 CLI::App* declareDevices(CLI::App& app, DevicesOptions& o)
 {
     CLI::App* cmd = app.add_subcommand(
@@ -371,6 +393,8 @@ int main(int argc, char** argv)
          [&] { return runBoardDistance(o.board_distance); }},
         {declareDevices(app, o.devices), [&] { return runDevices(o.devices); }},
         {declareRecord(app, o.record), [&] { return runRecord(o.record); }},
+        {declareCheckCalibration(app, o.check_calibration),
+         [&] { return runCheckCalibration(o.check_calibration); }},
     };
 
     try {
