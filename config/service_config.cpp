@@ -797,6 +797,9 @@ std::vector<KeyDef> buildKeyTable()
     add(integerKey(
         "nearest.min_pixels", kLive,
         [](auto& c) -> auto& { return c.processing.nearest.min_pixels; }));
+    add(realKey(
+        "nearest.min_in_range_fraction", kLive,
+        [](auto& c) -> auto& { return c.processing.nearest.min_in_range_fraction; }, ""));
     add(integerKey(
         "nearest.min_confidence", kLive,
         [](auto& c) -> auto& { return c.processing.nearest.min_confidence; }));
@@ -1414,6 +1417,8 @@ void checkNearest(Checker& checker, const NearestSettings& nearest)
                  closed(0, 1, " of the region's pixels"));
     checker.integer("nearest.min_pixels", nearest.min_pixels, 1, std::numeric_limits<int>::max(),
                     " px");
+    checker.real("nearest.min_in_range_fraction", nearest.min_in_range_fraction,
+                 closed(0, 1, " of the region's pixels"));
     checker.integer("nearest.min_confidence", nearest.min_confidence, 0, 255, "");
     checker.real("nearest.range_limit_fraction", nearest.range_limit_fraction,
                  closed(0, 1, " of the region's pixels"));

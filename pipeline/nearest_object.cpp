@@ -43,6 +43,7 @@ void validateNearestSettings(const NearestSettings& s)
         invalid("percentile", "must be within 0..100, got " + std::to_string(s.percentile));
     fraction("min_valid_fraction", s.min_valid_fraction);
     fraction("range_limit_fraction", s.range_limit_fraction);
+    fraction("min_in_range_fraction", s.min_in_range_fraction);
     if (s.min_confidence < 0 || s.min_confidence > 255)
         invalid("min_confidence", "must be within 0..255, got " + std::to_string(s.min_confidence));
     if (s.min_pixels < 1)
@@ -137,7 +138,8 @@ Reading NearestObjectFinder::find(const cv::Mat& depth_m, const cv::Mat& confide
         reading.reason = NoReadingReason::TooFewValidPixels;
         return reading;
     }
-    if (in_range_.size() < static_cast<size_t>(settings.min_pixels)) {
+    if (in_range_.size() < static_cast<size_t>(settings.min_pixels) ||
+        reading.in_range_fraction < settings.min_in_range_fraction) {
         reading.reason = NoReadingReason::NothingInRange;
         return reading;
     }

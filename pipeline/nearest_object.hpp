@@ -41,7 +41,8 @@ public:
     //  - range_limit_fraction of the region (and min_pixels) at the range's near limit
     //    -> NearerThanRange, nearer_than_m = closest_depth_m;
     //  - fewer than min_valid_fraction of the region valid -> TooFewValidPixels;
-    //  - fewer than min_pixels within [min_depth_m, max_depth_m] -> NothingInRange;
+    //  - fewer than min_pixels, or than min_in_range_fraction of the region, within
+    //    [min_depth_m, max_depth_m] -> NothingInRange;
     //  - else the configured percentile of the in-range depths.
     // confidence (CV_8UC1, or empty: all trusted) drops pixels below min_confidence;
     // range_limit (CV_8UC1, or empty: none) flags pixels matched at the range's near end.

@@ -23,6 +23,10 @@ struct NearestSettings {
     double min_valid_fraction = 0.10;
     // At least this many in-range pixels are needed for a reading.
     int min_pixels = 50;
+    // ... and at least this fraction of the region: a sliver of in-range depths in a region
+    // that is otherwise empty is more likely wrong matches (swapped cameras, a blind
+    // camera seeing noise) than an obstacle.
+    double min_in_range_fraction = 0.05;
     // Pixels whose match confidence (0..255, see MatchOutput) is below this are left out
     // of the statistic, as if they had no depth. 0 keeps every reported pixel.
     int min_confidence = 0;

@@ -86,6 +86,28 @@ TEST(NearestObject, TooFewValidPixels)
     EXPECT_DOUBLE_EQ(r.valid_fraction, 0.05);
 }
 
+// What swapped cameras gave on Venus: most of the region beyond the range or invalid, a
+// sliver of 4 % "in range" at 0.98 m, far more than min_pixels. Not a reading.
+TEST(NearestObject, ASliverInRangeIsNoReading)
+{
+    cv::Mat depth(100, 100, CV_32FC1, cv::Scalar(0.0));
+    depth.rowRange(0, 40).setTo(25.0);                     // valid, beyond max_depth_m
+    depth.rowRange(40, 44).setTo(0.98);                    // 400 px in range: 4 %
+    NearestObjectFinder finder;
+    NearestSettings settings = wholeImage();
+    const Reading r = finder.find(depth, settings, 0, 0);
+    EXPECT_FALSE(r.valid);
+    EXPECT_EQ(r.reason, NoReadingReason::NothingInRange);
+    EXPECT_DOUBLE_EQ(r.in_range_fraction, 0.04);
+    // The same with 6 % in range is a reading: the rule is the fraction, not the count.
+    depth.rowRange(44, 46).setTo(0.98);
+    const Reading six = finder.find(depth, settings, 0, 0);
+    EXPECT_TRUE(six.valid);
+    settings.min_in_range_fraction = 0.0;
+    depth.rowRange(44, 46).setTo(0.0);
+    EXPECT_TRUE(finder.find(depth, settings, 0, 0).valid);
+}
+
 TEST(NearestObject, NothingInRange)
 {
     cv::Mat depth(100, 100, CV_32FC1, cv::Scalar(25.0));   // all beyond max_depth_m
