@@ -27,17 +27,25 @@ int exitCode(ExitCode code)
 // `stereod --check-config FILE`: every problem on its own line, file:line first.
 int checkConfig(const std::string& path)
 {
+    std::string calibration_path;
     try {
-        stereod::loadConfig(path);
+        calibration_path = stereod::checkConfiguration(path);
     } catch (const stereod::ConfigError& e) {
         for (const std::string& problem : e.problems())
             std::cerr << problem << '\n';
-        return exitCode(ExitCode::InvalidConfig);
+        return exitCode(stereod::exitCodeFor(e));
+    } catch (const stereod::StartupError& e) {
+        std::cerr << e.what() << '\n';
+        return exitCode(e.code());
     } catch (const std::exception& e) {
         std::cerr << path << ": " << e.what() << '\n';
         return exitCode(ExitCode::InvalidConfig);
     }
-    std::cout << path << ": valid\n";
+    if (calibration_path.empty())
+        std::cout << path << ": valid (no calibration named: the processing settings are "
+                             "checked against the frames at start-up)\n";
+    else
+        std::cout << path << ": valid with the calibration " << calibration_path << '\n';
     return exitCode(ExitCode::Ok);
 }
 

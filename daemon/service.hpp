@@ -61,6 +61,11 @@ class StartupError : public std::runtime_error {
     ExitCode code_;
 };
 
+// The exit code for an invalid configuration: Source when its only problems concern
+// source.replay.path, Calibration when they only concern `calibration`, else
+// InvalidConfig.
+ExitCode exitCodeFor(const ConfigError& error);
+
 // Blocks SIGTERM, SIGINT and SIGHUP in the calling thread (and the threads it creates
 // later), so that they reach the service only through its signalfd. Call it first thing
 // in main(), before any thread exists.
@@ -159,6 +164,14 @@ class Service final : private ServerBackend {
     int64_t stop_requested_ns_ = 0;
     bool worker_abandoned_ = false;
 };
+
+// `stereod --check-config FILE`: the checks of start-up that need neither a running source
+// nor the socket. The file and its values (throws ConfigError with every problem), the
+// calibration it names or the recording's calibration.yaml (StartupError: Calibration),
+// and the processing settings against that calibration, as the stereo chain will check
+// them (StartupError: InvalidConfig). Returns the calibration checked against, or empty
+// when none is named.
+std::string checkConfiguration(const std::string& path);
 
 // What `stereod` was asked to run, from its command line.
 struct LaunchRequest {

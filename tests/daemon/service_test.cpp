@@ -135,6 +135,28 @@ class ServiceTest : public ::testing::Test {
 
     void start() { start(baseConfig()); }
 
+    // Writes stereod.yaml: the calibration (saved beside it), the socket, then `extra`.
+    std::string writeConfigFile(const std::string& extra)
+    {
+        const std::string config_path = dir_.file("stereod.yaml");
+        const std::string calibration_path = dir_.file("calibration.yaml");
+        if (!std::filesystem::exists(calibration_path))
+            saveCalibration(calibration(), calibration_path);
+        std::ofstream file(config_path);
+        file << "calibration: " << calibration_path << "\n"
+             << "socket:\n  path: " << dir_.file("run/stereod.sock") << "\n"
+             << extra;
+        return config_path;
+    }
+
+    // Starts the service from writeConfigFile(extra), the file `reload` re-reads.
+    void startFromConfigFile(const std::string& extra)
+    {
+        ServiceOptions options;
+        options.config_path = writeConfigFile(extra);
+        start(loadConfig(options.config_path), options);
+    }
+
     // Stops the service and checks that it stopped cleanly.
     void stop()
     {
@@ -955,19 +977,8 @@ TEST_F(ServiceTest, ContinuousStreamWithManySubscribers)
 
 TEST_F(ServiceTest, ReloadAppliesLiveSettingsAndRefusesInvalidOnes)
 {
-    const std::string config_path = dir_.file("stereod.yaml");
-    const std::string calibration_path = dir_.file("calibration.yaml");
-    saveCalibration(calibration(), calibration_path);
-    const auto write_config = [&](const std::string& extra) {
-        std::ofstream file(config_path);
-        file << "calibration: " << calibration_path << "\n"
-             << "socket:\n  path: " << dir_.file("run/stereod.sock") << "\n"
-             << extra;
-    };
-    write_config("nearest:\n  min_valid_fraction: 0.1\n");
-    ServiceOptions options;
-    options.config_path = config_path;
-    start(loadConfig(config_path), options);
+    const auto write_config = [&](const std::string& extra) { writeConfigFile(extra); };
+    startFromConfigFile("nearest:\n  min_valid_fraction: 0.1\n");
     TestClient client(socket_path_);
     source_->deliver(1);
     waitForFrames(client, 1);
@@ -1001,16 +1012,50 @@ TEST_F(ServiceTest, ReloadAppliesLiveSettingsAndRefusesInvalidOnes)
         << invalid.dump();
 
     // A change that needs a restart is named, and not applied.
-    std::ofstream(config_path) << "calibration: " << calibration_path << "\n"
-                               << "socket:\n  path: " << dir_.file("run/stereod.sock") << "\n"
-                               << "  max_clients: 3\n"
-                               << "nearest:\n  min_valid_fraction: 0.1\n";
+    // (The socket section is the last of the file: the key below goes into it.)
+    writeConfigFile("  max_clients: 3\nnearest:\n  min_valid_fraction: 0.1\n");
     const Json restart = client.request({{"cmd", "reload"}});
     ASSERT_EQ(restart["ok"], true) << restart.dump();
     EXPECT_EQ(restart["restart_needed"], Json::parse(R"(["socket.max_clients"])"));
     source_->deliver(1);
     waitForFrames(client, 3);
     EXPECT_EQ(distance(client)["valid"], true);
+}
+
+TEST_F(ServiceTest, ReloadRefusesSettingsTheCalibrationCannotTakeAndKeepsAllInForce)
+{
+    const auto write_config = [&](const std::string& extra) { writeConfigFile(extra); };
+    startFromConfigFile("nearest:\n  min_valid_fraction: 0.1\n");
+    TestClient client(socket_path_);
+    source_->deliver(1);
+    waitForFrames(client, 1);
+    ASSERT_EQ(distance(client)["valid"], true);
+    const Json disparities_before = status(client)["pipeline"]["num_disparities"];
+
+    // Valid as a file, but 512 disparities leave no column of a 384 px wide frame: the
+    // worker would refuse it. Refused as a whole, with the key and the reason; the safety
+    // setting beside it is not applied either.
+    write_config("nearest:\n  min_valid_fraction: 0.99\nmatcher:\n  num_disparities: 512\n");
+    const Json refused = client.request({{"cmd", "reload"}});
+    EXPECT_EQ(refused["ok"], false) << refused.dump();
+    EXPECT_EQ(refused["error"]["code"], "invalid_config");
+    const std::string message = refused["error"]["message"].get<std::string>();
+    EXPECT_NE(message.find("matcher.num_disparities"), std::string::npos) << message;
+    EXPECT_NE(message.find("384"), std::string::npos) << message;
+    EXPECT_NE(message.find("stereod.yaml"), std::string::npos) << message;
+    source_->deliver(1);
+    waitForFrames(client, 2);
+    const Json reading = distance(client);
+    EXPECT_EQ(reading["valid"], true) << reading.dump();
+    EXPECT_EQ(status(client)["pipeline"]["num_disparities"], disparities_before);
+
+    // A region of interest that rounds to no pixel of the 384x288 frame.
+    write_config("nearest:\n  roi: {x: 0.5, y: 0.5, width: 0.001, height: 0.5}\n");
+    const Json empty_region = client.request({{"cmd", "reload"}});
+    EXPECT_EQ(empty_region["ok"], false) << empty_region.dump();
+    EXPECT_NE(empty_region["error"]["message"].get<std::string>().find("nearest.roi"),
+              std::string::npos)
+        << empty_region.dump();
 }
 
 TEST_F(ServiceTest, ReloadWithoutAConfigurationFile)

@@ -109,6 +109,36 @@ TEST_F(StereodCli, CheckConfigNamesEveryProblemWithItsLine)
     EXPECT_EQ(run({"--check-config", dir_.file("missing.yaml")}).exit_code, 3);
 }
 
+TEST_F(StereodCli, CheckConfigChecksTheSettingsAgainstTheCalibrationAsStartUpDoes)
+{
+    // Valid as a file; with the calibration it names, 1024 disparities leave no column of
+    // the 384 px wide frames: start-up refuses it (3), and so does --check-config.
+    const std::string wide = dir_.file("wide.yaml");
+    std::ofstream(wide) << "calibration: " << calibration_ << "\n"
+                        << "nearest:\n  min_valid_fraction: 0.9\n"
+                        << "matcher:\n  num_disparities: 1024\n";
+    const ProcessResult checked = run({"--check-config", wide});
+    EXPECT_EQ(checked.exit_code, 3) << checked.out << checked.err;
+    EXPECT_NE(checked.err.find("matcher.num_disparities"), std::string::npos) << checked.err;
+    EXPECT_NE(checked.err.find(calibration_), std::string::npos) << checked.err;
+    const ProcessResult started = run({"--config", wide, "--replay", replay_, "--socket", socket_});
+    EXPECT_EQ(started.exit_code, 3) << started.err;
+    EXPECT_NE(started.err.find("matcher.num_disparities"), std::string::npos) << started.err;
+
+    // A calibration named but missing is the calibration problem start-up calls it (4).
+    const std::string missing = dir_.file("missing-calibration.yaml");
+    std::ofstream(missing) << "calibration: " << dir_.file("nowhere.yaml") << "\n";
+    EXPECT_EQ(run({"--check-config", missing}).exit_code, 4);
+
+    // The same settings within the frame are valid with the calibration.
+    const std::string fits = dir_.file("fits.yaml");
+    std::ofstream(fits) << "calibration: " << calibration_ << "\n"
+                        << "matcher:\n  num_disparities: 64\n";
+    const ProcessResult valid = run({"--check-config", fits});
+    EXPECT_EQ(valid.exit_code, 0) << valid.err;
+    EXPECT_NE(valid.out.find(calibration_), std::string::npos) << valid.out;
+}
+
 TEST_F(StereodCli, EachStartUpProblemHasItsExitCode)
 {
     // 3: the configuration.
