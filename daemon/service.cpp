@@ -117,7 +117,8 @@ void blockServiceSignals()
 Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
                  std::optional<StereoCalibration> calibration, ServiceOptions options)
     : config_(std::move(config)), options_(std::move(options)), source_(std::move(source)),
-      calibration_(std::move(calibration)), notifier_(options_.notify_systemd)
+      calibration_(std::move(calibration)), notifier_(options_.notify_systemd),
+      watchdog_pinger_(notifier_, [this](int64_t now_ns) { return alive(now_ns); })
 {
     const std::string calibration_origin = options_.calibration_path.empty()
                                                ? std::string("the calibration")
@@ -207,6 +208,8 @@ ExitCode Service::run()
     }
     running_ = true;
     worker_->start();
+    last_tick_ns_.store(monotonicNowNs(), std::memory_order_release);
+    watchdog_pinger_.start();
     spdlog::info("stereod {} listening on {}", serviceVersion(), config_.socket.path);
 
     // READY=1 follows from onTick() once the first pair has arrived.
@@ -239,6 +242,7 @@ void Service::onStopRequest()
 
 void Service::shutdown() noexcept
 {
+    watchdog_pinger_.stop();
     if (running_)
         notifier_.stopping();
     // The socket first, so that clients see the service gone at once (connections
@@ -524,8 +528,16 @@ std::string Service::statusText(int64_t now_ns, const SourceHealth& health)
     return statusLine(facts);
 }
 
+bool Service::alive(int64_t now_ns) const noexcept
+{
+    const int64_t interval_ns = notifier_.watchdogIntervalNs();
+    return now_ns - last_tick_ns_.load(std::memory_order_acquire) < interval_ns &&
+           workerMakesProgress(worker_->busySinceNs(), now_ns, interval_ns);
+}
+
 void Service::onTick(int64_t now_ns)
 {
+    last_tick_ns_.store(now_ns, std::memory_order_release);
     if (running_ && source_counters_.due(now_ns)) {
         for (const SourceCounterWatch::Report& report :
              source_counters_.look(source_->status(), now_ns))
@@ -546,12 +558,6 @@ void Service::onTick(int64_t now_ns)
                 notifier_.ready(statusText(now_ns, health));
         }
     }
-    // The watchdog rule (daemon/systemd_notifier.hpp): this runs on the event loop, so a
-    // ping says the loop turns; it is sent only while the worker is not stuck in one
-    // pair for a whole watchdog interval.
-    notifier_.watchdog(
-        workerMakesProgress(worker_->busySinceNs(), now_ns, notifier_.watchdogIntervalNs()),
-        now_ns);
     if (notifier_.statusDue(now_ns))
         notifier_.status(statusText(now_ns, sourceHealth(now_ns)), now_ns);
 }

@@ -18,6 +18,7 @@
 // the thread that becomes the I/O thread; the signal mask of that thread matters, see
 // blockServiceSignals()); requestStop() from any thread at any time.
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -128,6 +129,11 @@ class Service final : private ServerBackend {
                   int64_t now_ns) override;
     ReloadOutcome reload() override;
     void onTick(int64_t now_ns) override;
+    // The watchdog rule (daemon/systemd_notifier.hpp), asked by the pinger's thread: the
+    // event loop ran its timer within one watchdog interval, and the worker is not stuck
+    // in one pair for as long. The pings come from their own thread, so a loop busy with
+    // a backlog does not delay them; a loop that stops turning still stops them.
+    bool alive(int64_t now_ns) const noexcept;
 
     // Reads the configuration file and applies what can change live (reloadConfig()
     // adds the log lines and the notifications).
@@ -159,6 +165,9 @@ class Service final : private ServerBackend {
     int64_t last_push_change_ns_ = 0;
     // systemd notifications.
     SystemdNotifier notifier_;
+    // When the event loop last ran its timer, for the watchdog's pinger thread.
+    std::atomic<int64_t> last_tick_ns_{0};
+    WatchdogPinger watchdog_pinger_; // after notifier_ and last_tick_ns_, which it uses
     SourceCounterWatch source_counters_; // bad/dropped/unpaired frames into the log
     std::string last_error_; // the newest error for STATUS= (a refused reload), or empty
     int64_t stop_requested_ns_ = 0;

@@ -43,10 +43,14 @@ constexpr uint64_t kTagPublisher = 4;
 constexpr uint64_t kTagWatchBase = uint64_t{1} << 32;
 constexpr uint64_t kFirstClientTag = uint64_t{1} << 40;
 
+// Read at most this much from one client per turn of the loop (epoll is level-triggered:
+// the rest is read on a later turn).
 constexpr std::size_t kReadChunkBytes = 64 * 1024;
-// Read at most this much from one client per wake-up, so one busy client cannot starve
-// the others (epoll is level-triggered: the rest is read on the next round).
-constexpr std::size_t kMaxReadPerWakeup = 1 << 20;
+// Answer at most this many requests of one client per turn of the loop, then serve the
+// others: a client pipelining a megabyte of requests delays another one by a few
+// requests' work, not by its whole backlog. The rest waits in the client's input, and
+// the client in the ready list, for the next turn.
+constexpr int kRequestsPerTurn = 8;
 // An output buffer that grew beyond this (a snapshot) is given back once sent.
 constexpr std::size_t kKeepOutCapacity = 8u << 20;
 // Unread input left at close makes the peer's read fail with ECONNRESET after our last
@@ -397,7 +401,10 @@ void SocketServer::run()
     std::array<epoll_event, kMaxEvents> events{};
     stopping_ = false;
     while (!stopping_) {
-        const int count = ::epoll_wait(epoll_fd_.get(), events.data(), kMaxEvents, -1);
+        // Clients with requests waiting for their turn: look for new events without
+        // sleeping, then serve them.
+        const int count =
+            ::epoll_wait(epoll_fd_.get(), events.data(), kMaxEvents, ready_.empty() ? -1 : 0);
         if (count < 0) {
             if (errno == EINTR)
                 continue;
@@ -441,6 +448,8 @@ void SocketServer::run()
                 stopping_ = true;
             }
         }
+        if (!stopping_)
+            serveReadyClients();
         reapClients();
     }
 }
@@ -522,15 +531,15 @@ void SocketServer::acceptClients()
 
 void SocketServer::readClient(Client& client)
 {
-    std::size_t total = 0;
-    while (!client.dead && !client.input_closed && total < kMaxReadPerWakeup) {
+    // One chunk per turn, and nothing while requests already received wait for their
+    // turn (EPOLLIN is off then, see updateEpoll()).
+    while (!client.dead && !client.input_closed && !client.pending) {
         const ssize_t got = ::recv(client.fd.get(), read_buffer_.data(), read_buffer_.size(), 0);
         if (got > 0) {
-            total += static_cast<std::size_t>(got);
             client.in.append(read_buffer_.data(), static_cast<std::size_t>(got));
             client.last_input_ns = monotonicNowNs();
             handleLines(client);
-            continue;
+            break;
         }
         if (got == 0) {
             // The peer shut down its side: answer a last line without its newline, then
@@ -561,10 +570,32 @@ void SocketServer::readClient(Client& client)
         writeClient(client);
 }
 
+void SocketServer::serveReadyClients()
+{
+    std::vector<uint64_t> ready;
+    ready.swap(ready_);
+    for (const uint64_t id : ready) {
+        const auto it = clients_.find(id);
+        if (it == clients_.end() || it->second.dead)
+            continue;
+        Client& client = it->second;
+        client.pending = false;
+        handleLines(client);
+        if (!client.dead)
+            writeClient(client);
+    }
+    // The list's capacity is reused on the next turn.
+    if (ready_.empty()) {
+        ready.clear();
+        ready_.swap(ready);
+    }
+}
+
 void SocketServer::handleLines(Client& client)
 {
     const std::size_t limit = options_.socket.max_request_bytes;
-    std::size_t start = 0;
+    std::size_t start = client.in_start;
+    int served = 0;
     while (!client.dead && !client.input_closed && !client.waiting) {
         const std::size_t newline = client.in.find('\n', start);
         if (newline == std::string::npos)
@@ -573,12 +604,23 @@ void SocketServer::handleLines(Client& client)
             rejectTooLarge(client);
             return;
         }
+        if (served == kRequestsPerTurn) {
+            // The others' turn: the rest of this input waits for the next turn.
+            client.in_start = start;
+            if (!client.pending) {
+                client.pending = true;
+                ready_.push_back(client.id);
+            }
+            return;
+        }
         handleRequest(client, std::string_view(client.in).substr(start, newline - start));
+        ++served;
         start = newline + 1;
     }
     if (client.dead || client.input_closed)
         return;
     client.in.erase(0, start);
+    client.in_start = 0;
     // No newline within the limit: even if the next byte ended the line, it would be
     // longer than allowed.
     if (client.in.size() >= limit)
@@ -597,6 +639,7 @@ void SocketServer::rejectTooLarge(Client& client)
                      client.id - kFirstClientTag, options_.socket.max_request_bytes);
     // The stream cannot be resynchronised: stop reading, send the reply, close.
     client.in.clear();
+    client.in_start = 0;
     client.input_closed = true;
     client.close_when_flushed = true;
     client.readings.active = false;
@@ -685,7 +728,8 @@ void SocketServer::writeClient(Client& client)
 
 void SocketServer::updateEpoll(Client& client)
 {
-    const uint32_t wanted = (client.input_closed ? 0u : static_cast<uint32_t>(EPOLLIN)) |
+    const uint32_t wanted = (client.input_closed || client.pending ? 0u
+                                                                   : static_cast<uint32_t>(EPOLLIN)) |
                             (client.unsent() > 0 ? static_cast<uint32_t>(EPOLLOUT) : 0u);
     if (wanted == client.epoll_events)
         return;
@@ -917,6 +961,7 @@ void SocketServer::onTick()
                                              " s (socket.idle_timeout_s); closing the connection",
                                          std::nullopt));
                 client.in.clear();
+                client.in_start = 0;
                 client.input_closed = true;
                 client.close_when_flushed = true;
                 writeClient(client);

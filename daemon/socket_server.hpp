@@ -155,6 +155,10 @@ class SocketServer {
         UniqueFd fd;
         uint64_t id = 0;
         std::string in;  // received bytes not yet framed into requests
+        std::size_t in_start = 0; // where the unanswered part of `in` begins
+        // Requests received and not answered yet wait for the client's next turn (it is
+        // in ready_); nothing more is read from it meanwhile.
+        bool pending = false;
         std::string out; // bytes to send; out_sent of them are sent
         std::size_t out_sent = 0;
         uint32_t epoll_events = 0; // what the client is registered for
@@ -174,7 +178,11 @@ class SocketServer {
     void addToEpoll(int fd, uint64_t tag, uint32_t events);
     void acceptClients();
     void readClient(Client& client);
+    // Answers the complete request lines received, at most kRequestsPerTurn of them; a
+    // client with more waiting goes into ready_ for the next turn.
     void handleLines(Client& client);
+    // Gives each client in ready_ its next turn.
+    void serveReadyClients();
     void handleRequest(Client& client, std::string_view line);
     void rejectTooLarge(Client& client);
     void writeClient(Client& client);
@@ -238,6 +246,7 @@ class SocketServer {
 
     std::unordered_map<uint64_t, Client> clients_;
     std::vector<uint64_t> dead_clients_;
+    std::vector<uint64_t> ready_; // clients with requests waiting for their next turn
     uint64_t next_client_id_ = 0;
     std::vector<std::function<void()>> watches_;
 

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <limits>
 #include <memory>
 #include <thread>
@@ -895,6 +896,98 @@ TEST_F(ServiceTest, SixtyFourClientsAtOnceAndTheNextOneRefused)
     TestClient replacement(socket_path_);
     EXPECT_EQ(replacement.request({{"cmd", "hello"}})["ok"], true);
     EXPECT_EQ(status(*clients[0])["clients"]["rejected"], 1);
+}
+
+TEST_F(ServiceTest, ClientsFloodingRequestsDelayNeitherAPoliteClientNorTheWatchdog)
+{
+    // systemd's notify socket, with a watchdog of 400 ms: pings are due every 100 ms.
+    constexpr auto kWatchdog = 400ms;
+    const std::string notify_path = dir_.file("notify.sock");
+    test::NotifySocket notify(notify_path);
+    test::ScopedEnv notify_socket("NOTIFY_SOCKET", notify_path);
+    test::ScopedEnv watchdog_usec(
+        "WATCHDOG_USEC",
+        std::to_string(std::chrono::duration_cast<std::chrono::microseconds>(kWatchdog).count()));
+    ServiceOptions options;
+    options.notify_systemd = true;
+    start(baseConfig(), options);
+    TestClient polite(socket_path_);
+    source_->deliver(1);
+    waitForFrames(polite, 1);
+
+    // Six clients, each pipelining 128 KiB of `status` requests at once, and reading the
+    // replies on their own threads.
+    constexpr int kFlooders = 6;
+    const std::string request = "{\"cmd\":\"status\"}\n";
+    const std::size_t requests = (128u << 10) / request.size();
+    std::string flood;
+    for (std::size_t i = 0; i < requests; ++i)
+        flood += request;
+    std::vector<std::unique_ptr<TestClient>> flooders;
+    for (int i = 0; i < kFlooders; ++i)
+        flooders.push_back(std::make_unique<TestClient>(socket_path_));
+    std::atomic<int> flooding{kFlooders};
+    std::atomic<std::size_t> answered{0};
+    std::vector<std::thread> threads;
+    for (auto& flooder : flooders) {
+        TestClient* client = flooder.get();
+        threads.emplace_back([client, &flood] { client->send(flood); });
+        threads.emplace_back([client, requests, &flooding, &answered] {
+            for (std::size_t i = 0; i < requests; ++i) {
+                client->readLine();
+                ++answered;
+            }
+            --flooding;
+        });
+    }
+
+    // Meanwhile a polite client asks for the distance, one request at a time, and the
+    // notify socket collects the pings.
+    std::vector<test::NotifySocket::Message> messages;
+    std::thread collector([&] {
+        while (flooding.load() > 0)
+            for (const auto& message : notify.collect(50ms))
+                messages.push_back(message);
+    });
+    std::vector<double> latencies_ms;
+    while (flooding.load() > 0 || latencies_ms.size() < 100) {
+        const auto asked = std::chrono::steady_clock::now();
+        const Json reply = polite.request({{"cmd", "distance"}, {"max_age_ms", 600000}});
+        latencies_ms.push_back(
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - asked)
+                .count());
+        if (reply["ok"] != true) {
+            ADD_FAILURE() << reply.dump();
+            break;
+        }
+        std::this_thread::sleep_for(2ms);
+    }
+    for (std::thread& thread : threads)
+        thread.join();
+    collector.join();
+    EXPECT_EQ(answered.load(), requests * kFlooders);
+
+    std::sort(latencies_ms.begin(), latencies_ms.end());
+    const double p99_ms = latencies_ms[latencies_ms.size() * 99 / 100];
+    EXPECT_LT(p99_ms, 50.0) << latencies_ms.size() << " requests, max "
+                            << latencies_ms.back() << " ms";
+
+    std::vector<std::chrono::steady_clock::time_point> pings;
+    for (const auto& message : messages)
+        if (message.text.find("WATCHDOG=1") != std::string::npos)
+            pings.push_back(message.at);
+    ASSERT_GE(pings.size(), 2u) << notify.all();
+    double longest_gap_ms = 0.0;
+    for (std::size_t i = 1; i < pings.size(); ++i)
+        longest_gap_ms = std::max(
+            longest_gap_ms,
+            std::chrono::duration<double, std::milli>(pings[i] - pings[i - 1]).count());
+    const double half_interval_ms = std::chrono::duration<double, std::milli>(kWatchdog / 2).count();
+    EXPECT_LT(longest_gap_ms, half_interval_ms) << pings.size() << " pings";
+    std::cout << "flood of " << kFlooders << " x " << requests
+              << " status requests: polite distance p99 " << p99_ms << " ms, max "
+              << latencies_ms.back() << " ms over " << latencies_ms.size()
+              << " requests; longest watchdog gap " << longest_gap_ms << " ms\n";
 }
 
 TEST_F(ServiceTest, SlowSubscriberSkipsFramesAndIsToldHowMany)
