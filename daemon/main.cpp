@@ -14,10 +14,23 @@
 #include "capture/device_list.hpp"
 #include "config/service_config.hpp"
 #include "daemon/service.hpp"
+#include "daemon/stop_signal_watch.hpp"
 
 namespace {
 
 using stereod::ExitCode;
+
+// Runs before the initialisers of the shared libraries (OpenCV's take a good part of a
+// second on a loaded machine), so that a SIGTERM that early finds the service's signals
+// blocked and waits for the StopSignalWatch, instead of ending the process with 143.
+// Every thread created later inherits the mask.
+void blockSignalsBeforeLibraries(int, char**, char**)
+{
+    stereod::blockServiceSignals();
+}
+
+[[gnu::section(".preinit_array"), gnu::used]] void (*const kBlockSignalsEarly)(int, char**, char**) =
+    &blockSignalsBeforeLibraries;
 
 int exitCode(ExitCode code)
 {
@@ -64,8 +77,10 @@ void setUpLogging()
 
 int main(int argc, char** argv)
 {
-    // Before any thread exists, so that every thread inherits the mask: these signals
-    // are taken from a signalfd in the I/O loop, never by an asynchronous handler.
+    // Blocked already (blockSignalsBeforeLibraries()); again here in case the loader did
+    // not run .preinit_array. Before any thread exists, so that every thread inherits
+    // the mask: these signals are taken from a signalfd in the I/O loop and by the
+    // StopSignalWatch, never by an asynchronous handler.
     stereod::blockServiceSignals();
     // A client that hangs up while we write must not kill the service (sends also use
     // MSG_NOSIGNAL; this covers every other write).
@@ -113,6 +128,10 @@ int main(int argc, char** argv)
         return exitCode(ExitCode::BadArguments);
     }
 
+    // From here on SIGTERM and SIGINT stop the process within a second whatever it is
+    // doing, a start-up blocked in an open() included (daemon/stop_signal_watch.hpp).
+    setUpLogging();
+    stereod::StopSignalWatch stop_signals;
     if (!check_path.empty())
         return checkConfig(check_path);
     if (list_devices) {
@@ -121,10 +140,17 @@ int main(int argc, char** argv)
         return devices.devices.empty() ? exitCode(ExitCode::Failure) : exitCode(ExitCode::Ok);
     }
 
-    setUpLogging();
     try {
         std::unique_ptr<stereod::Service> service = stereod::launchService(request, true);
-        const ExitCode code = service->run();
+        stop_signals.setService(service.get());
+        ExitCode code = ExitCode::Ok;
+        try {
+            code = service->run();
+        } catch (...) {
+            stop_signals.setService(nullptr);
+            throw;
+        }
+        stop_signals.setService(nullptr);
         if (service->workerAbandoned()) {
             // The worker is still inside a pair that would outlast the stop: end now,
             // without the destructors that would wait for it (docs/service.md, Signals).

@@ -237,11 +237,13 @@ void Service::onStopRequest()
     [[maybe_unused]] const ssize_t got = ::read(stop_fd_.get(), &value, sizeof value);
     if (stop_requested_ns_ == 0)
         stop_requested_ns_ = monotonicNowNs();
+    stop_seen_.store(true, std::memory_order_release);
     server_->requestStop();
 }
 
 void Service::shutdown() noexcept
 {
+    stop_seen_.store(true, std::memory_order_release);
     watchdog_pinger_.stop();
     if (running_)
         notifier_.stopping();
@@ -293,6 +295,7 @@ void Service::onSignal()
             spdlog::info("{}: stopping", signal_number == SIGINT ? "SIGINT" : "SIGTERM");
             if (stop_requested_ns_ == 0)
                 stop_requested_ns_ = monotonicNowNs();
+            stop_seen_.store(true, std::memory_order_release);
             server_->requestStop();
         }
     }

@@ -112,6 +112,11 @@ class Service final : private ServerBackend {
     // Makes run() return soon. Any thread.
     void requestStop() noexcept;
 
+    // Whether the event loop has taken a stop request (a signal, requestStop()) or the
+    // service is stopping anyway. Any thread: a stop request that stays untaken means the
+    // loop is not running (daemon/stop_signal_watch.hpp).
+    bool stopRequested() const noexcept { return stop_seen_.load(std::memory_order_acquire); }
+
     // Re-reads the configuration file and applies what can change live. I/O thread.
     ReloadOutcome reloadConfig();
 
@@ -171,6 +176,7 @@ class Service final : private ServerBackend {
     SourceCounterWatch source_counters_; // bad/dropped/unpaired frames into the log
     std::string last_error_; // the newest error for STATUS= (a refused reload), or empty
     int64_t stop_requested_ns_ = 0;
+    std::atomic<bool> stop_seen_{false}; // see stopRequested()
     bool worker_abandoned_ = false;
 };
 

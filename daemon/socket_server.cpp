@@ -8,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <mutex>
 #include <system_error>
 #include <type_traits>
 
@@ -315,7 +316,40 @@ Json imagePayload(const char* name, const char* format, const cv::Mat& mat)
     return payload;
 }
 
+// The socket file bound by this process's server, for removeOwnedSocketFile().
+struct OwnedSocketFile {
+    std::mutex mutex;
+    bool present = false; // guarded by mutex
+    std::string path;     // guarded by mutex
+    dev_t dev = 0;        // guarded by mutex
+    ino_t ino = 0;        // guarded by mutex
+};
+
+OwnedSocketFile& ownedSocketFile()
+{
+    static OwnedSocketFile file;
+    return file;
+}
+
+// Removes `path` if it is still the socket file bound (same device and inode).
+void removeIfStillOurs(const std::string& path, dev_t dev, ino_t ino) noexcept
+{
+    struct stat info {};
+    if (::lstat(path.c_str(), &info) == 0 && S_ISSOCK(info.st_mode) && info.st_dev == dev &&
+        info.st_ino == ino)
+        ::unlink(path.c_str());
+}
+
 } // namespace
+
+void removeOwnedSocketFile() noexcept
+{
+    OwnedSocketFile& file = ownedSocketFile();
+    std::lock_guard lock(file.mutex);
+    if (file.present)
+        removeIfStillOurs(file.path, file.dev, file.ino);
+    file.present = false;
+}
 
 SocketServer::SocketServer(const ServerOptions& options, Publisher& publisher,
                            ServerBackend& backend)
@@ -326,6 +360,14 @@ SocketServer::SocketServer(const ServerOptions& options, Publisher& publisher,
     owns_socket_file_ = bound.owned;
     socket_dev_ = bound.dev;
     socket_ino_ = bound.ino;
+    if (owns_socket_file_) {
+        OwnedSocketFile& file = ownedSocketFile();
+        std::lock_guard lock(file.mutex);
+        file.present = true;
+        file.path = options_.socket.path;
+        file.dev = socket_dev_;
+        file.ino = socket_ino_;
+    }
 
     epoll_fd_ = UniqueFd(::epoll_create1(EPOLL_CLOEXEC));
     stop_fd_ = UniqueFd(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
@@ -352,11 +394,11 @@ SocketServer::~SocketServer()
     clients_.clear();
     listen_fd_.reset();
     if (owns_socket_file_) {
-        struct stat info {};
-        const std::string& path = options_.socket.path;
-        if (::lstat(path.c_str(), &info) == 0 && S_ISSOCK(info.st_mode) &&
-            info.st_dev == socket_dev_ && info.st_ino == socket_ino_)
-            ::unlink(path.c_str());
+        OwnedSocketFile& file = ownedSocketFile();
+        std::lock_guard lock(file.mutex);
+        if (file.present && file.dev == socket_dev_ && file.ino == socket_ino_)
+            file.present = false;
+        removeIfStillOurs(options_.socket.path, socket_dev_, socket_ino_);
     }
 }
 

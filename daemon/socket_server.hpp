@@ -75,6 +75,11 @@ class ServerBackend {
     virtual void onTick(int64_t now_ns) = 0;
 };
 
+// Removes the socket file a SocketServer of this process bound and still owns, if any
+// (never a file systemd handed over, nor one that replaced ours). Any thread: for a stop
+// that cannot wait for the server's destructor (daemon/stop_signal_watch.hpp).
+void removeOwnedSocketFile() noexcept;
+
 struct ServerOptions {
     SocketConfig socket;
     PublishConfig publish;

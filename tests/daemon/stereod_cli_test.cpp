@@ -1,15 +1,18 @@
 // The `stereod` binary as users run it: its command line, its exit codes for each kind of
 // start-up problem, and a run on a replayed tsukuba folder that ends with SIGTERM.
 
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <memory>
 #include <sstream>
+#include <thread>
 #include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 
 #include "pipeline/calibration.hpp"
@@ -219,6 +222,55 @@ TEST_F(StereodCli, ServesAReplayAndStopsOnSigterm)
     const std::string text = log();
     EXPECT_NE(text.find("disparity range: "), std::string::npos) << text;
     EXPECT_NE(text.find("SIGTERM"), std::string::npos) << text;
+}
+
+// Whether `pid` has SIGTERM blocked (from /proc/PID/status): its own code has run.
+bool blocksSigterm(pid_t pid)
+{
+    std::ifstream status("/proc/" + std::to_string(pid) + "/status");
+    for (std::string line; std::getline(status, line);) {
+        if (line.rfind("SigBlk:", 0) == 0) {
+            const unsigned long long mask = std::stoull(line.substr(7), nullptr, 16);
+            return (mask & (1ull << (SIGTERM - 1))) != 0;
+        }
+    }
+    return false;
+}
+
+TEST_F(StereodCli, SigtermStopsAStartUpBlockedInItsSourceWithinOneSecond)
+{
+    // frames.csv is a FIFO nobody writes: opening it blocks start-up for ever.
+    const std::string recording = dir_.file("fifo");
+    std::filesystem::create_directory(recording);
+    ASSERT_EQ(::mkfifo((recording + "/frames.csv").c_str(), 0600), 0);
+    const auto log = [&] {
+        std::ifstream file(dir_.file("stereod.log"));
+        return std::string(std::istreambuf_iterator<char>(file), {});
+    };
+    // At once when the process's own code has run (the libraries' initialisers still
+    // ahead of it), and later, while start-up waits in the open().
+    for (const auto delay : {0ms, 300ms, 1000ms}) {
+        ChildProcess service(
+            {stereodPath(), "--replay", recording, "--calib", calibration_, "--socket", socket_},
+            dir_.file("stereod.log"));
+        ASSERT_TRUE(waitUntil([&] { return blocksSigterm(service.pid()) || !service.running(); },
+                              10s));
+        std::this_thread::sleep_for(delay);
+        ASSERT_TRUE(service.running()) << log();
+        const auto signalled = std::chrono::steady_clock::now();
+        service.sendSignal(SIGTERM);
+        const std::optional<int> status = service.waitFor(5s);
+        const double stop_s =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - signalled).count();
+        ASSERT_TRUE(status.has_value()) << "still running 5 s after SIGTERM, " << delay.count()
+                                        << " ms after start:\n"
+                                        << log();
+        ASSERT_TRUE(WIFEXITED(*status))
+            << "killed by signal " << WTERMSIG(*status) << " " << delay.count() << " ms after start";
+        EXPECT_EQ(WEXITSTATUS(*status), 0) << log();
+        EXPECT_LT(stop_s, 1.0) << delay.count() << " ms after start";
+        EXPECT_FALSE(std::filesystem::exists(socket_));
+    }
 }
 
 TEST_F(StereodCli, WarnsWhenTheDisparityCapHidesTheClosestDistance)
