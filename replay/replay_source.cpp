@@ -15,6 +15,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <spdlog/spdlog.h>
 
+#include "replay/image_file.hpp"
+
 namespace stereod {
 
 namespace {
@@ -24,42 +26,71 @@ constexpr int kRight = 1;
 constexpr const char* kSideName[2] = {"left", "right"};
 constexpr int64_t kForever = std::numeric_limits<int64_t>::max();
 
-std::string errnoText(int code)
-{
-    return std::error_code(code, std::generic_category()).message();
-}
-
 std::string sizeText(cv::Size size)
 {
     return std::to_string(size.width) + "x" + std::to_string(size.height);
 }
 
-// Decodes one image as 8-bit grayscale into `out` (imread allocates the buffer). On
-// failure says why, with the errno for a file that cannot be opened (ENOENT when
-// missing) and EINVAL for one that is no readable image.
-bool decodeImage(const std::string& path, cv::Mat& out, std::string& reason, int& code)
+// An image file larger than this is refused unread (a 1920x1080 PNG is a few MB).
+constexpr std::size_t kMaxImageFileBytes = 64u << 20;
+// Before the frame size is known (the first pair), an image declaring more pixels than
+// this is refused undecoded: 8192x8192, beyond any stereo camera's frame.
+constexpr int64_t kMaxImagePixels = int64_t{8192} * 8192;
+
+// Decodes one image file as 8-bit grayscale into `out` (imdecode allocates the buffer),
+// reading it into `bytes` first (a bounded read of a regular file, capacity kept) and
+// refusing it before decoding when its header says it is not `expected` (`expected_what`
+// says what that is), or, with no size expected yet, larger than kMaxImagePixels; or cut
+// short. On failure says why, with the errno: ENOENT when missing, EINVAL for a file
+// that is no usable image.
+bool decodeImage(const std::string& path, cv::Size expected, const std::string& expected_what,
+                 std::vector<uint8_t>& bytes, cv::Mat& out, std::string& reason, int& code)
 {
-    // Checked first because imread would print its own warning for every attempt, every
-    // loop, where the replay says it once per file. access() allocates nothing.
-    if (::access(path.c_str(), R_OK) != 0) {
-        code = errno;
-        reason = code == ENOENT ? "missing" : "cannot be read: " + errnoText(code);
-        out.release();
+    out.release();
+    code = readImageFile(path, kMaxImageFileBytes, bytes, reason);
+    if (code != 0)
+        return false;
+    code = EINVAL;
+    const ImageHeader header = parseImageHeader(bytes);
+    if (!header.problem.empty()) {
+        reason = "not a readable image: " + header.problem;
         return false;
     }
+    if (!header.complete) {
+        reason = header.format == ImageFormat::Png
+                     ? "is cut short: a truncated PNG (no IEND chunk at its end)"
+                     : "is cut short: a truncated JPEG (no end-of-image marker)";
+        return false;
+    }
+    if (!header.size.empty()) {
+        if (!expected.empty() && header.size != expected) {
+            reason = "is " + sizeText(header.size) + ", " + expected_what + " (not decoded)";
+            return false;
+        }
+        if (expected.empty() && int64_t{header.size.width} * header.size.height > kMaxImagePixels) {
+            reason = "declares " + sizeText(header.size) +
+                     " pixels, more than a frame may have (not decoded)";
+            return false;
+        }
+    }
     try {
-        out = cv::imread(path, cv::IMREAD_GRAYSCALE);
+        out = cv::imdecode(cv::Mat(1, static_cast<int>(bytes.size()), CV_8UC1, bytes.data()),
+                           cv::IMREAD_GRAYSCALE);
     } catch (const cv::Exception& e) {
         out.release();
         reason = std::string("cannot decode: ") + e.what();
-        code = EINVAL;
         return false;
     }
     if (out.empty()) {
         reason = "not a readable image (corrupt, truncated or of an unknown format)";
-        code = EINVAL;
         return false;
     }
+    if (!expected.empty() && out.size() != expected) {
+        reason = "is " + sizeText(out.size()) + ", " + expected_what;
+        out.release();
+        return false;
+    }
+    code = 0;
     return true;
 }
 
@@ -174,30 +205,24 @@ void ReplaySource::stop() noexcept
 bool ReplaySource::decodePair(std::size_t i, BadPair& bad)
 {
     const RecordingEntry& entry = recording_.entries[i];
-    if (!decodeImage(entry.left_path, left_image_, bad.reason, bad.code)) {
+    // Each side is checked against the size it must have before it is decoded: the
+    // replay's frame size once known, else the left image's for the right one. So the
+    // file blamed is the one at fault, and a decompression bomb is never decoded.
+    const std::string replay_size =
+        frame_size_.empty() ? std::string()
+                            : "the replay is " + sizeText(frame_size_) + " (its first readable pair)";
+    if (!decodeImage(entry.left_path, frame_size_, replay_size, file_bytes_, left_image_,
+                     bad.reason, bad.code)) {
         bad.side = kLeft;
         bad.path = entry.left_path;
         return false;
     }
-    if (!decodeImage(entry.right_path, right_image_, bad.reason, bad.code)) {
+    const std::string left_size =
+        frame_size_.empty() ? "its left image is " + sizeText(left_image_.size()) : replay_size;
+    if (!decodeImage(entry.right_path, left_image_.size(), left_size, file_bytes_, right_image_,
+                     bad.reason, bad.code)) {
         bad.side = kRight;
         bad.path = entry.right_path;
-        return false;
-    }
-    if (right_image_.size() != left_image_.size()) {
-        bad.side = kRight;
-        bad.path = entry.right_path;
-        bad.reason = "is " + sizeText(right_image_.size()) + ", its left image is " +
-                     sizeText(left_image_.size());
-        bad.code = EINVAL;
-        return false;
-    }
-    if (!frame_size_.empty() && left_image_.size() != frame_size_) {
-        bad.side = kLeft;
-        bad.path = entry.left_path;
-        bad.reason = "is " + sizeText(left_image_.size()) + ", the replay is " +
-                     sizeText(frame_size_) + " (its first readable pair)";
-        bad.code = EINVAL;
         return false;
     }
     return true;

@@ -14,12 +14,16 @@
 // `pass * pairCount() + position in the recording`: they increase across loops, and a
 // skipped pair leaves a gap, as a dropped camera frame would.
 //
-// Bad input is never fatal: a missing or corrupt image, or one whose size differs from
-// the first readable pair's, makes the pair skipped, counted (bad_frames of its side) and
-// logged once per file. Only a recording with no readable pair at all fails start().
+// Bad input is never fatal: a missing, corrupt or truncated image, a file that is not a
+// regular one (a row pointing at /dev/zero), or an image whose size differs from the first
+// readable pair's makes the pair skipped, counted (bad_frames of its side) and logged once
+// per file. Sizes are read from the PNG or JPEG header before decoding
+// (replay/image_file.hpp): an image of another size, or, in the first pair, one larger
+// than 8192x8192, is never decoded. Only a recording with no readable pair at all fails
+// start().
 //
 // Frames come from a FramePool sized from the first readable pair and allocated in the
-// constructor; decoding (cv::imread) allocates a temporary image per frame, which
+// constructor; decoding (cv::imdecode) allocates a temporary image per frame, which
 // OpenCV 4.6 cannot decode into a given buffer; nothing else is allocated per frame.
 //
 // Thread-safety: as FrameSource: start()/stop() from one controlling thread, status()
@@ -130,8 +134,9 @@ private:
 
     // Replay thread only (the controlling thread touches them only while it is not running).
     std::vector<uint8_t> warned_;              // per entry and side: already logged
-    cv::Mat left_image_;                       // last decoded images (imread's buffers)
+    cv::Mat left_image_;                       // last decoded images (imdecode's buffers)
     cv::Mat right_image_;
+    std::vector<uint8_t> file_bytes_;          // the image file being decoded, capacity kept
     uint64_t next_pass_ = 0;                   // loops continue the numbering after a restart
     std::array<int64_t, 32> recent_stamps_ns_{};   // delivery times, for the measured fps
     std::size_t recent_count_ = 0;

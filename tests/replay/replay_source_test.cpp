@@ -12,6 +12,8 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
 #include <opencv2/imgcodecs.hpp>
 #include <spdlog/sinks/ringbuffer_sink.h>
 #include <spdlog/spdlog.h>
@@ -447,6 +449,87 @@ TEST_F(ReplaySourceTest, BadFilesAreSkippedCountedAndLoggedOncePerFile)
     EXPECT_EQ(corrupt, 1);
     EXPECT_EQ(missing, 1);
     EXPECT_EQ(resized, 1);
+}
+
+// The process's peak resident memory so far, in MB.
+double peakRssMb()
+{
+    rusage usage{};
+    ::getrusage(RUSAGE_SELF, &usage);
+    return static_cast<double>(usage.ru_maxrss) / 1024.0; // ru_maxrss is in KB
+}
+
+// Runs a looping lockstep replay of `dir` for two passes of `count` pairs with the log
+// captured; returns the log lines.
+std::vector<std::string> replayTwoPasses(const std::string& dir, std::size_t good_pairs,
+                                         SourceStatus& status)
+{
+    auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(256);
+    auto previous = spdlog::default_logger();
+    spdlog::set_default_logger(std::make_shared<spdlog::logger>("replay-test", sink));
+    {
+        Rig rig(lockstep(dir, /*loop=*/true), 2);
+        EXPECT_EQ(rig.source.start(rig.ring), 0) << rig.source.status().last_error;
+        EXPECT_EQ(popPairs(rig.ring, 2 * good_pairs).size(), 2 * good_pairs);
+        rig.source.stop();
+        status = rig.source.status();
+    }
+    spdlog::set_default_logger(previous);
+    return sink->last_formatted();
+}
+
+std::size_t linesWith(const std::vector<std::string>& lines, const std::string& needle)
+{
+    std::size_t n = 0;
+    for (const std::string& line : lines)
+        n += line.find(needle) != std::string::npos ? 1 : 0;
+    return n;
+}
+
+TEST_F(ReplaySourceTest, DecompressionBombsAreRefusedUndecodedNamingTheirFile)
+{
+    const std::string dir = makeRecording(4);
+    // 12000x12000 grey (144 MB decoded, a few hundred KB on disk): as the first pair's
+    // left image, before the frame size is known, and as a later right image.
+    test::writeDecompressionBomb(dir + "/left/000000.png", {12000, 12000});
+    fs::copy_file(dir + "/left/000000.png", dir + "/right/000002.png",
+                  fs::copy_options::overwrite_existing);
+    const double rss_before_mb = peakRssMb();
+
+    SourceStatus status;
+    const std::vector<std::string> log = replayTwoPasses(dir, 2, status);
+    EXPECT_LT(peakRssMb() - rss_before_mb, 50.0) << "a bomb was decoded";
+    // Each bomb is named, with its size, once; the good images beside them never are.
+    EXPECT_EQ(linesWith(log, "left/000000.png"), 1u);
+    EXPECT_EQ(linesWith(log, "right/000002.png"), 1u);
+    EXPECT_EQ(linesWith(log, "12000x12000"), 2u);
+    EXPECT_EQ(linesWith(log, "right/000000.png"), 0u);
+    EXPECT_EQ(linesWith(log, "left/000002.png"), 0u);
+    EXPECT_GE(status.cameras[0].bad_frames, 2u);
+    EXPECT_GE(status.cameras[1].bad_frames, 2u);
+}
+
+TEST_F(ReplaySourceTest, RowsPointingAtDevicesFifosOrTruncatedImagesAreBadFrames)
+{
+    const std::string dir = makeRecording(5);
+    fs::remove(dir + "/left/000001.png");
+    fs::create_symlink("/dev/zero", dir + "/left/000001.png");
+    fs::remove(dir + "/right/000002.png");
+    ASSERT_EQ(::mkfifo((dir + "/right/000002.png").c_str(), 0600), 0);
+    // A truncated JPEG would decode into a grey-filled frame that passes for a good one.
+    std::vector<uint8_t> jpeg = test::encode(pairs_[3].left, ".jpg");
+    jpeg.resize(jpeg.size() / 2);
+    test::writeBytes(dir + "/left/000003.png", jpeg);
+
+    SourceStatus status;
+    const std::vector<std::string> log = replayTwoPasses(dir, 2, status);
+    EXPECT_EQ(linesWith(log, "left/000001.png"), 1u);
+    EXPECT_EQ(linesWith(log, "not a regular file"), 2u);
+    EXPECT_EQ(linesWith(log, "right/000002.png"), 1u);
+    EXPECT_EQ(linesWith(log, "left/000003.png"), 1u);
+    EXPECT_EQ(linesWith(log, "truncated JPEG"), 1u);
+    EXPECT_GE(status.cameras[0].bad_frames, 4u); // 000001 and 000003, two passes
+    EXPECT_GE(status.cameras[1].bad_frames, 2u); // 000002
 }
 
 TEST_F(ReplaySourceTest, NothingReadableFailsStartNamingThePath)
