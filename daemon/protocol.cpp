@@ -457,6 +457,7 @@ void appendDepthEventHeader(std::string& out, const DepthEventHeader& header,
     object.field("width", header.width);
     object.field("height", header.height);
     object.field("bytes", header.bytes);
+    object.field("depth_valid", header.depth_valid);
     if (skipped > 0)
         object.field("skipped", skipped);
     appendReadingJson(object.openField("reading"), report, now_ns);

@@ -858,6 +858,7 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
     header.width = depth.empty() ? 0 : depth.cols;
     header.height = depth.empty() ? 0 : depth.rows;
     header.bytes = matBytes(depth);
+    header.depth_valid = frame.depth_valid;
 
     const RawPair& raw = frame.raw;
     raw_header_.clear();
@@ -1167,6 +1168,7 @@ void SocketServer::sendSnapshot(Client& client, const SnapshotRequest& request,
     Json answer = okReply(id);
     answer["frame"] = result.frame;
     answer["stamp_ns"] = result.stamp_ns;
+    answer["depth_valid"] = latest->depth_valid;
     answer["reading"] = readingToJson(report, now_ns);
     answer["calibration"] = {{"focal_px", geometry.focal_px},
                              {"baseline_m", geometry.baseline_m},

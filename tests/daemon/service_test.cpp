@@ -680,6 +680,49 @@ TEST_F(ServiceTest, DepthSubscriberGetsHeaderAndPayload)
     EXPECT_EQ(hello["id"], "h");
 }
 
+TEST_F(ServiceTest, DepthFramesSayWhetherTheyHoldTheirPairsDepth)
+{
+    // Nearly every pixel of the region must be valid: tsukuba's frames give no distance
+    // (too_few_valid_pixels), yet their depth is sound and is published as such.
+    ServiceConfig config = baseConfig();
+    config.processing.nearest.min_valid_fraction = 0.999;
+    config.source.max_skew_ms = 5.0;
+    config.publish.depth_max_hz = 0.0; // every frame
+    start(config);
+    TestClient subscriber(socket_path_);
+    ASSERT_EQ(
+        subscriber.request({{"cmd", "subscribe"}, {"stream", "depth"}, {"max_hz", 1000}})["ok"],
+        true);
+    const auto next_depth = [&](Json& header) {
+        header = subscriber.readJson();
+        EXPECT_EQ(header["event"], "depth") << header.dump();
+        const std::vector<uint8_t> payload =
+            subscriber.readBytes(header["bytes"].get<std::size_t>());
+        return static_cast<std::size_t>(
+            std::count_if(payload.begin(), payload.end(), [](uint8_t b) { return b != 0; }));
+    };
+
+    source_->deliver(1);
+    Json header;
+    EXPECT_GT(next_depth(header), 0u);
+    EXPECT_EQ(header["depth_valid"], true) << header.dump();
+    EXPECT_EQ(header["reading"]["valid"], false);
+    EXPECT_EQ(header["reading"]["reason"]["code"], "too_few_valid_pixels");
+    TestClient client(socket_path_);
+    Json snapshot = client.request({{"cmd", "snapshot"}, {"items", {"depth"}}});
+    EXPECT_EQ(snapshot["depth_valid"], true) << snapshot.dump();
+    client.readBytes(snapshot["payloads"][0]["bytes"]);
+
+    // Out of sync: no depth to trust, and the frame says so.
+    source_->setSkewNs(20'000'000);
+    source_->deliver(1);
+    EXPECT_EQ(next_depth(header), 0u);
+    EXPECT_EQ(header["depth_valid"], false) << header.dump();
+    EXPECT_EQ(header["reading"]["reason"]["code"], "out_of_sync");
+    snapshot = client.request({{"cmd", "snapshot"}, {"items", {"depth"}}});
+    EXPECT_EQ(snapshot["depth_valid"], false) << snapshot.dump();
+}
+
 TEST_F(ServiceTest, DepthStreamIsRateLimited)
 {
     start();
