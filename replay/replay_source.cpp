@@ -26,6 +26,15 @@ constexpr int kRight = 1;
 constexpr const char* kSideName[2] = {"left", "right"};
 constexpr int64_t kForever = std::numeric_limits<int64_t>::max();
 
+// a - b, saturated to the int64_t range (recorded stamps may be anything).
+int64_t saturatingDifference(int64_t a, int64_t b)
+{
+    int64_t difference = 0;
+    if (__builtin_sub_overflow(a, b, &difference))
+        return a < b ? std::numeric_limits<int64_t>::min() : std::numeric_limits<int64_t>::max();
+    return difference;
+}
+
 std::string sizeText(cv::Size size)
 {
     return std::to_string(size.width) + "x" + std::to_string(size.height);
@@ -112,6 +121,7 @@ ReplaySource::ReplaySource(ReplayOptions options) : options_(std::move(options))
                      recording_.bad_rows - recording_.problems.size());
 
     warned_.assign(recording_.entries.size() * 2, 0);
+    planSchedule();
 
     // The first readable pair fixes the frame size (and so the pool).
     std::string first_problem;
@@ -200,6 +210,53 @@ void ReplaySource::stop() noexcept
     ring_ = nullptr;
     SourceState running = SourceState::Running;
     state_.compare_exchange_strong(running, SourceState::Stopped, std::memory_order_acq_rel);
+}
+
+void ReplaySource::planSchedule()
+{
+    const std::vector<RecordingEntry>& entries = recording_.entries;
+    const std::size_t count = entries.size();
+    // One frame period: the mean of the recorded steps forward, or the nominal rate.
+    int64_t forward_ns = 0;
+    std::size_t forward_steps = 0;
+    for (std::size_t i = 1; i < count; ++i) {
+        const int64_t step_ns =
+            saturatingDifference(entries[i].left_stamp_ns, entries[i - 1].left_stamp_ns);
+        if (step_ns > 0 && forward_ns <= std::numeric_limits<int64_t>::max() - step_ns) {
+            forward_ns += step_ns;
+            ++forward_steps;
+        }
+    }
+    period_ns_ = forward_steps > 0
+                     ? std::max<int64_t>(forward_ns / static_cast<int64_t>(forward_steps), 1)
+                     : std::llround(1e9 / (options_.fps > 0.0 ? options_.fps : 10.0));
+
+    // Each pair is due its recorded step after the one before; a stamp that steps back
+    // (a recording spliced from two runs) comes one period after its predecessor, and
+    // the pace goes on from the new stamps.
+    schedule_ns_.assign(std::max<std::size_t>(count, 1), 0);
+    std::size_t steps_back = 0;
+    std::size_t first_back = 0;
+    for (std::size_t i = 1; i < count; ++i) {
+        int64_t step_ns =
+            saturatingDifference(entries[i].left_stamp_ns, entries[i - 1].left_stamp_ns);
+        if (step_ns < 0) {
+            if (steps_back++ == 0)
+                first_back = i;
+            step_ns = period_ns_;
+        }
+        schedule_ns_[i] = schedule_ns_[i - 1] +
+                          std::min(step_ns, std::numeric_limits<int64_t>::max() / 4 -
+                                                schedule_ns_[i - 1]);
+    }
+    if (steps_back > 0)
+        spdlog::warn("replay: {}: the stamps step back {} time{}, first at pair {} ({} ns "
+                     "after {} ns; a recording spliced from two runs?): each such pair comes "
+                     "one frame period ({:.1f} ms) after the one before, and the pace goes on "
+                     "from the new stamps",
+                     recording_.dir, steps_back, steps_back == 1 ? "" : "s",
+                     entries[first_back].index, entries[first_back].left_stamp_ns,
+                     entries[first_back - 1].left_stamp_ns, static_cast<double>(period_ns_) / 1e6);
 }
 
 bool ReplaySource::decodePair(std::size_t i, BadPair& bad)
@@ -316,15 +373,9 @@ void ReplaySource::run() noexcept
     const std::vector<RecordingEntry>& entries = recording_.entries;
     const std::size_t count = entries.size();
     const bool paced = options_.pacing == ReplayOptions::Pacing::Paced;
-    const int64_t first_ns = entries.front().left_stamp_ns;
-    const int64_t span_ns = std::max<int64_t>(entries.back().left_stamp_ns - first_ns, 0);
-    // One frame period: the mean recorded spacing, or the nominal rate for a single pair.
-    const int64_t period_ns =
-        (count > 1 && span_ns > 0)
-            ? span_ns / static_cast<int64_t>(count - 1)
-            : std::llround(1e9 / (options_.fps > 0.0 ? options_.fps : 10.0));
+    const int64_t period_ns = period_ns_;
     // A loop goes on one period after the last pair, as the recording would have.
-    const int64_t loop_ns = span_ns + period_ns;
+    const int64_t loop_ns = schedule_ns_.back() + period_ns;
 
     int64_t base_ns = monotonicNowNs();   // when the first pair of this pass is due
     for (;;) {
@@ -366,7 +417,7 @@ void ReplaySource::run() noexcept
             if (paced) {
                 // The pacing sleep is the only lock this thread takes on its way, and it
                 // is the stop() wake-up mutex, never shared with the consumer.
-                const int64_t due_ns = base_ns + (entry.left_stamp_ns - first_ns);
+                const int64_t due_ns = base_ns + schedule_ns_[i];
                 if (!sleepUntil(due_ns))
                     return;
                 // Fell behind (decoding slower than the recorded rate): shift the schedule

@@ -4,7 +4,10 @@
 //
 // Two pacings:
 //  - paced: pairs are delivered at their recorded time spacing, like live cameras
-//    (drop-oldest push into the ring; a slow worker loses pairs, as it would live);
+//    (drop-oldest push into the ring; a slow worker loses pairs, as it would live). A
+//    stamp that steps back (a recording spliced from two runs) is warned about once, at
+//    the open; that pair comes one frame period after the one before, and the pace goes
+//    on from the new stamps;
 //  - lockstep: as fast as the worker takes them, waiting for room in the ring and for
 //    free buffers; nothing is dropped, so a run is repeatable (tests, offline runs).
 //
@@ -115,6 +118,9 @@ private:
     // Decodes entry `i` into left_image_/right_image_. False (and `bad` filled) when the
     // pair cannot be used.
     bool decodePair(std::size_t i, BadPair& bad);
+    // Works out when each pair is due in a pass (schedule_ns_) and the frame period;
+    // warns once when the stamps step back.
+    void planSchedule();
     void reportBadPair(std::size_t i, const BadPair& bad);
     // Takes a free frame; with `wait` (lockstep) waits for one, and gives an empty handle
     // only when stopping.
@@ -129,6 +135,10 @@ private:
     const ReplayOptions options_;
     Recording recording_;
     cv::Size frame_size_;
+    // When each pair is due, in ns after the pass's first pair: the recorded spacing,
+    // except that a stamp stepping back counts as one period (planSchedule()).
+    std::vector<int64_t> schedule_ns_;
+    int64_t period_ns_ = 0; // the mean recorded step forward (or the nominal rate's)
     int open_error_ = 0;                       // negative errno when nothing is readable
     std::unique_ptr<FramePool> pool_;
 

@@ -255,6 +255,48 @@ TEST_F(ReplaySourceTest, PacedDeliveryKeepsTheRecordedSpacing)
     EXPECT_EQ(ring.dropped(), 0u);
 }
 
+TEST_F(ReplaySourceTest, StampsSteppingBackKeepThePaceAndAreWarnedOnce)
+{
+    // Spliced from two runs: pairs 3..5 were stamped 6 s before pairs 0..2.
+    const int64_t spacing_ns = 40 * kMs;
+    pairs_ = test::tsukubaPairs(6);
+    test::stampPairs(pairs_, 7'000'000'000, spacing_ns);
+    for (std::size_t k = 3; k < pairs_.size(); ++k) {
+        pairs_[k].left_stamp_ns -= 6'000'000'000;
+        pairs_[k].right_stamp_ns -= 6'000'000'000;
+    }
+    const std::string dir = tmp_.file("spliced");
+    test::writeRecording(dir, pairs_);
+
+    auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(64);
+    auto previous = spdlog::default_logger();
+    spdlog::set_default_logger(std::make_shared<spdlog::logger>("replay-test", sink));
+    ReplayOptions options;
+    options.path = dir;
+    options.pacing = ReplayOptions::Pacing::Paced;
+    options.loop = true;
+    options.pool_pairs = 24; // the test keeps every pair it pops
+    std::size_t got_count = 0;
+    double elapsed_s = 0.0;
+    {
+        Rig rig(options, 16);
+        const auto started = std::chrono::steady_clock::now();
+        EXPECT_EQ(rig.source.start(rig.ring), 0);
+        // Three passes: 18 pairs, 40 ms apart, about 0.7 s.
+        got_count = popPairs(rig.ring, 18).size();
+        elapsed_s =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+        rig.source.stop();
+    }
+    spdlog::set_default_logger(previous);
+    EXPECT_EQ(got_count, 18u);
+    EXPECT_LT(elapsed_s, 2.0) << "the replay stalled at the step back";
+    std::size_t warnings = 0;
+    for (const std::string& line : sink->last_formatted())
+        warnings += line.find("step back") != std::string::npos ? 1 : 0;
+    EXPECT_EQ(warnings, 1u);
+}
+
 TEST_F(ReplaySourceTest, PacedReplayDropsPairsWhenEveryBufferIsHeld)
 {
     const std::string dir = makeRecording(4, 1 * kMs);
