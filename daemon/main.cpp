@@ -107,6 +107,17 @@ int main(int argc, char** argv)
                                         "or DIR/calibration.yaml of the replay)");
     auto* socket_option = app.add_option("--socket", request.overrides.socket_path,
                                          "Unix socket path (default /run/stereod/stereod.sock)");
+    // An empty path would silently mean "not given" further on (`--socket ""` would bind
+    // the default path): refused here.
+    const CLI::Validator non_empty_path(
+        [](std::string& value) {
+            return value.empty() ? std::string("an empty path; leave the option out for the default")
+                                 : std::string();
+        },
+        "PATH");
+    for (CLI::Option* option :
+         {config_option, check_option, replay_option, calib_option, socket_option})
+        option->check(non_empty_path);
     auto* level_option =
         app.add_option("--log-level", request.overrides.log_level, "log level")
             ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}));

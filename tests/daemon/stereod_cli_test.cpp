@@ -92,6 +92,20 @@ TEST_F(StereodCli, BadArgumentsGiveOneLineAndExitTwo)
     }
 }
 
+TEST_F(StereodCli, EmptyPathsAreBadArgumentsNotTheDefaults)
+{
+    for (const char* option : {"--socket", "--replay", "--calib", "--config", "--check-config"}) {
+        std::vector<std::string> arguments = {option, ""};
+        if (std::string(option) != "--check-config" && std::string(option) != "--replay")
+            arguments.insert(arguments.end(), {"--replay", replay_});
+        const ProcessResult result = run(arguments);
+        EXPECT_EQ(result.exit_code, 2) << option << ": " << result.err;
+        EXPECT_EQ(lines(result.err).size(), 1u) << result.err;
+        EXPECT_NE(result.err.find(option), std::string::npos) << result.err;
+        EXPECT_NE(result.err.find("empty path"), std::string::npos) << result.err;
+    }
+}
+
 TEST_F(StereodCli, CheckConfigNamesEveryProblemWithItsLine)
 {
     const std::string good = dir_.file("good.yaml");
