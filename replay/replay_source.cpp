@@ -26,15 +26,6 @@ constexpr int kRight = 1;
 constexpr const char* kSideName[2] = {"left", "right"};
 constexpr int64_t kForever = std::numeric_limits<int64_t>::max();
 
-// a - b, saturated to the int64_t range (recorded stamps may be anything).
-int64_t saturatingDifference(int64_t a, int64_t b)
-{
-    int64_t difference = 0;
-    if (__builtin_sub_overflow(a, b, &difference))
-        return a < b ? std::numeric_limits<int64_t>::min() : std::numeric_limits<int64_t>::max();
-    return difference;
-}
-
 std::string sizeText(cv::Size size)
 {
     return std::to_string(size.width) + "x" + std::to_string(size.height);
@@ -221,7 +212,7 @@ void ReplaySource::planSchedule()
     std::size_t forward_steps = 0;
     for (std::size_t i = 1; i < count; ++i) {
         const int64_t step_ns =
-            saturatingDifference(entries[i].left_stamp_ns, entries[i - 1].left_stamp_ns);
+            saturatingSubNs(entries[i].left_stamp_ns, entries[i - 1].left_stamp_ns);
         if (step_ns > 0 && forward_ns <= std::numeric_limits<int64_t>::max() - step_ns) {
             forward_ns += step_ns;
             ++forward_steps;
@@ -239,7 +230,7 @@ void ReplaySource::planSchedule()
     std::size_t first_back = 0;
     for (std::size_t i = 1; i < count; ++i) {
         int64_t step_ns =
-            saturatingDifference(entries[i].left_stamp_ns, entries[i - 1].left_stamp_ns);
+            saturatingSubNs(entries[i].left_stamp_ns, entries[i - 1].left_stamp_ns);
         if (step_ns < 0) {
             if (steps_back++ == 0)
                 first_back = i;
@@ -347,11 +338,12 @@ void ReplaySource::recordDelivery(int64_t stamp_ns, int64_t skew_ns) noexcept
     }
 
     // Single writer: plain load/store suffice for the running sums.
-    const int64_t skew_abs_ns = std::abs(skew_ns);
+    const int64_t skew_abs_ns = saturatingAbsNs(skew_ns);
     const uint64_t pairs = pairs_.load(std::memory_order_relaxed);
     recent_skew_abs_ns_[pairs % kSkewWindow].store(skew_abs_ns, std::memory_order_relaxed);
-    skew_abs_sum_ns_.store(skew_abs_sum_ns_.load(std::memory_order_relaxed) + skew_abs_ns,
-                           std::memory_order_relaxed);
+    skew_abs_sum_ns_.store(
+        saturatingAddNs(skew_abs_sum_ns_.load(std::memory_order_relaxed), skew_abs_ns),
+        std::memory_order_relaxed);
     if (skew_abs_ns > skew_abs_max_ns_.load(std::memory_order_relaxed))
         skew_abs_max_ns_.store(skew_abs_ns, std::memory_order_relaxed);
     frames_[kLeft].fetch_add(1, std::memory_order_relaxed);
@@ -412,7 +404,7 @@ void ReplaySource::run() noexcept
             pair.right->sequence = number;
             pair.left->source_stamp_ns = entry.left_stamp_ns;
             pair.right->source_stamp_ns = entry.right_stamp_ns;
-            const int64_t skew_ns = entry.right_stamp_ns - entry.left_stamp_ns;
+            const int64_t skew_ns = saturatingSubNs(entry.right_stamp_ns, entry.left_stamp_ns);
 
             if (paced) {
                 // The pacing sleep is the only lock this thread takes on its way, and it
@@ -430,7 +422,7 @@ void ReplaySource::run() noexcept
             // Delivery: stamps, then the ring. From here to the counters: atomics only.
             const int64_t now_ns = monotonicNowNs();
             pair.left->stamp_ns = now_ns;
-            pair.right->stamp_ns = now_ns + skew_ns;
+            pair.right->stamp_ns = saturatingAddNs(now_ns, skew_ns);
             if (paced) {
                 ring_->push(std::move(pair));   // drop-oldest; the ring counts the drop
             } else if (!ring_->pushWait(std::move(pair))) {

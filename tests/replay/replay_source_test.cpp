@@ -5,6 +5,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -295,6 +296,31 @@ TEST_F(ReplaySourceTest, StampsSteppingBackKeepThePaceAndAreWarnedOnce)
     for (const std::string& line : sink->last_formatted())
         warnings += line.find("step back") != std::string::npos ? 1 : 0;
     EXPECT_EQ(warnings, 1u);
+}
+
+TEST_F(ReplaySourceTest, ExtremeStampsGiveASaturatedSkewNotAWrappedOne)
+{
+    pairs_ = test::tsukubaPairs(3);
+    test::stampPairs(pairs_, 7'000'000'000, 40 * kMs);
+    // Right minus left overflows: wrapped, it would read -1 ns, "in sync".
+    pairs_[1].left_stamp_ns = std::numeric_limits<int64_t>::min();
+    pairs_[1].right_stamp_ns = std::numeric_limits<int64_t>::max();
+    pairs_[2].left_stamp_ns = std::numeric_limits<int64_t>::max();
+    pairs_[2].right_stamp_ns = std::numeric_limits<int64_t>::min();
+    const std::string dir = tmp_.file("extreme");
+    test::writeRecording(dir, pairs_);
+
+    Rig rig(lockstep(dir), 4);
+    ASSERT_EQ(rig.source.start(rig.ring), 0) << rig.source.status().last_error;
+    const std::vector<StereoPair> got = popPairs(rig.ring, 3);
+    ASSERT_EQ(got.size(), 3u);
+    // Delivered stamps are "now" plus the recorded skew, saturated: as far apart as they go.
+    EXPECT_GT(got[1].skewNs(), std::numeric_limits<int64_t>::max() / 2);
+    EXPECT_LT(got[2].skewNs(), std::numeric_limits<int64_t>::min() / 2);
+    EXPECT_EQ(got[1].right->source_stamp_ns, std::numeric_limits<int64_t>::max());
+    const SourceStatus status = rig.source.status();
+    EXPECT_GT(status.skew_max_ms, 1e12) << "the largest skew wrapped";
+    EXPECT_GT(status.skew_mean_ms, 1e12) << "the mean skew wrapped";
 }
 
 TEST_F(ReplaySourceTest, PacedReplayDropsPairsWhenEveryBufferIsHeld)
