@@ -14,6 +14,7 @@
 
 #include <fcntl.h>
 #include <grp.h>
+#include <poll.h>
 #include <spdlog/spdlog.h>
 #include <sys/epoll.h>
 #include <sys/eventfd.h>
@@ -544,7 +545,12 @@ void SocketServer::acceptClients()
                              options_.socket.path, peer.pid, peer.uid, peer.gid);
             continue;
         }
-        if (live_clients_ >= static_cast<std::size_t>(std::max(options_.socket.max_clients, 0))) {
+        const auto max_clients = static_cast<std::size_t>(std::max(options_.socket.max_clients, 0));
+        // Clients that hung up since the last turn still count until their events are
+        // read: under fast connect/close churn they would fill the limit. Close them now.
+        if (live_clients_ >= max_clients)
+            closeHungUpClients();
+        if (live_clients_ >= max_clients) {
             refuseConnection(std::move(connection), ErrorCode::TooManyClients,
                              std::to_string(options_.socket.max_clients) +
                                  " connections are open (socket.max_clients)");
@@ -568,6 +574,27 @@ void SocketServer::acceptClients()
         log_limiter_.log(spdlog::level::info, fmt::format("client.connected.uid{}", peer.uid),
                          monotonicNowNs(), "client {} connected: pid {} uid {} gid {} ({} open)",
                          id - kFirstClientTag, peer.pid, peer.uid, peer.gid, live_clients_);
+    }
+}
+
+void SocketServer::closeHungUpClients()
+{
+    hangup_poll_.clear();
+    hangup_ids_.clear();
+    for (const auto& [id, client] : clients_) {
+        if (client.dead)
+            continue;
+        hangup_poll_.push_back(pollfd{client.fd.get(), 0, 0});
+        hangup_ids_.push_back(id);
+    }
+    if (hangup_poll_.empty() ||
+        ::poll(hangup_poll_.data(), static_cast<nfds_t>(hangup_poll_.size()), 0) <= 0)
+        return;
+    for (std::size_t i = 0; i < hangup_poll_.size(); ++i) {
+        // POLLHUP: both directions shut, the peer is gone (one that only shut its writing
+        // side still waits for its replies, and keeps its place).
+        if ((hangup_poll_[i].revents & (POLLHUP | POLLERR)) != 0)
+            closeClient(clients_.at(hangup_ids_[i]));
     }
 }
 

@@ -24,6 +24,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include <poll.h>
 #include <sys/types.h>
 
 #include "config/service_config.hpp"
@@ -183,6 +184,8 @@ class SocketServer {
     void addToEpoll(int fd, uint64_t tag, uint32_t events);
     void acceptClients();
     void readClient(Client& client);
+    // Closes the clients whose peers have hung up, without waiting for their events.
+    void closeHungUpClients();
     // Answers the complete request lines received, at most kRequestsPerTurn of them; a
     // client with more waiting goes into ready_ for the next turn.
     void handleLines(Client& client);
@@ -252,6 +255,8 @@ class SocketServer {
     std::unordered_map<uint64_t, Client> clients_;
     std::vector<uint64_t> dead_clients_;
     std::vector<uint64_t> ready_; // clients with requests waiting for their next turn
+    std::vector<pollfd> hangup_poll_;  // closeHungUpClients(), reused
+    std::vector<uint64_t> hangup_ids_; // the client of each hangup_poll_ entry
     uint64_t next_client_id_ = 0;
     std::vector<std::function<void()>> watches_;
 

@@ -941,6 +941,35 @@ TEST_F(ServiceTest, SixtyFourClientsAtOnceAndTheNextOneRefused)
     EXPECT_EQ(status(*clients[0])["clients"]["rejected"], 1);
 }
 
+TEST_F(ServiceTest, ConnectCloseChurnDoesNotCountClosedClientsAsOpen)
+{
+    ServiceConfig config = baseConfig();
+    config.socket.max_clients = 4;
+    start(config);
+    TestClient watcher(socket_path_);
+    // 300 connections opened and closed at once, faster than the loop turns: the service
+    // accepts them in batches, and those already gone must not fill socket.max_clients.
+    const sockaddr_un address = [&] {
+        sockaddr_un a{};
+        a.sun_family = AF_UNIX;
+        std::strncpy(a.sun_path, socket_path_.c_str(), sizeof a.sun_path - 1);
+        return a;
+    }();
+    int connected = 0;
+    for (int i = 0; i < 300; ++i) {
+        const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+        ASSERT_GE(fd, 0);
+        if (::connect(fd, reinterpret_cast<const sockaddr*>(&address), sizeof address) == 0)
+            ++connected;
+        ::close(fd);
+    }
+    EXPECT_GT(connected, 0);
+    TestClient last(socket_path_);
+    EXPECT_EQ(last.request({{"cmd", "hello"}})["ok"], true);
+    const Json clients = status(watcher)["clients"];
+    EXPECT_EQ(clients["rejected"], 0) << clients.dump() << ", " << connected << " connected";
+}
+
 TEST_F(ServiceTest, ClientsFloodingRequestsDelayNeitherAPoliteClientNorTheWatchdog)
 {
     // systemd's notify socket, with a watchdog of 400 ms: pings are due every 100 ms.
