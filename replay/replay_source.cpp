@@ -1,18 +1,22 @@
 #include "replay/replay_source.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <limits>
 #include <system_error>
 #include <utility>
 
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <spdlog/details/console_globals.h>
 #include <spdlog/spdlog.h>
 
 #include "replay/image_file.hpp"
@@ -29,6 +33,62 @@ constexpr int64_t kForever = std::numeric_limits<int64_t>::max();
 std::string sizeText(cv::Size size)
 {
     return std::to_string(size.width) + "x" + std::to_string(size.height);
+}
+
+// Decodes `bytes` as 8-bit grayscale into `out`, catching what the image libraries print
+// on their own (libpng's "libpng error: ...", libjpeg's "Corrupt JPEG data: ...") into
+// `printed` instead of letting it reach stderr beside the log, unlimited, once per frame.
+// fd 2 is pointed at a pipe for the call, under spdlog's console mutex, so that no log
+// line of another thread goes into the pipe meanwhile. Throws what imdecode throws.
+void decodeQuietly(const std::vector<uint8_t>& bytes, cv::Mat& out, std::string& printed)
+{
+    // Non-blocking on both ends: a library printing more than the pipe holds loses the
+    // rest rather than blocking this thread, which reads only after the call.
+    static const std::array<int, 2> pipe_fds = [] {
+        std::array<int, 2> fds{-1, -1};
+        if (::pipe2(fds.data(), O_CLOEXEC | O_NONBLOCK) != 0)
+            fds = {-1, -1};
+        return fds;
+    }();
+    printed.clear();
+    const cv::Mat encoded(1, static_cast<int>(bytes.size()), CV_8UC1,
+                          const_cast<uint8_t*>(bytes.data()));
+    if (pipe_fds[0] < 0) {
+        out = cv::imdecode(encoded, cv::IMREAD_GRAYSCALE);
+        return;
+    }
+    std::lock_guard console(spdlog::details::console_mutex::mutex());
+    std::fflush(stderr);
+    const int saved = ::dup(STDERR_FILENO);
+    if (saved < 0 || ::dup2(pipe_fds[1], STDERR_FILENO) < 0) {
+        if (saved >= 0)
+            ::close(saved);
+        out = cv::imdecode(encoded, cv::IMREAD_GRAYSCALE);
+        return;
+    }
+    struct Restore {
+        int saved;
+        ~Restore()
+        {
+            std::fflush(stderr);
+            ::dup2(saved, STDERR_FILENO);
+            ::close(saved);
+        }
+    };
+    {
+        const Restore restore{saved};
+        out = cv::imdecode(encoded, cv::IMREAD_GRAYSCALE);
+    }
+    char chunk[512];
+    for (;;) {
+        const ssize_t got = ::read(pipe_fds[0], chunk, sizeof chunk);
+        if (got <= 0)
+            break;
+        printed.append(chunk, static_cast<std::size_t>(got));
+    }
+    while (!printed.empty() && (printed.back() == '\n' || printed.back() == ' '))
+        printed.pop_back();
+    std::replace(printed.begin(), printed.end(), '\n', ';');
 }
 
 // An image file larger than this is refused unread (a 1920x1080 PNG is a few MB).
@@ -73,9 +133,9 @@ bool decodeImage(const std::string& path, cv::Size expected, const std::string& 
             return false;
         }
     }
+    std::string printed;
     try {
-        out = cv::imdecode(cv::Mat(1, static_cast<int>(bytes.size()), CV_8UC1, bytes.data()),
-                           cv::IMREAD_GRAYSCALE);
+        decodeQuietly(bytes, out, printed);
     } catch (const cv::Exception& e) {
         out.release();
         reason = std::string("cannot decode: ") + e.what();
@@ -83,6 +143,16 @@ bool decodeImage(const std::string& path, cv::Size expected, const std::string& 
     }
     if (out.empty()) {
         reason = "not a readable image (corrupt, truncated or of an unknown format)";
+        if (!printed.empty())
+            reason += ": " + printed;
+        return false;
+    }
+    // libjpeg says so when it met corrupt data it filled in (grey, or the last row):
+    // such a frame is not the picture the camera took. (libpng's warnings, e.g. about a
+    // colour profile, leave the pixels alone.)
+    if (header.format == ImageFormat::Jpeg && !printed.empty()) {
+        reason = "corrupt: " + printed;
+        out.release();
         return false;
     }
     if (!expected.empty() && out.size() != expected) {

@@ -3,6 +3,7 @@
 
 #include <cerrno>
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -13,8 +14,10 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <fcntl.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
+#include <unistd.h>
 #include <opencv2/imgcodecs.hpp>
 #include <spdlog/sinks/ringbuffer_sink.h>
 #include <spdlog/spdlog.h>
@@ -598,6 +601,44 @@ TEST_F(ReplaySourceTest, RowsPointingAtDevicesFifosOrTruncatedImagesAreBadFrames
     EXPECT_EQ(linesWith(log, "truncated JPEG"), 1u);
     EXPECT_GE(status.cameras[0].bad_frames, 4u); // 000001 and 000003, two passes
     EXPECT_GE(status.cameras[1].bad_frames, 2u); // 000002
+}
+
+TEST_F(ReplaySourceTest, WhatTheDecodersPrintGoesIntoTheLogNotToStderr)
+{
+    const std::string dir = makeRecording(4);
+    // Damaged in the middle, with intact headers and ends: libpng fails with an error of
+    // its own, libjpeg fills the damage in and says so.
+    const auto damage = [](std::vector<uint8_t> bytes) {
+        for (std::size_t i = bytes.size() / 3; i < bytes.size() * 2 / 3; i += 5)
+            bytes[i] ^= 0x5a;
+        return bytes;
+    };
+    test::writeBytes(dir + "/left/000001.png", damage(test::encode(pairs_[1].left, ".png")));
+    test::writeBytes(dir + "/right/000002.png", damage(test::encode(pairs_[2].right, ".jpg")));
+
+    // Everything written to fd 2 meanwhile goes to a file.
+    const std::string stderr_path = tmp_.file("stderr.txt");
+    std::fflush(stderr);
+    const int saved = ::dup(STDERR_FILENO);
+    const int file = ::open(stderr_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    ASSERT_GE(file, 0);
+    ::dup2(file, STDERR_FILENO);
+    ::close(file);
+    SourceStatus status;
+    const std::vector<std::string> log = replayTwoPasses(dir, 2, status);
+    std::fflush(stderr);
+    ::dup2(saved, STDERR_FILENO);
+    ::close(saved);
+
+    std::ifstream printed_file(stderr_path);
+    const std::string printed(std::istreambuf_iterator<char>(printed_file), {});
+    EXPECT_EQ(printed, "");
+    EXPECT_EQ(linesWith(log, "left/000001.png"), 1u);
+    EXPECT_EQ(linesWith(log, "libpng error"), 1u);
+    EXPECT_EQ(linesWith(log, "right/000002.png"), 1u);
+    EXPECT_EQ(linesWith(log, "corrupt: "), 1u);
+    EXPECT_GE(status.cameras[0].bad_frames, 2u);
+    EXPECT_GE(status.cameras[1].bad_frames, 2u);
 }
 
 TEST_F(ReplaySourceTest, NothingReadableFailsStartNamingThePath)
