@@ -138,8 +138,8 @@ TEST_F(StereodUnderSystemd, NotifiesReadyStatusWatchdogReloadAndStop)
     EXPECT_GE(client->request({{"cmd", "status"}})["status"]["source"]["pairs"].get<uint64_t>(),
               1u);
 
-    // Pings at half the interval (200 ms) while the worker keeps up, and a STATUS= line a
-    // person can read.
+    // Pings every quarter of the interval (100 ms) while the worker keeps up, and a
+    // STATUS= line a person can read.
     const std::vector<NotifySocket::Message> running = notify.collect(2500ms);
     EXPECT_GE(count(running, "WATCHDOG=1"), 4u) << notify.all();
     ASSERT_TRUE(notify.waitFor("STATUS=running: ", 5s)) << notify.all();
