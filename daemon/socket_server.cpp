@@ -797,9 +797,9 @@ void SocketServer::writeClient(Client& client)
 
 void SocketServer::updateEpoll(Client& client)
 {
-    const uint32_t wanted = (client.input_closed || client.pending ? 0u
-                                                                   : static_cast<uint32_t>(EPOLLIN)) |
-                            (client.unsent() > 0 ? static_cast<uint32_t>(EPOLLOUT) : 0u);
+    const uint32_t wanted =
+        (client.input_closed || client.pending ? 0u : static_cast<uint32_t>(EPOLLIN)) |
+        (client.unsent() > 0 ? static_cast<uint32_t>(EPOLLOUT) : 0u);
     if (wanted == client.epoll_events)
         return;
     epoll_event event{};

@@ -160,7 +160,7 @@ class SocketServer {
     struct Client {
         UniqueFd fd;
         uint64_t id = 0;
-        std::string in;  // received bytes not yet framed into requests
+        std::string in;           // received bytes not yet framed into requests
         std::size_t in_start = 0; // where the unanswered part of `in` begins
         // Requests received and not answered yet wait for the client's next turn (it is
         // in ready_); nothing more is read from it meanwhile.
@@ -254,7 +254,7 @@ class SocketServer {
 
     std::unordered_map<uint64_t, Client> clients_;
     std::vector<uint64_t> dead_clients_;
-    std::vector<uint64_t> ready_; // clients with requests waiting for their next turn
+    std::vector<uint64_t> ready_;      // clients with requests waiting for their next turn
     std::vector<pollfd> hangup_poll_;  // closeHungUpClients(), reused
     std::vector<uint64_t> hangup_ids_; // the client of each hangup_poll_ entry
     uint64_t next_client_id_ = 0;

@@ -76,8 +76,8 @@ ImageHeader parseJpeg(std::span<const uint8_t> bytes)
         }
         const std::size_t length = bigEndian16(bytes, at + 2);
         // SOF0..SOF15, except DHT (C4), JPG (C8) and DAC (CC).
-        const bool frame = marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 &&
-                           marker != 0xC8 && marker != 0xCC;
+        const bool frame =
+            marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
         if (frame) {
             if (length < 7 || at + 9 > bytes.size()) {
                 header.problem = "a JPEG whose frame header is cut short";
@@ -108,8 +108,8 @@ ImageHeader parseJpeg(std::span<const uint8_t> bytes)
 
 ImageHeader parseImageHeader(std::span<const uint8_t> bytes)
 {
-    if (bytes.size() >= 8 && std::equal(std::begin(kPngSignature), std::end(kPngSignature),
-                                        bytes.begin()))
+    if (bytes.size() >= 8 &&
+        std::equal(std::begin(kPngSignature), std::end(kPngSignature), bytes.begin()))
         return parsePng(bytes);
     if (bytes.size() >= 3 && bytes[0] == 0xFF && bytes[1] == 0xD8 && bytes[2] == 0xFF)
         return parseJpeg(bytes);

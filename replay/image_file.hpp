@@ -25,9 +25,9 @@ enum class ImageFormat {
 
 struct ImageHeader {
     ImageFormat format = ImageFormat::Other;
-    cv::Size size;          // from the header; empty when unknown (Other, or unreadable)
-    bool complete = true;   // PNG ends with IEND, JPEG with its EOI marker
-    std::string problem;    // a PNG or JPEG whose header cannot be read: why
+    cv::Size size;        // from the header; empty when unknown (Other, or unreadable)
+    bool complete = true; // PNG ends with IEND, JPEG with its EOI marker
+    std::string problem;  // a PNG or JPEG whose header cannot be read: why
 };
 
 // The format, size and completeness of the image in `bytes` (the whole file), from the

@@ -39,8 +39,8 @@ TEST(ImageHeader, PngAndJpegSizesComeFromTheHeader)
 {
     for (const char* extension : {".png", ".jpg"}) {
         const ImageHeader header = parseImageHeader(test::encode(testImage({123, 45}), extension));
-        EXPECT_EQ(header.format, extension == std::string(".png") ? ImageFormat::Png
-                                                                  : ImageFormat::Jpeg);
+        EXPECT_EQ(header.format,
+                  extension == std::string(".png") ? ImageFormat::Png : ImageFormat::Jpeg);
         EXPECT_EQ(header.size, cv::Size(123, 45)) << extension;
         EXPECT_TRUE(header.complete) << extension;
         EXPECT_EQ(header.problem, "") << extension;
