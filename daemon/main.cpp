@@ -14,10 +14,23 @@
 #include "capture/device_list.hpp"
 #include "config/service_config.hpp"
 #include "daemon/service.hpp"
+#include "daemon/stop_signal_watch.hpp"
 
 namespace {
 
 using stereod::ExitCode;
+
+// Runs before the initialisers of the shared libraries (OpenCV's take a good part of a
+// second on a loaded machine), so that a SIGTERM that early finds the service's signals
+// blocked and waits for the StopSignalWatch, instead of ending the process with 143.
+// Every thread created later inherits the mask.
+void blockSignalsBeforeLibraries(int, char**, char**)
+{
+    stereod::blockServiceSignals();
+}
+
+[[gnu::section(".preinit_array"), gnu::used]] void (*const kBlockSignalsEarly)(int, char**, char**) =
+    &blockSignalsBeforeLibraries;
 
 int exitCode(ExitCode code)
 {
@@ -27,17 +40,25 @@ int exitCode(ExitCode code)
 // `stereod --check-config FILE`: every problem on its own line, file:line first.
 int checkConfig(const std::string& path)
 {
+    std::string calibration_path;
     try {
-        stereod::loadConfig(path);
+        calibration_path = stereod::checkConfiguration(path);
     } catch (const stereod::ConfigError& e) {
         for (const std::string& problem : e.problems())
             std::cerr << problem << '\n';
-        return exitCode(ExitCode::InvalidConfig);
+        return exitCode(stereod::exitCodeFor(e));
+    } catch (const stereod::StartupError& e) {
+        std::cerr << e.what() << '\n';
+        return exitCode(e.code());
     } catch (const std::exception& e) {
         std::cerr << path << ": " << e.what() << '\n';
         return exitCode(ExitCode::InvalidConfig);
     }
-    std::cout << path << ": valid\n";
+    if (calibration_path.empty())
+        std::cout << path << ": valid (no calibration named: the processing settings are "
+                             "checked against the frames at start-up)\n";
+    else
+        std::cout << path << ": valid with the calibration " << calibration_path << '\n';
     return exitCode(ExitCode::Ok);
 }
 
@@ -56,8 +77,10 @@ void setUpLogging()
 
 int main(int argc, char** argv)
 {
-    // Before any thread exists, so that every thread inherits the mask: these signals
-    // are taken from a signalfd in the I/O loop, never by an asynchronous handler.
+    // Blocked already (blockSignalsBeforeLibraries()); again here in case the loader did
+    // not run .preinit_array. Before any thread exists, so that every thread inherits
+    // the mask: these signals are taken from a signalfd in the I/O loop and by the
+    // StopSignalWatch, never by an asynchronous handler.
     stereod::blockServiceSignals();
     // A client that hangs up while we write must not kill the service (sends also use
     // MSG_NOSIGNAL; this covers every other write).
@@ -84,6 +107,17 @@ int main(int argc, char** argv)
                                         "or DIR/calibration.yaml of the replay)");
     auto* socket_option = app.add_option("--socket", request.overrides.socket_path,
                                          "Unix socket path (default /run/stereod/stereod.sock)");
+    // An empty path would silently mean "not given" further on (`--socket ""` would bind
+    // the default path): refused here.
+    const CLI::Validator non_empty_path(
+        [](std::string& value) {
+            return value.empty() ? std::string("an empty path; leave the option out for the default")
+                                 : std::string();
+        },
+        "PATH");
+    for (CLI::Option* option :
+         {config_option, check_option, replay_option, calib_option, socket_option})
+        option->check(non_empty_path);
     auto* level_option =
         app.add_option("--log-level", request.overrides.log_level, "log level")
             ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}));
@@ -105,6 +139,10 @@ int main(int argc, char** argv)
         return exitCode(ExitCode::BadArguments);
     }
 
+    // From here on SIGTERM and SIGINT stop the process within a second whatever it is
+    // doing, a start-up blocked in an open() included (daemon/stop_signal_watch.hpp).
+    setUpLogging();
+    stereod::StopSignalWatch stop_signals;
     if (!check_path.empty())
         return checkConfig(check_path);
     if (list_devices) {
@@ -113,10 +151,17 @@ int main(int argc, char** argv)
         return devices.devices.empty() ? exitCode(ExitCode::Failure) : exitCode(ExitCode::Ok);
     }
 
-    setUpLogging();
     try {
         std::unique_ptr<stereod::Service> service = stereod::launchService(request, true);
-        const ExitCode code = service->run();
+        stop_signals.setService(service.get());
+        ExitCode code = ExitCode::Ok;
+        try {
+            code = service->run();
+        } catch (...) {
+            stop_signals.setService(nullptr);
+            throw;
+        }
+        stop_signals.setService(nullptr);
         if (service->workerAbandoned()) {
             // The worker is still inside a pair that would outlast the stop: end now,
             // without the destructors that would wait for it (docs/service.md, Signals).

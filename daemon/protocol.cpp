@@ -145,21 +145,22 @@ ParseResult parseSubscribe(const Json& request, const std::optional<Json>& id)
 }
 
 // Copying and writing a JSON value recurse once per level: an id is echoed, so its
-// depth is bounded before it is copied (the parser itself does not recurse).
+// depth is bounded before it is copied (the parser itself does not recurse). A level is
+// an array or an object: `[[]]` has two, `7` none.
 constexpr int kMaxIdDepth = 16;
 
 bool nestedDeeperThan(const Json& value, int limit)
 {
-    std::vector<std::pair<const Json*, int>> pending{{&value, 0}};
+    std::vector<std::pair<const Json*, int>> pending{{&value, 1}};
     while (!pending.empty()) {
-        const auto [node, depth] = pending.back();
+        const auto [node, level] = pending.back();
         pending.pop_back();
-        if (depth > limit)
+        if (!node->is_structured())
+            continue;
+        if (level > limit)
             return true;
-        if (node->is_structured()) {
-            for (const Json& child : *node)
-                pending.emplace_back(&child, depth + 1);
-        }
+        for (const Json& child : *node)
+            pending.emplace_back(&child, level + 1);
     }
     return false;
 }
@@ -330,6 +331,13 @@ const std::vector<std::string>& knownSnapshotItems()
 
 ParseResult parseRequest(std::string_view line)
 {
+    // The parser takes a NUL byte for the end of the input: `{...}` followed by a NUL
+    // and anything would pass. No JSON text holds a raw NUL.
+    if (line.find('\0') != std::string_view::npos)
+        return ProtocolError{ErrorCode::BadJson,
+                             "the request is not valid JSON: it holds a NUL byte (at byte " +
+                                 std::to_string(line.find('\0')) + ")",
+                             std::nullopt};
     try {
         Json request;
         try {
@@ -468,6 +476,7 @@ void appendDepthEventHeader(std::string& out, const DepthEventHeader& header,
     object.field("width", header.width);
     object.field("height", header.height);
     object.field("bytes", header.bytes);
+    object.field("depth_valid", header.depth_valid);
     if (skipped > 0)
         object.field("skipped", skipped);
     appendReadingJson(object.openField("reading"), report, now_ns);

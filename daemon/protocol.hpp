@@ -149,6 +149,7 @@ struct DepthEventHeader {
     int width = 0;
     int height = 0;
     uint64_t bytes = 0;
+    bool depth_valid = false; // the payload is this pair's depth, not cleared
 };
 
 // Appends the depth event's header line (with "skipped" when > 0), without the payload.

@@ -75,6 +75,11 @@ struct RawPair {
 struct PublishedFrame {
     DepthResult result;       // the chain's output; result.reading is the reading
     cv::Mat depth_mm;         // CV_16UC1, millimetres, 0 = invalid (u16_mm payload)
+    // Whether depth_mm holds this pair's depth. False when it was cleared (a bad frame, a
+    // pair out of sync: depth the reading refuses to trust) or never made (uncalibrated).
+    // A reading without a distance for want of data in the region (too few valid pixels,
+    // nothing in range) keeps its depth: the rest of the picture is good.
+    bool depth_valid = false;
     int64_t skew_ns = 0;      // right minus left capture time of the pair
     uint64_t sequence = 0;    // set by publish(): 1 for the first result, then +1
     int64_t published_ns = 0; // CLOCK_MONOTONIC when published, set by publish()

@@ -4,6 +4,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string_view>
@@ -20,6 +21,7 @@
 
 #include "daemon/json_writer.hpp"
 #include "daemon/camera_source_factory.hpp"
+#include "replay/recording.hpp"
 #include "replay/replay_source.hpp"
 
 namespace stereod {
@@ -34,26 +36,6 @@ sigset_t serviceSignals()
     sigaddset(&signals, SIGINT);
     sigaddset(&signals, SIGHUP);
     return signals;
-}
-
-// A configuration whose only problems are the replay path, or only the calibration
-// path, is a source or a calibration problem for the exit code: `stereod --replay DIR`
-// with a DIR that does not exist is a source problem, whatever layer finds it.
-ExitCode classifyConfigError(const ConfigError& error)
-{
-    const auto all_about = [&](std::string_view key) {
-        const std::string needle = ": " + std::string(key) + ": ";
-        return !error.problems().empty() &&
-               std::all_of(error.problems().begin(), error.problems().end(),
-                           [&](const std::string& problem) {
-                               return problem.find(needle) != std::string::npos;
-                           });
-    };
-    if (all_about("source.replay.path"))
-        return ExitCode::Source;
-    if (all_about("calibration"))
-        return ExitCode::Calibration;
-    return ExitCode::InvalidConfig;
 }
 
 void applyLogLevel(const std::string& level)
@@ -75,7 +57,56 @@ std::string readCalibrationText(const std::string& path)
     return text.str();
 }
 
+// Loads the calibration at `path`: its text (for the `calibration` request) and the parsed
+// calibration. Throws StartupError(Calibration) naming the file and the problem.
+StereoCalibration loadCalibrationFile(const std::string& path, std::string& text)
+{
+    try {
+        text = readCalibrationText(path);
+        return parseCalibration(text, path);
+    } catch (const std::exception& e) {
+        throw StartupError(ExitCode::Calibration, e.what());
+    }
+}
+
+// The processing settings as the stereo chain checks them against the calibration (a
+// disparity range wider than the image, a region of interest of no pixel, ...): the
+// problem, naming the key and `origin` (the configuration file), or empty when they fit.
+std::string processingProblem(const ProcessorSettings& settings,
+                              const StereoCalibration& calibration, const std::string& origin)
+{
+    try {
+        validateProcessorSettings(settings, calibration.rectified);
+    } catch (const std::invalid_argument& e) {
+        return (origin.empty() ? std::string() : origin + ": ") + e.what() +
+               " (with the calibration's " +
+               std::to_string(calibration.rectified.image_size.width) + "x" +
+               std::to_string(calibration.rectified.image_size.height) + " frames)";
+    }
+    return {};
+}
+
 } // namespace
+
+// A configuration whose only problems are the replay path, or only the calibration
+// path, is a source or a calibration problem for the exit code: `stereod --replay DIR`
+// with a DIR that does not exist is a source problem, whatever layer finds it.
+ExitCode exitCodeFor(const ConfigError& error)
+{
+    const auto all_about = [&](std::string_view key) {
+        const std::string needle = ": " + std::string(key) + ": ";
+        return !error.problems().empty() &&
+               std::all_of(error.problems().begin(), error.problems().end(),
+                           [&](const std::string& problem) {
+                               return problem.find(needle) != std::string::npos;
+                           });
+    };
+    if (all_about("source.replay.path"))
+        return ExitCode::Source;
+    if (all_about("calibration"))
+        return ExitCode::Calibration;
+    return ExitCode::InvalidConfig;
+}
 
 void blockServiceSignals()
 {
@@ -86,7 +117,8 @@ void blockServiceSignals()
 Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
                  std::optional<StereoCalibration> calibration, ServiceOptions options)
     : config_(std::move(config)), options_(std::move(options)), source_(std::move(source)),
-      calibration_(std::move(calibration)), notifier_(options_.notify_systemd)
+      calibration_(std::move(calibration)), notifier_(options_.notify_systemd),
+      watchdog_pinger_(notifier_, [this](int64_t now_ns) { return alive(now_ns); })
 {
     const std::string calibration_origin = options_.calibration_path.empty()
                                                ? std::string("the calibration")
@@ -94,6 +126,10 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
     try {
         if (calibration_) {
             checkFrameSize(*calibration_, source_->frameSize(), calibration_origin);
+            const std::string problem =
+                processingProblem(config_.processing, *calibration_, options_.config_path);
+            if (!problem.empty())
+                throw std::invalid_argument(problem);
             processor_ = std::make_unique<StereoProcessor>(*calibration_, config_.processing);
         }
     } catch (const CalibrationError& e) {
@@ -172,6 +208,8 @@ ExitCode Service::run()
     }
     running_ = true;
     worker_->start();
+    last_tick_ns_.store(monotonicNowNs(), std::memory_order_release);
+    watchdog_pinger_.start();
     spdlog::info("stereod {} listening on {}", serviceVersion(), config_.socket.path);
 
     // READY=1 follows from onTick() once the first pair has arrived.
@@ -199,11 +237,14 @@ void Service::onStopRequest()
     [[maybe_unused]] const ssize_t got = ::read(stop_fd_.get(), &value, sizeof value);
     if (stop_requested_ns_ == 0)
         stop_requested_ns_ = monotonicNowNs();
+    stop_seen_.store(true, std::memory_order_release);
     server_->requestStop();
 }
 
 void Service::shutdown() noexcept
 {
+    stop_seen_.store(true, std::memory_order_release);
+    watchdog_pinger_.stop();
     if (running_)
         notifier_.stopping();
     // The socket first, so that clients see the service gone at once (connections
@@ -254,6 +295,7 @@ void Service::onSignal()
             spdlog::info("{}: stopping", signal_number == SIGINT ? "SIGINT" : "SIGTERM");
             if (stop_requested_ns_ == 0)
                 stop_requested_ns_ = monotonicNowNs();
+            stop_seen_.store(true, std::memory_order_release);
             server_->requestStop();
         }
     }
@@ -411,6 +453,18 @@ ReloadOutcome Service::loadAndApply()
         outcome.message = e.what();
         return outcome;
     }
+    // Everything the worker will check, checked here: a file the worker would refuse is
+    // refused now, as a whole, rather than answered `ok` and silently not applied.
+    if (calibration_) {
+        std::string problem =
+            processingProblem(proposed.processing, *calibration_, options_.config_path);
+        if (!problem.empty()) {
+            outcome.ok = false;
+            outcome.error = ErrorCode::InvalidConfig;
+            outcome.message = std::move(problem);
+            return outcome;
+        }
+    }
     ConfigChange change = diffConfig(config_, proposed);
     // restart_needed is a subset of changed: anything more is a live change. Live
     // settings are handed over as a whole (unchanged values stay what they were).
@@ -477,8 +531,16 @@ std::string Service::statusText(int64_t now_ns, const SourceHealth& health)
     return statusLine(facts);
 }
 
+bool Service::alive(int64_t now_ns) const noexcept
+{
+    const int64_t interval_ns = notifier_.watchdogIntervalNs();
+    return now_ns - last_tick_ns_.load(std::memory_order_acquire) < interval_ns &&
+           workerMakesProgress(worker_->busySinceNs(), now_ns, interval_ns);
+}
+
 void Service::onTick(int64_t now_ns)
 {
+    last_tick_ns_.store(now_ns, std::memory_order_release);
     if (running_ && source_counters_.due(now_ns)) {
         for (const SourceCounterWatch::Report& report :
              source_counters_.look(source_->status(), now_ns))
@@ -499,14 +561,32 @@ void Service::onTick(int64_t now_ns)
                 notifier_.ready(statusText(now_ns, health));
         }
     }
-    // The watchdog rule (daemon/systemd_notifier.hpp): this runs on the event loop, so a
-    // ping says the loop turns; it is sent only while the worker is not stuck in one
-    // pair for a whole watchdog interval.
-    notifier_.watchdog(
-        workerMakesProgress(worker_->busySinceNs(), now_ns, notifier_.watchdogIntervalNs()),
-        now_ns);
     if (notifier_.statusDue(now_ns))
         notifier_.status(statusText(now_ns, sourceHealth(now_ns)), now_ns);
+}
+
+std::string checkConfiguration(const std::string& path)
+{
+    const ServiceConfig config = loadConfig(path);
+    std::string calibration_path = config.calibration_path;
+    if (calibration_path.empty() && config.source.kind == SourceKind::Replay) {
+        // A recording's own calibration, as start-up would find it.
+        std::error_code error;
+        const std::filesystem::path in_recording =
+            std::filesystem::path(config.source.replay.path) / kCalibrationName;
+        if (std::filesystem::is_directory(config.source.replay.path, error) &&
+            std::filesystem::is_regular_file(in_recording, error))
+            calibration_path = in_recording.string();
+    }
+    if (calibration_path.empty())
+        return {};
+    std::string text;
+    const StereoCalibration calibration = loadCalibrationFile(calibration_path, text);
+    const std::string problem = processingProblem(config.processing, calibration, path);
+    if (!problem.empty())
+        throw StartupError(ExitCode::InvalidConfig, problem + " (calibration " +
+                                                        calibration_path + ")");
+    return calibration_path;
 }
 
 std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle_signals)
@@ -521,7 +601,7 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle
             validateConfig(config);
         }
     } catch (const ConfigError& e) {
-        throw StartupError(classifyConfigError(e),
+        throw StartupError(exitCodeFor(e),
                            std::string("invalid configuration:\n") + e.what());
     } catch (const std::exception& e) {
         throw StartupError(ExitCode::InvalidConfig,
@@ -570,12 +650,7 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle
     std::optional<StereoCalibration> calibration;
     std::string calibration_text;
     if (!calibration_path.empty()) {
-        try {
-            calibration_text = readCalibrationText(calibration_path);
-            calibration = parseCalibration(calibration_text, calibration_path);
-        } catch (const std::exception& e) {
-            throw StartupError(ExitCode::Calibration, e.what());
-        }
+        calibration = loadCalibrationFile(calibration_path, calibration_text);
         spdlog::info("calibration {}: {}, {}x{}, focal {:.1f} px, baseline {:.4f} m",
                      calibration_path,
                      calibration->kind == StereoCalibration::Kind::Full ? "full" : "rectified-only",

@@ -18,6 +18,7 @@
 // the thread that becomes the I/O thread; the signal mask of that thread matters, see
 // blockServiceSignals()); requestStop() from any thread at any time.
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -60,6 +61,11 @@ class StartupError : public std::runtime_error {
   private:
     ExitCode code_;
 };
+
+// The exit code for an invalid configuration: Source when its only problems concern
+// source.replay.path, Calibration when they only concern `calibration`, else
+// InvalidConfig.
+ExitCode exitCodeFor(const ConfigError& error);
 
 // Blocks SIGTERM, SIGINT and SIGHUP in the calling thread (and the threads it creates
 // later), so that they reach the service only through its signalfd. Call it first thing
@@ -106,6 +112,11 @@ class Service final : private ServerBackend {
     // Makes run() return soon. Any thread.
     void requestStop() noexcept;
 
+    // Whether the event loop has taken a stop request (a signal, requestStop()) or the
+    // service is stopping anyway. Any thread: a stop request that stays untaken means the
+    // loop is not running (daemon/stop_signal_watch.hpp).
+    bool stopRequested() const noexcept { return stop_seen_.load(std::memory_order_acquire); }
+
     // Re-reads the configuration file and applies what can change live. I/O thread.
     ReloadOutcome reloadConfig();
 
@@ -123,6 +134,11 @@ class Service final : private ServerBackend {
                   int64_t now_ns) override;
     ReloadOutcome reload() override;
     void onTick(int64_t now_ns) override;
+    // The watchdog rule (daemon/systemd_notifier.hpp), asked by the pinger's thread: the
+    // event loop ran its timer within one watchdog interval, and the worker is not stuck
+    // in one pair for as long. The pings come from their own thread, so a loop busy with
+    // a backlog does not delay them; a loop that stops turning still stops them.
+    bool alive(int64_t now_ns) const noexcept;
 
     // Reads the configuration file and applies what can change live (reloadConfig()
     // adds the log lines and the notifications).
@@ -154,11 +170,23 @@ class Service final : private ServerBackend {
     int64_t last_push_change_ns_ = 0;
     // systemd notifications.
     SystemdNotifier notifier_;
+    // When the event loop last ran its timer, for the watchdog's pinger thread.
+    std::atomic<int64_t> last_tick_ns_{0};
+    WatchdogPinger watchdog_pinger_; // after notifier_ and last_tick_ns_, which it uses
     SourceCounterWatch source_counters_; // bad/dropped/unpaired frames into the log
     std::string last_error_; // the newest error for STATUS= (a refused reload), or empty
     int64_t stop_requested_ns_ = 0;
+    std::atomic<bool> stop_seen_{false}; // see stopRequested()
     bool worker_abandoned_ = false;
 };
+
+// `stereod --check-config FILE`: the checks of start-up that need neither a running source
+// nor the socket. The file and its values (throws ConfigError with every problem), the
+// calibration it names or the recording's calibration.yaml (StartupError: Calibration),
+// and the processing settings against that calibration, as the stereo chain will check
+// them (StartupError: InvalidConfig). Returns the calibration checked against, or empty
+// when none is named.
+std::string checkConfiguration(const std::string& path);
 
 // What `stereod` was asked to run, from its command line.
 struct LaunchRequest {

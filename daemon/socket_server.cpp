@@ -8,11 +8,13 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <mutex>
 #include <system_error>
 #include <type_traits>
 
 #include <fcntl.h>
 #include <grp.h>
+#include <poll.h>
 #include <spdlog/spdlog.h>
 #include <sys/epoll.h>
 #include <sys/eventfd.h>
@@ -43,10 +45,14 @@ constexpr uint64_t kTagPublisher = 4;
 constexpr uint64_t kTagWatchBase = uint64_t{1} << 32;
 constexpr uint64_t kFirstClientTag = uint64_t{1} << 40;
 
+// Read at most this much from one client per turn of the loop (epoll is level-triggered:
+// the rest is read on a later turn).
 constexpr std::size_t kReadChunkBytes = 64 * 1024;
-// Read at most this much from one client per wake-up, so one busy client cannot starve
-// the others (epoll is level-triggered: the rest is read on the next round).
-constexpr std::size_t kMaxReadPerWakeup = 1 << 20;
+// Answer at most this many requests of one client per turn of the loop, then serve the
+// others: a client pipelining a megabyte of requests delays another one by a few
+// requests' work, not by its whole backlog. The rest waits in the client's input, and
+// the client in the ready list, for the next turn.
+constexpr int kRequestsPerTurn = 8;
 // An output buffer that grew beyond this (a snapshot) is given back once sent.
 constexpr std::size_t kKeepOutCapacity = 8u << 20;
 // Unread input left at close makes the peer's read fail with ECONNRESET after our last
@@ -311,7 +317,40 @@ Json imagePayload(const char* name, const char* format, const cv::Mat& mat)
     return payload;
 }
 
+// The socket file bound by this process's server, for removeOwnedSocketFile().
+struct OwnedSocketFile {
+    std::mutex mutex;
+    bool present = false; // guarded by mutex
+    std::string path;     // guarded by mutex
+    dev_t dev = 0;        // guarded by mutex
+    ino_t ino = 0;        // guarded by mutex
+};
+
+OwnedSocketFile& ownedSocketFile()
+{
+    static OwnedSocketFile file;
+    return file;
+}
+
+// Removes `path` if it is still the socket file bound (same device and inode).
+void removeIfStillOurs(const std::string& path, dev_t dev, ino_t ino) noexcept
+{
+    struct stat info {};
+    if (::lstat(path.c_str(), &info) == 0 && S_ISSOCK(info.st_mode) && info.st_dev == dev &&
+        info.st_ino == ino)
+        ::unlink(path.c_str());
+}
+
 } // namespace
+
+void removeOwnedSocketFile() noexcept
+{
+    OwnedSocketFile& file = ownedSocketFile();
+    std::lock_guard lock(file.mutex);
+    if (file.present)
+        removeIfStillOurs(file.path, file.dev, file.ino);
+    file.present = false;
+}
 
 SocketServer::SocketServer(const ServerOptions& options, Publisher& publisher,
                            ServerBackend& backend)
@@ -322,6 +361,14 @@ SocketServer::SocketServer(const ServerOptions& options, Publisher& publisher,
     owns_socket_file_ = bound.owned;
     socket_dev_ = bound.dev;
     socket_ino_ = bound.ino;
+    if (owns_socket_file_) {
+        OwnedSocketFile& file = ownedSocketFile();
+        std::lock_guard lock(file.mutex);
+        file.present = true;
+        file.path = options_.socket.path;
+        file.dev = socket_dev_;
+        file.ino = socket_ino_;
+    }
 
     epoll_fd_ = UniqueFd(::epoll_create1(EPOLL_CLOEXEC));
     stop_fd_ = UniqueFd(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
@@ -348,11 +395,11 @@ SocketServer::~SocketServer()
     clients_.clear();
     listen_fd_.reset();
     if (owns_socket_file_) {
-        struct stat info {};
-        const std::string& path = options_.socket.path;
-        if (::lstat(path.c_str(), &info) == 0 && S_ISSOCK(info.st_mode) &&
-            info.st_dev == socket_dev_ && info.st_ino == socket_ino_)
-            ::unlink(path.c_str());
+        OwnedSocketFile& file = ownedSocketFile();
+        std::lock_guard lock(file.mutex);
+        if (file.present && file.dev == socket_dev_ && file.ino == socket_ino_)
+            file.present = false;
+        removeIfStillOurs(options_.socket.path, socket_dev_, socket_ino_);
     }
 }
 
@@ -397,7 +444,10 @@ void SocketServer::run()
     std::array<epoll_event, kMaxEvents> events{};
     stopping_ = false;
     while (!stopping_) {
-        const int count = ::epoll_wait(epoll_fd_.get(), events.data(), kMaxEvents, -1);
+        // Clients with requests waiting for their turn: look for new events without
+        // sleeping, then serve them.
+        const int count =
+            ::epoll_wait(epoll_fd_.get(), events.data(), kMaxEvents, ready_.empty() ? -1 : 0);
         if (count < 0) {
             if (errno == EINTR)
                 continue;
@@ -441,6 +491,8 @@ void SocketServer::run()
                 stopping_ = true;
             }
         }
+        if (!stopping_)
+            serveReadyClients();
         reapClients();
     }
 }
@@ -493,7 +545,12 @@ void SocketServer::acceptClients()
                              options_.socket.path, peer.pid, peer.uid, peer.gid);
             continue;
         }
-        if (live_clients_ >= static_cast<std::size_t>(std::max(options_.socket.max_clients, 0))) {
+        const auto max_clients = static_cast<std::size_t>(std::max(options_.socket.max_clients, 0));
+        // Clients that hung up since the last turn still count until their events are
+        // read: under fast connect/close churn they would fill the limit. Close them now.
+        if (live_clients_ >= max_clients)
+            closeHungUpClients();
+        if (live_clients_ >= max_clients) {
             refuseConnection(std::move(connection), ErrorCode::TooManyClients,
                              std::to_string(options_.socket.max_clients) +
                                  " connections are open (socket.max_clients)");
@@ -520,17 +577,38 @@ void SocketServer::acceptClients()
     }
 }
 
+void SocketServer::closeHungUpClients()
+{
+    hangup_poll_.clear();
+    hangup_ids_.clear();
+    for (const auto& [id, client] : clients_) {
+        if (client.dead)
+            continue;
+        hangup_poll_.push_back(pollfd{client.fd.get(), 0, 0});
+        hangup_ids_.push_back(id);
+    }
+    if (hangup_poll_.empty() ||
+        ::poll(hangup_poll_.data(), static_cast<nfds_t>(hangup_poll_.size()), 0) <= 0)
+        return;
+    for (std::size_t i = 0; i < hangup_poll_.size(); ++i) {
+        // POLLHUP: both directions shut, the peer is gone (one that only shut its writing
+        // side still waits for its replies, and keeps its place).
+        if ((hangup_poll_[i].revents & (POLLHUP | POLLERR)) != 0)
+            closeClient(clients_.at(hangup_ids_[i]));
+    }
+}
+
 void SocketServer::readClient(Client& client)
 {
-    std::size_t total = 0;
-    while (!client.dead && !client.input_closed && total < kMaxReadPerWakeup) {
+    // One chunk per turn, and nothing while requests already received wait for their
+    // turn (EPOLLIN is off then, see updateEpoll()).
+    while (!client.dead && !client.input_closed && !client.pending) {
         const ssize_t got = ::recv(client.fd.get(), read_buffer_.data(), read_buffer_.size(), 0);
         if (got > 0) {
-            total += static_cast<std::size_t>(got);
             client.in.append(read_buffer_.data(), static_cast<std::size_t>(got));
             client.last_input_ns = monotonicNowNs();
             handleLines(client);
-            continue;
+            break;
         }
         if (got == 0) {
             // The peer shut down its side: answer a last line without its newline, then
@@ -561,10 +639,32 @@ void SocketServer::readClient(Client& client)
         writeClient(client);
 }
 
+void SocketServer::serveReadyClients()
+{
+    std::vector<uint64_t> ready;
+    ready.swap(ready_);
+    for (const uint64_t id : ready) {
+        const auto it = clients_.find(id);
+        if (it == clients_.end() || it->second.dead)
+            continue;
+        Client& client = it->second;
+        client.pending = false;
+        handleLines(client);
+        if (!client.dead)
+            writeClient(client);
+    }
+    // The list's capacity is reused on the next turn.
+    if (ready_.empty()) {
+        ready.clear();
+        ready_.swap(ready);
+    }
+}
+
 void SocketServer::handleLines(Client& client)
 {
     const std::size_t limit = options_.socket.max_request_bytes;
-    std::size_t start = 0;
+    std::size_t start = client.in_start;
+    int served = 0;
     while (!client.dead && !client.input_closed && !client.waiting) {
         const std::size_t newline = client.in.find('\n', start);
         if (newline == std::string::npos)
@@ -573,12 +673,23 @@ void SocketServer::handleLines(Client& client)
             rejectTooLarge(client);
             return;
         }
+        if (served == kRequestsPerTurn) {
+            // The others' turn: the rest of this input waits for the next turn.
+            client.in_start = start;
+            if (!client.pending) {
+                client.pending = true;
+                ready_.push_back(client.id);
+            }
+            return;
+        }
         handleRequest(client, std::string_view(client.in).substr(start, newline - start));
+        ++served;
         start = newline + 1;
     }
     if (client.dead || client.input_closed)
         return;
     client.in.erase(0, start);
+    client.in_start = 0;
     // No newline within the limit: even if the next byte ended the line, it would be
     // longer than allowed.
     if (client.in.size() >= limit)
@@ -597,6 +708,7 @@ void SocketServer::rejectTooLarge(Client& client)
                      client.id - kFirstClientTag, options_.socket.max_request_bytes);
     // The stream cannot be resynchronised: stop reading, send the reply, close.
     client.in.clear();
+    client.in_start = 0;
     client.input_closed = true;
     client.close_when_flushed = true;
     client.readings.active = false;
@@ -685,8 +797,9 @@ void SocketServer::writeClient(Client& client)
 
 void SocketServer::updateEpoll(Client& client)
 {
-    const uint32_t wanted = (client.input_closed ? 0u : static_cast<uint32_t>(EPOLLIN)) |
-                            (client.unsent() > 0 ? static_cast<uint32_t>(EPOLLOUT) : 0u);
+    const uint32_t wanted =
+        (client.input_closed || client.pending ? 0u : static_cast<uint32_t>(EPOLLIN)) |
+        (client.unsent() > 0 ? static_cast<uint32_t>(EPOLLOUT) : 0u);
     if (wanted == client.epoll_events)
         return;
     epoll_event event{};
@@ -772,6 +885,7 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
     header.width = depth.empty() ? 0 : depth.cols;
     header.height = depth.empty() ? 0 : depth.rows;
     header.bytes = matBytes(depth);
+    header.depth_valid = frame.depth_valid;
 
     const RawPair& raw = frame.raw;
     raw_header_.clear();
@@ -917,6 +1031,7 @@ void SocketServer::onTick()
                                              " s (socket.idle_timeout_s); closing the connection",
                                          std::nullopt));
                 client.in.clear();
+                client.in_start = 0;
                 client.input_closed = true;
                 client.close_when_flushed = true;
                 writeClient(client);
@@ -1080,6 +1195,7 @@ void SocketServer::sendSnapshot(Client& client, const SnapshotRequest& request,
     Json answer = okReply(id);
     answer["frame"] = result.frame;
     answer["stamp_ns"] = result.stamp_ns;
+    answer["depth_valid"] = latest->depth_valid;
     answer["reading"] = readingToJson(report, now_ns);
     answer["calibration"] = {{"focal_px", geometry.focal_px},
                              {"baseline_m", geometry.baseline_m},

@@ -24,6 +24,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include <poll.h>
 #include <sys/types.h>
 
 #include "config/service_config.hpp"
@@ -74,6 +75,11 @@ class ServerBackend {
     // Runs on every timer tick (about every 100 ms).
     virtual void onTick(int64_t now_ns) = 0;
 };
+
+// Removes the socket file a SocketServer of this process bound and still owns, if any
+// (never a file systemd handed over, nor one that replaced ours). Any thread: for a stop
+// that cannot wait for the server's destructor (daemon/stop_signal_watch.hpp).
+void removeOwnedSocketFile() noexcept;
 
 struct ServerOptions {
     SocketConfig socket;
@@ -154,7 +160,11 @@ class SocketServer {
     struct Client {
         UniqueFd fd;
         uint64_t id = 0;
-        std::string in;  // received bytes not yet framed into requests
+        std::string in;           // received bytes not yet framed into requests
+        std::size_t in_start = 0; // where the unanswered part of `in` begins
+        // Requests received and not answered yet wait for the client's next turn (it is
+        // in ready_); nothing more is read from it meanwhile.
+        bool pending = false;
         std::string out; // bytes to send; out_sent of them are sent
         std::size_t out_sent = 0;
         uint32_t epoll_events = 0; // what the client is registered for
@@ -174,7 +184,13 @@ class SocketServer {
     void addToEpoll(int fd, uint64_t tag, uint32_t events);
     void acceptClients();
     void readClient(Client& client);
+    // Closes the clients whose peers have hung up, without waiting for their events.
+    void closeHungUpClients();
+    // Answers the complete request lines received, at most kRequestsPerTurn of them; a
+    // client with more waiting goes into ready_ for the next turn.
     void handleLines(Client& client);
+    // Gives each client in ready_ its next turn.
+    void serveReadyClients();
     void handleRequest(Client& client, std::string_view line);
     void rejectTooLarge(Client& client);
     void writeClient(Client& client);
@@ -238,6 +254,9 @@ class SocketServer {
 
     std::unordered_map<uint64_t, Client> clients_;
     std::vector<uint64_t> dead_clients_;
+    std::vector<uint64_t> ready_;      // clients with requests waiting for their next turn
+    std::vector<pollfd> hangup_poll_;  // closeHungUpClients(), reused
+    std::vector<uint64_t> hangup_ids_; // the client of each hangup_poll_ entry
     uint64_t next_client_id_ = 0;
     std::vector<std::function<void()>> watches_;
 

@@ -1,5 +1,7 @@
 #include "daemon/systemd_notifier.hpp"
 
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
 
 #include <systemd/sd-daemon.h>
@@ -104,7 +106,7 @@ void SystemdNotifier::status(const std::string& status, int64_t now_ns, bool now
 
 bool SystemdNotifier::watchdog(bool alive, int64_t now_ns)
 {
-    if (watchdog_interval_ns_ <= 0 || !alive || now_ns - last_ping_ns_ < watchdog_interval_ns_ / 2)
+    if (watchdog_interval_ns_ <= 0 || !alive || now_ns - last_ping_ns_ < watchdog_interval_ns_ / 4)
         return false;
     last_ping_ns_ = now_ns;
     return send("WATCHDOG=1");
@@ -127,6 +129,55 @@ void SystemdNotifier::reloaded(const std::string& status)
 void SystemdNotifier::stopping()
 {
     send("STOPPING=1\nSTATUS=stopping");
+}
+
+WatchdogPinger::WatchdogPinger(SystemdNotifier& notifier,
+                               std::function<bool(int64_t now_ns)> alive)
+    : notifier_(notifier), alive_(std::move(alive))
+{
+}
+
+WatchdogPinger::~WatchdogPinger()
+{
+    stop();
+}
+
+void WatchdogPinger::start()
+{
+    if (!notifier_.enabled() || notifier_.watchdogIntervalNs() <= 0 || thread_.joinable())
+        return;
+    {
+        std::lock_guard lock(mutex_);
+        stopping_ = false;
+    }
+    thread_ = std::thread([this] { run(); });
+}
+
+void WatchdogPinger::stop()
+{
+    {
+        std::lock_guard lock(mutex_);
+        stopping_ = true;
+    }
+    wake_.notify_all();
+    if (thread_.joinable())
+        thread_.join();
+}
+
+void WatchdogPinger::run()
+{
+    // Look often enough that a ping is never late by more than a small part of the
+    // interval, and at most every 10 ms.
+    const auto step = std::chrono::nanoseconds(
+        std::clamp<int64_t>(notifier_.watchdogIntervalNs() / 40, 1'000'000, 10'000'000));
+    std::unique_lock lock(mutex_);
+    while (!stopping_) {
+        lock.unlock();
+        const int64_t now_ns = monotonicNowNs();
+        notifier_.watchdog(alive_(now_ns), now_ns);
+        lock.lock();
+        wake_.wait_for(lock, step, [this] { return stopping_; });
+    }
 }
 
 } // namespace stereod

@@ -14,8 +14,8 @@ namespace stereod {
 
 namespace {
 
-// A result that carries no distance carries no depth either: a robot reading the depth
-// stream must not act on numbers the reading refuses.
+// A pair whose depth cannot be trusted (a bad frame, cameras out of sync) carries no
+// depth: a robot reading the depth stream must not act on numbers the reading refuses.
 void clearDepth(DepthResult& result)
 {
     if (!result.depth_m.empty())
@@ -212,11 +212,16 @@ void Worker::processPair(StereoPair& pair)
                                    reasonText(NoReadingReason::OutOfSync), skew_ms, max_skew_ms);
         ++stats_.out_of_sync;
     }
+    // Depth is kept when only the region lacked data (too few valid pixels, nothing in
+    // range): the picture itself is sound. It is cleared when the pair is not.
+    slot.depth_valid = processed && !result.depth_m.empty();
     if (reading.reason == NoReadingReason::BadFrame) {
         ++stats_.bad_frames;
         clearDepth(result);
+        slot.depth_valid = false;
     } else if (reading.reason == NoReadingReason::OutOfSync) {
         clearDepth(result);
+        slot.depth_valid = false;
     }
 
     const int64_t publish_start_ns = monotonicNowNs();

@@ -6,8 +6,9 @@
 // out_of_sync reading (still published, with its stamp, so that clients see why there is
 // no distance); an exception from the chain gives a bad_frame reading and a log line
 // (rate-limited), never an exception across threads; the frames go back to their source
-// right after processing. A reading without a distance never carries depth: the depth,
-// disparity and cloud of such a result are cleared.
+// right after processing. The depth, disparity and cloud of an out_of_sync or bad_frame
+// pair are cleared (PublishedFrame::depth_valid false); those of a pair whose region
+// only lacked data (too_few_valid_pixels, nothing_in_range) are kept.
 //
 // Raw frames: while the publisher says they are wanted (Publisher::rawWanted()), the pair
 // is copied as captured into the slot's RawPair before it goes back to its source.

@@ -30,28 +30,6 @@ std::string describeSize(cv::Size size)
     return std::to_string(size.width) + "x" + std::to_string(size.height);
 }
 
-// Checks the settings against each other and against the calibration; returns the
-// disparity range they give. Throws std::invalid_argument.
-DisparityRange validateSettings(const ProcessorSettings& settings,
-                                const RectifiedGeometry& geometry)
-{
-    validateMatcherSettings(settings.matcher);
-    validateNearestSettings(settings.nearest);
-    const DisparityRange range = chooseDisparityRange(settings.matcher, geometry);
-    const cv::Size size = geometry.image_size;
-    const int last_disparity = range.min_disparity + range.num_disparities - 1;
-    if (last_disparity >= size.width)
-        throw std::invalid_argument(
-            "matcher: a disparity range up to " + std::to_string(last_disparity) +
-            " px leaves no column to match in an image " + std::to_string(size.width) +
-            " px wide");
-    if (settings.matcher.block_size >= std::min(size.width, size.height))
-        throw std::invalid_argument("matcher.block_size: " +
-                                    std::to_string(settings.matcher.block_size) +
-                                    " does not fit in a " + describeSize(size) + " image");
-    return range;
-}
-
 void warnIfCapped(const DisparityRange& range, const MatcherSettings& settings)
 {
     if (range.capped)
@@ -90,11 +68,44 @@ DisparityRange chooseDisparityRange(const MatcherSettings& settings,
     return range;
 }
 
+DisparityRange validateProcessorSettings(const ProcessorSettings& settings,
+                                         const RectifiedGeometry& geometry)
+{
+    validateMatcherSettings(settings.matcher);
+    validateNearestSettings(settings.nearest);
+    const DisparityRange range = chooseDisparityRange(settings.matcher, geometry);
+    const cv::Size size = geometry.image_size;
+    const int last_disparity = range.min_disparity + range.num_disparities - 1;
+    if (last_disparity >= size.width) {
+        // Name the key that set the range: the explicit count, or the cap it came from.
+        const char* key = settings.matcher.num_disparities > 0 ? "matcher.num_disparities"
+                          : range.capped                     ? "matcher.max_num_disparities"
+                                                             : "matcher.min_depth_m";
+        throw std::invalid_argument(
+            std::string(key) + ": a disparity range up to " + std::to_string(last_disparity) +
+            " px (" + std::to_string(range.num_disparities) + " disparities from " +
+            std::to_string(range.min_disparity) + ") leaves no column to match in an image " +
+            std::to_string(size.width) + " px wide");
+    }
+    if (settings.matcher.block_size >= std::min(size.width, size.height))
+        throw std::invalid_argument("matcher.block_size: " +
+                                    std::to_string(settings.matcher.block_size) +
+                                    " does not fit in a " + describeSize(size) + " image");
+    // A region that rounds to no pixel at all would read "0.0 % valid" on every frame.
+    const cv::Rect region = regionPixels(settings.nearest.roi, size);
+    if (region.area() == 0)
+        throw std::invalid_argument("nearest.roi: " + std::to_string(region.width) + "x" +
+                                    std::to_string(region.height) + " px in a " +
+                                    describeSize(size) +
+                                    " image: the region must hold at least one pixel");
+    return range;
+}
+
 struct StereoProcessor::Impl {
     Impl(const StereoCalibration& calibration_in, const ProcessorSettings& settings_in)
         : calibration(calibration_in),
           settings(settings_in),
-          range(validateSettings(settings_in, calibration_in.rectified)),
+          range(validateProcessorSettings(settings_in, calibration_in.rectified)),
           rectifier(calibration_in),
           matcher(makeMatcher(settings_in.matcher, range)),
           nearest(static_cast<size_t>(calibration_in.rectified.image_size.area()))
@@ -248,7 +259,7 @@ void StereoProcessor::updateSettings(const ProcessorSettings& settings)
 {
     Impl& p = *impl_;
     // Everything that can throw happens before anything changes.
-    const DisparityRange range = validateSettings(settings, p.calibration.rectified);
+    const DisparityRange range = validateProcessorSettings(settings, p.calibration.rectified);
     if (p.matcher->kind() != settings.matcher.kind) {
         p.matcher = makeMatcher(settings.matcher, range);
     } else {

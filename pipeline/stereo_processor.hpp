@@ -71,6 +71,14 @@ struct DisparityRange {
 DisparityRange chooseDisparityRange(const MatcherSettings& settings,
                                     const RectifiedGeometry& geometry);
 
+// Checks the settings against each other and against the rectified geometry, exactly as
+// the constructor and updateSettings() do (disparity range within the image width, block
+// size within the image, a region of interest of at least one pixel); returns the
+// disparity range they give. Throws std::invalid_argument starting with the key at fault
+// ("matcher.num_disparities: ...").
+DisparityRange validateProcessorSettings(const ProcessorSettings& settings,
+                                         const RectifiedGeometry& geometry);
+
 class StereoProcessor {
 public:
     // Computes the rectification maps (fixed-point) once and sets up the matcher.

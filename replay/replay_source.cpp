@@ -1,19 +1,25 @@
 #include "replay/replay_source.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <limits>
 #include <system_error>
 #include <utility>
 
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <spdlog/details/console_globals.h>
 #include <spdlog/spdlog.h>
+
+#include "replay/image_file.hpp"
 
 namespace stereod {
 
@@ -24,42 +30,137 @@ constexpr int kRight = 1;
 constexpr const char* kSideName[2] = {"left", "right"};
 constexpr int64_t kForever = std::numeric_limits<int64_t>::max();
 
-std::string errnoText(int code)
-{
-    return std::error_code(code, std::generic_category()).message();
-}
-
 std::string sizeText(cv::Size size)
 {
     return std::to_string(size.width) + "x" + std::to_string(size.height);
 }
 
-// Decodes one image as 8-bit grayscale into `out` (imread allocates the buffer). On
-// failure says why, with the errno for a file that cannot be opened (ENOENT when
-// missing) and EINVAL for one that is no readable image.
-bool decodeImage(const std::string& path, cv::Mat& out, std::string& reason, int& code)
+// Decodes `bytes` as 8-bit grayscale into `out`, catching what the image libraries print
+// on their own (libpng's "libpng error: ...", libjpeg's "Corrupt JPEG data: ...") into
+// `printed` instead of letting it reach stderr beside the log, unlimited, once per frame.
+// fd 2 is pointed at a pipe for the call, under spdlog's console mutex, so that no log
+// line of another thread goes into the pipe meanwhile. Throws what imdecode throws.
+void decodeQuietly(const std::vector<uint8_t>& bytes, cv::Mat& out, std::string& printed)
 {
-    // Checked first because imread would print its own warning for every attempt, every
-    // loop, where the replay says it once per file. access() allocates nothing.
-    if (::access(path.c_str(), R_OK) != 0) {
-        code = errno;
-        reason = code == ENOENT ? "missing" : "cannot be read: " + errnoText(code);
-        out.release();
+    // Non-blocking on both ends: a library printing more than the pipe holds loses the
+    // rest rather than blocking this thread, which reads only after the call.
+    static const std::array<int, 2> pipe_fds = [] {
+        std::array<int, 2> fds{-1, -1};
+        if (::pipe2(fds.data(), O_CLOEXEC | O_NONBLOCK) != 0)
+            fds = {-1, -1};
+        return fds;
+    }();
+    printed.clear();
+    const cv::Mat encoded(1, static_cast<int>(bytes.size()), CV_8UC1,
+                          const_cast<uint8_t*>(bytes.data()));
+    if (pipe_fds[0] < 0) {
+        out = cv::imdecode(encoded, cv::IMREAD_GRAYSCALE);
+        return;
+    }
+    std::lock_guard console(spdlog::details::console_mutex::mutex());
+    std::fflush(stderr);
+    const int saved = ::dup(STDERR_FILENO);
+    if (saved < 0 || ::dup2(pipe_fds[1], STDERR_FILENO) < 0) {
+        if (saved >= 0)
+            ::close(saved);
+        out = cv::imdecode(encoded, cv::IMREAD_GRAYSCALE);
+        return;
+    }
+    struct Restore {
+        int saved;
+        ~Restore()
+        {
+            std::fflush(stderr);
+            ::dup2(saved, STDERR_FILENO);
+            ::close(saved);
+        }
+    };
+    {
+        const Restore restore{saved};
+        out = cv::imdecode(encoded, cv::IMREAD_GRAYSCALE);
+    }
+    char chunk[512];
+    for (;;) {
+        const ssize_t got = ::read(pipe_fds[0], chunk, sizeof chunk);
+        if (got <= 0)
+            break;
+        printed.append(chunk, static_cast<std::size_t>(got));
+    }
+    while (!printed.empty() && (printed.back() == '\n' || printed.back() == ' '))
+        printed.pop_back();
+    std::replace(printed.begin(), printed.end(), '\n', ';');
+}
+
+// An image file larger than this is refused unread (a 1920x1080 PNG is a few MB).
+constexpr std::size_t kMaxImageFileBytes = 64u << 20;
+// Before the frame size is known (the first pair), an image declaring more pixels than
+// this is refused undecoded: 8192x8192, beyond any stereo camera's frame.
+constexpr int64_t kMaxImagePixels = int64_t{8192} * 8192;
+
+// Decodes one image file as 8-bit grayscale into `out` (imdecode allocates the buffer),
+// reading it into `bytes` first (a bounded read of a regular file, capacity kept) and
+// refusing it before decoding when its header says it is not `expected` (`expected_what`
+// says what that is), or, with no size expected yet, larger than kMaxImagePixels; or cut
+// short. On failure says why, with the errno: ENOENT when missing, EINVAL for a file
+// that is no usable image.
+bool decodeImage(const std::string& path, cv::Size expected, const std::string& expected_what,
+                 std::vector<uint8_t>& bytes, cv::Mat& out, std::string& reason, int& code)
+{
+    out.release();
+    code = readImageFile(path, kMaxImageFileBytes, bytes, reason);
+    if (code != 0)
+        return false;
+    code = EINVAL;
+    const ImageHeader header = parseImageHeader(bytes);
+    if (!header.problem.empty()) {
+        reason = "not a readable image: " + header.problem;
         return false;
     }
+    if (!header.complete) {
+        reason = header.format == ImageFormat::Png
+                     ? "is cut short: a truncated PNG (no IEND chunk at its end)"
+                     : "is cut short: a truncated JPEG (no end-of-image marker)";
+        return false;
+    }
+    if (!header.size.empty()) {
+        if (!expected.empty() && header.size != expected) {
+            reason = "is " + sizeText(header.size) + ", " + expected_what + " (not decoded)";
+            return false;
+        }
+        if (expected.empty() && int64_t{header.size.width} * header.size.height > kMaxImagePixels) {
+            reason = "declares " + sizeText(header.size) +
+                     " pixels, more than a frame may have (not decoded)";
+            return false;
+        }
+    }
+    std::string printed;
     try {
-        out = cv::imread(path, cv::IMREAD_GRAYSCALE);
+        decodeQuietly(bytes, out, printed);
     } catch (const cv::Exception& e) {
         out.release();
         reason = std::string("cannot decode: ") + e.what();
-        code = EINVAL;
         return false;
     }
     if (out.empty()) {
         reason = "not a readable image (corrupt, truncated or of an unknown format)";
-        code = EINVAL;
+        if (!printed.empty())
+            reason += ": " + printed;
         return false;
     }
+    // libjpeg says so when it met corrupt data it filled in (grey, or the last row):
+    // such a frame is not the picture the camera took. (libpng's warnings, e.g. about a
+    // colour profile, leave the pixels alone.)
+    if (header.format == ImageFormat::Jpeg && !printed.empty()) {
+        reason = "corrupt: " + printed;
+        out.release();
+        return false;
+    }
+    if (!expected.empty() && out.size() != expected) {
+        reason = "is " + sizeText(out.size()) + ", " + expected_what;
+        out.release();
+        return false;
+    }
+    code = 0;
     return true;
 }
 
@@ -81,6 +182,7 @@ ReplaySource::ReplaySource(ReplayOptions options) : options_(std::move(options))
                      recording_.bad_rows - recording_.problems.size());
 
     warned_.assign(recording_.entries.size() * 2, 0);
+    planSchedule();
 
     // The first readable pair fixes the frame size (and so the pool).
     std::string first_problem;
@@ -171,33 +273,74 @@ void ReplaySource::stop() noexcept
     state_.compare_exchange_strong(running, SourceState::Stopped, std::memory_order_acq_rel);
 }
 
+void ReplaySource::planSchedule()
+{
+    const std::vector<RecordingEntry>& entries = recording_.entries;
+    const std::size_t count = entries.size();
+    // One frame period: the mean of the recorded steps forward, or the nominal rate.
+    int64_t forward_ns = 0;
+    std::size_t forward_steps = 0;
+    for (std::size_t i = 1; i < count; ++i) {
+        const int64_t step_ns =
+            saturatingSubNs(entries[i].left_stamp_ns, entries[i - 1].left_stamp_ns);
+        if (step_ns > 0 && forward_ns <= std::numeric_limits<int64_t>::max() - step_ns) {
+            forward_ns += step_ns;
+            ++forward_steps;
+        }
+    }
+    period_ns_ = forward_steps > 0
+                     ? std::max<int64_t>(forward_ns / static_cast<int64_t>(forward_steps), 1)
+                     : std::llround(1e9 / (options_.fps > 0.0 ? options_.fps : 10.0));
+
+    // Each pair is due its recorded step after the one before; a stamp that steps back
+    // (a recording spliced from two runs) comes one period after its predecessor, and
+    // the pace goes on from the new stamps.
+    schedule_ns_.assign(std::max<std::size_t>(count, 1), 0);
+    std::size_t steps_back = 0;
+    std::size_t first_back = 0;
+    for (std::size_t i = 1; i < count; ++i) {
+        int64_t step_ns =
+            saturatingSubNs(entries[i].left_stamp_ns, entries[i - 1].left_stamp_ns);
+        if (step_ns < 0) {
+            if (steps_back++ == 0)
+                first_back = i;
+            step_ns = period_ns_;
+        }
+        schedule_ns_[i] = schedule_ns_[i - 1] +
+                          std::min(step_ns, std::numeric_limits<int64_t>::max() / 4 -
+                                                schedule_ns_[i - 1]);
+    }
+    if (steps_back > 0)
+        spdlog::warn("replay: {}: the stamps step back {} time{}, first at pair {} ({} ns "
+                     "after {} ns; a recording spliced from two runs?): each such pair comes "
+                     "one frame period ({:.1f} ms) after the one before, and the pace goes on "
+                     "from the new stamps",
+                     recording_.dir, steps_back, steps_back == 1 ? "" : "s",
+                     entries[first_back].index, entries[first_back].left_stamp_ns,
+                     entries[first_back - 1].left_stamp_ns, static_cast<double>(period_ns_) / 1e6);
+}
+
 bool ReplaySource::decodePair(std::size_t i, BadPair& bad)
 {
     const RecordingEntry& entry = recording_.entries[i];
-    if (!decodeImage(entry.left_path, left_image_, bad.reason, bad.code)) {
+    // Each side is checked against the size it must have before it is decoded: the
+    // replay's frame size once known, else the left image's for the right one. So the
+    // file blamed is the one at fault, and a decompression bomb is never decoded.
+    const std::string replay_size =
+        frame_size_.empty() ? std::string()
+                            : "the replay is " + sizeText(frame_size_) + " (its first readable pair)";
+    if (!decodeImage(entry.left_path, frame_size_, replay_size, file_bytes_, left_image_,
+                     bad.reason, bad.code)) {
         bad.side = kLeft;
         bad.path = entry.left_path;
         return false;
     }
-    if (!decodeImage(entry.right_path, right_image_, bad.reason, bad.code)) {
+    const std::string left_size =
+        frame_size_.empty() ? "its left image is " + sizeText(left_image_.size()) : replay_size;
+    if (!decodeImage(entry.right_path, left_image_.size(), left_size, file_bytes_, right_image_,
+                     bad.reason, bad.code)) {
         bad.side = kRight;
         bad.path = entry.right_path;
-        return false;
-    }
-    if (right_image_.size() != left_image_.size()) {
-        bad.side = kRight;
-        bad.path = entry.right_path;
-        bad.reason = "is " + sizeText(right_image_.size()) + ", its left image is " +
-                     sizeText(left_image_.size());
-        bad.code = EINVAL;
-        return false;
-    }
-    if (!frame_size_.empty() && left_image_.size() != frame_size_) {
-        bad.side = kLeft;
-        bad.path = entry.left_path;
-        bad.reason = "is " + sizeText(left_image_.size()) + ", the replay is " +
-                     sizeText(frame_size_) + " (its first readable pair)";
-        bad.code = EINVAL;
         return false;
     }
     return true;
@@ -265,11 +408,12 @@ void ReplaySource::recordDelivery(int64_t stamp_ns, int64_t skew_ns) noexcept
     }
 
     // Single writer: plain load/store suffice for the running sums.
-    const int64_t skew_abs_ns = std::abs(skew_ns);
+    const int64_t skew_abs_ns = saturatingAbsNs(skew_ns);
     const uint64_t pairs = pairs_.load(std::memory_order_relaxed);
     recent_skew_abs_ns_[pairs % kSkewWindow].store(skew_abs_ns, std::memory_order_relaxed);
-    skew_abs_sum_ns_.store(skew_abs_sum_ns_.load(std::memory_order_relaxed) + skew_abs_ns,
-                           std::memory_order_relaxed);
+    skew_abs_sum_ns_.store(
+        saturatingAddNs(skew_abs_sum_ns_.load(std::memory_order_relaxed), skew_abs_ns),
+        std::memory_order_relaxed);
     if (skew_abs_ns > skew_abs_max_ns_.load(std::memory_order_relaxed))
         skew_abs_max_ns_.store(skew_abs_ns, std::memory_order_relaxed);
     frames_[kLeft].fetch_add(1, std::memory_order_relaxed);
@@ -291,15 +435,9 @@ void ReplaySource::run() noexcept
     const std::vector<RecordingEntry>& entries = recording_.entries;
     const std::size_t count = entries.size();
     const bool paced = options_.pacing == ReplayOptions::Pacing::Paced;
-    const int64_t first_ns = entries.front().left_stamp_ns;
-    const int64_t span_ns = std::max<int64_t>(entries.back().left_stamp_ns - first_ns, 0);
-    // One frame period: the mean recorded spacing, or the nominal rate for a single pair.
-    const int64_t period_ns =
-        (count > 1 && span_ns > 0)
-            ? span_ns / static_cast<int64_t>(count - 1)
-            : std::llround(1e9 / (options_.fps > 0.0 ? options_.fps : 10.0));
+    const int64_t period_ns = period_ns_;
     // A loop goes on one period after the last pair, as the recording would have.
-    const int64_t loop_ns = span_ns + period_ns;
+    const int64_t loop_ns = schedule_ns_.back() + period_ns;
 
     int64_t base_ns = monotonicNowNs();   // when the first pair of this pass is due
     for (;;) {
@@ -336,12 +474,12 @@ void ReplaySource::run() noexcept
             pair.right->sequence = number;
             pair.left->source_stamp_ns = entry.left_stamp_ns;
             pair.right->source_stamp_ns = entry.right_stamp_ns;
-            const int64_t skew_ns = entry.right_stamp_ns - entry.left_stamp_ns;
+            const int64_t skew_ns = saturatingSubNs(entry.right_stamp_ns, entry.left_stamp_ns);
 
             if (paced) {
                 // The pacing sleep is the only lock this thread takes on its way, and it
                 // is the stop() wake-up mutex, never shared with the consumer.
-                const int64_t due_ns = base_ns + (entry.left_stamp_ns - first_ns);
+                const int64_t due_ns = base_ns + schedule_ns_[i];
                 if (!sleepUntil(due_ns))
                     return;
                 // Fell behind (decoding slower than the recorded rate): shift the schedule
@@ -354,7 +492,7 @@ void ReplaySource::run() noexcept
             // Delivery: stamps, then the ring. From here to the counters: atomics only.
             const int64_t now_ns = monotonicNowNs();
             pair.left->stamp_ns = now_ns;
-            pair.right->stamp_ns = now_ns + skew_ns;
+            pair.right->stamp_ns = saturatingAddNs(now_ns, skew_ns);
             if (paced) {
                 ring_->push(std::move(pair));   // drop-oldest; the ring counts the drop
             } else if (!ring_->pushWait(std::move(pair))) {

@@ -4,7 +4,10 @@
 //
 // Two pacings:
 //  - paced: pairs are delivered at their recorded time spacing, like live cameras
-//    (drop-oldest push into the ring; a slow worker loses pairs, as it would live);
+//    (drop-oldest push into the ring; a slow worker loses pairs, as it would live). A
+//    stamp that steps back (a recording spliced from two runs) is warned about once, at
+//    the open; that pair comes one frame period after the one before, and the pace goes
+//    on from the new stamps;
 //  - lockstep: as fast as the worker takes them, waiting for room in the ring and for
 //    free buffers; nothing is dropped, so a run is repeatable (tests, offline runs).
 //
@@ -14,12 +17,16 @@
 // `pass * pairCount() + position in the recording`: they increase across loops, and a
 // skipped pair leaves a gap, as a dropped camera frame would.
 //
-// Bad input is never fatal: a missing or corrupt image, or one whose size differs from
-// the first readable pair's, makes the pair skipped, counted (bad_frames of its side) and
-// logged once per file. Only a recording with no readable pair at all fails start().
+// Bad input is never fatal: a missing, corrupt or truncated image, a file that is not a
+// regular one (a row pointing at /dev/zero), or an image whose size differs from the first
+// readable pair's makes the pair skipped, counted (bad_frames of its side) and logged once
+// per file. Sizes are read from the PNG or JPEG header before decoding
+// (replay/image_file.hpp): an image of another size, or, in the first pair, one larger
+// than 8192x8192, is never decoded. Only a recording with no readable pair at all fails
+// start().
 //
 // Frames come from a FramePool sized from the first readable pair and allocated in the
-// constructor; decoding (cv::imread) allocates a temporary image per frame, which
+// constructor; decoding (cv::imdecode) allocates a temporary image per frame, which
 // OpenCV 4.6 cannot decode into a given buffer; nothing else is allocated per frame.
 //
 // Thread-safety: as FrameSource: start()/stop() from one controlling thread, status()
@@ -111,6 +118,9 @@ private:
     // Decodes entry `i` into left_image_/right_image_. False (and `bad` filled) when the
     // pair cannot be used.
     bool decodePair(std::size_t i, BadPair& bad);
+    // Works out when each pair is due in a pass (schedule_ns_) and the frame period;
+    // warns once when the stamps step back.
+    void planSchedule();
     void reportBadPair(std::size_t i, const BadPair& bad);
     // Takes a free frame; with `wait` (lockstep) waits for one, and gives an empty handle
     // only when stopping.
@@ -125,13 +135,18 @@ private:
     const ReplayOptions options_;
     Recording recording_;
     cv::Size frame_size_;
+    // When each pair is due, in ns after the pass's first pair: the recorded spacing,
+    // except that a stamp stepping back counts as one period (planSchedule()).
+    std::vector<int64_t> schedule_ns_;
+    int64_t period_ns_ = 0; // the mean recorded step forward (or the nominal rate's)
     int open_error_ = 0;                       // negative errno when nothing is readable
     std::unique_ptr<FramePool> pool_;
 
     // Replay thread only (the controlling thread touches them only while it is not running).
     std::vector<uint8_t> warned_;              // per entry and side: already logged
-    cv::Mat left_image_;                       // last decoded images (imread's buffers)
+    cv::Mat left_image_;                       // last decoded images (imdecode's buffers)
     cv::Mat right_image_;
+    std::vector<uint8_t> file_bytes_;          // the image file being decoded, capacity kept
     uint64_t next_pass_ = 0;                   // loops continue the numbering after a restart
     std::array<int64_t, 32> recent_stamps_ns_{};   // delivery times, for the measured fps
     std::size_t recent_count_ = 0;

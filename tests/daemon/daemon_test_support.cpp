@@ -1,6 +1,8 @@
 #include "tests/daemon/daemon_test_support.hpp"
 
+#include <algorithm>
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 #include <stdexcept>
 
@@ -279,6 +281,80 @@ std::unique_ptr<TestClient> connectWhenListening(ChildProcess& service,
         }
     });
     return client;
+}
+
+NotifySocket::NotifySocket(const std::string& path)
+{
+    sockaddr_un address{};
+    address.sun_family = AF_UNIX;
+    std::strncpy(address.sun_path, path.c_str(), sizeof address.sun_path - 1);
+    fd_ = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    if (fd_ < 0 || ::bind(fd_, reinterpret_cast<const sockaddr*>(&address), sizeof address) != 0)
+        throw std::runtime_error("cannot bind the notify socket " + path);
+}
+
+NotifySocket::~NotifySocket()
+{
+    ::close(fd_);
+}
+
+std::optional<NotifySocket::Message> NotifySocket::next(std::chrono::milliseconds limit)
+{
+    pollfd waiting{fd_, POLLIN, 0};
+    if (::poll(&waiting, 1, static_cast<int>(limit.count())) <= 0)
+        return std::nullopt;
+    char buffer[4096];
+    const ssize_t got = ::recv(fd_, buffer, sizeof buffer, 0);
+    if (got < 0)
+        return std::nullopt;
+    Message message{Clock::now(), std::string(buffer, static_cast<std::size_t>(got))};
+    received_.push_back(message);
+    return message;
+}
+
+std::optional<NotifySocket::Message> NotifySocket::waitFor(const std::string& needle,
+                                                           std::chrono::milliseconds limit)
+{
+    const auto deadline = Clock::now() + limit;
+    while (Clock::now() < deadline) {
+        const auto left =
+            std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now());
+        std::optional<Message> message = next(std::max(left, std::chrono::milliseconds(1)));
+        if (message && message->text.find(needle) != std::string::npos)
+            return message;
+    }
+    return std::nullopt;
+}
+
+std::vector<NotifySocket::Message> NotifySocket::collect(std::chrono::milliseconds span)
+{
+    std::vector<Message> messages;
+    const auto deadline = Clock::now() + span;
+    while (Clock::now() < deadline) {
+        const auto left =
+            std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now());
+        if (std::optional<Message> message = next(std::max(left, std::chrono::milliseconds(1))))
+            messages.push_back(*message);
+    }
+    return messages;
+}
+
+std::string NotifySocket::all() const
+{
+    std::string text;
+    for (const Message& message : received_)
+        text += "[" + message.text + "]\n";
+    return text;
+}
+
+ScopedEnv::ScopedEnv(const std::string& name, const std::string& value) : name_(name)
+{
+    ::setenv(name.c_str(), value.c_str(), 1);
+}
+
+ScopedEnv::~ScopedEnv()
+{
+    ::unsetenv(name_.c_str());
 }
 
 } // namespace stereod::test

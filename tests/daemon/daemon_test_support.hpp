@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <thread>
@@ -109,6 +110,49 @@ class TestClient {
 
     int fd_ = -1;
     std::string buffer_;
+};
+
+// Stands in for systemd's notify socket (NOTIFY_SOCKET): a datagram socket bound at a
+// path that keeps what the service sends, with the time each message arrived.
+class NotifySocket {
+  public:
+    using Clock = std::chrono::steady_clock;
+    struct Message {
+        Clock::time_point at;
+        std::string text;
+    };
+
+    // Throws std::runtime_error when it cannot bind `path`.
+    explicit NotifySocket(const std::string& path);
+    ~NotifySocket();
+    NotifySocket(const NotifySocket&) = delete;
+    NotifySocket& operator=(const NotifySocket&) = delete;
+
+    // The next message, or nullopt when none comes within `limit`.
+    std::optional<Message> next(std::chrono::milliseconds limit);
+    // Reads until a message contains `needle`; nullopt when `limit` passes first.
+    std::optional<Message> waitFor(const std::string& needle, std::chrono::milliseconds limit);
+    // Everything received for `span`.
+    std::vector<Message> collect(std::chrono::milliseconds span);
+    // Every message received so far, one per line in brackets.
+    std::string all() const;
+
+  private:
+    int fd_ = -1;
+    std::vector<Message> received_;
+};
+
+// Sets an environment variable while it lives (for the service it starts, in process or
+// as a child), and unsets it after.
+class ScopedEnv {
+  public:
+    ScopedEnv(const std::string& name, const std::string& value);
+    ~ScopedEnv();
+    ScopedEnv(const ScopedEnv&) = delete;
+    ScopedEnv& operator=(const ScopedEnv&) = delete;
+
+  private:
+    std::string name_;
 };
 
 // Polls `condition` every few milliseconds until it holds or `limit` passes.

@@ -242,6 +242,38 @@ TEST(ProtocolParse, DeepNestingDoesNotCrash)
     EXPECT_EQ(parseOk(R"({"cmd":"hello","id":[[[[1]]]]})").id, Json::parse("[[[[1]]]]"));
 }
 
+TEST(ProtocolParse, IdNestingLimitIsSixteenLevels)
+{
+    const auto nested = [](int levels, const std::string& inner) {
+        return std::string(static_cast<std::size_t>(levels), '[') + inner +
+               std::string(static_cast<std::size_t>(levels), ']');
+    };
+    for (const std::string& inner : {std::string(), std::string("1")}) {
+        const std::string sixteen = nested(16, inner);
+        EXPECT_EQ(parseOk(R"({"cmd":"hello","id":)" + sixteen + "}").id, Json::parse(sixteen))
+            << inner;
+        const ProtocolError seventeen =
+            parseError(R"({"cmd":"hello","id":)" + nested(17, inner) + "}");
+        EXPECT_EQ(seventeen.code, ErrorCode::BadRequest) << inner;
+        EXPECT_NE(seventeen.message.find("16 levels"), std::string::npos) << seventeen.message;
+    }
+    EXPECT_EQ(parseError(R"({"cmd":"hello","id":)" + std::string(16, '[') + "{\"a\":[]}" +
+                         std::string(16, ']') + "}")
+                  .code,
+              ErrorCode::BadRequest);
+}
+
+TEST(ProtocolParse, NulByteAnywhereIsRefused)
+{
+    for (const std::string& line :
+         {std::string("{\"cmd\":\"hello\"}\0", 17), std::string("{\"cmd\":\"hello\"}\0junk", 21),
+          std::string("{\"cmd\":\"hel\0lo\"}", 17), std::string("\0{\"cmd\":\"hello\"}", 17)}) {
+        const ProtocolError error = parseError(line);
+        EXPECT_EQ(error.code, ErrorCode::BadJson) << line.size();
+        EXPECT_NE(error.message.find("NUL"), std::string::npos) << error.message;
+    }
+}
+
 TEST(ProtocolParse, EveryByteValueAlone)
 {
     for (int byte = 0; byte < 256; ++byte) {

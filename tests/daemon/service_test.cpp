@@ -8,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <limits>
 #include <memory>
 #include <thread>
@@ -134,6 +135,28 @@ class ServiceTest : public ::testing::Test {
     }
 
     void start() { start(baseConfig()); }
+
+    // Writes stereod.yaml: the calibration (saved beside it), the socket, then `extra`.
+    std::string writeConfigFile(const std::string& extra)
+    {
+        const std::string config_path = dir_.file("stereod.yaml");
+        const std::string calibration_path = dir_.file("calibration.yaml");
+        if (!std::filesystem::exists(calibration_path))
+            saveCalibration(calibration(), calibration_path);
+        std::ofstream file(config_path);
+        file << "calibration: " << calibration_path << "\n"
+             << "socket:\n  path: " << dir_.file("run/stereod.sock") << "\n"
+             << extra;
+        return config_path;
+    }
+
+    // Starts the service from writeConfigFile(extra), the file `reload` re-reads.
+    void startFromConfigFile(const std::string& extra)
+    {
+        ServiceOptions options;
+        options.config_path = writeConfigFile(extra);
+        start(loadConfig(options.config_path), options);
+    }
 
     // Stops the service and checks that it stopped cleanly.
     void stop()
@@ -657,6 +680,49 @@ TEST_F(ServiceTest, DepthSubscriberGetsHeaderAndPayload)
     EXPECT_EQ(hello["id"], "h");
 }
 
+TEST_F(ServiceTest, DepthFramesSayWhetherTheyHoldTheirPairsDepth)
+{
+    // Nearly every pixel of the region must be valid: tsukuba's frames give no distance
+    // (too_few_valid_pixels), yet their depth is sound and is published as such.
+    ServiceConfig config = baseConfig();
+    config.processing.nearest.min_valid_fraction = 0.999;
+    config.source.max_skew_ms = 5.0;
+    config.publish.depth_max_hz = 0.0; // every frame
+    start(config);
+    TestClient subscriber(socket_path_);
+    ASSERT_EQ(
+        subscriber.request({{"cmd", "subscribe"}, {"stream", "depth"}, {"max_hz", 1000}})["ok"],
+        true);
+    const auto next_depth = [&](Json& header) {
+        header = subscriber.readJson();
+        EXPECT_EQ(header["event"], "depth") << header.dump();
+        const std::vector<uint8_t> payload =
+            subscriber.readBytes(header["bytes"].get<std::size_t>());
+        return static_cast<std::size_t>(
+            std::count_if(payload.begin(), payload.end(), [](uint8_t b) { return b != 0; }));
+    };
+
+    source_->deliver(1);
+    Json header;
+    EXPECT_GT(next_depth(header), 0u);
+    EXPECT_EQ(header["depth_valid"], true) << header.dump();
+    EXPECT_EQ(header["reading"]["valid"], false);
+    EXPECT_EQ(header["reading"]["reason"]["code"], "too_few_valid_pixels");
+    TestClient client(socket_path_);
+    Json snapshot = client.request({{"cmd", "snapshot"}, {"items", {"depth"}}});
+    EXPECT_EQ(snapshot["depth_valid"], true) << snapshot.dump();
+    client.readBytes(snapshot["payloads"][0]["bytes"]);
+
+    // Out of sync: no depth to trust, and the frame says so.
+    source_->setSkewNs(20'000'000);
+    source_->deliver(1);
+    EXPECT_EQ(next_depth(header), 0u);
+    EXPECT_EQ(header["depth_valid"], false) << header.dump();
+    EXPECT_EQ(header["reading"]["reason"]["code"], "out_of_sync");
+    snapshot = client.request({{"cmd", "snapshot"}, {"items", {"depth"}}});
+    EXPECT_EQ(snapshot["depth_valid"], false) << snapshot.dump();
+}
+
 TEST_F(ServiceTest, DepthStreamIsRateLimited)
 {
     start();
@@ -875,6 +941,127 @@ TEST_F(ServiceTest, SixtyFourClientsAtOnceAndTheNextOneRefused)
     EXPECT_EQ(status(*clients[0])["clients"]["rejected"], 1);
 }
 
+TEST_F(ServiceTest, ConnectCloseChurnDoesNotCountClosedClientsAsOpen)
+{
+    ServiceConfig config = baseConfig();
+    config.socket.max_clients = 4;
+    start(config);
+    TestClient watcher(socket_path_);
+    // 300 connections opened and closed at once, faster than the loop turns: the service
+    // accepts them in batches, and those already gone must not fill socket.max_clients.
+    const sockaddr_un address = [&] {
+        sockaddr_un a{};
+        a.sun_family = AF_UNIX;
+        std::strncpy(a.sun_path, socket_path_.c_str(), sizeof a.sun_path - 1);
+        return a;
+    }();
+    int connected = 0;
+    for (int i = 0; i < 300; ++i) {
+        const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+        ASSERT_GE(fd, 0);
+        if (::connect(fd, reinterpret_cast<const sockaddr*>(&address), sizeof address) == 0)
+            ++connected;
+        ::close(fd);
+    }
+    EXPECT_GT(connected, 0);
+    TestClient last(socket_path_);
+    EXPECT_EQ(last.request({{"cmd", "hello"}})["ok"], true);
+    const Json clients = status(watcher)["clients"];
+    EXPECT_EQ(clients["rejected"], 0) << clients.dump() << ", " << connected << " connected";
+}
+
+TEST_F(ServiceTest, ClientsFloodingRequestsDelayNeitherAPoliteClientNorTheWatchdog)
+{
+    // systemd's notify socket, with a watchdog of 400 ms: pings are due every 100 ms.
+    constexpr auto kWatchdog = 400ms;
+    const std::string notify_path = dir_.file("notify.sock");
+    test::NotifySocket notify(notify_path);
+    test::ScopedEnv notify_socket("NOTIFY_SOCKET", notify_path);
+    test::ScopedEnv watchdog_usec(
+        "WATCHDOG_USEC",
+        std::to_string(std::chrono::duration_cast<std::chrono::microseconds>(kWatchdog).count()));
+    ServiceOptions options;
+    options.notify_systemd = true;
+    start(baseConfig(), options);
+    TestClient polite(socket_path_);
+    source_->deliver(1);
+    waitForFrames(polite, 1);
+
+    // Six clients, each pipelining 128 KiB of `status` requests at once, and reading the
+    // replies on their own threads.
+    constexpr int kFlooders = 6;
+    const std::string request = "{\"cmd\":\"status\"}\n";
+    const std::size_t requests = (128u << 10) / request.size();
+    std::string flood;
+    for (std::size_t i = 0; i < requests; ++i)
+        flood += request;
+    std::vector<std::unique_ptr<TestClient>> flooders;
+    for (int i = 0; i < kFlooders; ++i)
+        flooders.push_back(std::make_unique<TestClient>(socket_path_));
+    std::atomic<int> flooding{kFlooders};
+    std::atomic<std::size_t> answered{0};
+    std::vector<std::thread> threads;
+    for (auto& flooder : flooders) {
+        TestClient* client = flooder.get();
+        threads.emplace_back([client, &flood] { client->send(flood); });
+        threads.emplace_back([client, requests, &flooding, &answered] {
+            for (std::size_t i = 0; i < requests; ++i) {
+                client->readLine();
+                ++answered;
+            }
+            --flooding;
+        });
+    }
+
+    // Meanwhile a polite client asks for the distance, one request at a time, and the
+    // notify socket collects the pings.
+    std::vector<test::NotifySocket::Message> messages;
+    std::thread collector([&] {
+        while (flooding.load() > 0)
+            for (const auto& message : notify.collect(50ms))
+                messages.push_back(message);
+    });
+    std::vector<double> latencies_ms;
+    while (flooding.load() > 0 || latencies_ms.size() < 100) {
+        const auto asked = std::chrono::steady_clock::now();
+        const Json reply = polite.request({{"cmd", "distance"}, {"max_age_ms", 600000}});
+        latencies_ms.push_back(
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - asked)
+                .count());
+        if (reply["ok"] != true) {
+            ADD_FAILURE() << reply.dump();
+            break;
+        }
+        std::this_thread::sleep_for(2ms);
+    }
+    for (std::thread& thread : threads)
+        thread.join();
+    collector.join();
+    EXPECT_EQ(answered.load(), requests * kFlooders);
+
+    std::sort(latencies_ms.begin(), latencies_ms.end());
+    const double p99_ms = latencies_ms[latencies_ms.size() * 99 / 100];
+    EXPECT_LT(p99_ms, 50.0) << latencies_ms.size() << " requests, max "
+                            << latencies_ms.back() << " ms";
+
+    std::vector<std::chrono::steady_clock::time_point> pings;
+    for (const auto& message : messages)
+        if (message.text.find("WATCHDOG=1") != std::string::npos)
+            pings.push_back(message.at);
+    ASSERT_GE(pings.size(), 2u) << notify.all();
+    double longest_gap_ms = 0.0;
+    for (std::size_t i = 1; i < pings.size(); ++i)
+        longest_gap_ms = std::max(
+            longest_gap_ms,
+            std::chrono::duration<double, std::milli>(pings[i] - pings[i - 1]).count());
+    const double half_interval_ms = std::chrono::duration<double, std::milli>(kWatchdog / 2).count();
+    EXPECT_LT(longest_gap_ms, half_interval_ms) << pings.size() << " pings";
+    std::cout << "flood of " << kFlooders << " x " << requests
+              << " status requests: polite distance p99 " << p99_ms << " ms, max "
+              << latencies_ms.back() << " ms over " << latencies_ms.size()
+              << " requests; longest watchdog gap " << longest_gap_ms << " ms\n";
+}
+
 TEST_F(ServiceTest, SlowSubscriberSkipsFramesAndIsToldHowMany)
 {
     start();
@@ -955,19 +1142,8 @@ TEST_F(ServiceTest, ContinuousStreamWithManySubscribers)
 
 TEST_F(ServiceTest, ReloadAppliesLiveSettingsAndRefusesInvalidOnes)
 {
-    const std::string config_path = dir_.file("stereod.yaml");
-    const std::string calibration_path = dir_.file("calibration.yaml");
-    saveCalibration(calibration(), calibration_path);
-    const auto write_config = [&](const std::string& extra) {
-        std::ofstream file(config_path);
-        file << "calibration: " << calibration_path << "\n"
-             << "socket:\n  path: " << dir_.file("run/stereod.sock") << "\n"
-             << extra;
-    };
-    write_config("nearest:\n  min_valid_fraction: 0.1\n");
-    ServiceOptions options;
-    options.config_path = config_path;
-    start(loadConfig(config_path), options);
+    const auto write_config = [&](const std::string& extra) { writeConfigFile(extra); };
+    startFromConfigFile("nearest:\n  min_valid_fraction: 0.1\n");
     TestClient client(socket_path_);
     source_->deliver(1);
     waitForFrames(client, 1);
@@ -1001,16 +1177,50 @@ TEST_F(ServiceTest, ReloadAppliesLiveSettingsAndRefusesInvalidOnes)
         << invalid.dump();
 
     // A change that needs a restart is named, and not applied.
-    std::ofstream(config_path) << "calibration: " << calibration_path << "\n"
-                               << "socket:\n  path: " << dir_.file("run/stereod.sock") << "\n"
-                               << "  max_clients: 3\n"
-                               << "nearest:\n  min_valid_fraction: 0.1\n";
+    // (The socket section is the last of the file: the key below goes into it.)
+    writeConfigFile("  max_clients: 3\nnearest:\n  min_valid_fraction: 0.1\n");
     const Json restart = client.request({{"cmd", "reload"}});
     ASSERT_EQ(restart["ok"], true) << restart.dump();
     EXPECT_EQ(restart["restart_needed"], Json::parse(R"(["socket.max_clients"])"));
     source_->deliver(1);
     waitForFrames(client, 3);
     EXPECT_EQ(distance(client)["valid"], true);
+}
+
+TEST_F(ServiceTest, ReloadRefusesSettingsTheCalibrationCannotTakeAndKeepsAllInForce)
+{
+    const auto write_config = [&](const std::string& extra) { writeConfigFile(extra); };
+    startFromConfigFile("nearest:\n  min_valid_fraction: 0.1\n");
+    TestClient client(socket_path_);
+    source_->deliver(1);
+    waitForFrames(client, 1);
+    ASSERT_EQ(distance(client)["valid"], true);
+    const Json disparities_before = status(client)["pipeline"]["num_disparities"];
+
+    // Valid as a file, but 512 disparities leave no column of a 384 px wide frame: the
+    // worker would refuse it. Refused as a whole, with the key and the reason; the safety
+    // setting beside it is not applied either.
+    write_config("nearest:\n  min_valid_fraction: 0.99\nmatcher:\n  num_disparities: 512\n");
+    const Json refused = client.request({{"cmd", "reload"}});
+    EXPECT_EQ(refused["ok"], false) << refused.dump();
+    EXPECT_EQ(refused["error"]["code"], "invalid_config");
+    const std::string message = refused["error"]["message"].get<std::string>();
+    EXPECT_NE(message.find("matcher.num_disparities"), std::string::npos) << message;
+    EXPECT_NE(message.find("384"), std::string::npos) << message;
+    EXPECT_NE(message.find("stereod.yaml"), std::string::npos) << message;
+    source_->deliver(1);
+    waitForFrames(client, 2);
+    const Json reading = distance(client);
+    EXPECT_EQ(reading["valid"], true) << reading.dump();
+    EXPECT_EQ(status(client)["pipeline"]["num_disparities"], disparities_before);
+
+    // A region of interest that rounds to no pixel of the 384x288 frame.
+    write_config("nearest:\n  roi: {x: 0.5, y: 0.5, width: 0.001, height: 0.5}\n");
+    const Json empty_region = client.request({{"cmd", "reload"}});
+    EXPECT_EQ(empty_region["ok"], false) << empty_region.dump();
+    EXPECT_NE(empty_region["error"]["message"].get<std::string>().find("nearest.roi"),
+              std::string::npos)
+        << empty_region.dump();
 }
 
 TEST_F(ServiceTest, ReloadWithoutAConfigurationFile)

@@ -1,15 +1,18 @@
 // The `stereod` binary as users run it: its command line, its exit codes for each kind of
 // start-up problem, and a run on a replayed tsukuba folder that ends with SIGTERM.
 
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <memory>
 #include <sstream>
+#include <thread>
 #include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 
 #include "pipeline/calibration.hpp"
@@ -89,6 +92,20 @@ TEST_F(StereodCli, BadArgumentsGiveOneLineAndExitTwo)
     }
 }
 
+TEST_F(StereodCli, EmptyPathsAreBadArgumentsNotTheDefaults)
+{
+    for (const char* option : {"--socket", "--replay", "--calib", "--config", "--check-config"}) {
+        std::vector<std::string> arguments = {option, ""};
+        if (std::string(option) != "--check-config" && std::string(option) != "--replay")
+            arguments.insert(arguments.end(), {"--replay", replay_});
+        const ProcessResult result = run(arguments);
+        EXPECT_EQ(result.exit_code, 2) << option << ": " << result.err;
+        EXPECT_EQ(lines(result.err).size(), 1u) << result.err;
+        EXPECT_NE(result.err.find(option), std::string::npos) << result.err;
+        EXPECT_NE(result.err.find("empty path"), std::string::npos) << result.err;
+    }
+}
+
 TEST_F(StereodCli, CheckConfigNamesEveryProblemWithItsLine)
 {
     const std::string good = dir_.file("good.yaml");
@@ -107,6 +124,36 @@ TEST_F(StereodCli, CheckConfigNamesEveryProblemWithItsLine)
     EXPECT_EQ(problems[1].rfind(bad + ":4:", 0), 0u) << problems[1];
 
     EXPECT_EQ(run({"--check-config", dir_.file("missing.yaml")}).exit_code, 3);
+}
+
+TEST_F(StereodCli, CheckConfigChecksTheSettingsAgainstTheCalibrationAsStartUpDoes)
+{
+    // Valid as a file; with the calibration it names, 1024 disparities leave no column of
+    // the 384 px wide frames: start-up refuses it (3), and so does --check-config.
+    const std::string wide = dir_.file("wide.yaml");
+    std::ofstream(wide) << "calibration: " << calibration_ << "\n"
+                        << "nearest:\n  min_valid_fraction: 0.9\n"
+                        << "matcher:\n  num_disparities: 1024\n";
+    const ProcessResult checked = run({"--check-config", wide});
+    EXPECT_EQ(checked.exit_code, 3) << checked.out << checked.err;
+    EXPECT_NE(checked.err.find("matcher.num_disparities"), std::string::npos) << checked.err;
+    EXPECT_NE(checked.err.find(calibration_), std::string::npos) << checked.err;
+    const ProcessResult started = run({"--config", wide, "--replay", replay_, "--socket", socket_});
+    EXPECT_EQ(started.exit_code, 3) << started.err;
+    EXPECT_NE(started.err.find("matcher.num_disparities"), std::string::npos) << started.err;
+
+    // A calibration named but missing is the calibration problem start-up calls it (4).
+    const std::string missing = dir_.file("missing-calibration.yaml");
+    std::ofstream(missing) << "calibration: " << dir_.file("nowhere.yaml") << "\n";
+    EXPECT_EQ(run({"--check-config", missing}).exit_code, 4);
+
+    // The same settings within the frame are valid with the calibration.
+    const std::string fits = dir_.file("fits.yaml");
+    std::ofstream(fits) << "calibration: " << calibration_ << "\n"
+                        << "matcher:\n  num_disparities: 64\n";
+    const ProcessResult valid = run({"--check-config", fits});
+    EXPECT_EQ(valid.exit_code, 0) << valid.err;
+    EXPECT_NE(valid.out.find(calibration_), std::string::npos) << valid.out;
 }
 
 TEST_F(StereodCli, EachStartUpProblemHasItsExitCode)
@@ -189,6 +236,55 @@ TEST_F(StereodCli, ServesAReplayAndStopsOnSigterm)
     const std::string text = log();
     EXPECT_NE(text.find("disparity range: "), std::string::npos) << text;
     EXPECT_NE(text.find("SIGTERM"), std::string::npos) << text;
+}
+
+// Whether `pid` has SIGTERM blocked (from /proc/PID/status): its own code has run.
+bool blocksSigterm(pid_t pid)
+{
+    std::ifstream status("/proc/" + std::to_string(pid) + "/status");
+    for (std::string line; std::getline(status, line);) {
+        if (line.rfind("SigBlk:", 0) == 0) {
+            const unsigned long long mask = std::stoull(line.substr(7), nullptr, 16);
+            return (mask & (1ull << (SIGTERM - 1))) != 0;
+        }
+    }
+    return false;
+}
+
+TEST_F(StereodCli, SigtermStopsAStartUpBlockedInItsSourceWithinOneSecond)
+{
+    // frames.csv is a FIFO nobody writes: opening it blocks start-up for ever.
+    const std::string recording = dir_.file("fifo");
+    std::filesystem::create_directory(recording);
+    ASSERT_EQ(::mkfifo((recording + "/frames.csv").c_str(), 0600), 0);
+    const auto log = [&] {
+        std::ifstream file(dir_.file("stereod.log"));
+        return std::string(std::istreambuf_iterator<char>(file), {});
+    };
+    // At once when the process's own code has run (the libraries' initialisers still
+    // ahead of it), and later, while start-up waits in the open().
+    for (const auto delay : {0ms, 300ms, 1000ms}) {
+        ChildProcess service(
+            {stereodPath(), "--replay", recording, "--calib", calibration_, "--socket", socket_},
+            dir_.file("stereod.log"));
+        ASSERT_TRUE(waitUntil([&] { return blocksSigterm(service.pid()) || !service.running(); },
+                              10s));
+        std::this_thread::sleep_for(delay);
+        ASSERT_TRUE(service.running()) << log();
+        const auto signalled = std::chrono::steady_clock::now();
+        service.sendSignal(SIGTERM);
+        const std::optional<int> status = service.waitFor(5s);
+        const double stop_s =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - signalled).count();
+        ASSERT_TRUE(status.has_value()) << "still running 5 s after SIGTERM, " << delay.count()
+                                        << " ms after start:\n"
+                                        << log();
+        ASSERT_TRUE(WIFEXITED(*status))
+            << "killed by signal " << WTERMSIG(*status) << " " << delay.count() << " ms after start";
+        EXPECT_EQ(WEXITSTATUS(*status), 0) << log();
+        EXPECT_LT(stop_s, 1.0) << delay.count() << " ms after start";
+        EXPECT_FALSE(std::filesystem::exists(socket_));
+    }
 }
 
 TEST_F(StereodCli, WarnsWhenTheDisparityCapHidesTheClosestDistance)

@@ -45,6 +45,8 @@ namespace stereod {
 namespace {
 
 using test::ChildProcess;
+using test::NotifySocket;
+using test::ScopedEnv;
 using test::Json;
 using test::stereodPath;
 using test::TempDir;
@@ -63,98 +65,6 @@ sockaddr_un unixAddress(const std::string& path)
     std::strncpy(address.sun_path, path.c_str(), sizeof address.sun_path - 1);
     return address;
 }
-
-// The notify socket: what the service sends, with the time it arrived.
-class NotifySocket {
-  public:
-    struct Message {
-        Clock::time_point at;
-        std::string text;
-    };
-
-    explicit NotifySocket(const std::string& path) : path_(path)
-    {
-        fd_ = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-        const sockaddr_un address = unixAddress(path);
-        if (fd_ < 0 ||
-            ::bind(fd_, reinterpret_cast<const sockaddr*>(&address), sizeof address) != 0)
-            throw std::runtime_error("cannot bind the notify socket " + path);
-    }
-    ~NotifySocket() { ::close(fd_); }
-    NotifySocket(const NotifySocket&) = delete;
-    NotifySocket& operator=(const NotifySocket&) = delete;
-
-    // The next message, or nullopt when none comes within `limit`.
-    std::optional<Message> next(std::chrono::milliseconds limit)
-    {
-        pollfd waiting{fd_, POLLIN, 0};
-        if (::poll(&waiting, 1, static_cast<int>(limit.count())) <= 0)
-            return std::nullopt;
-        char buffer[4096];
-        const ssize_t got = ::recv(fd_, buffer, sizeof buffer, 0);
-        if (got < 0)
-            return std::nullopt;
-        Message message{Clock::now(), std::string(buffer, static_cast<std::size_t>(got))};
-        received_.push_back(message);
-        return message;
-    }
-
-    // Reads until a message contains `needle`; nullopt when `limit` passes first.
-    std::optional<Message> waitFor(const std::string& needle, std::chrono::milliseconds limit)
-    {
-        const auto deadline = Clock::now() + limit;
-        while (Clock::now() < deadline) {
-            const auto left =
-                std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now());
-            std::optional<Message> message = next(std::max(left, 1ms));
-            if (message && message->text.find(needle) != std::string::npos)
-                return message;
-        }
-        return std::nullopt;
-    }
-
-    // Everything received for `span`.
-    std::vector<Message> collect(std::chrono::milliseconds span)
-    {
-        std::vector<Message> messages;
-        const auto deadline = Clock::now() + span;
-        while (Clock::now() < deadline) {
-            const auto left =
-                std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now());
-            if (std::optional<Message> message = next(std::max(left, 1ms)))
-                messages.push_back(*message);
-        }
-        return messages;
-    }
-
-    std::string all() const
-    {
-        std::string text;
-        for (const Message& message : received_)
-            text += "[" + message.text + "]\n";
-        return text;
-    }
-
-  private:
-    std::string path_;
-    int fd_ = -1;
-    std::vector<Message> received_;
-};
-
-// Sets environment variables for the children started while it lives.
-class ScopedEnv {
-  public:
-    ScopedEnv(const std::string& name, const std::string& value) : name_(name)
-    {
-        ::setenv(name.c_str(), value.c_str(), 1);
-    }
-    ~ScopedEnv() { ::unsetenv(name_.c_str()); }
-    ScopedEnv(const ScopedEnv&) = delete;
-    ScopedEnv& operator=(const ScopedEnv&) = delete;
-
-  private:
-    std::string name_;
-};
 
 std::string readFile(const std::string& path)
 {
@@ -228,8 +138,8 @@ TEST_F(StereodUnderSystemd, NotifiesReadyStatusWatchdogReloadAndStop)
     EXPECT_GE(client->request({{"cmd", "status"}})["status"]["source"]["pairs"].get<uint64_t>(),
               1u);
 
-    // Pings at half the interval (200 ms) while the worker keeps up, and a STATUS= line a
-    // person can read.
+    // Pings every quarter of the interval (100 ms) while the worker keeps up, and a
+    // STATUS= line a person can read.
     const std::vector<NotifySocket::Message> running = notify.collect(2500ms);
     EXPECT_GE(count(running, "WATCHDOG=1"), 4u) << notify.all();
     ASSERT_TRUE(notify.waitFor("STATUS=running: ", 5s)) << notify.all();

@@ -3,8 +3,10 @@
 
 #include <cerrno>
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -12,6 +14,10 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <fcntl.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <opencv2/imgcodecs.hpp>
 #include <spdlog/sinks/ringbuffer_sink.h>
 #include <spdlog/spdlog.h>
@@ -253,6 +259,73 @@ TEST_F(ReplaySourceTest, PacedDeliveryKeepsTheRecordedSpacing)
     EXPECT_EQ(ring.dropped(), 0u);
 }
 
+TEST_F(ReplaySourceTest, StampsSteppingBackKeepThePaceAndAreWarnedOnce)
+{
+    // Spliced from two runs: pairs 3..5 were stamped 6 s before pairs 0..2.
+    const int64_t spacing_ns = 40 * kMs;
+    pairs_ = test::tsukubaPairs(6);
+    test::stampPairs(pairs_, 7'000'000'000, spacing_ns);
+    for (std::size_t k = 3; k < pairs_.size(); ++k) {
+        pairs_[k].left_stamp_ns -= 6'000'000'000;
+        pairs_[k].right_stamp_ns -= 6'000'000'000;
+    }
+    const std::string dir = tmp_.file("spliced");
+    test::writeRecording(dir, pairs_);
+
+    auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(64);
+    auto previous = spdlog::default_logger();
+    spdlog::set_default_logger(std::make_shared<spdlog::logger>("replay-test", sink));
+    ReplayOptions options;
+    options.path = dir;
+    options.pacing = ReplayOptions::Pacing::Paced;
+    options.loop = true;
+    options.pool_pairs = 24; // the test keeps every pair it pops
+    std::size_t got_count = 0;
+    double elapsed_s = 0.0;
+    {
+        Rig rig(options, 16);
+        const auto started = std::chrono::steady_clock::now();
+        EXPECT_EQ(rig.source.start(rig.ring), 0);
+        // Three passes: 18 pairs, 40 ms apart, about 0.7 s.
+        got_count = popPairs(rig.ring, 18).size();
+        elapsed_s =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+        rig.source.stop();
+    }
+    spdlog::set_default_logger(previous);
+    EXPECT_EQ(got_count, 18u);
+    EXPECT_LT(elapsed_s, 2.0) << "the replay stalled at the step back";
+    std::size_t warnings = 0;
+    for (const std::string& line : sink->last_formatted())
+        warnings += line.find("step back") != std::string::npos ? 1 : 0;
+    EXPECT_EQ(warnings, 1u);
+}
+
+TEST_F(ReplaySourceTest, ExtremeStampsGiveASaturatedSkewNotAWrappedOne)
+{
+    pairs_ = test::tsukubaPairs(3);
+    test::stampPairs(pairs_, 7'000'000'000, 40 * kMs);
+    // Right minus left overflows: wrapped, it would read -1 ns, "in sync".
+    pairs_[1].left_stamp_ns = std::numeric_limits<int64_t>::min();
+    pairs_[1].right_stamp_ns = std::numeric_limits<int64_t>::max();
+    pairs_[2].left_stamp_ns = std::numeric_limits<int64_t>::max();
+    pairs_[2].right_stamp_ns = std::numeric_limits<int64_t>::min();
+    const std::string dir = tmp_.file("extreme");
+    test::writeRecording(dir, pairs_);
+
+    Rig rig(lockstep(dir), 4);
+    ASSERT_EQ(rig.source.start(rig.ring), 0) << rig.source.status().last_error;
+    const std::vector<StereoPair> got = popPairs(rig.ring, 3);
+    ASSERT_EQ(got.size(), 3u);
+    // Delivered stamps are "now" plus the recorded skew, saturated: as far apart as they go.
+    EXPECT_GT(got[1].skewNs(), std::numeric_limits<int64_t>::max() / 2);
+    EXPECT_LT(got[2].skewNs(), std::numeric_limits<int64_t>::min() / 2);
+    EXPECT_EQ(got[1].right->source_stamp_ns, std::numeric_limits<int64_t>::max());
+    const SourceStatus status = rig.source.status();
+    EXPECT_GT(status.skew_max_ms, 1e12) << "the largest skew wrapped";
+    EXPECT_GT(status.skew_mean_ms, 1e12) << "the mean skew wrapped";
+}
+
 TEST_F(ReplaySourceTest, PacedReplayDropsPairsWhenEveryBufferIsHeld)
 {
     const std::string dir = makeRecording(4, 1 * kMs);
@@ -447,6 +520,125 @@ TEST_F(ReplaySourceTest, BadFilesAreSkippedCountedAndLoggedOncePerFile)
     EXPECT_EQ(corrupt, 1);
     EXPECT_EQ(missing, 1);
     EXPECT_EQ(resized, 1);
+}
+
+// The process's peak resident memory so far, in MB.
+double peakRssMb()
+{
+    rusage usage{};
+    ::getrusage(RUSAGE_SELF, &usage);
+    return static_cast<double>(usage.ru_maxrss) / 1024.0; // ru_maxrss is in KB
+}
+
+// Runs a looping lockstep replay of `dir` for two passes of `count` pairs with the log
+// captured; returns the log lines.
+std::vector<std::string> replayTwoPasses(const std::string& dir, std::size_t good_pairs,
+                                         SourceStatus& status)
+{
+    auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(256);
+    auto previous = spdlog::default_logger();
+    spdlog::set_default_logger(std::make_shared<spdlog::logger>("replay-test", sink));
+    {
+        Rig rig(lockstep(dir, /*loop=*/true), 2);
+        EXPECT_EQ(rig.source.start(rig.ring), 0) << rig.source.status().last_error;
+        EXPECT_EQ(popPairs(rig.ring, 2 * good_pairs).size(), 2 * good_pairs);
+        rig.source.stop();
+        status = rig.source.status();
+    }
+    spdlog::set_default_logger(previous);
+    return sink->last_formatted();
+}
+
+std::size_t linesWith(const std::vector<std::string>& lines, const std::string& needle)
+{
+    std::size_t n = 0;
+    for (const std::string& line : lines)
+        n += line.find(needle) != std::string::npos ? 1 : 0;
+    return n;
+}
+
+TEST_F(ReplaySourceTest, DecompressionBombsAreRefusedUndecodedNamingTheirFile)
+{
+    const std::string dir = makeRecording(4);
+    // 12000x12000 grey (144 MB decoded, a few hundred KB on disk): as the first pair's
+    // left image, before the frame size is known, and as a later right image.
+    test::writeDecompressionBomb(dir + "/left/000000.png", {12000, 12000});
+    fs::copy_file(dir + "/left/000000.png", dir + "/right/000002.png",
+                  fs::copy_options::overwrite_existing);
+    const double rss_before_mb = peakRssMb();
+
+    SourceStatus status;
+    const std::vector<std::string> log = replayTwoPasses(dir, 2, status);
+    EXPECT_LT(peakRssMb() - rss_before_mb, 50.0) << "a bomb was decoded";
+    // Each bomb is named, with its size, once; the good images beside them never are.
+    EXPECT_EQ(linesWith(log, "left/000000.png"), 1u);
+    EXPECT_EQ(linesWith(log, "right/000002.png"), 1u);
+    EXPECT_EQ(linesWith(log, "12000x12000"), 2u);
+    EXPECT_EQ(linesWith(log, "right/000000.png"), 0u);
+    EXPECT_EQ(linesWith(log, "left/000002.png"), 0u);
+    EXPECT_GE(status.cameras[0].bad_frames, 2u);
+    EXPECT_GE(status.cameras[1].bad_frames, 2u);
+}
+
+TEST_F(ReplaySourceTest, RowsPointingAtDevicesFifosOrTruncatedImagesAreBadFrames)
+{
+    const std::string dir = makeRecording(5);
+    fs::remove(dir + "/left/000001.png");
+    fs::create_symlink("/dev/zero", dir + "/left/000001.png");
+    fs::remove(dir + "/right/000002.png");
+    ASSERT_EQ(::mkfifo((dir + "/right/000002.png").c_str(), 0600), 0);
+    // A truncated JPEG would decode into a grey-filled frame that passes for a good one.
+    std::vector<uint8_t> jpeg = test::encode(pairs_[3].left, ".jpg");
+    jpeg.resize(jpeg.size() / 2);
+    test::writeBytes(dir + "/left/000003.png", jpeg);
+
+    SourceStatus status;
+    const std::vector<std::string> log = replayTwoPasses(dir, 2, status);
+    EXPECT_EQ(linesWith(log, "left/000001.png"), 1u);
+    EXPECT_EQ(linesWith(log, "not a regular file"), 2u);
+    EXPECT_EQ(linesWith(log, "right/000002.png"), 1u);
+    EXPECT_EQ(linesWith(log, "left/000003.png"), 1u);
+    EXPECT_EQ(linesWith(log, "truncated JPEG"), 1u);
+    EXPECT_GE(status.cameras[0].bad_frames, 4u); // 000001 and 000003, two passes
+    EXPECT_GE(status.cameras[1].bad_frames, 2u); // 000002
+}
+
+TEST_F(ReplaySourceTest, WhatTheDecodersPrintGoesIntoTheLogNotToStderr)
+{
+    const std::string dir = makeRecording(4);
+    // Damaged in the middle, with intact headers and ends: libpng fails with an error of
+    // its own, libjpeg fills the damage in and says so.
+    const auto damage = [](std::vector<uint8_t> bytes) {
+        for (std::size_t i = bytes.size() / 3; i < bytes.size() * 2 / 3; i += 5)
+            bytes[i] ^= 0x5a;
+        return bytes;
+    };
+    test::writeBytes(dir + "/left/000001.png", damage(test::encode(pairs_[1].left, ".png")));
+    test::writeBytes(dir + "/right/000002.png", damage(test::encode(pairs_[2].right, ".jpg")));
+
+    // Everything written to fd 2 meanwhile goes to a file.
+    const std::string stderr_path = tmp_.file("stderr.txt");
+    std::fflush(stderr);
+    const int saved = ::dup(STDERR_FILENO);
+    const int file = ::open(stderr_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    ASSERT_GE(file, 0);
+    ::dup2(file, STDERR_FILENO);
+    ::close(file);
+    SourceStatus status;
+    const std::vector<std::string> log = replayTwoPasses(dir, 2, status);
+    std::fflush(stderr);
+    ::dup2(saved, STDERR_FILENO);
+    ::close(saved);
+
+    std::ifstream printed_file(stderr_path);
+    const std::string printed(std::istreambuf_iterator<char>(printed_file), {});
+    EXPECT_EQ(printed, "");
+    EXPECT_EQ(linesWith(log, "left/000001.png"), 1u);
+    EXPECT_EQ(linesWith(log, "libpng error"), 1u);
+    EXPECT_EQ(linesWith(log, "right/000002.png"), 1u);
+    EXPECT_EQ(linesWith(log, "corrupt: "), 1u);
+    EXPECT_GE(status.cameras[0].bad_frames, 2u);
+    EXPECT_GE(status.cameras[1].bad_frames, 2u);
 }
 
 TEST_F(ReplaySourceTest, NothingReadableFailsStartNamingThePath)

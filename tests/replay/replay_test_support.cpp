@@ -3,6 +3,8 @@
 #include <fstream>
 #include <random>
 
+#include <zlib.h>
+
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -64,6 +66,74 @@ void writeGarbage(const std::string& path, std::size_t bytes)
     std::ofstream out(path, std::ios::binary | std::ios::trunc);
     for (std::size_t i = 0; i < bytes; ++i)
         out.put(static_cast<char>(rng() & 0xFF));
+}
+
+namespace {
+
+void appendBigEndian32(std::vector<uint8_t>& out, uint32_t value)
+{
+    for (int shift = 24; shift >= 0; shift -= 8)
+        out.push_back(static_cast<uint8_t>(value >> shift));
+}
+
+// Appends one PNG chunk: length, type, data, CRC of type and data.
+void appendChunk(std::vector<uint8_t>& out, const char* type, const std::vector<uint8_t>& data)
+{
+    appendBigEndian32(out, static_cast<uint32_t>(data.size()));
+    const std::size_t type_at = out.size();
+    out.insert(out.end(), type, type + 4);
+    out.insert(out.end(), data.begin(), data.end());
+    const uLong crc = crc32(0L, out.data() + type_at, static_cast<uInt>(4 + data.size()));
+    appendBigEndian32(out, static_cast<uint32_t>(crc));
+}
+
+} // namespace
+
+void writeDecompressionBomb(const std::string& path, cv::Size size)
+{
+    std::vector<uint8_t> png = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    std::vector<uint8_t> header;
+    appendBigEndian32(header, static_cast<uint32_t>(size.width));
+    appendBigEndian32(header, static_cast<uint32_t>(size.height));
+    header.insert(header.end(), {8, 0, 0, 0, 0}); // 8-bit grey, deflate, no filter, no interlace
+    appendChunk(png, "IHDR", header);
+
+    // Each row: filter type 0, then `width` zero bytes; deflated as a stream.
+    z_stream stream{};
+    ASSERT_EQ(deflateInit(&stream, 9), Z_OK);
+    const std::vector<uint8_t> row(static_cast<std::size_t>(size.width) + 1, 0);
+    std::vector<uint8_t> compressed;
+    std::vector<uint8_t> chunk(1 << 16);
+    for (int y = 0; y <= size.height; ++y) {
+        const bool last = y == size.height;
+        stream.next_in = last ? nullptr : const_cast<Bytef*>(row.data());
+        stream.avail_in = last ? 0 : static_cast<uInt>(row.size());
+        do {
+            stream.next_out = chunk.data();
+            stream.avail_out = static_cast<uInt>(chunk.size());
+            deflate(&stream, last ? Z_FINISH : Z_NO_FLUSH);
+            compressed.insert(compressed.end(), chunk.data(),
+                              chunk.data() + (chunk.size() - stream.avail_out));
+        } while (stream.avail_out == 0);
+    }
+    deflateEnd(&stream);
+    appendChunk(png, "IDAT", compressed);
+    appendChunk(png, "IEND", {});
+    writeBytes(path, png);
+}
+
+std::vector<uint8_t> encode(const cv::Mat& image, const std::string& extension)
+{
+    std::vector<uint8_t> bytes;
+    EXPECT_TRUE(cv::imencode(extension, image, bytes));
+    return bytes;
+}
+
+void writeBytes(const std::string& path, const std::vector<uint8_t>& bytes)
+{
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out.write(reinterpret_cast<const char*>(bytes.data()),
+              static_cast<std::streamsize>(bytes.size()));
 }
 
 } // namespace stereod::test

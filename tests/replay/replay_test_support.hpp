@@ -38,4 +38,14 @@ bool samePixels(const cv::Mat& a, const cv::Mat& b);
 // Overwrites `path` with bytes that are no image at all.
 void writeGarbage(const std::string& path, std::size_t bytes = 2048);
 
+// Writes a valid grey 8-bit PNG of `size`, all black: a few hundred KB on disk for
+// 20000x20000 (400 MB once decoded), written row by row without holding the image.
+void writeDecompressionBomb(const std::string& path, cv::Size size);
+
+// The bytes of `image` encoded as `extension` (".png", ".jpg").
+std::vector<uint8_t> encode(const cv::Mat& image, const std::string& extension);
+
+// Writes `bytes` to `path`, replacing it.
+void writeBytes(const std::string& path, const std::vector<uint8_t>& bytes);
+
 } // namespace stereod::test
