@@ -808,6 +808,12 @@ std::vector<KeyDef> buildKeyTable()
         [](auto& c) -> auto& { return c.processing.nearest.range_limit_fraction; }, ""));
     add(boolKey(
         "point_cloud", kLive, [](auto& c) -> auto& { return c.processing.compute_cloud; }));
+    add(realKey(
+        "calibration_health.interval_s", kLive,
+        [](auto& c) -> auto& { return c.calibration_health.interval_s; }, "s"));
+    add(boolKey(
+        "calibration_health.withhold_when_failed", kLive,
+        [](auto& c) -> auto& { return c.calibration_health.withhold_when_failed; }));
 
     add(textKey(
         "socket.path", kRestart, [](auto& c) -> auto& { return c.socket.path; }, true));
@@ -1481,6 +1487,8 @@ std::vector<Problem> checkValues(const ServiceConfig& config, const KeyLocations
     checkSource(checker, config.source, config.calibration_path);
     checkMatcher(checker, config.processing.matcher);
     checkNearest(checker, config.processing.nearest);
+    checker.real("calibration_health.interval_s", config.calibration_health.interval_s,
+                 closed(0, 3600, " s"));
     checkSocket(checker, config.socket);
     checkPublish(checker, config.publish);
     const auto& levels = logLevelNames();

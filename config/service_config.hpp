@@ -90,11 +90,18 @@ struct PublishConfig {
     double max_reading_age_ms = 1000.0;   // default for `distance` without max_age_ms
 };
 
+// Calibration health while running (docs/configuration.md).
+struct HealthConfig {
+    double interval_s = 2.0;          // between checks; 0 turns them off
+    bool withhold_when_failed = false; // failed: readings become calibration_suspect
+};
+
 struct ServiceConfig {
     std::string origin;               // file the configuration came from, or "<defaults>"
     SourceConfig source;
     std::string calibration_path;     // empty: the recording's calibration.yaml
     ProcessorSettings processing;
+    HealthConfig calibration_health;
     SocketConfig socket;
     PublishConfig publish;
     std::string log_level = "info";   // trace, debug, info, warn, error, critical, off

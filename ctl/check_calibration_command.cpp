@@ -1,6 +1,7 @@
 // `stereoctl check-calibration`: calibration health (pipeline/calibration_health.hpp) on a
 // rig's raw pairs, offline, and the correction when asked for.
 
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <string>
@@ -10,6 +11,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "ctl/client.hpp"
 #include "ctl/commands.hpp"
 #include "ctl/exit_codes.hpp"
 #include "ctl/file_patterns.hpp"
@@ -116,10 +118,42 @@ int exitCodeFor(HealthState state)
     return kExitUsage;
 }
 
+// The running service's calibration health, from its status.
+int checkRunningService(const CheckCalibrationOptions& options)
+{
+    ProtocolClient client(options.service.socket_path,
+                          std::chrono::milliseconds(options.service.timeout_ms));
+    const json reply = client.request({{"cmd", "status"}});
+    const json status = reply.value("status", json::object());
+    const json health = status.value("calibration_health", json::object());
+    const std::string state = health.value("state", std::string("unknown"));
+    if (options.json) {
+        std::printf("%s\n", health.dump(2).c_str());
+    } else {
+        std::printf("%s", state.c_str());
+        if (health.contains("reason"))
+            std::printf(" (%s)", health["reason"].get<std::string>().c_str());
+        if (health.contains("row_offset_px"))
+            std::printf(": %d matches, row offset %+.2f px (right - left), 90 %% within %.2f px, "
+                        "trend %+.3f px/min, checked %.1f s ago",
+                        health.value("matches", 0), health.value("row_offset_px", 0.0),
+                        health.value("row_offset_p90_px", 0.0),
+                        health.value("trend_px_per_min", 0.0), health.value("checked_age_s", 0.0));
+        std::printf("\n");
+    }
+    if (state == "ok")
+        return kExitOk;
+    if (state == "degraded" || state == "failed")
+        return kExitNoReading;
+    return kExitUsage;
+}
+
 } // namespace
 
 int runCheckCalibration(const CheckCalibrationOptions& options)
 {
+    if (options.left_glob.empty())
+        return checkRunningService(options);
     const std::vector<std::string> left = expandGlob(options.left_glob, "--left");
     const std::vector<std::string> right = expandGlob(options.right_glob, "--right");
     if (left.size() != right.size())

@@ -132,6 +132,8 @@ struct BoardDistanceOptions {
 // `stereoctl check-calibration`: how well a calibration still rectifies a rig's pairs.
 // Exit 0 ok, 1 degraded or failed, 2 unknown (no verdict) or bad arguments.
 struct CheckCalibrationOptions {
+    // Without files: from the running service (its calibration_health).
+    ServiceOptions service;
     std::string left_glob;            // raw left images
     std::string right_glob;           // raw right images, paired in sorted order
     std::string calib_path;           // full calibration (YAML)

@@ -335,12 +335,19 @@ CLI::App* declareCheckCalibration(CLI::App& app, CheckCalibrationOptions& o)
 {
     CLI::App* cmd = app.add_subcommand(
         "check-calibration",
-        "how well a calibration still rectifies the rig's pairs: the row offset of matching "
-        "features after rectification (exit 0 ok, 1 degraded or failed, 2 no verdict)");
-    cmd->add_option("--left", o.left_glob, "raw left images: a glob, quoted, sorted")->required();
-    cmd->add_option("--right", o.right_glob, "raw right images, paired in sorted order")
-        ->required();
-    cmd->add_option("--calib", o.calib_path, "the full calibration to check (YAML)")->required();
+        "how well a calibration still rectifies the rig's pairs, or (without --left) the "
+        "running service's cameras: the row offset of matching features after "
+        "rectification (exit 0 ok, 1 degraded or failed, 2 no verdict, 3 no service)");
+    CLI::Option* left = cmd->add_option("--left", o.left_glob, "raw left images: a glob, quoted, sorted");
+    CLI::Option* right = cmd->add_option("--right", o.right_glob, "raw right images, paired in sorted order");
+    CLI::Option* calib = cmd->add_option("--calib", o.calib_path, "the full calibration to check (YAML)");
+    CLI::Option* socket = cmd->add_option(
+        "--socket", o.service.socket_path,
+        "without --left/--right/--calib: the running service's figures (its "
+        "calibration_health), from this socket");
+    left->needs(right)->needs(calib)->excludes(socket);
+    right->needs(left);
+    calib->needs(left);
     CLI::Option* fix = cmd->add_flag(
         "--fix", o.fix,
         "estimate the small turn of the right camera that brings the rows back, and write "
@@ -348,6 +355,7 @@ CLI::App* declareCheckCalibration(CLI::App& app, CheckCalibrationOptions& o)
     cmd->add_option("--out", o.out_path, "where --fix writes the corrected calibration (new file)")
         ->needs(fix);
     fix->needs(cmd->get_option("--out"));
+    fix->needs(left);
     cmd->add_flag("--json", o.json, "print the figures per pair and overall as JSON");
     return cmd;
 }

@@ -17,6 +17,7 @@ constexpr std::array kAllReasons = {
     NoReadingReason::OutOfSync,      NoReadingReason::SourceDown,
     NoReadingReason::BadFrame,       NoReadingReason::Stale,
     NoReadingReason::Uncalibrated,   NoReadingReason::NearerThanRange,
+    NoReadingReason::CalibrationSuspect,
 };
 
 bool isValid(const nlohmann::ordered_json& reading)

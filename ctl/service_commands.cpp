@@ -134,6 +134,20 @@ void printStatus(const json& status)
                number(pipeline, "num_disparities", 0), number(pipeline, "min_disparity", 0),
                number(pipeline, "closest_depth_m", 2));
     printStageTable(stdout, member(pipeline, "stage_ms"));
+    const json& latency = member(pipeline, "latency_ms");
+    fmt::print("latency from capture to reading: p50 {} ms, p99 {} ms\n", number(latency, "p50", 1),
+               number(latency, "p99", 1));
+    const json& health = member(status, "calibration_health");
+    if (health.is_object() && health.contains("state")) {
+        const std::string reason = text(health, "reason");
+        fmt::print("calibration health: {}{}", text(health, "state"),
+                   reason.empty() ? std::string() : " (" + reason + ")");
+        if (health.contains("row_offset_px"))
+            fmt::print(", rows {} px apart (90 % within {} px, {} matches)",
+                       number(health, "row_offset_px", 2), number(health, "row_offset_p90_px", 2),
+                       number(health, "matches", 0));
+        fmt::print("\n");
+    }
 
     const json& calibration = member(status, "calibration");
     if (text(calibration, "kind") == "none") {

@@ -225,6 +225,12 @@ std::size_t formatReasonMessage(const Reading& reading, char* buffer, std::size_
             reasonText(reading.reason), reading.in_range_fraction * reading.region_pixels,
             reading.min_pixels, 100.0 * reading.valid_fraction, 100.0 * reading.in_range_fraction);
         break;
+    case NoReadingReason::CalibrationSuspect:
+        written = std::snprintf(buffer, size,
+                                "%s: rows of matching points %+.2f px apart; recalibrate, or "
+                                "`stereoctl check-calibration --fix`",
+                                reasonText(reading.reason), reading.calibration_row_offset_px);
+        break;
     case NoReadingReason::NearerThanRange:
         written = std::snprintf(buffer, size,
                                 "%s: nearer than %.3f m (%.1f %% of the region at the range's near "
@@ -424,6 +430,10 @@ void appendReadingJson(std::string& out, const ReadingReport& report, int64_t no
     object.field("in_range_fraction", roundTo(reading.in_range_fraction, 4));
     object.field("region_pixels", reading.region_pixels);
     object.field("range_limit_fraction", roundTo(reading.range_limit_fraction, 4));
+    if (reading.calibration_suspect) {
+        object.field("calibration_suspect", true);
+        object.field("calibration_row_offset_px", roundTo(reading.calibration_row_offset_px, 3));
+    }
     if (reading.reason == NoReadingReason::NearerThanRange)
         object.field("nearer_than_m", roundTo(reading.nearer_than_m, 4));
     if (!valid) {

@@ -55,6 +55,9 @@ struct PipelineStats {
     double fps = 0.0;               // processed pairs per second over the last frames
     StageTimings stage_mean_ms;     // mean of each stage over the last frames, ms
     double publish_mean_ms = 0.0;   // mean of the publish stage (depth to mm, hand-off)
+    // From a pair's capture stamp to its result's publication, over the last pairs, ms.
+    double latency_p50_ms = 0.0;
+    double latency_p99_ms = 0.0;
     DisparityRange range;           // the disparity range in force
     std::array<char, 16> matcher{}; // StereoProcessor::matcherName(), NUL-terminated
 };

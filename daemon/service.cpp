@@ -155,6 +155,11 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
     publisher_ = std::make_unique<Publisher>();
     worker_ =
         std::make_unique<Worker>(*ring_, *publisher_, processor_.get(), config_.source.max_skew_ms);
+    if (processor_) {
+        health_ = std::make_unique<CalibrationHealthMonitor>(config_.calibration_health.interval_s);
+        worker_->setHealthMonitor(health_.get());
+        worker_->setWithholdWhenFailed(config_.calibration_health.withhold_when_failed);
+    }
 
     ServerOptions server_options;
     server_options.socket = config_.socket;
@@ -408,7 +413,32 @@ void Service::describe(Json& status, const PublishedFrame* latest, const SourceH
         {"rectify", roundTo(stage.rectify_ms, 3)}, {"match", roundTo(stage.match_ms, 3)},
         {"depth", roundTo(stage.depth_ms, 3)},     {"nearest", roundTo(stage.nearest_ms, 3)},
         {"cloud", roundTo(stage.cloud_ms, 3)},     {"publish", roundTo(stats.publish_mean_ms, 3)}};
+    // From the capture stamp of a pair to the publication of its result (the last 256 pairs).
+    pipeline["latency_ms"] = {{"p50", roundTo(stats.latency_p50_ms, 3)},
+                              {"p99", roundTo(stats.latency_p99_ms, 3)}};
     status["pipeline"] = std::move(pipeline);
+
+    Json rig_health = Json::object();
+    if (!health_) {
+        rig_health["state"] = healthStateName(HealthState::Unknown);
+        rig_health["reason"] = "uncalibrated";
+    } else {
+        const HealthReport report = health_->report();
+        rig_health["state"] = healthStateName(report.state);
+        if (!report.reason.empty())
+            rig_health["reason"] = report.reason;
+        rig_health["row_offset_px"] = roundTo(report.row_offset_px, 3);
+        rig_health["row_offset_p90_px"] = roundTo(report.row_offset_p90_px, 3);
+        rig_health["matches"] = report.matches;
+        rig_health["trend_px_per_min"] = roundTo(report.trend_px_per_min, 4);
+        rig_health["checks"] = report.checks;
+        rig_health["check_ms"] = roundTo(report.check_ms, 2);
+        rig_health["interval_s"] = config_.calibration_health.interval_s;
+        if (report.checked_stamp_ns > 0)
+            rig_health["checked_age_s"] =
+                roundTo(static_cast<double>(monotonicNowNs() - report.checked_stamp_ns) / 1e9, 2);
+    }
+    status["calibration_health"] = std::move(rig_health);
 
     Json calibration = Json::object();
     calibration["path"] = options_.calibration_path;
@@ -472,6 +502,11 @@ ReloadOutcome Service::loadAndApply()
         worker_->updateSettings(proposed.processing);
         server_->setPublishConfig(proposed.publish);
         applyLogLevel(proposed.log_level);
+        if (health_) {
+            health_->setInterval(proposed.calibration_health.interval_s);
+            worker_->setWithholdWhenFailed(proposed.calibration_health.withhold_when_failed);
+        }
+        config_.calibration_health = proposed.calibration_health;
         config_.processing = proposed.processing;
         config_.publish = proposed.publish;
         config_.log_level = proposed.log_level;

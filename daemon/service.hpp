@@ -27,6 +27,7 @@
 
 #include "capture/frame_source.hpp"
 #include "config/service_config.hpp"
+#include "daemon/calibration_health_monitor.hpp"
 #include "daemon/publisher.hpp"
 #include "daemon/socket_server.hpp"
 #include "daemon/source_counter_watch.hpp"
@@ -154,6 +155,8 @@ class Service final : private ServerBackend {
     std::unique_ptr<FrameSource> source_;
     std::optional<StereoCalibration> calibration_; // none: uncalibrated mode
     std::unique_ptr<StereoProcessor> processor_;   // null in uncalibrated mode
+    // Calibration health; outlives the worker, which borrows it. Null when uncalibrated.
+    std::unique_ptr<CalibrationHealthMonitor> health_;
     std::unique_ptr<PairRing> ring_;
     std::unique_ptr<Publisher> publisher_;
     std::unique_ptr<Worker> worker_;

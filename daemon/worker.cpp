@@ -175,6 +175,11 @@ void Worker::processPair(StereoPair& pair)
         try {
             processor_->process(pair.left->image, pair.right->image, stamp_ns, frame, result);
             processed = true;
+            // Before the frames go back: with a rectified-only calibration the right image
+            // the matcher saw is the frame itself.
+            if (health_ != nullptr && result.reading.reason != NoReadingReason::BadFrame &&
+                health_->due(monotonicNowNs()))
+                health_->offer(result.left_rectified, processor_->lastRightRectified(), stamp_ns);
             const cv::Size calibrated = processor_->calibration().rectified.image_size;
             if (result.reading.reason == NoReadingReason::BadFrame &&
                 (pair.left->image.size() != calibrated || pair.right->image.size() != calibrated))
@@ -212,6 +217,20 @@ void Worker::processPair(StereoPair& pair)
                                    reasonText(NoReadingReason::OutOfSync), skew_ms, max_skew_ms);
         ++stats_.out_of_sync;
     }
+    // Calibration health: a suspect calibration marks the reading, and withholds it when it
+    // failed and the configuration asks for that.
+    reading.calibration_suspect = false;
+    reading.calibration_row_offset_px = 0.0;
+    if (health_ != nullptr && processed) {
+        const HealthState health = health_->state();
+        if (health == HealthState::Degraded || health == HealthState::Failed) {
+            reading.calibration_suspect = true;
+            reading.calibration_row_offset_px = health_->rowOffsetPx();
+            if (health == HealthState::Failed &&
+                withhold_when_failed_.load(std::memory_order_relaxed) && reading.valid)
+                refuseReading(reading, NoReadingReason::CalibrationSuspect);
+        }
+    }
     // Depth is kept when only the region lacked data (too few valid pixels, nothing in
     // range): the picture itself is sound. It is cleared when the pair is not.
     slot.depth_valid = processed && !result.depth_m.empty();
@@ -246,8 +265,26 @@ void Worker::processPair(StereoPair& pair)
     stats_.stage_mean_ms.depth_ms = mean(depth_ms_);
     stats_.stage_mean_ms.nearest_ms = mean(nearest_ms_);
     stats_.stage_mean_ms.cloud_ms = mean(cloud_ms_);
-    publish_ms_.add(static_cast<double>(monotonicNowNs() - publish_start_ns) / 1e6);
+    const int64_t published_ns = monotonicNowNs();
+    publish_ms_.add(static_cast<double>(published_ns - publish_start_ns) / 1e6);
     stats_.publish_mean_ms = mean(publish_ms_);
+    // Latency as a robot sees it: from the pair's capture stamp (CLOCK_MONOTONIC) to its
+    // result going out. A pair whose stamp is not on this clock gives no figure.
+    if (stamp_ns > 0 && stamp_ns <= published_ns) {
+        latency_ms_.add(static_cast<double>(published_ns - stamp_ns) / 1e6);
+        const std::size_t n = latency_ms_.size();
+        for (std::size_t i = 0; i < n; ++i)
+            latency_sorted_[i] = latency_ms_[i];
+        const auto percentile = [&](double p) {
+            const auto nth = latency_sorted_.begin() +
+                             static_cast<std::ptrdiff_t>(std::floor(p * static_cast<double>(n - 1)));
+            std::nth_element(latency_sorted_.begin(), nth,
+                             latency_sorted_.begin() + static_cast<std::ptrdiff_t>(n));
+            return *nth;
+        };
+        stats_.latency_p50_ms = percentile(0.50);
+        stats_.latency_p99_ms = percentile(0.99);
+    }
     slot.stats = stats_;
     publisher_.publish();
 }

@@ -29,6 +29,7 @@
 #include <thread>
 
 #include "capture/frame_source.hpp"
+#include "daemon/calibration_health_monitor.hpp"
 #include "daemon/log_limiter.hpp"
 #include "daemon/publisher.hpp"
 #include "pipeline/stereo_processor.hpp"
@@ -103,6 +104,16 @@ class Worker {
 
     void setMaxSkewMs(double max_skew_ms) noexcept;
 
+    // Calibration health (borrowed until the worker is destroyed; null: none): the worker
+    // offers it a rectified pair when it is due, flags readings while it is degraded or
+    // failed, and withholds them (calibration_suspect) while it is failed if asked to.
+    // Call before start().
+    void setHealthMonitor(CalibrationHealthMonitor* monitor) noexcept { health_ = monitor; }
+    void setWithholdWhenFailed(bool withhold) noexcept
+    {
+        withhold_when_failed_.store(withhold, std::memory_order_relaxed);
+    }
+
     // Hands new settings over; the worker applies them before its next pair (a frame
     // boundary). Never blocks the worker: an atomic pointer swap; settings not picked up
     // yet are replaced. If the processor refuses them, the worker logs why and keeps the
@@ -119,6 +130,7 @@ class Worker {
 
   private:
     static constexpr std::size_t kWindow = 32; // frames in the rolling means
+    static constexpr std::size_t kLatencyWindow = 256; // frames in the latency percentiles
 
     void run();
     void processPair(StereoPair& pair);
@@ -129,6 +141,8 @@ class Worker {
     PairRing& ring_;
     Publisher& publisher_;
     StereoProcessor* processor_; // null: uncalibrated
+    CalibrationHealthMonitor* health_ = nullptr;
+    std::atomic<bool> withhold_when_failed_{false};
     std::thread thread_;
     std::atomic<double> max_skew_ms_;
     std::atomic<ProcessorSettings*> pending_settings_{nullptr}; // owned; see updateSettings()
@@ -140,6 +154,8 @@ class Worker {
     RecentValues<double, kWindow> rectify_ms_, match_ms_, depth_ms_, nearest_ms_, cloud_ms_,
         publish_ms_;
     RecentValues<int64_t, kWindow> processed_ns_; // when each pair was done, for the rate
+    RecentValues<double, kLatencyWindow> latency_ms_; // capture stamp to publication
+    std::array<double, kLatencyWindow> latency_sorted_{}; // scratch for the percentiles
     LogLimiter log_limiter_; // failing pairs: one line per 5 s, the rest counted
 };
 

@@ -15,6 +15,7 @@ const char* reasonCode(NoReadingReason reason) noexcept
     case NoReadingReason::Stale: return "stale";
     case NoReadingReason::Uncalibrated: return "uncalibrated";
     case NoReadingReason::NearerThanRange: return "nearer_than_range";
+    case NoReadingReason::CalibrationSuspect: return "calibration_suspect";
     }
     return "unknown";
 }
@@ -33,6 +34,8 @@ const char* reasonText(NoReadingReason reason) noexcept
     case NoReadingReason::Uncalibrated: return "the service runs without a calibration";
     case NoReadingReason::NearerThanRange:
         return "something in the region is nearer than the disparity range can see";
+    case NoReadingReason::CalibrationSuspect:
+        return "the calibration no longer rectifies the cameras (calibration health failed)";
     }
     return "unknown";
 }

@@ -16,6 +16,8 @@ enum class NoReadingReason {
     BadFrame,           // the pair could not be processed (size mismatch, corrupt data)
     NearerThanRange,    // much of the region matches at the near end of the disparity range:
                         // something is nearer than the service can measure (nearer_than_m)
+    CalibrationSuspect, // the calibration no longer rectifies the rig (calibration health
+                        // failed) and the service is configured to withhold readings then
     Stale,              // the latest reading is older than the caller allows
     Uncalibrated,       // the service runs without a calibration (raw frames only)
 };
@@ -43,6 +45,10 @@ struct Reading {
     // NearerThanRange: the closest depth the disparity range can see, in metres; the
     // obstacle is nearer than this.
     double nearer_than_m = 0.0;
+    // Set while calibration health is degraded or failed: the rows of matching points
+    // are calibration_row_offset_px apart (signed median, right - left), so depth may be off.
+    bool calibration_suspect = false;
+    double calibration_row_offset_px = 0.0;
 };
 
 } // namespace stereod

@@ -185,6 +185,7 @@ struct StereoProcessor::Impl {
     NearestObjectFinder nearest;
     cv::Mat left_gray, right_gray;   // colour inputs converted, reused
     cv::Mat right_rectified;         // full calibration only, reused
+    cv::Mat last_right;              // what the matcher saw last (see lastRightRectified())
     bool last_frame_bad = false;     // log a run of bad frames once
 };
 
@@ -211,6 +212,7 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& right, int64_t
     const cv::Mat right_gray =
         left_gray.empty() ? cv::Mat() : p.grayView(right, p.right_gray, "right", problem);
     if (left_gray.empty() || right_gray.empty()) {
+        p.last_right = cv::Mat();
         p.badFrame(out, problem);
         return;
     }
@@ -229,6 +231,7 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& right, int64_t
 
     // The matcher writes into the result's buffers (headers shared, nothing copied).
     MatchOutput match{out.disparity, out.confidence, out.range_limit};
+    p.last_right = right_rectified;
     p.matcher->compute(out.left_rectified, right_rectified, match);
     out.disparity = match.disparity_px;
     out.confidence = match.confidence;
@@ -269,6 +272,11 @@ void StereoProcessor::updateSettings(const ProcessorSettings& settings)
         warnIfCapped(range, settings.matcher);
     p.range = range;
     p.settings = settings;
+}
+
+const cv::Mat& StereoProcessor::lastRightRectified() const
+{
+    return impl_->last_right;
 }
 
 const StereoCalibration& StereoProcessor::calibration() const

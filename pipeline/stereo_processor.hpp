@@ -99,6 +99,11 @@ public:
     // Throws std::invalid_argument, leaving the current settings in force, if invalid.
     void updateSettings(const ProcessorSettings& settings);
 
+    // The right image of the last pair as it was matched (rectified): the processor's own
+    // buffer, or with a rectified-only calibration a view of the input, so valid only
+    // while that input is. Empty before the first pair and after a bad one.
+    const cv::Mat& lastRightRectified() const;
+
     const StereoCalibration& calibration() const;
     const ProcessorSettings& settings() const;
     DisparityRange disparityRange() const;

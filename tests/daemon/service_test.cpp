@@ -541,6 +541,12 @@ TEST_F(ServiceTest, StatusReportsEveryPart)
     for (const char* stage : {"rectify", "match", "depth", "nearest", "cloud", "publish"})
         EXPECT_TRUE(pipeline["stage_ms"].contains(stage)) << stage;
     EXPECT_GT(pipeline["stage_ms"]["match"].get<double>(), 0.0);
+    // Capture to publication: at least the chain's own time, p99 at least p50.
+    const double p50 = pipeline["latency_ms"]["p50"].get<double>();
+    const double p99 = pipeline["latency_ms"]["p99"].get<double>();
+    EXPECT_GE(p50, pipeline["stage_ms"]["match"].get<double>() * 0.5);
+    EXPECT_GE(p99, p50);
+    EXPECT_LT(p99, 60000.0);
     EXPECT_EQ(state["calibration"]["kind"], "rectified");
     EXPECT_DOUBLE_EQ(state["calibration"]["focal_px"].get<double>(), kFocalPx);
     EXPECT_DOUBLE_EQ(state["calibration"]["baseline_m"].get<double>(), kBaselineM);

@@ -1,0 +1,174 @@
+#include "daemon/calibration_health_monitor.hpp"
+
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include <spdlog/spdlog.h>
+
+#include "capture/frame.hpp"
+
+namespace stereod {
+namespace {
+
+// Checks kept for the trend, and how far back it looks.
+constexpr std::size_t kHistory = 64;
+constexpr int64_t kTrendWindowNs = 5LL * 60 * 1'000'000'000;
+// Below normal priority: the check waits for the pipeline, never the reverse.
+constexpr int kNice = 10;
+
+int64_t toNs(double seconds)
+{
+    return seconds > 0.0 ? static_cast<int64_t>(seconds * 1e9) : 0;
+}
+
+// Least-squares slope of the row offset against time, px per minute.
+double trendPerMinute(const std::vector<std::pair<double, double>>& minutes_offsets)
+{
+    const double n = static_cast<double>(minutes_offsets.size());
+    double sx = 0, sy = 0, sxx = 0, sxy = 0;
+    for (const auto& [x, y] : minutes_offsets) {
+        sx += x;
+        sy += y;
+        sxx += x * x;
+        sxy += x * y;
+    }
+    const double denominator = n * sxx - sx * sx;
+    return denominator > 0.0 ? (n * sxy - sx * sy) / denominator : 0.0;
+}
+
+} // namespace
+
+CalibrationHealthMonitor::CalibrationHealthMonitor(double interval_s)
+    : interval_ns_(toNs(interval_s))
+{
+    report_.enabled = interval_s > 0.0;
+    if (!report_.enabled)
+        report_.reason = "off";
+    history_.reserve(kHistory);
+    thread_ = std::thread([this] { run(); });
+}
+
+CalibrationHealthMonitor::~CalibrationHealthMonitor()
+{
+    {
+        std::lock_guard lock(mutex_);
+        stop_ = true;
+    }
+    wake_.notify_one();
+    thread_.join();
+}
+
+void CalibrationHealthMonitor::setInterval(double interval_s)
+{
+    interval_ns_.store(toNs(interval_s), std::memory_order_release);
+    std::lock_guard lock(mutex_);
+    report_.enabled = interval_s > 0.0;
+    if (!report_.enabled) {
+        report_.reason = "off";
+        report_.state = HealthState::Unknown;
+        state_.store(HealthState::Unknown, std::memory_order_release);
+    }
+}
+
+bool CalibrationHealthMonitor::due(int64_t now_ns) const noexcept
+{
+    return interval_ns_.load(std::memory_order_acquire) > 0 &&
+           now_ns >= next_due_ns_.load(std::memory_order_acquire) &&
+           !busy_.load(std::memory_order_acquire);
+}
+
+void CalibrationHealthMonitor::offer(const cv::Mat& left_rectified, const cv::Mat& right_rectified,
+                                     int64_t stamp_ns)
+{
+    if (left_rectified.empty() || right_rectified.empty() ||
+        left_rectified.size() != right_rectified.size() || busy_.exchange(true))
+        return;
+    // Buffers keep their size: copying allocates only for the first pair.
+    left_rectified.copyTo(left_);
+    right_rectified.copyTo(right_);
+    stamp_ns_ = stamp_ns;
+    next_due_ns_.store(monotonicNowNs() + interval_ns_.load(std::memory_order_acquire),
+                       std::memory_order_release);
+    {
+        std::lock_guard lock(mutex_);
+        ready_ = true;
+    }
+    wake_.notify_one();
+}
+
+void CalibrationHealthMonitor::run()
+{
+    // This thread's own niceness (Linux schedules threads one by one).
+    ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), kNice);
+    std::unique_lock lock(mutex_);
+    for (;;) {
+        wake_.wait(lock, [this] { return stop_ || ready_; });
+        if (stop_)
+            return;
+        lock.unlock();
+        measureOffered();
+        lock.lock();
+        ready_ = false;
+        busy_.store(false, std::memory_order_release);
+    }
+}
+
+void CalibrationHealthMonitor::measureOffered()
+{
+    const auto start = std::chrono::steady_clock::now();
+    const HealthMeasurement m = checker_.measure(left_, right_);
+    const double check_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+
+    if (m.state != HealthState::Unknown) {
+        if (history_.size() == kHistory)
+            history_.erase(history_.begin());
+        history_.push_back({stamp_ns_, m.row_offset_px});
+    }
+    std::vector<std::pair<double, double>> recent;
+    for (const Sample& s : history_)
+        if (stamp_ns_ - s.stamp_ns <= kTrendWindowNs)
+            recent.emplace_back(static_cast<double>(s.stamp_ns - stamp_ns_) / 60e9, s.row_offset_px);
+    const bool spans = recent.size() >= 3 &&
+                       (recent.back().first - recent.front().first) * 60.0 >= 10.0;
+
+    HealthState previous;
+    {
+        std::lock_guard lock(mutex_);
+        previous = report_.state;
+        report_.state = m.state;
+        report_.reason = m.reason;
+        report_.matches = m.matches;
+        report_.row_offset_px = m.row_offset_px;
+        report_.row_offset_p90_px = m.row_offset_p90_px;
+        report_.trend_px_per_min = spans ? trendPerMinute(recent) : 0.0;
+        report_.checked_stamp_ns = stamp_ns_;
+        report_.check_ms = check_ms;
+        ++report_.checks;
+    }
+    row_offset_px_.store(m.row_offset_px, std::memory_order_release);
+    state_.store(m.state, std::memory_order_release);
+    if (m.state != previous) {
+        const auto level = m.state == HealthState::Ok || m.state == HealthState::Unknown
+                               ? spdlog::level::info
+                               : spdlog::level::warn;
+        spdlog::log(level,
+                    "calibration health: {} -> {}{}{}: rows of matching points {:+.2f} px apart "
+                    "(90 % within {:.2f} px, {} matches)",
+                    healthStateName(previous), healthStateName(m.state),
+                    m.reason.empty() ? "" : ", ", m.reason, m.row_offset_px, m.row_offset_p90_px,
+                    m.matches);
+    }
+}
+
+HealthReport CalibrationHealthMonitor::report() const
+{
+    std::lock_guard lock(mutex_);
+    return report_;
+}
+
+} // namespace stereod

@@ -1,0 +1,92 @@
+#pragma once
+// Calibration health while the service runs (pipeline/calibration_health.hpp): every
+// `interval_s` the worker hands over a copy of the rectified pair it just matched, and a
+// thread of its own, at a lower scheduling priority, measures how far apart the rows of
+// matching features are. The state (ok, degraded, failed, unknown) is logged once when it
+// changes, never per frame; readings are flagged while it is degraded or failed.
+//
+// Thread contract: due() and offer() from the worker thread only (never blocking: a pair
+// offered while a measurement runs is not taken); state(), rowOffsetPx() and report() from
+// any thread; setInterval() from the controlling thread.
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <opencv2/core/mat.hpp>
+
+#include "pipeline/calibration_health.hpp"
+
+namespace stereod {
+
+// What the monitor last found, for `status`.
+struct HealthReport {
+    bool enabled = false;
+    HealthState state = HealthState::Unknown;
+    std::string reason = "no_check_yet";   // see HealthMeasurement::reason
+    int matches = 0;
+    double row_offset_px = 0.0;            // signed median, right row - left row
+    double row_offset_p90_px = 0.0;
+    // Change of the row offset per minute, from the checks of the last minutes (0 with
+    // fewer than three checks ten seconds apart).
+    double trend_px_per_min = 0.0;
+    uint64_t checks = 0;
+    int64_t checked_stamp_ns = 0;          // capture stamp of the pair last checked
+    double check_ms = 0.0;                 // what the last check cost, on its own thread
+};
+
+class CalibrationHealthMonitor {
+public:
+    // interval_s <= 0: no checks (state unknown, reason "off").
+    explicit CalibrationHealthMonitor(double interval_s);
+    ~CalibrationHealthMonitor();
+
+    CalibrationHealthMonitor(const CalibrationHealthMonitor&) = delete;
+    CalibrationHealthMonitor& operator=(const CalibrationHealthMonitor&) = delete;
+
+    // Whether a pair is wanted now: checks are on, the last one is an interval old and
+    // none is running.
+    bool due(int64_t now_ns) const noexcept;
+    // Copies the rectified pair (CV_8UC1, same size) and wakes the measuring thread.
+    void offer(const cv::Mat& left_rectified, const cv::Mat& right_rectified, int64_t stamp_ns);
+
+    HealthState state() const noexcept { return state_.load(std::memory_order_acquire); }
+    double rowOffsetPx() const noexcept { return row_offset_px_.load(std::memory_order_acquire); }
+    HealthReport report() const;
+
+    void setInterval(double interval_s);
+
+private:
+    void run();
+    void measureOffered();
+
+    std::atomic<int64_t> interval_ns_;
+    std::atomic<int64_t> next_due_ns_{0};
+    std::atomic<bool> busy_{false};          // a pair is waiting or being measured
+    std::atomic<HealthState> state_{HealthState::Unknown};
+    std::atomic<double> row_offset_px_{0.0};
+
+    mutable std::mutex mutex_;
+    std::condition_variable wake_;           // a pair was offered, or stop
+    bool stop_ = false;                      // guarded by mutex_
+    bool ready_ = false;                     // guarded by mutex_: an offered pair is copied
+    HealthReport report_;                    // guarded by mutex_
+
+    // Owned by whoever holds busy_: the worker fills them, the thread measures them.
+    cv::Mat left_, right_;
+    int64_t stamp_ns_ = 0;
+    // The measuring thread's own.
+    CalibrationHealthChecker checker_;
+    struct Sample {
+        int64_t stamp_ns;
+        double row_offset_px;
+    };
+    std::vector<Sample> history_;            // recent checks, for the trend
+    std::thread thread_;
+};
+
+} // namespace stereod
