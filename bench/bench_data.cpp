@@ -1,11 +1,14 @@
 #include "bench/bench_data.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+
+#include "pipeline/chessboard_calibration.hpp"
 
 namespace stereod::bench {
 
@@ -62,6 +65,35 @@ const std::vector<Scene>& scenes()
          STEREOD_SHARED_DATA_DIR "/middlebury/venus/im6.png"},
     };
     return all;
+}
+
+const Scene& chessboardScene()
+{
+    static const Scene rig = {"chessboard", STEREOD_OPENCV_SAMPLES_DIR "/left01.jpg",
+                              STEREOD_OPENCV_SAMPLES_DIR "/right01.jpg", true};
+    return rig;
+}
+
+const StereoCalibration& chessboardRigCalibration()
+{
+    static const StereoCalibration calibration = [] {
+        std::vector<std::string> left;
+        std::vector<std::string> right;
+        for (int i = 1; i <= 14; ++i) {
+            if (i == 10) {
+                continue; // the sample set has no pair 10
+            }
+            char name[32];
+            std::snprintf(name, sizeof name, "/left%02d.jpg", i);
+            left.push_back(std::string(STEREOD_OPENCV_SAMPLES_DIR) + name);
+            std::snprintf(name, sizeof name, "/right%02d.jpg", i);
+            right.push_back(std::string(STEREOD_OPENCV_SAMPLES_DIR) + name);
+        }
+        ChessboardCalibrationOptions options;
+        options.board = {9, 6, 0.025};
+        return calibrateChessboard(left, right, options).calibration;
+    }();
+    return calibration;
 }
 
 ImagePair loadScene(const Scene& scene, cv::Size size)

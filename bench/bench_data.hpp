@@ -14,17 +14,32 @@
 
 namespace stereod::bench {
 
-// One real stereo pair on disk (rectified by its authors).
+// One real stereo pair on disk: either rectified by its authors (the benchmark turns it
+// into what a plausible rig would capture), or raw views of a real rig that the benchmark
+// calibrates from its chessboard pairs.
 struct Scene {
     std::string name; // short, used in benchmark names: "aloe"
     std::string left_path;
     std::string right_path;
+    bool raw_rig_views = false; // true: raw views of the chessboard rig (chessboardRig())
 };
 
 // Aloe (Middlebury 2006, from OpenCV's samples), Tsukuba and Venus (Middlebury 2001,
 // from the shared data folder). Paths come from the compile definitions
 // STEREOD_OPENCV_SAMPLES_DIR and STEREOD_SHARED_DATA_DIR.
 const std::vector<Scene>& scenes();
+
+// The real rig: pair 01 of OpenCV's 13 chessboard pairs (left01.jpg / right01.jpg,
+// 640x480, raw views of a wide-angle stereo camera; opencv-doc samples).
+const Scene& chessboardScene();
+
+// The calibration of that rig, made by the project's own chessboard calibration
+// (pipeline/chessboard_calibration.hpp) from all 13 pairs (01..14 without 10), board
+// 9x6 inner corners, 25 mm squares (the sample board's square size is not published;
+// depths scale with it, disparities do not), alpha 0. Computed on the first call (a few
+// seconds) and kept for the process. Throws ChessboardCalibrationError when the images
+// are missing or unusable.
+const StereoCalibration& chessboardRigCalibration();
 
 // A pair of CV_8UC1 images of the same size.
 struct ImagePair {

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Builds stereod_bench in Release and runs it: Google Benchmark's table on the terminal,
-# its JSON in bench/results.json (untracked), and a markdown summary at the end.
+# its JSON in bench/results.json (untracked), and a markdown summary at the end: stage
+# times, latency, census-sgm against OpenCV's SGBM as ratios, allocations, memory.
 #
-#   bench/run.sh                                   everything (about 1.5 minutes on 2 idle cores)
+#   bench/run.sh                                   everything (about 2 minutes on 2 shared cores)
 #   bench/run.sh --benchmark_filter='scene:aloe'   any extra flags go to the benchmark
 #
 # Environment: BUILD_DIR (default: build-bench in the source tree), JOBS (default 2),
