@@ -1612,6 +1612,22 @@ ServiceConfig parseDocument(const std::string& text, const std::string& origin,
         problems.push_back(Problem{0, message + ": " + error.msg});
         throw ConfigError(inLineOrder(std::move(problems)));
     }
+    // A file that chooses census-sgm gets census-sgm's own values for the settings it
+    // shares with OpenCV's matchers, where the file does not set them.
+    if (config.processing.matcher.kind == MatcherKind::CensusSgm) {
+        MatcherSettings tuned = config.processing.matcher;
+        applyCensusSgmDefaults(tuned);
+        MatcherSettings& m = config.processing.matcher;
+        const auto unset = [&](const char* key) { return locations.lines.count(key) == 0; };
+        if (unset("matcher.uniqueness_ratio"))
+            m.uniqueness_ratio = tuned.uniqueness_ratio;
+        if (unset("matcher.lr_max_diff_px"))
+            m.lr_max_diff_px = tuned.lr_max_diff_px;
+        if (unset("matcher.speckle_window_px"))
+            m.speckle_window_px = tuned.speckle_window_px;
+        if (unset("matcher.speckle_range_px"))
+            m.speckle_range_px = tuned.speckle_range_px;
+    }
     overrideKeys(config, overrides, locations);
     auto value_problems = checkValues(config, locations);
     problems.insert(problems.end(), std::make_move_iterator(value_problems.begin()),

@@ -12,6 +12,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "config/service_config.hpp"
+#include "pipeline/census_sgm_matcher.hpp"
 #include "ctl/commands.hpp"
 #include "ctl/exit_codes.hpp"
 #include "ctl/output.hpp"
@@ -105,8 +106,10 @@ ProcessorSettings depthSettings(const DepthOptions& options)
                                      ? defaultConfig().processing
                                      : loadConfig(options.config_path).processing;
     MatcherSettings& matcher = settings.matcher;
-    if (options.matcher == "census-sgm") {
+    if (options.matcher == "census-sgm" && matcher.kind != MatcherKind::CensusSgm) {
+        // Switched to census-sgm here: with its own values for the shared settings.
         matcher.kind = MatcherKind::CensusSgm;
+        applyCensusSgmDefaults(matcher);
     } else if (options.matcher == "bm") {
         matcher.kind = MatcherKind::Bm;
     } else if (options.matcher == "sgbm") {

@@ -90,6 +90,15 @@ sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& s, const Dispari
     return c;
 }
 
+void applyCensusSgmDefaults(MatcherSettings& settings)
+{
+    const sgm::CensusSgmSettings tuned;
+    settings.uniqueness_ratio = tuned.uniqueness_percent;
+    settings.lr_max_diff_px = tuned.lr_max_diff_px;
+    settings.speckle_window_px = tuned.speckle_window_px;
+    settings.speckle_range_px = tuned.speckle_range_px;
+}
+
 void validateCensusSgm(const MatcherSettings& settings)
 {
     DisparityRange range;

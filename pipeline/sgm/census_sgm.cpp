@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -41,14 +42,16 @@ int censusBits(const CensusSgmSettings& s)
 // The work of one band: its rows' costs and paths. Sized once for the widest row.
 struct BandScratch {
     std::vector<uint8_t> cost;                 // width * lanes
-    std::vector<uint16_t> sum;                 // width * lanes
-    std::vector<uint8_t> row_scratch;          // two path blocks
+    std::vector<uint8_t> forward;              // width path blocks: the left->right path
+    std::vector<uint8_t> row_scratch;          // two path blocks: the right->left path
+    std::vector<uint16_t> sum_scratch;         // summed paths of a few pixels
     std::vector<uint8_t> above[3][2];          // per path from above: previous, current row
     std::vector<uint8_t> p2_above[3];          // width, per path from above
-    std::vector<uint8_t> p2_forward, p2_backward;
+    // width + 1: P2 onto x from x - 1 at [x], so onto x from x + 1 at [x + 1].
+    std::vector<uint8_t> p2_along;
     std::vector<Winner> winners;
-    std::vector<uint32_t> right_best;
-    std::vector<uint32_t> winners_scratch;
+    std::vector<uint16_t> right_lane;
+    std::vector<uint16_t> winners_scratch;
 };
 
 } // namespace
@@ -110,10 +113,11 @@ size_t censusSgmMemoryBytes(const CensusSgmSettings& s)
     const size_t output = w * h * (2 * sizeof(int16_t) + 2) +       // fixed point x2, conf, flags
                           speckleFilterBytes(s.width, s.height);
     const size_t above = s.paths == 5 ? 3 : 1;
-    const size_t band = w * lanes * (1 + sizeof(uint16_t)) + 2 * pathBlockBytes(static_cast<int>(lanes)) +
-                        above * 2 * w * pathBlockBytes(static_cast<int>(lanes)) +
-                        w * (above + 2) + w * (sizeof(Winner) + sizeof(uint32_t)) +
-                        winnersScratch(s.width, s.min_disparity, static_cast<int>(lanes)) * sizeof(uint32_t);
+    const size_t band = w * lanes + 2 * pathBlockBytes(static_cast<int>(lanes)) +
+                        winnersSumScratch(static_cast<int>(lanes)) * sizeof(uint16_t) +
+                        (above * 2 + 1) * w * pathBlockBytes(static_cast<int>(lanes)) +
+                        w * (above + 1) + 1 + w * (sizeof(Winner) + sizeof(uint16_t)) +
+                        winnersScratch(s.width, s.min_disparity, static_cast<int>(lanes)) * sizeof(uint16_t);
     return image + output + band * static_cast<size_t>(s.threads);
 }
 
@@ -147,20 +151,22 @@ struct CensusSgm::Impl {
         const size_t row_blocks = static_cast<size_t>(s.width) * pathBlockBytes(lanes);
         bands.resize(static_cast<size_t>(s.threads));
         for (BandScratch& b : bands) {
+            // Path blocks start all 255: their pads stay so (see sgm_kernels.hpp).
             b.cost.assign(row_cells, 0);
-            b.sum.assign(row_cells, 0);
+            b.forward.assign(row_blocks, 255);
             b.row_scratch.assign(2 * pathBlockBytes(lanes), 255);
+            b.sum_scratch.assign(winnersSumScratch(lanes), 0);
             for (int i = 0; i < abovePaths(); ++i) {
                 b.above[i][0].assign(row_blocks, 255);
                 b.above[i][1].assign(row_blocks, 255);
                 b.p2_above[i].assign(static_cast<size_t>(s.width), 0);
             }
-            b.p2_forward.assign(static_cast<size_t>(s.width), 0);
-            b.p2_backward.assign(static_cast<size_t>(s.width), 0);
+            b.p2_along.assign(static_cast<size_t>(s.width) + 1, 0);
             b.winners.assign(static_cast<size_t>(s.width), Winner{});
-            b.right_best.assign(static_cast<size_t>(s.width), 0);
+            b.right_lane.assign(static_cast<size_t>(s.width), 0);
             b.winners_scratch.assign(winnersScratch(s.width, s.min_disparity, lanes), 0);
         }
+        inv_sharp_scale = 1.0 / (2.0 * s.p1 * s.paths);
         // P2 by intensity step along the path (see CensusSgmSettings::p2_gradient_scale).
         for (int g = 0; g < 256; ++g) {
             double p2 = s.p2;
@@ -215,21 +221,54 @@ struct CensusSgm::Impl {
         for (int y = y0; y < y1; ++y)
             for (int p = 0; p < planes; ++p) {
                 const uint8_t* row = planeRow(census_right, p, y);
-                std::reverse_copy(row, row + w, planeRow(census_right_reversed, p, y));
+                uint8_t* reversed = planeRow(census_right_reversed, p, y);
+                // Eight bytes at a time, swapped end for end.
+                int j = 0;
+                for (; j + 8 <= w; j += 8) {
+                    uint64_t bytes;
+                    std::memcpy(&bytes, row + w - j - 8, 8);
+                    bytes = byteSwap(bytes);
+                    std::memcpy(reversed + j, &bytes, 8);
+                }
+                for (; j < w; ++j)
+                    reversed[j] = row[w - 1 - j];
             }
     }
 
-    // The P2 of every pixel of row y for a step from (x + dx, y + dy) onto (x, y).
-    void penalties(const uint8_t* left, size_t stride, int y, int dx, int dy, uint8_t* p2) const
+    static uint64_t byteSwap(uint64_t v)
+    {
+        v = ((v & 0x00FF00FF00FF00FFull) << 8) | ((v >> 8) & 0x00FF00FF00FF00FFull);
+        v = ((v & 0x0000FFFF0000FFFFull) << 16) | ((v >> 16) & 0x0000FFFF0000FFFFull);
+        return (v << 32) | (v >> 32);
+    }
+
+    // The P2 of every pixel of row y for a step from (x + dx, y - 1) onto (x, y); a step
+    // from outside the image counts as no intensity change.
+    void penaltiesFromAbove(const uint8_t* left, size_t stride, int y, int dx, uint8_t* p2) const
     {
         const int w = settings.width;
         const uint8_t* row = left + static_cast<size_t>(y) * stride;
-        const int yp = std::clamp(y + dy, 0, settings.height - 1);
-        const uint8_t* from_row = left + static_cast<size_t>(yp) * stride;
-        for (int x = 0; x < w; ++x) {
-            const int xp = std::clamp(x + dx, 0, w - 1);
-            p2[x] = p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(from_row[xp]))];
-        }
+        const uint8_t* from = left + static_cast<size_t>(std::max(y - 1, 0)) * stride;
+        const int x0 = std::max(0, -dx);
+        const int x1 = std::min(w, w - dx);
+        for (int x = 0; x < x0; ++x)
+            p2[x] = p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(from[0]))];
+        for (int x = x0; x < x1; ++x)
+            p2[x] = p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(from[x + dx]))];
+        for (int x = x1; x < w; ++x)
+            p2[x] = p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(from[w - 1]))];
+    }
+
+    // p2[x] = P2 for a step between x - 1 and x of row y, for x in 0..width (0 and width:
+    // outside the image, no intensity change).
+    void penaltiesAlong(const uint8_t* left, size_t stride, int y, uint8_t* p2) const
+    {
+        const int w = settings.width;
+        const uint8_t* row = left + static_cast<size_t>(y) * stride;
+        p2[0] = p2_by_step[0];
+        for (int x = 1; x < w; ++x)
+            p2[x] = p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(row[x - 1]))];
+        p2[w] = p2_by_step[0];
     }
 
     void matchBand(int band, const uint8_t* left, size_t stride, const CensusSgmOutput& out)
@@ -257,27 +296,34 @@ struct CensusSgm::Impl {
                               cost_invalid, b.cost.data());
 
             const int parity = (y - first_row) & 1;
+            const uint8_t* others[4];
+            const uint8_t* p2_rows[3];
+            const uint8_t* prev_rows[3];
+            uint8_t* cur_rows[3];
             for (int i = 0; i < above; ++i) {
-                penalties(left, stride, y, kAboveDx[i], -1, b.p2_above[i].data());
-                const uint8_t* prev = y == first_row ? nullptr : b.above[i][parity ^ 1].data();
-                kernels->path_from_above(b.cost.data(), b.p2_above[i].data(),
-                                         static_cast<uint8_t>(s.p1), s.width, lanes,
-                                         kAboveDx[i], i == 0, prev, b.above[i][parity].data(),
-                                         b.sum.data());
+                penaltiesFromAbove(left, stride, y, kAboveDx[i], b.p2_above[i].data());
+                p2_rows[i] = b.p2_above[i].data();
+                prev_rows[i] = y == first_row ? nullptr : b.above[i][parity ^ 1].data();
+                cur_rows[i] = b.above[i][parity].data();
+                others[i] = cur_rows[i];
             }
-            if (y < y0)
-                continue;   // warming up the paths from above for this band's first row
-
-            penalties(left, stride, y, -1, 0, b.p2_forward.data());
-            penalties(left, stride, y, 1, 0, b.p2_backward.data());
-            kernels->path_along_row(b.cost.data(), b.p2_forward.data(),
-                                    static_cast<uint8_t>(s.p1), s.width, lanes, true, false,
-                                    b.row_scratch.data(), b.sum.data());
-            kernels->path_along_row(b.cost.data(), b.p2_backward.data(),
-                                    static_cast<uint8_t>(s.p1), s.width, lanes, false, false,
-                                    b.row_scratch.data(), b.sum.data());
-            kernels->winners(b.sum.data(), s.width, s.min_disparity, s.num_disparities, lanes,
-                             b.winners.data(), b.right_best.data(), b.winners_scratch.data());
+            const AbovePaths above_paths{above, kAboveDx, p2_rows, prev_rows, cur_rows};
+            if (y < y0) {
+                // Warming up the paths from above for this band's first row.
+                kernels->paths_forward(b.cost.data(), static_cast<uint8_t>(s.p1), s.width, lanes,
+                                       above_paths, nullptr, nullptr);
+                continue;
+            }
+            penaltiesAlong(left, stride, y, b.p2_along.data());
+            kernels->paths_forward(b.cost.data(), static_cast<uint8_t>(s.p1), s.width, lanes,
+                                   above_paths, b.p2_along.data(), b.forward.data());
+            others[above] = b.forward.data();
+            kernels->winners_backward(b.cost.data(), b.p2_along.data() + 1,
+                                      static_cast<uint8_t>(s.p1), s.width, lanes,
+                                      PathRows{others, above + 1}, s.min_disparity,
+                                      s.num_disparities, b.row_scratch.data(),
+                                      b.sum_scratch.data(), b.winners.data(),
+                                      b.right_lane.data(), b.winners_scratch.data());
             decideRow(b, y, out);
         }
     }
@@ -316,20 +362,19 @@ struct CensusSgm::Impl {
             int lr_diff = 0;
             if (s.lr_max_diff_px >= 0) {
                 const int xr = x - s.min_disparity - k;
-                const uint32_t right = b.right_best[static_cast<size_t>(xr)];
-                if (right == 0xFFFFFFFFu)
+                const uint16_t right = b.right_lane[static_cast<size_t>(xr)];
+                if (right == 0xFFFF)
                     continue;
-                lr_diff = std::abs(static_cast<int>(right & 0xFFFFu) - k);
+                lr_diff = std::abs(static_cast<int>(right) - k);
                 if (lr_diff > s.lr_max_diff_px)
                     continue;
             }
-            const uint16_t* sum = b.sum.data() + static_cast<size_t>(x) * static_cast<size_t>(lanes);
             int offset16 = 0;
             int curvature = 0;
             // The parabola needs both neighbours searched: not at either end of the range,
             // nor at the last lane the left image edge lets this pixel search.
             if (k > 0 && k < std::min(n - 1, searchable)) {
-                const int below = sum[k - 1], at = sum[k], above = sum[k + 1];
+                const int below = w.below_sum, at = w.best_sum, above = w.above_sum;
                 curvature = below + above - 2 * at;
                 if (curvature > 0) {
                     // Rounded to the nearest 1/16 px: (below - above) / (2 curvature) * 16.
@@ -340,8 +385,7 @@ struct CensusSgm::Impl {
                 }
             }
             disparity[x] = static_cast<int16_t>((s.min_disparity + k) * kSubpixel + offset16);
-            confidence[x] = confidenceOf(best, second, curvature, lr_diff,
-                                         static_cast<double>(searchable + 1) / n);
+            confidence[x] = confidenceOf(best, second, curvature, lr_diff, searchable, n);
         }
     }
 
@@ -349,24 +393,25 @@ struct CensusSgm::Impl {
     // than the best non-adjacent one, how sharp the minimum is, and whether the right
     // view agrees exactly; scaled down where the left edge cut the search.
     uint8_t confidenceOf(uint32_t best, uint32_t second, int curvature, int lr_diff,
-                         double searchable_fraction) const
+                         int searchable, int n) const
     {
-        const double margin = second == 0xFFFFu ? 1.0
-                                                : static_cast<double>(second - best) /
-                                                      std::max(1.0, static_cast<double>(best));
-        const double uniqueness = std::min(1.0, margin / 0.5);
-        const double sharpness =
-            std::min(1.0, static_cast<double>(curvature) / (2.0 * settings.p1 * settings.paths));
+        // uniqueness = min(1, margin / 0.5), margin = (second - best) / max(1, best): a
+        // division only when it is below 1.
+        const double best_or_1 = std::max(1.0, static_cast<double>(best));
+        const double twice_gap = 2.0 * static_cast<double>(second - best);
+        const double uniqueness =
+            second == 0xFFFFu || twice_gap >= best_or_1 ? 1.0 : twice_gap / best_or_1;
+        const double sharpness = std::min(1.0, static_cast<double>(curvature) * inv_sharp_scale);
         const double agreement = lr_diff == 0 ? 1.0 : lr_diff == 1 ? 0.7 : 0.4;
-        const double c = 255.0 * uniqueness * (0.5 + 0.5 * sharpness) * agreement *
-                         std::min(1.0, searchable_fraction);
-        return static_cast<uint8_t>(std::clamp(static_cast<int>(std::lround(c)), 1, 255));
+        double c = 255.0 * uniqueness * (0.5 + 0.5 * sharpness) * agreement;
+        if (searchable < n - 1)   // the left edge cut the search
+            c = c * (searchable + 1) / n;
+        return static_cast<uint8_t>(std::clamp(static_cast<int>(c + 0.5), 1, 255));   // c >= 0
     }
 
     // 3x3 median around each valid pixel, rows y0..y1-1; a missing neighbour counts as
     // the centre's value, so that holes neither pull a disparity down (too far) nor up.
-    // The one-pixel image border is copied as it is. Written as a min/max network over
-    // whole rows so that the compiler vectorizes it.
+    // The one-pixel image border is copied as it is.
     void medianRows(int y0, int y1)
     {
         const int w = settings.width, h = settings.height;
@@ -378,37 +423,10 @@ struct CensusSgm::Impl {
                 std::copy(row, row + w, dst);
                 continue;
             }
-            const int16_t* up = row - w;
-            const int16_t* down = row + w;
             dst[0] = row[0];
             dst[w - 1] = row[w - 1];
-            for (int x = 1; x < w - 1; ++x) {
-                const int16_t c = row[x];
-                const auto pick = [c](int16_t v) { return v == kInvalid ? c : v; };
-                int16_t p[9] = {pick(up[x - 1]), pick(up[x]),     pick(up[x + 1]),
-                                pick(row[x - 1]), c,              pick(row[x + 1]),
-                                pick(down[x - 1]), pick(down[x]), pick(down[x + 1])};
-                dst[x] = c == kInvalid ? kInvalid : medianOf9(p);
-            }
+            kernels->median_row(row - w, row, row + w, w, kInvalid, dst);
         }
-    }
-
-    // Paeth's median-of-9 network: 19 compare-exchanges.
-    static int16_t medianOf9(int16_t* p)
-    {
-        const auto sort2 = [](int16_t& a, int16_t& b) {
-            const int16_t lo = std::min(a, b);
-            b = std::max(a, b);
-            a = lo;
-        };
-        sort2(p[1], p[2]); sort2(p[4], p[5]); sort2(p[7], p[8]);
-        sort2(p[0], p[1]); sort2(p[3], p[4]); sort2(p[6], p[7]);
-        sort2(p[1], p[2]); sort2(p[4], p[5]); sort2(p[7], p[8]);
-        sort2(p[0], p[3]); sort2(p[5], p[8]); sort2(p[4], p[7]);
-        sort2(p[3], p[6]); sort2(p[1], p[4]); sort2(p[2], p[5]);
-        sort2(p[4], p[7]); sort2(p[4], p[2]); sort2(p[6], p[4]);
-        sort2(p[4], p[2]);
-        return p[4];
     }
 
     void finishRows(const std::vector<int16_t>& source, int y0, int y1, const CensusSgmOutput& out)
@@ -433,6 +451,7 @@ struct CensusSgm::Impl {
     int rx, ry;
     size_t padded_stride;
     uint8_t p2_by_step[256] = {};
+    double inv_sharp_scale = 0;                       // 1 / (2 p1 paths): full sharpness
     std::vector<uint8_t> padded_left, padded_right;
     size_t plane_margin = 0, plane_stride = 0;
     std::vector<uint8_t> census_left, census_right;   // planes x (margin, height x width, margin)
@@ -474,18 +493,29 @@ void CensusSgm::compute(const uint8_t* left, const uint8_t* right, size_t stride
     });
     m.pool.run(bands, [&](int band) { m.matchBand(band, left, stride, out); });
 
-    std::vector<int16_t>* result = &m.fixed;
-    if (s.median) {
-        m.pool.run(bands, [&](int band) {
-            m.medianRows(s.height * band / bands, s.height * (band + 1) / bands);
-        });
-        result = &m.filtered;
-    }
-    if (s.speckle_window_px > 0)
-        m.speckle.apply(result->data(), kInvalid,
-                        s.speckle_range_px * kSubpixel, s.speckle_window_px);
+    const auto band_start = [&](int band) { return s.height * band / bands; };
+    std::vector<int16_t>* result = s.median ? &m.filtered : &m.fixed;
+    const int max_step = s.speckle_range_px * kSubpixel;
+    // The median reads the rows around its band, which the other bands have finished;
+    // the speckle labels only the band's own rows.
     m.pool.run(bands, [&](int band) {
-        m.finishRows(*result, s.height * band / bands, s.height * (band + 1) / bands, out);
+        if (s.median)
+            m.medianRows(band_start(band), band_start(band + 1));
+        if (s.speckle_window_px > 0)
+            m.speckle.labelBand(result->data(), kInvalid, max_step, band_start(band),
+                                band_start(band + 1));
+    });
+    if (s.speckle_window_px > 0) {
+        int starts[64];   // threads <= 64 (validated)
+        for (int band = 0; band < bands; ++band)
+            starts[band] = band_start(band);
+        m.speckle.joinBands(result->data(), kInvalid, max_step, starts, bands);
+    }
+    m.pool.run(bands, [&](int band) {
+        if (s.speckle_window_px > 0)
+            m.speckle.removeBand(result->data(), kInvalid, s.speckle_window_px,
+                                 band_start(band), band_start(band + 1));
+        m.finishRows(*result, band_start(band), band_start(band + 1), out);
     });
 }
 

@@ -17,7 +17,11 @@
 //  - path costs are 8-bit: L(p, k) = C(p, k) + min(L(p-r, k), L(p-r, k±1) + P1,
 //    min L(p-r) + P2) - min L(p-r), which stays within max cost + P2 <= 255 (the settings
 //    make sure of it), and each addition saturates;
-//  - the sum of the paths is 16-bit, `lanes` per pixel.
+//  - the pads of a path block are set to 255 once, when its buffer is allocated: kernels
+//    write only the L bytes and byte 0, where the SIMD kernels keep min L of the block
+//    for the next step of the path (the scalar reference leaves it alone);
+//  - the sum of the paths is 16-bit and is formed only inside winners_backward(), from
+//    the 8-bit rows of the other paths and its own: no 16-bit sum row is ever kept.
 //
 // Reentrant: kernels keep no state; each thread passes its own rows.
 
@@ -46,10 +50,19 @@ struct CensusRows {
     int planes = 0;
 };
 
-// Entries of scratch that winners() needs for a row.
+// Entries of scratch that winners_backward() needs for a row: the right view's best sum
+// and lane per right pixel, with margins for the lanes that fall outside the row.
 inline constexpr size_t winnersScratch(int width, int min_disparity, int lanes)
 {
-    return static_cast<size_t>(width) + 2 * static_cast<size_t>(lanes + (min_disparity < 0 ? -min_disparity : min_disparity) + kLaneAlign);
+    return 2 * (static_cast<size_t>(width) + 2 * static_cast<size_t>(lanes + (min_disparity < 0 ? -min_disparity : min_disparity) + kLaneAlign));
+}
+
+// Entries of sum_scratch that winners_backward() needs: the summed paths of 16 pixels,
+// each with 16 entries of margin on both sides, and two vectors per pixel.
+inline constexpr int kWinnerGroup = 16;
+inline constexpr size_t winnersSumScratch(int lanes)
+{
+    return static_cast<size_t>(kWinnerGroup) * static_cast<size_t>(lanes + 32 + kLaneAlign);
 }
 
 // The best and second-best disparity lane of one pixel over the summed paths.
@@ -57,6 +70,27 @@ struct Winner {
     uint16_t best_lane;            // smallest k with the smallest sum (ties: smallest k)
     uint16_t best_sum;
     uint16_t second_sum;           // smallest sum with |k - best_lane| > 1 (0xFFFF if none)
+    uint16_t below_sum;            // the sums at best_lane - 1 and + 1, for sub-pixel
+    uint16_t above_sum;            // interpolation (0 outside 0 .. num_disparities - 1)
+};
+
+// The paths from the previous row onto row y: path i steps from (x + dx[i], y - 1) onto
+// (x, y), dx in -1..1.
+struct AbovePaths {
+    int count = 0;
+    const int* dx;
+    const uint8_t* const* p2;      // [count] rows: P2 of the step onto x
+    const uint8_t* const* prev;    // [count] row y-1's path blocks, or nullptr on the path's
+                                   // first row (then L = C)
+    uint8_t* const* cur;           // [count] row y's path blocks, written
+};
+
+// The rows that winners_backward() sums with its own path: `count` rows of `width` path
+// blocks each (the paths from above, and the left->right path). count <= 4, so that a
+// sum stays within 5 x 255 (the SIMD kernels pack a sum and a lane tag in 16 bits).
+struct PathRows {
+    const uint8_t* const* rows;
+    int count = 0;
 };
 
 struct SgmKernels {
@@ -75,29 +109,32 @@ struct SgmKernels {
     void (*cost_row)(const CensusRows& census, int width, int min_disparity,
                      int num_disparities, int lanes, uint8_t cost_invalid, uint8_t* cost);
 
-    // The path along the row: left to right when `forward`, else right to left.
-    // p2[x] is the penalty for a jump of more than one disparity when stepping onto x.
-    // Adds the path cost of every pixel into sum (or stores it when `first`); `scratch`
-    // holds two path blocks.
-    void (*path_along_row)(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width,
-                           int lanes, bool forward, bool first, uint8_t* scratch,
-                           uint16_t* sum);
+    // The paths that come from the previous row, and the left->right path along the row,
+    // in one pass over the row (the path along the row waits on each pixel's min L; the
+    // others fill that time). Writes every pixel's path block of each path from above to
+    // above.cur[i] and, unless `along` is nullptr, of the left->right path to along
+    // (width blocks each). p2_along[x]: P2 for the step from x - 1 onto x.
+    void (*paths_forward)(const uint8_t* cost, uint8_t p1, int width, int lanes,
+                          const AbovePaths& above, const uint8_t* p2_along, uint8_t* along);
 
-    // A path coming from the previous row: from (x + dx, y - 1) onto (x, y), dx in -1..1.
-    // prev: the previous row's path blocks for this path, written by the same kernels (a
-    // block's pad bytes may carry what the next step needs), or nullptr on the path's
-    // first row (then L = C). Writes this row's blocks to cur (same layout) and adds into sum
-    // (or stores when `first`).
-    void (*path_from_above)(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width,
-                            int lanes, int dx, bool first, const uint8_t* prev,
-                            uint8_t* cur, uint16_t* sum);
+    // The right->left path along the row (p2[x]: stepping onto x), summed in 16 bits with
+    // `others`, and the winner of every pixel over the first num_disparities lanes (a
+    // multiple of 16); and, for the right view, right_lane[xr] = the lane k with the
+    // smallest sum (ties: smallest k) among the lanes whose left pixel
+    // xr + min_disparity + k lies inside the row (0xFFFF when none). path_scratch: two path
+    // blocks (pads 255); sum_scratch: winnersSumScratch() entries; scratch:
+    // winnersScratch() entries.
+    void (*winners_backward)(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width,
+                             int lanes, const PathRows& others, int min_disparity,
+                             int num_disparities, uint8_t* path_scratch,
+                             uint16_t* sum_scratch, Winner* winners, uint16_t* right_lane,
+                             uint16_t* scratch);
 
-    // Winner of every pixel of the row over the first num_disparities lanes (a multiple
-    // of 16); and, for the right view, right_best[xr] = smallest (sum << 16 | k) over the
-    // lanes k whose left pixel xr + min_disparity + k lies inside the row (0xFFFFFFFF
-    // when none). scratch: winnersScratch() entries.
-    void (*winners)(const uint16_t* sum, int width, int min_disparity, int num_disparities,
-                    int lanes, Winner* winners, uint32_t* right_best, uint32_t* scratch);
+    // One row of the 3x3 median of 16-bit disparities (up, row, down: rows y-1, y, y+1),
+    // for x in 1 .. width-2: `invalid` stays invalid, and an invalid neighbour counts as
+    // the centre's value. dst[0] and dst[width-1] are left alone.
+    void (*median_row)(const int16_t* up, const int16_t* row, const int16_t* down, int width,
+                       int16_t invalid, int16_t* dst);
 };
 
 const SgmKernels& scalarKernels();

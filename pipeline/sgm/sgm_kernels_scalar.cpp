@@ -82,40 +82,20 @@ void step(const uint8_t* cost, const uint8_t* prev, uint8_t p1, uint8_t p2, int 
     }
 }
 
-void accumulate(const uint8_t* block, int lanes, bool first, uint16_t* sum)
-{
-    const uint8_t* l = block + kPathPad;
-    for (int k = 0; k < lanes; ++k)
-        sum[k] = static_cast<uint16_t>(first ? l[k] : sum[k] + l[k]);
-}
-
-void clearPads(uint8_t* block, int lanes)
-{
-    std::fill(block, block + kPathPad, 255);
-    std::fill(block + kPathPad + lanes, block + 2 * kPathPad + lanes, 255);
-}
-
-void pathAlongRow(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
-                  bool forward, bool first, uint8_t* scratch, uint16_t* sum)
+void pathForward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
+                 uint8_t* out)
 {
     const size_t block = pathBlockBytes(lanes);
-    uint8_t* a = scratch;
-    uint8_t* b = scratch + block;
-    clearPads(a, lanes);
-    clearPads(b, lanes);
     const uint8_t* prev = nullptr;
-    for (int i = 0; i < width; ++i) {
-        const int x = forward ? i : width - 1 - i;
-        const size_t at = static_cast<size_t>(x) * lanes;
-        step(cost + at, prev, p1, p2[x], lanes, a);
-        accumulate(a, lanes, first, sum + at);
-        prev = a;
-        std::swap(a, b);
+    for (int x = 0; x < width; ++x) {
+        uint8_t* l = out + static_cast<size_t>(x) * block;
+        step(cost + static_cast<size_t>(x) * static_cast<size_t>(lanes), prev, p1, p2[x], lanes, l);
+        prev = l;
     }
 }
 
 void pathFromAbove(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
-                   int dx, bool first, const uint8_t* prev, uint8_t* cur, uint16_t* sum)
+                   int dx, const uint8_t* prev, uint8_t* cur)
 {
     const size_t block = pathBlockBytes(lanes);
     for (int x = 0; x < width; ++x) {
@@ -123,20 +103,46 @@ void pathFromAbove(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width
         const uint8_t* from =
             (prev != nullptr && xp >= 0 && xp < width) ? prev + static_cast<size_t>(xp) * block
                                                        : nullptr;
-        uint8_t* out = cur + static_cast<size_t>(x) * block;
-        clearPads(out, lanes);
-        const size_t at = static_cast<size_t>(x) * lanes;
-        step(cost + at, from, p1, p2[x], lanes, out);
-        accumulate(out, lanes, first, sum + at);
+        step(cost + static_cast<size_t>(x) * static_cast<size_t>(lanes), from, p1, p2[x], lanes,
+             cur + static_cast<size_t>(x) * block);
     }
 }
 
-void winners(const uint16_t* sum, int width, int min_disparity, int num_disparities,
-             int lanes, Winner* out, uint32_t* right_best, uint32_t* /*scratch*/)
+void pathsForward(const uint8_t* cost, uint8_t p1, int width, int lanes, const AbovePaths& above,
+                  const uint8_t* p2_along, uint8_t* along)
 {
-    std::fill(right_best, right_best + width, 0xFFFFFFFFu);
-    for (int x = 0; x < width; ++x) {
-        const uint16_t* s = sum + static_cast<size_t>(x) * lanes;
+    for (int i = 0; i < above.count; ++i)
+        pathFromAbove(cost, above.p2[i], p1, width, lanes, above.dx[i], above.prev[i],
+                      above.cur[i]);
+    if (along != nullptr)
+        pathForward(cost, p2_along, p1, width, lanes, along);
+}
+
+void winnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
+                     const PathRows& others, int min_disparity, int num_disparities,
+                     uint8_t* path_scratch, uint16_t* s, Winner* out, uint16_t* right_lane,
+                     uint16_t* scratch)
+{
+    const size_t block = pathBlockBytes(lanes);
+    uint8_t* a = path_scratch;
+    uint8_t* b = path_scratch + block;
+    const uint8_t* prev = nullptr;
+    // The right view's best sum per right pixel; its lane goes to right_lane.
+    uint16_t* right_sum = scratch;
+    std::fill(right_sum, right_sum + width, uint16_t{0xFFFF});
+    std::fill(right_lane, right_lane + width, uint16_t{0xFFFF});
+    for (int x = width - 1; x >= 0; --x) {
+        const size_t at = static_cast<size_t>(x) * static_cast<size_t>(lanes);
+        step(cost + at, prev, p1, p2[x], lanes, a);
+        for (int k = 0; k < num_disparities; ++k) {
+            int total = a[kPathPad + k];
+            for (int i = 0; i < others.count; ++i)
+                total += others.rows[i][static_cast<size_t>(x) * block + kPathPad + static_cast<size_t>(k)];
+            s[k] = static_cast<uint16_t>(total);
+        }
+        prev = a;
+        std::swap(a, b);
+
         int best = 0;
         for (int k = 1; k < num_disparities; ++k)
             if (s[k] < s[best])
@@ -145,14 +151,48 @@ void winners(const uint16_t* sum, int width, int min_disparity, int num_disparit
         for (int k = 0; k < num_disparities; ++k)
             if (k < best - 1 || k > best + 1)
                 second = std::min(second, s[k]);
-        out[x] = Winner{static_cast<uint16_t>(best), s[best], second};
+        const uint16_t below = best > 0 ? s[best - 1] : uint16_t{0};
+        const uint16_t above = best < num_disparities - 1 ? s[best + 1] : uint16_t{0};
+        out[x] = Winner{static_cast<uint16_t>(best), s[best], second, below, above};
         for (int k = 0; k < num_disparities; ++k) {
             const int xr = x - min_disparity - k;
             if (xr < 0 || xr >= width)
                 continue;
-            const uint32_t packed = (static_cast<uint32_t>(s[k]) << 16) | static_cast<uint32_t>(k);
-            right_best[xr] = std::min(right_best[xr], packed);
+            if (s[k] < right_sum[xr] || (s[k] == right_sum[xr] && k < right_lane[xr])) {
+                right_sum[xr] = s[k];
+                right_lane[xr] = static_cast<uint16_t>(k);
+            }
         }
+    }
+}
+
+void medianRow(const int16_t* up, const int16_t* row, const int16_t* down, int width,
+               int16_t invalid, int16_t* dst)
+{
+    const auto sort2 = [](int16_t& a, int16_t& b) {
+        const int16_t lo = std::min(a, b);
+        b = std::max(a, b);
+        a = lo;
+    };
+    for (int x = 1; x < width - 1; ++x) {
+        const int16_t c = row[x];
+        if (c == invalid) {
+            dst[x] = invalid;
+            continue;
+        }
+        const auto pick = [c, invalid](int16_t v) { return v == invalid ? c : v; };
+        int16_t p[9] = {pick(up[x - 1]),   pick(up[x]),   pick(up[x + 1]),
+                        pick(row[x - 1]),  c,             pick(row[x + 1]),
+                        pick(down[x - 1]), pick(down[x]), pick(down[x + 1])};
+        // Paeth's median-of-9 network: 19 compare-exchanges.
+        sort2(p[1], p[2]); sort2(p[4], p[5]); sort2(p[7], p[8]);
+        sort2(p[0], p[1]); sort2(p[3], p[4]); sort2(p[6], p[7]);
+        sort2(p[1], p[2]); sort2(p[4], p[5]); sort2(p[7], p[8]);
+        sort2(p[0], p[3]); sort2(p[5], p[8]); sort2(p[4], p[7]);
+        sort2(p[3], p[6]); sort2(p[1], p[4]); sort2(p[2], p[5]);
+        sort2(p[4], p[7]); sort2(p[4], p[2]); sort2(p[6], p[4]);
+        sort2(p[4], p[2]);
+        dst[x] = p[4];
     }
 }
 
@@ -160,7 +200,8 @@ void winners(const uint16_t* sum, int width, int min_disparity, int num_disparit
 
 const SgmKernels& scalarKernels()
 {
-    static const SgmKernels kernels{"scalar", censusRow, costRow, pathAlongRow, pathFromAbove, winners};
+    static const SgmKernels kernels{"scalar", censusRow, costRow, pathsForward, winnersBackward,
+                                    medianRow};
     return kernels;
 }
 

@@ -3,6 +3,12 @@
 // reference (sgm_kernels_scalar.cpp); vectors are capped at 32 bytes, so a row of `lanes`
 // disparities (a multiple of kLaneAlign) is always a whole number of vectors.
 
+// Also compile for AVX3_DL (Ice Lake, Zen 4 and later): one instruction per byte popcount,
+// which the cost row spends most of its time on.
+#ifndef HWY_WANT_AVX3_DL
+#define HWY_WANT_AVX3_DL
+#endif
+
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "pipeline/sgm/sgm_kernels_simd.cpp"
 #include <hwy/foreach_target.h>   // IWYU pragma: keep
@@ -33,37 +39,41 @@ void CostRow(const CensusRows& census, int width, int min_disparity, int num_dis
     scalarKernels().cost_row(census, width, min_disparity, num_disparities, lanes, cost_invalid,
                              cost);
 }
-void PathAlongRow(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
-                  bool forward, bool first, uint8_t* scratch, uint16_t* sum)
+void PathsForward(const uint8_t* cost, uint8_t p1, int width, int lanes, const AbovePaths& above,
+                  const uint8_t* p2_along, uint8_t* along)
 {
-    scalarKernels().path_along_row(cost, p2, p1, width, lanes, forward, first, scratch, sum);
+    scalarKernels().paths_forward(cost, p1, width, lanes, above, p2_along, along);
 }
-void PathFromAbove(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
-                   int dx, bool first, const uint8_t* prev, uint8_t* cur, uint16_t* sum)
+void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
+                     const PathRows& others, int min_disparity, int num_disparities,
+                     uint8_t* path_scratch, uint16_t* sum_scratch, Winner* winners,
+                     uint16_t* right_lane, uint16_t* scratch)
 {
-    scalarKernels().path_from_above(cost, p2, p1, width, lanes, dx, first, prev, cur, sum);
+    scalarKernels().winners_backward(cost, p2, p1, width, lanes, others, min_disparity,
+                                     num_disparities, path_scratch, sum_scratch, winners,
+                                     right_lane, scratch);
 }
-void Winners(const uint16_t* sum, int width, int min_disparity, int num_disparities, int lanes,
-             Winner* out, uint32_t* right_best, uint32_t* scratch)
+void MedianRow(const int16_t* up, const int16_t* row, const int16_t* down, int width,
+               int16_t invalid, int16_t* dst)
 {
-    scalarKernels().winners(sum, width, min_disparity, num_disparities, lanes, out, right_best,
-                            scratch);
+    scalarKernels().median_row(up, row, down, width, invalid, dst);
 }
 #else
 
 using D8 = hn::CappedTag<uint8_t, kLaneAlign>;
 using D16 = hn::Repartition<uint16_t, D8>;        // same bytes, half the lanes
-using DNarrow8 = hn::Rebind<uint8_t, D16>;        // as many bytes as D16 has lanes
 using D32 = hn::Repartition<uint32_t, D8>;
 
-// Smallest byte of a vector.
-HWY_INLINE uint8_t minOfBytes(hn::Vec<D8> v)
+// Smallest byte of a vector, in every byte.
+HWY_INLINE hn::Vec<D8> MinOfBytes(hn::Vec<D8> v)
 {
+    const D8 d;
     const D16 d16;
     const auto wide = hn::BitCast(d16, v);
     const auto low = hn::And(wide, hn::Set(d16, uint16_t{0xFF}));
     const auto high = hn::ShiftRight<8>(wide);
-    return static_cast<uint8_t>(hn::GetLane(hn::MinOfLanes(d16, hn::Min(low, high))));
+    const auto m = hn::MinOfLanes(d16, hn::Min(low, high));   // in every u16 lane
+    return hn::BitCast(d, hn::Or(m, hn::ShiftLeft<8>(m)));
 }
 
 void CensusRow(const uint8_t* center, size_t stride, int width, int census_width,
@@ -84,21 +94,26 @@ void CensusRow(const uint8_t* center, size_t stride, int width, int census_width
                    static_cast<std::ptrdiff_t>(stride) +
                (index % census_width - rx);
     };
-    int x = 0;
-    for (; x + n <= width; x += n) {
-        const auto c = hn::LoadU(d, center + x);
-        // One plane (8 neighbours) at a time: scalable vector types cannot form arrays.
-        for (int p = 0; p < plane_count; ++p) {
+    // One plane (8 neighbours) at a time: scalable vector types cannot form arrays.
+    const int vector_end = width - width % n;
+    for (int p = 0; p < plane_count; ++p) {
+        std::ptrdiff_t offsets[8];
+        const int first = 8 * p;
+        const int count = std::min(bits, first + 8) - first;
+        for (int i = 0; i < count; ++i)
+            offsets[i] = offset(first + i);
+        for (int x = 0; x < vector_end; x += n) {
+            const auto c = hn::LoadU(d, center + x);
             auto acc = hn::Zero(d);
-            for (int bit = 8 * p; bit < std::min(bits, 8 * p + 8); ++bit) {
-                const uint8_t* neighbour = center + offset(bit);
-                const auto darker = hn::Lt(hn::LoadU(d, neighbour + x), c);
+            for (int i = 0; i < count; ++i) {
+                const auto darker = hn::Lt(hn::LoadU(d, center + offsets[i] + x), c);
                 acc = hn::Or(acc, hn::IfThenElseZero(
-                                      darker, hn::Set(d, static_cast<uint8_t>(1u << (bit % 8)))));
+                                      darker, hn::Set(d, static_cast<uint8_t>(1u << i))));
             }
             hn::StoreU(acc, d, planes[p] + x);
         }
     }
+    int x = vector_end;
     for (; x < width; ++x) {   // the tail, one pixel at a time
         uint8_t bytes[8] = {};
         int bit = 0;
@@ -122,64 +137,69 @@ void CostRow(const CensusRows& census, int width, int min_disparity, int num_dis
 {
     const D8 d;
     const int n = static_cast<int>(hn::Lanes(d));
+    const auto iota = hn::Iota(d, 0);
+    const auto invalid = hn::Set(d, cost_invalid);
     for (int x = 0; x < width; ++x) {
         uint8_t* c = cost + static_cast<size_t>(x) * static_cast<size_t>(lanes);
-        // right_reversed index of lane 0: x - min_disparity = width - 1 - j.
-        const std::ptrdiff_t j0 = width - 1 - x + min_disparity;
-        for (int k0 = 0; k0 < lanes; k0 += n) {
-            auto distance = hn::Zero(d);
-            for (int p = 0; p < census.planes; ++p) {
-                const auto l = hn::Set(d, census.left[p][x]);
-                const auto r = hn::LoadU(d, census.right_reversed[p] + j0 + k0);
-                distance = hn::Add(distance, hn::PopulationCount(hn::Xor(l, r)));
-            }
-            hn::StoreU(distance, d, c + k0);
-        }
-        // Lanes whose right pixel is outside the image, and the padding lanes.
+        // The lanes whose right pixel is inside the image, and not padding.
         const int k_lo = std::max(0, x - min_disparity - width + 1);
         const int k_hi = std::min(num_disparities - 1, x - min_disparity);
         if (k_hi < k_lo) {
             std::memset(c, cost_invalid, static_cast<size_t>(lanes));
             continue;
         }
-        std::memset(c, cost_invalid, static_cast<size_t>(k_lo));
-        std::memset(c + k_hi + 1, cost_invalid, static_cast<size_t>(lanes - k_hi - 1));
+        // right_reversed index of lane 0: x - min_disparity = width - 1 - j.
+        const std::ptrdiff_t j0 = width - 1 - x + min_disparity;
+        const auto distance = [&](int k0) {
+            auto sum = hn::Zero(d);
+            for (int p = 0; p < census.planes; ++p) {
+                const auto l = hn::Set(d, census.left[p][x]);
+                const auto r = hn::LoadU(d, census.right_reversed[p] + j0 + k0);
+                sum = hn::Add(sum, hn::PopulationCount(hn::Xor(l, r)));
+            }
+            return sum;
+        };
+        if (k_lo == 0 && k_hi == lanes - 1) {   // every lane valid: most pixels
+            for (int k0 = 0; k0 < lanes; k0 += n)
+                hn::StoreU(distance(k0), d, c + k0);
+            continue;
+        }
+        const auto lo = hn::Set(d, static_cast<uint8_t>(k_lo));   // k_lo <= k_hi <= 255
+        const auto hi = hn::Set(d, static_cast<uint8_t>(k_hi));
+        for (int k0 = 0; k0 < lanes; k0 += n) {
+            if (k0 > k_hi || k0 + n <= k_lo) {
+                hn::StoreU(invalid, d, c + k0);
+                continue;
+            }
+            const auto k = hn::Add(iota, hn::Set(d, static_cast<uint8_t>(k0)));
+            const auto outside = hn::Or(hn::Lt(k, lo), hn::Lt(hi, k));
+            hn::StoreU(hn::IfThenElse(outside, invalid, distance(k0)), d, c + k0);
+        }
     }
 }
 
-// One path step (see step() in the scalar reference). Also keeps the smallest L of the
-// block in its byte 0, which the next step of the path reads as its min L(p-r).
-HWY_INLINE void Step(const uint8_t* cost, const uint8_t* prev, uint8_t p1, uint8_t p2,
-                     int lanes, bool first, uint8_t* out, uint16_t* sum)
+// One step of a path (see step() in the scalar reference): writes L to out + kPathPad and
+// returns min L in every byte. prev == nullptr starts the path; v_min_prev holds min L of
+// prev in every byte. `visit(k0, v)` sees each vector of L as it is made.
+template <class Visit>
+HWY_INLINE hn::Vec<D8> Step(const uint8_t* cost, const uint8_t* prev, hn::Vec<D8> v_min_prev,
+                            hn::Vec<D8> v_p1, uint8_t p2, int lanes, uint8_t* out,
+                            const Visit& visit)
 {
     const D8 d;
-    const D16 dw;
-    const DNarrow8 dn;
     const int n = static_cast<int>(hn::Lanes(d));
-    const int nw = static_cast<int>(hn::Lanes(dw));
     uint8_t* l = out + kPathPad;
     auto running_min = hn::Set(d, uint8_t{255});
-    // Adds the L values just stored at l + k0 into the 16-bit sums, widened from memory.
-    auto accumulate = [&](int k0) {
-        for (int h = k0; h < k0 + n; h += nw) {
-            const auto wide = hn::PromoteTo(dw, hn::LoadU(dn, l + h));
-            hn::StoreU(first ? wide : hn::Add(hn::LoadU(dw, sum + h), wide), dw, sum + h);
-        }
-    };
     if (prev == nullptr) {
         for (int k0 = 0; k0 < lanes; k0 += n) {
             const auto v = hn::LoadU(d, cost + k0);
             hn::StoreU(v, d, l + k0);
             running_min = hn::Min(running_min, v);
-            accumulate(k0);
+            visit(k0, v);
         }
-        out[0] = minOfBytes(running_min);
-        return;
+        return MinOfBytes(running_min);
     }
     const uint8_t* lp = prev + kPathPad;
-    const uint8_t min_prev = prev[0];
-    const auto v_min_prev = hn::Set(d, min_prev);
-    const auto v_p1 = hn::Set(d, p1);
     const auto jump = hn::SaturatedAdd(v_min_prev, hn::Set(d, p2));
     for (int k0 = 0; k0 < lanes; k0 += n) {
         const auto same = hn::LoadU(d, lp + k0);
@@ -189,108 +209,220 @@ HWY_INLINE void Step(const uint8_t* cost, const uint8_t* prev, uint8_t p1, uint8
         const auto v = hn::SaturatedAdd(hn::LoadU(d, cost + k0), hn::Sub(best, v_min_prev));
         hn::StoreU(v, d, l + k0);
         running_min = hn::Min(running_min, v);
-        accumulate(k0);
+        visit(k0, v);
     }
-    out[0] = minOfBytes(running_min);
+    return MinOfBytes(running_min);
 }
 
-void ClearPads(uint8_t* block, int lanes)
+void PathsForward(const uint8_t* cost, uint8_t p1, int width, int lanes, const AbovePaths& above,
+                  const uint8_t* p2_along, uint8_t* along)
 {
-    std::memset(block, 255, kPathPad);
-    std::memset(block + kPathPad + lanes, 255, kPathPad);
-}
-
-void PathAlongRow(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
-                  bool forward, bool first, uint8_t* scratch, uint16_t* sum)
-{
+    const D8 d;
     const size_t block = pathBlockBytes(lanes);
-    uint8_t* a = scratch;
-    uint8_t* b = scratch + block;
-    ClearPads(a, lanes);
-    ClearPads(b, lanes);
+    const auto v_p1 = hn::Set(d, p1);
+    const auto none = [](int, hn::Vec<D8>) {};
+    auto v_min = hn::Zero(d);     // min L of the along path's previous block, every byte
+    for (int x = 0; x < width; ++x) {
+        const uint8_t* c = cost + static_cast<size_t>(x) * static_cast<size_t>(lanes);
+        for (int i = 0; i < above.count; ++i) {
+            const int xp = x + above.dx[i];
+            const uint8_t* from = (above.prev[i] != nullptr && xp >= 0 && xp < width)
+                                      ? above.prev[i] + static_cast<size_t>(xp) * block
+                                      : nullptr;
+            const auto v_min_prev = hn::Set(d, from != nullptr ? from[0] : uint8_t{0});
+            uint8_t* out = above.cur[i] + static_cast<size_t>(x) * block;
+            out[0] = hn::GetLane(
+                Step(c, from, v_min_prev, v_p1, above.p2[i][x], lanes, out, none));
+        }
+        if (along != nullptr) {
+            const uint8_t* prev = x == 0 ? nullptr : along + static_cast<size_t>(x - 1) * block;
+            v_min = Step(c, prev, v_min, v_p1, p2_along[x], lanes,
+                               along + static_cast<size_t>(x) * block, none);
+        }
+    }
+}
+
+// Summed path costs are at most 5 x 255 = 1275 < 2^11, so a sum and a 5-bit tag fit in
+// 16 bits as sum << kTagBits | tag: comparing keys compares sums first, tags on ties.
+constexpr int kTagBits = 5;
+static_assert(5 * 255 < (1 << (16 - kTagBits)) - 1, "summed paths and tag fit in 16 bits");
+static_assert(kWinnerGroup <= (1 << kTagBits), "a group index fits in the tag");
+
+void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
+                     const PathRows& others, int min_disparity, int num_disparities,
+                     uint8_t* path_scratch, uint16_t* sum_scratch, Winner* out,
+                     uint16_t* right_lane, uint16_t* scratch)
+{
+    const D8 d;
+    const D16 d16;
+    const hn::Half<D8> dh;
+    const int n16 = static_cast<int>(hn::Lanes(d16));
+    const size_t block = pathBlockBytes(lanes);
+    const auto iota16 = hn::Iota(d16, 0);
+    const auto none16 = hn::Set(d16, uint16_t{0xFFFF});
+    const auto three16 = hn::Set(d16, uint16_t{3});
+    const auto tag_mask = hn::Set(d16, uint16_t{(1u << kTagBits) - 1});
+    const auto v_n16 = hn::Set(d16, static_cast<uint16_t>(n16));
+    const auto v_p1 = hn::Set(d, p1);
+    // The vector index of a lane (k / n16) must fit the tag too.
+    HWY_DASSERT(num_disparities / n16 <= (1 << kTagBits));
+
+    // The right view's best sum and its lane, indexed backwards (j = width - 1 - xr) so
+    // that the lanes of one left pixel are consecutive; a margin on both sides takes the
+    // lanes whose right pixel lies outside the row.
+    const size_t half = winnersScratch(width, min_disparity, lanes) / 2;
+    const std::ptrdiff_t margin = lanes + std::abs(min_disparity) + kLaneAlign;
+    std::fill(scratch, scratch + 2 * half, uint16_t{0xFFFF});
+    uint16_t* back_sum = scratch + margin;
+    uint16_t* back_lane = scratch + half + margin;
+    // The last kWinnerGroup pixels, worked on together once their paths are summed, so that
+    // the reductions of one pixel overlap with the next pixel's rather than waiting in
+    // line: for pixel g of the group, its keys sum << kTagBits | (kWinnerGroup - 1 - g)
+    // with 0xFFFF on both sides (the tag ranks a later pixel, of smaller k for the same
+    // right pixel, first), and per lane the smallest sum << kTagBits | k / n16.
+    const size_t group_stride = static_cast<size_t>(lanes) + 32;
+    uint16_t* lane_best = sum_scratch + static_cast<size_t>(kWinnerGroup) * group_stride;
+    std::fill(sum_scratch, sum_scratch + winnersSumScratch(lanes), uint16_t{0xFFFF});
+    const auto keys_of = [&](int g) {
+        return sum_scratch + static_cast<size_t>(g) * group_stride + 16;
+    };
+
+    const auto finish_group = [&](int x_first, int count) {
+        for (int g = 0; g < count; ++g) {
+            const uint16_t* key = keys_of(g);
+            const auto v_first = hn::LoadU(d16, lane_best + (2 * g) * n16);
+            const auto v_next = hn::LoadU(d16, lane_best + (2 * g + 1) * n16);
+            const auto v_best = hn::MinOfLanes(d16, v_first);
+            const uint16_t best_key = hn::GetLane(v_best);
+            const int best = (best_key & ((1 << kTagBits) - 1)) * n16 +
+                             static_cast<int>(hn::FindFirstTrue(d16, hn::Eq(v_first, v_best)));
+            // The best sum outside best-1 .. best+1. Those three k lie in different lanes,
+            // so a lane whose smallest sum is at one of them offers its second smallest
+            // (at another k, not near), and every other lane its smallest.
+            // k - (best - 1) < 3 (unsigned) is near.
+            const auto k_first = hn::Add(hn::Mul(hn::And(v_first, tag_mask), v_n16), iota16);
+            const auto near = hn::Lt(hn::Sub(k_first, hn::Set(d16, static_cast<uint16_t>(best - 1))),
+                                     three16);
+            const uint16_t second =
+                hn::GetLane(hn::MinOfLanes(d16, hn::IfThenElse(near, v_next, v_first)));
+            const auto sum_at = [&](int k) {
+                return k >= 0 && k < num_disparities ? static_cast<uint16_t>(key[k] >> kTagBits)
+                                                     : uint16_t{0};
+            };
+            out[x_first - g] = Winner{static_cast<uint16_t>(best),
+                                      static_cast<uint16_t>(best_key >> kTagBits),
+                                      second == 0xFFFF ? second
+                                                       : static_cast<uint16_t>(second >> kTagBits),
+                                      sum_at(best - 1), sum_at(best + 1)};
+        }
+        // The right view: pixel g of the group has j = j0 + g, so its lane for position
+        // p0 is p0 - g. Keys of pixels past the row's ends, and margins, are 0xFFFF.
+        const std::ptrdiff_t j0 = width - 1 - x_first + min_disparity;
+        for (int p0 = 0; p0 < num_disparities + count - 1; p0 += n16) {
+            auto best_key = none16;
+            for (int g = 0; g < count; ++g)
+                best_key = hn::Min(best_key, hn::LoadU(d16, keys_of(g) + p0 - g));
+            const auto sums = hn::ShiftRight<kTagBits>(best_key);
+            const auto g_of = hn::Sub(hn::Set(d16, static_cast<uint16_t>(kWinnerGroup - 1)),
+                                      hn::And(best_key, tag_mask));
+            const auto k = hn::Sub(hn::Add(iota16, hn::Set(d16, static_cast<uint16_t>(p0))), g_of);
+            // This group's pixels lie left of the earlier groups': smaller k, so a tie
+            // replaces.
+            const auto old_sum = hn::LoadU(d16, back_sum + j0 + p0);
+            const auto keep = hn::Lt(old_sum, sums);
+            hn::StoreU(hn::Min(old_sum, sums), d16, back_sum + j0 + p0);
+            hn::StoreU(hn::IfThenElse(keep, hn::LoadU(d16, back_lane + j0 + p0), k), d16,
+                       back_lane + j0 + p0);
+        }
+    };
+
+    uint8_t* a = path_scratch;
+    uint8_t* b = path_scratch + block;
     const uint8_t* prev = nullptr;
-    for (int i = 0; i < width; ++i) {
-        const int x = forward ? i : width - 1 - i;
+    auto v_min = hn::Zero(d);
+    for (int x = width - 1; x >= 0; --x) {
         const size_t at = static_cast<size_t>(x) * static_cast<size_t>(lanes);
-        Step(cost + at, prev, p1, p2[x], lanes, first, a, sum + at);
+        const size_t block_at = static_cast<size_t>(x) * block + kPathPad;
+        const int g = (width - 1 - x) % kWinnerGroup;
+        uint16_t* key = sum_scratch + static_cast<size_t>(g) * group_stride + 16;
+        const auto right_tag = hn::Set(d16, static_cast<uint16_t>(kWinnerGroup - 1 - g));
+        auto best = none16;    // per lane: smallest sum << kTagBits | k / n16
+        auto next = none16;    // per lane: the second smallest
+        // Sums the paths for the lanes of this vector.
+        const auto visit = [&](int k0, hn::Vec<D8> v) {
+            if (k0 >= num_disparities)
+                return;
+            auto lo = hn::PromoteTo(d16, hn::LowerHalf(dh, v));
+            auto hi = hn::PromoteTo(d16, hn::UpperHalf(dh, v));
+            for (int i = 0; i < others.count; ++i) {
+                const auto o = hn::LoadU(d, others.rows[i] + block_at + k0);
+                lo = hn::Add(lo, hn::PromoteTo(d16, hn::LowerHalf(dh, o)));
+                hi = hn::Add(hi, hn::PromoteTo(d16, hn::UpperHalf(dh, o)));
+            }
+            lo = hn::ShiftLeft<kTagBits>(lo);
+            hn::StoreU(hn::Or(lo, right_tag), d16, key + k0);
+            lo = hn::Or(lo, hn::Set(d16, static_cast<uint16_t>(k0 / n16)));
+            next = hn::Min(next, hn::Max(best, lo));
+            best = hn::Min(best, lo);
+            if (k0 + n16 < num_disparities) {
+                hi = hn::ShiftLeft<kTagBits>(hi);
+                hn::StoreU(hn::Or(hi, right_tag), d16, key + k0 + n16);
+                hi = hn::Or(hi, hn::Set(d16, static_cast<uint16_t>(k0 / n16 + 1)));
+                next = hn::Min(next, hn::Max(best, hi));
+                best = hn::Min(best, hi);
+            }
+        };
+        v_min = Step(cost + at, prev, v_min, v_p1, p2[x], lanes, a, visit);
         prev = a;
         std::swap(a, b);
+        hn::StoreU(best, d16, lane_best + (2 * g) * n16);
+        hn::StoreU(next, d16, lane_best + (2 * g + 1) * n16);
+        if (g == kWinnerGroup - 1 || x == 0)
+            finish_group(x + g, g + 1);
+    }
+    // 0xFFFF where no lane reached the right pixel (a margin lane may have left its k).
+    for (int xr = 0; xr < width; ++xr) {
+        const int jr = width - 1 - xr;
+        right_lane[xr] = back_sum[jr] >= (0xFFFF >> kTagBits) ? uint16_t{0xFFFF} : back_lane[jr];
     }
 }
 
-void PathFromAbove(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
-                   int dx, bool first, const uint8_t* prev, uint8_t* cur, uint16_t* sum)
+void MedianRow(const int16_t* up, const int16_t* row, const int16_t* down, int width,
+               int16_t invalid, int16_t* dst)
 {
-    const size_t block = pathBlockBytes(lanes);
-    for (int x = 0; x < width; ++x) {
-        const int xp = x + dx;
-        const uint8_t* from =
-            (prev != nullptr && xp >= 0 && xp < width) ? prev + static_cast<size_t>(xp) * block
-                                                       : nullptr;
-        uint8_t* out = cur + static_cast<size_t>(x) * block;
-        ClearPads(out, lanes);
-        const size_t at = static_cast<size_t>(x) * static_cast<size_t>(lanes);
-        Step(cost + at, from, p1, p2[x], lanes, first, out, sum + at);
+    const hn::CappedTag<int16_t, 16> d;
+    const int n = static_cast<int>(hn::Lanes(d));
+    const auto v_invalid = hn::Set(d, invalid);
+    const auto sort2 = [](hn::Vec<decltype(d)>& a, hn::Vec<decltype(d)>& b) {
+        const auto lo = hn::Min(a, b);
+        b = hn::Max(a, b);
+        a = lo;
+    };
+    int x = 1;
+    for (; x + n <= width - 1; x += n) {
+        const auto c = hn::LoadU(d, row + x);
+        const auto pick = [&](const int16_t* at) {
+            const auto v = hn::LoadU(d, at);
+            return hn::IfThenElse(hn::Eq(v, v_invalid), c, v);
+        };
+        // Nine named vectors: scalable vector types cannot form arrays.
+        auto p0 = pick(up + x - 1), p1 = pick(up + x), p2 = pick(up + x + 1);
+        auto p3 = pick(row + x - 1), p4 = c, p5 = pick(row + x + 1);
+        auto p6 = pick(down + x - 1), p7 = pick(down + x), p8 = pick(down + x + 1);
+        // Paeth's median-of-9 network, as in the scalar reference.
+        sort2(p1, p2); sort2(p4, p5); sort2(p7, p8);
+        sort2(p0, p1); sort2(p3, p4); sort2(p6, p7);
+        sort2(p1, p2); sort2(p4, p5); sort2(p7, p8);
+        sort2(p0, p3); sort2(p5, p8); sort2(p4, p7);
+        sort2(p3, p6); sort2(p1, p4); sort2(p2, p5);
+        sort2(p4, p7); sort2(p4, p2); sort2(p6, p4);
+        sort2(p4, p2);
+        hn::StoreU(hn::IfThenElse(hn::Eq(c, v_invalid), c, p4), d, dst + x);
     }
-}
-
-void Winners(const uint16_t* sum, int width, int min_disparity, int num_disparities, int lanes,
-             Winner* out, uint32_t* right_best, uint32_t* scratch)
-{
-    const D16 d16;
-    const D32 d32;
-    const hn::Rebind<uint16_t, D32> dn16;   // as many u16 lanes as a u32 vector has
-    const int n16 = static_cast<int>(hn::Lanes(d16));
-    const int n32 = static_cast<int>(hn::Lanes(d32));
-    const auto iota16 = hn::Iota(d16, 0);
-    const auto iota32 = hn::Iota(d32, 0);
-    const auto none16 = hn::Set(d16, uint16_t{0xFFFF});
-
-    // The right view's best, indexed backwards (j = width - 1 - xr) so that the lanes of
-    // one left pixel are consecutive; a margin on both sides takes the lanes whose right
-    // pixel lies outside the row.
-    const std::ptrdiff_t margin = lanes + std::abs(min_disparity) + kLaneAlign;
-    uint32_t* backwards = scratch + margin;
-    std::fill(scratch, scratch + winnersScratch(width, min_disparity, lanes), 0xFFFFFFFFu);
-
-    for (int x = 0; x < width; ++x) {
-        const uint16_t* s = sum + static_cast<size_t>(x) * static_cast<size_t>(lanes);
-        auto v_min = none16;
-        for (int k0 = 0; k0 < num_disparities; k0 += n16)
-            v_min = hn::Min(v_min, hn::LoadU(d16, s + k0));
-        const uint16_t best_sum = hn::GetLane(hn::MinOfLanes(d16, v_min));
-        const auto v_best = hn::Set(d16, best_sum);
-        int best = 0;
-        for (int k0 = 0; k0 < num_disparities; k0 += n16) {
-            const intptr_t at = hn::FindFirstTrue(d16, hn::Eq(hn::LoadU(d16, s + k0), v_best));
-            if (at >= 0) {
-                best = k0 + static_cast<int>(at);
-                break;
-            }
-        }
-        // The best sum outside best-1 .. best+1.
-        auto v_second = none16;
-        const auto below = hn::Set(d16, static_cast<uint16_t>(best - 1));   // 0xFFFF for 0
-        const auto at = hn::Set(d16, static_cast<uint16_t>(best));
-        const auto above = hn::Set(d16, static_cast<uint16_t>(best + 1));
-        for (int k0 = 0; k0 < num_disparities; k0 += n16) {
-            const auto k = hn::Add(iota16, hn::Set(d16, static_cast<uint16_t>(k0)));
-            const auto near = hn::Or(hn::Or(hn::Eq(k, below), hn::Eq(k, at)), hn::Eq(k, above));
-            v_second = hn::Min(v_second, hn::IfThenElse(near, none16, hn::LoadU(d16, s + k0)));
-        }
-        out[x] = Winner{static_cast<uint16_t>(best), best_sum,
-                        hn::GetLane(hn::MinOfLanes(d16, v_second))};
-
-        uint32_t* row = backwards + (width - 1 - x + min_disparity);
-        for (int k0 = 0; k0 < num_disparities; k0 += n32) {
-            const auto sums = hn::PromoteTo(d32, hn::LoadU(dn16, s + k0));
-            const auto packed = hn::Or(hn::ShiftLeft<16>(sums),
-                                       hn::Add(iota32, hn::Set(d32, static_cast<uint32_t>(k0))));
-            hn::StoreU(hn::Min(hn::LoadU(d32, row + k0), packed), d32, row + k0);
-        }
+    if (x < width - 1) {   // the tail: the reference on the last pixels
+        scalarKernels().median_row(up + x - 1, row + x - 1, down + x - 1, width - x + 1, invalid,
+                                   dst + x - 1);
     }
-    for (int xr = 0; xr < width; ++xr)
-        right_best[xr] = backwards[width - 1 - xr];
 }
 
 #endif // HWY_TARGET == HWY_SCALAR
@@ -310,9 +442,9 @@ namespace stereod::sgm {
 
 HWY_EXPORT(CensusRow);
 HWY_EXPORT(CostRow);
-HWY_EXPORT(PathAlongRow);
-HWY_EXPORT(PathFromAbove);
-HWY_EXPORT(Winners);
+HWY_EXPORT(PathsForward);
+HWY_EXPORT(WinnersBackward);
+HWY_EXPORT(MedianRow);
 HWY_EXPORT(TargetName);
 
 const SgmKernels& simdKernels()
@@ -322,8 +454,9 @@ const SgmKernels& simdKernels()
         // than the first-call trampolines.
         hwy::GetChosenTarget().Update(hwy::SupportedTargets());
         return SgmKernels{HWY_DYNAMIC_DISPATCH(TargetName)(),  HWY_DYNAMIC_DISPATCH(CensusRow),
-                          HWY_DYNAMIC_DISPATCH(CostRow),      HWY_DYNAMIC_DISPATCH(PathAlongRow),
-                          HWY_DYNAMIC_DISPATCH(PathFromAbove), HWY_DYNAMIC_DISPATCH(Winners)};
+                          HWY_DYNAMIC_DISPATCH(CostRow),      HWY_DYNAMIC_DISPATCH(PathsForward),
+                          HWY_DYNAMIC_DISPATCH(WinnersBackward),
+                          HWY_DYNAMIC_DISPATCH(MedianRow)};
     }();
     return kernels;
 }

@@ -4,7 +4,12 @@
 // max_size pixels are set invalid. The same rule as OpenCV's filterSpeckles, without
 // allocating: every buffer is sized in the constructor.
 //
-// Thread-bound.
+// Band-parallel: labelBand() floods the regions inside each band of rows (bands on
+// different threads), joinBands() joins the regions that touch across band borders (one
+// thread, one pass over the border rows), and removeBand() clears the small ones (bands on
+// different threads again). The result does not depend on the bands.
+//
+// Thread-bound, except that the calls of one phase may run at once on disjoint bands.
 
 #include <cstddef>
 #include <cstdint>
@@ -19,14 +24,33 @@ class SpeckleFilter {
 public:
     SpeckleFilter(int width, int height);
 
-    // disparity: width * height values, row-major; `invalid` marks no disparity.
+    // All three phases on one thread. disparity: width * height values, row-major;
+    // `invalid` marks no disparity.
     void apply(int16_t* disparity, int16_t invalid, int max_step, int max_size);
 
+    // Rows y0..y1-1: each region of the band gets its own label and size.
+    void labelBand(const int16_t* disparity, int16_t invalid, int max_step, int y0, int y1);
+    // After every band is labelled: joins regions across the borders between bands, which
+    // start at rows band_starts[1..bands-1].
+    void joinBands(const int16_t* disparity, int16_t invalid, int max_step,
+                   const int* band_starts, int bands);
+    // After joinBands(): rows y0..y1-1 lose the pixels of regions of fewer than max_size.
+    void removeBand(int16_t* disparity, int16_t invalid, int max_size, int y0, int y1) const;
+
 private:
+    uint32_t root(uint32_t region) const;
+
     int width_;
-    std::vector<uint32_t> label_;     // region of each pixel; 0 = not yet visited
-    std::vector<uint32_t> stack_;     // pixels waiting to be visited
-    std::vector<uint8_t> removed_;    // per region label: removed
+    int height_;
+    // Region of each pixel: 1 + the index of the pixel its band's flood started from;
+    // 0 = not yet visited.
+    std::vector<uint32_t> label_;
+    std::vector<uint32_t> stack_;     // pixels waiting to be visited, each band its rows' part
+    std::vector<uint32_t> stack_x_;   // their columns (saves a division per pixel)
+    // Per region (by its start pixel): the region it was joined into (itself when none),
+    // and its pixel count, whole once it is a root.
+    std::vector<uint32_t> parent_;
+    std::vector<uint32_t> size_;
 };
 
 } // namespace stereod::sgm

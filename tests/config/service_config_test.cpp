@@ -640,6 +640,24 @@ TEST(ConfigDiff, SeparatesLiveChangesFromThoseNeedingARestart)
     EXPECT_TRUE(diffConfig(proposed, bm_other_mode).changed.empty());
 }
 
+// census-sgm brings its own values for the settings it shares with OpenCV's matchers,
+// unless the file sets them.
+TEST(ConfigMatcher, CensusSgmTakesItsOwnSharedDefaultsUnlessSet)
+{
+    const ServiceConfig census = parseConfig("matcher:\n  algorithm: census-sgm\n", "t.yaml");
+    EXPECT_EQ(census.processing.matcher.kind, MatcherKind::CensusSgm);
+    EXPECT_EQ(census.processing.matcher.uniqueness_ratio, 9);
+    EXPECT_EQ(census.processing.matcher.lr_max_diff_px, 2);
+    EXPECT_EQ(census.processing.matcher.speckle_window_px, 200);
+    EXPECT_EQ(census.processing.matcher.speckle_range_px, 1);
+    const ServiceConfig set = parseConfig(
+        "matcher:\n  uniqueness_ratio: 12\n  algorithm: census-sgm\n", "t.yaml");
+    EXPECT_EQ(set.processing.matcher.uniqueness_ratio, 12);
+    EXPECT_EQ(set.processing.matcher.lr_max_diff_px, 2);
+    // OpenCV's SGBM keeps the generic defaults.
+    EXPECT_EQ(defaultConfig().processing.matcher.uniqueness_ratio, 10);
+}
+
 TEST(ConfigDiff, EveryKeyIsClassified)
 {
     const auto keys = configKeys();

@@ -191,50 +191,22 @@ TEST(SgmKernelsTest, CostRowMatchesScalar)
                 }
 }
 
-void expectPathAlongRowMatches(bool forward)
+// A row of path blocks as the matcher allocates it: pads at 255 (the contract sets them
+// once, when the buffer is made), L values garbage until a kernel writes them.
+std::vector<uint8_t> pathBlocks(int width, int lanes, Random& random)
 {
-    Random random(forward ? 3 : 4);
-    for (const CostModel& model : kCostModels)
-        for (int width : kWidths)
-            for (int num_disparities : kNumDisparities)
-                for (int min_disparity : kMinDisparities)
-                    for (bool first : {true, false}) {
-                        SCOPED_TRACE(describe(width, num_disparities, min_disparity) +
-                                     (first ? ", first path" : ", adding"));
-                        const int lanes = lanesFor(num_disparities);
-                        const auto cost =
-                            costRow(width, min_disparity, num_disparities, model, random);
-                        const auto p2 = penalties(width, model, random);
-                        // The sums the earlier paths left; the kernel adds to them.
-                        std::vector<uint16_t> expected(cost.size());
-                        fillRandom(expected, random, 0, 1200);
-                        std::vector<uint16_t> actual = expected;
-                        // Scratch: two path blocks, garbage in; the kernel sets the pads.
-                        std::vector<uint8_t> scratch_a(2 * pathBlockBytes(lanes));
-                        fillRandom(scratch_a, random, 0, 255);
-                        std::vector<uint8_t> scratch_b = scratch_a;
-                        scalarKernels().path_along_row(cost.data(), p2.data(), model.p1, width,
-                                                       lanes, forward, first, scratch_a.data(),
-                                                       expected.data());
-                        simdKernels().path_along_row(cost.data(), p2.data(), model.p1, width, lanes,
-                                                     forward, first, scratch_b.data(),
-                                                     actual.data());
-                        ASSERT_EQ(actual, expected);
-                    }
-}
-
-TEST(SgmKernelsTest, PathAlongRowLeftToRightMatchesScalar)
-{
-    expectPathAlongRowMatches(true);
-}
-
-TEST(SgmKernelsTest, PathAlongRowRightToLeftMatchesScalar)
-{
-    expectPathAlongRowMatches(false);
+    const size_t block = pathBlockBytes(lanes);
+    std::vector<uint8_t> blocks(static_cast<size_t>(width) * block, 255);
+    for (int x = 0; x < width; ++x)
+        for (int k = 0; k < lanes; ++k)
+            blocks[static_cast<size_t>(x) * block + kPathPad + static_cast<size_t>(k)] =
+                static_cast<uint8_t>(random.uniform(0, 255));
+    return blocks;
 }
 
 // L values of every block of a row of path blocks, and the pads around them that the next
-// row's L[k - 1] and L[k + 1] read: the contract keeps those at 255.
+// step's L[k - 1] and L[k + 1] read: the contract keeps those at 255. Byte 0 of a block
+// belongs to the kernels (the SIMD ones keep min L there) and is not compared.
 void expectBlocksMatch(const std::vector<uint8_t>& actual, const std::vector<uint8_t>& expected,
                        int width, int lanes)
 {
@@ -245,109 +217,179 @@ void expectBlocksMatch(const std::vector<uint8_t>& actual, const std::vector<uin
         ASSERT_TRUE(std::equal(a + kPathPad, a + kPathPad + lanes, e + kPathPad))
             << "path costs of pixel " << x;
         for (const uint8_t* b : {a, e}) {
-            ASSERT_EQ(b[kPathPad - 1], 255)
+            ASSERT_TRUE(std::all_of(b + 1, b + kPathPad, [](uint8_t v) { return v == 255; }))
                 << "pad before pixel " << x << (b == a ? " (simd)" : " (scalar)");
-            ASSERT_EQ(b[kPathPad + lanes], 255)
+            ASSERT_TRUE(std::all_of(b + kPathPad + lanes, b + block,
+                                    [](uint8_t v) { return v == 255; }))
                 << "pad after pixel " << x << (b == a ? " (simd)" : " (scalar)");
         }
     }
 }
 
-TEST(SgmKernelsTest, PathFromAboveMatchesScalar)
+// The paths from above (none, the vertical one, or all three) and the left->right path,
+// over a few rows: each implementation keeps its own previous row, as the matcher does.
+TEST(SgmKernelsTest, PathsForwardMatchesScalar)
 {
-    Random random(5);
-    constexpr int kRows = 4; // the path's first row (no previous row), then three more
+    Random random(3);
+    constexpr int kRows = 4; // the paths' first row (no previous row), then three more
+    static constexpr int kDx[3] = {0, -1, 1};
     for (const CostModel& model : kCostModels)
-        for (int dx : {-1, 0, 1})
+        for (int above : {0, 1, 3})
             for (int width : kWidths)
                 for (int num_disparities : kNumDisparities)
                     for (int min_disparity : kMinDisparities) {
-                        SCOPED_TRACE(describe(width, num_disparities, min_disparity) + ", dx " +
-                                     std::to_string(dx));
+                        SCOPED_TRACE(describe(width, num_disparities, min_disparity) +
+                                     ", paths from above " + std::to_string(above));
                         const int lanes = lanesFor(num_disparities);
-                        const size_t blocks = static_cast<size_t>(width) * pathBlockBytes(lanes);
-                        // Each implementation keeps its own previous row, as the matcher does.
-                        std::vector<uint8_t> expected_rows[2], actual_rows[2];
-                        for (auto* rows : {expected_rows, actual_rows})
-                            for (int i = 0; i < 2; ++i) {
-                                rows[i].resize(blocks);
-                                fillRandom(rows[i], random, 0, 255);
+                        std::vector<uint8_t> expected_rows[3][2], actual_rows[3][2];
+                        for (int i = 0; i < above; ++i)
+                            for (int r = 0; r < 2; ++r) {
+                                expected_rows[i][r] = pathBlocks(width, lanes, random);
+                                actual_rows[i][r] = expected_rows[i][r];
                             }
+                        std::vector<uint8_t> expected_along = pathBlocks(width, lanes, random);
+                        std::vector<uint8_t> actual_along = expected_along;
                         for (int y = 0; y < kRows; ++y) {
                             SCOPED_TRACE("row " + std::to_string(y));
                             const auto cost =
                                 costRow(width, min_disparity, num_disparities, model, random);
-                            const auto p2 = penalties(width, model, random);
-                            const bool first = y % 2 == 0; // stores on even rows, adds on odd
-                            std::vector<uint16_t> expected(cost.size());
-                            fillRandom(expected, random, 0, 1200);
-                            std::vector<uint16_t> actual = expected;
+                            std::vector<uint8_t> p2_above[3];
+                            const uint8_t* p2_ptr[3];
+                            const uint8_t* expected_prev[3];
+                            const uint8_t* actual_prev[3];
+                            uint8_t* expected_cur[3];
+                            uint8_t* actual_cur[3];
                             const int cur = y & 1;
-                            const uint8_t* expected_prev =
-                                y == 0 ? nullptr : expected_rows[cur ^ 1].data();
-                            const uint8_t* actual_prev =
-                                y == 0 ? nullptr : actual_rows[cur ^ 1].data();
-                            scalarKernels().path_from_above(
-                                cost.data(), p2.data(), model.p1, width, lanes, dx, first,
-                                expected_prev, expected_rows[cur].data(), expected.data());
-                            simdKernels().path_from_above(cost.data(), p2.data(), model.p1, width,
-                                                          lanes, dx, first, actual_prev,
-                                                          actual_rows[cur].data(), actual.data());
-                            ASSERT_NO_FATAL_FAILURE(expectBlocksMatch(
-                                actual_rows[cur], expected_rows[cur], width, lanes));
-                            ASSERT_EQ(actual, expected);
+                            for (int i = 0; i < above; ++i) {
+                                p2_above[i] = penalties(width, model, random);
+                                p2_ptr[i] = p2_above[i].data();
+                                expected_prev[i] = y == 0 ? nullptr : expected_rows[i][cur ^ 1].data();
+                                actual_prev[i] = y == 0 ? nullptr : actual_rows[i][cur ^ 1].data();
+                                expected_cur[i] = expected_rows[i][cur].data();
+                                actual_cur[i] = actual_rows[i][cur].data();
+                            }
+                            const auto p2_along = penalties(width, model, random);
+                            // The left->right path on odd rows only: the matcher's warm-up
+                            // rows run the paths from above alone.
+                            const bool along = above == 0 || y % 2 == 1;
+                            scalarKernels().paths_forward(
+                                cost.data(), model.p1, width, lanes,
+                                AbovePaths{above, kDx, p2_ptr, expected_prev, expected_cur},
+                                p2_along.data(), along ? expected_along.data() : nullptr);
+                            simdKernels().paths_forward(
+                                cost.data(), model.p1, width, lanes,
+                                AbovePaths{above, kDx, p2_ptr, actual_prev, actual_cur},
+                                p2_along.data(), along ? actual_along.data() : nullptr);
+                            for (int i = 0; i < above; ++i)
+                                ASSERT_NO_FATAL_FAILURE(expectBlocksMatch(
+                                    actual_rows[i][cur], expected_rows[i][cur], width, lanes))
+                                    << "path from above " << i;
+                            ASSERT_NO_FATAL_FAILURE(
+                                expectBlocksMatch(actual_along, expected_along, width, lanes))
+                                << "left->right path";
                         }
                     }
 }
 
-TEST(SgmKernelsTest, WinnersMatchesScalar)
+TEST(SgmKernelsTest, WinnersBackwardMatchesScalar)
 {
     Random random(6);
-    for (int width : kWidths)
-        for (int num_disparities : kNumDisparities)
-            for (int min_disparity : kMinDisparities)
-                for (int levels : {3, 4000}) {
-                    // 3 levels: many equal sums (ties go to the smallest lane); 4000: few.
-                    SCOPED_TRACE(describe(width, num_disparities, min_disparity) + ", levels " +
-                                 std::to_string(levels));
-                    const int lanes = lanesFor(num_disparities);
-                    std::vector<uint16_t> sum(static_cast<size_t>(width) *
-                                              static_cast<size_t>(lanes));
-                    for (int x = 0; x < width; ++x) {
-                        uint16_t* s =
-                            sum.data() + static_cast<size_t>(x) * static_cast<size_t>(lanes);
-                        const int best = random.uniform(0, num_disparities - 1);
-                        for (int k = 0; k < lanes; ++k) {
-                            // A valley around a random best lane, noise on top; the padding
-                            // lanes past num_disparities hold the smallest sums of all, which
-                            // the kernels must ignore.
-                            const int valley = std::abs(k - best) * 40 +
-                                               random.uniform(0, levels - 1) * (4000 / levels);
-                            s[k] = static_cast<uint16_t>(
-                                k >= num_disparities ? 0 : std::min(65000, 500 + valley));
+    for (const CostModel& model : kCostModels)
+        for (int others : {1, 2, 4})
+            for (int width : kWidths)
+                for (int num_disparities : kNumDisparities)
+                    for (int min_disparity : kMinDisparities)
+                        for (int levels : {3, 200}) {
+                            // 3 levels: many equal sums (ties go to the smallest lane);
+                            // 200: few.
+                            SCOPED_TRACE(describe(width, num_disparities, min_disparity) +
+                                         ", other paths " + std::to_string(others) +
+                                         ", levels " + std::to_string(levels));
+                            const int lanes = lanesFor(num_disparities);
+                            const size_t block = pathBlockBytes(lanes);
+                            const auto cost =
+                                costRow(width, min_disparity, num_disparities, model, random);
+                            const auto p2 = penalties(width, model, random);
+                            // The other paths' rows: a valley around a random best lane per
+                            // pixel, noise on top, anywhere in 0..255 as 8-bit path costs are.
+                            std::vector<std::vector<uint8_t>> rows(static_cast<size_t>(others));
+                            std::vector<const uint8_t*> row_ptr;
+                            for (auto& r : rows) {
+                                r = pathBlocks(width, lanes, random);
+                                for (int x = 0; x < width; ++x) {
+                                    const int best = random.uniform(0, num_disparities - 1);
+                                    for (int k = 0; k < lanes; ++k) {
+                                        const int valley = std::abs(k - best) * 8 +
+                                                           random.uniform(0, levels - 1) *
+                                                               (200 / levels);
+                                        r[static_cast<size_t>(x) * block + kPathPad +
+                                          static_cast<size_t>(k)] =
+                                            static_cast<uint8_t>(std::min(255, valley));
+                                    }
+                                }
+                                row_ptr.push_back(r.data());
+                            }
+                            const PathRows path_rows{row_ptr.data(), others};
+                            std::vector<uint8_t> path_scratch(2 * block, 255);
+                            std::vector<uint16_t> sum_scratch(winnersSumScratch(lanes));
+                            std::vector<uint16_t> scratch(
+                                winnersScratch(width, min_disparity, lanes));
+                            std::vector<Winner> expected(static_cast<size_t>(width),
+                                                         Winner{1, 2, 3, 4, 5});
+                            std::vector<Winner> actual(static_cast<size_t>(width),
+                                                       Winner{6, 7, 8, 9, 10});
+                            std::vector<uint16_t> expected_right(static_cast<size_t>(width), 7);
+                            std::vector<uint16_t> actual_right(static_cast<size_t>(width), 8);
+                            fillRandom(sum_scratch, random, 0, 65535);
+                            fillRandom(scratch, random, 0, 65535);
+                            scalarKernels().winners_backward(
+                                cost.data(), p2.data(), model.p1, width, lanes, path_rows,
+                                min_disparity, num_disparities, path_scratch.data(),
+                                sum_scratch.data(), expected.data(), expected_right.data(),
+                                scratch.data());
+                            fillRandom(sum_scratch, random, 0, 65535);
+                            fillRandom(scratch, random, 0, 65535);
+                            std::fill(path_scratch.begin(), path_scratch.end(), uint8_t{255});
+                            simdKernels().winners_backward(
+                                cost.data(), p2.data(), model.p1, width, lanes, path_rows,
+                                min_disparity, num_disparities, path_scratch.data(),
+                                sum_scratch.data(), actual.data(), actual_right.data(),
+                                scratch.data());
+                            for (int x = 0; x < width; ++x) {
+                                const Winner& e = expected[static_cast<size_t>(x)];
+                                const Winner& a = actual[static_cast<size_t>(x)];
+                                ASSERT_EQ(a.best_lane, e.best_lane) << "pixel " << x;
+                                ASSERT_EQ(a.best_sum, e.best_sum) << "pixel " << x;
+                                ASSERT_EQ(a.second_sum, e.second_sum) << "pixel " << x;
+                                ASSERT_EQ(a.below_sum, e.below_sum) << "pixel " << x;
+                                ASSERT_EQ(a.above_sum, e.above_sum) << "pixel " << x;
+                            }
+                            ASSERT_EQ(actual_right, expected_right);
                         }
-                    }
-                    std::vector<Winner> expected(static_cast<size_t>(width), Winner{1, 2, 3});
-                    std::vector<Winner> actual(static_cast<size_t>(width), Winner{4, 5, 6});
-                    std::vector<uint32_t> expected_right(static_cast<size_t>(width), 7);
-                    std::vector<uint32_t> actual_right(static_cast<size_t>(width), 8);
-                    std::vector<uint32_t> scratch(winnersScratch(width, min_disparity, lanes));
-                    fillRandom(scratch, random, 0, 1 << 30);
-                    scalarKernels().winners(sum.data(), width, min_disparity, num_disparities,
-                                            lanes, expected.data(), expected_right.data(),
-                                            scratch.data());
-                    fillRandom(scratch, random, 0, 1 << 30);
-                    simdKernels().winners(sum.data(), width, min_disparity, num_disparities, lanes,
-                                          actual.data(), actual_right.data(), scratch.data());
-                    for (int x = 0; x < width; ++x) {
-                        const Winner& e = expected[static_cast<size_t>(x)];
-                        const Winner& a = actual[static_cast<size_t>(x)];
-                        ASSERT_EQ(a.best_lane, e.best_lane) << "pixel " << x;
-                        ASSERT_EQ(a.best_sum, e.best_sum) << "pixel " << x;
-                        ASSERT_EQ(a.second_sum, e.second_sum) << "pixel " << x;
-                    }
-                    ASSERT_EQ(actual_right, expected_right);
-                }
+}
+
+TEST(SgmKernelsTest, MedianRowMatchesScalar)
+{
+    Random random(7);
+    constexpr int16_t kNone = -32768;
+    for (int width : {1, 2, 3, 4, 17, 31, 32, 33, 100})
+        for (int invalid_percent : {0, 30, 90}) {
+            SCOPED_TRACE("width " + std::to_string(width) + ", invalid " +
+                         std::to_string(invalid_percent) + " %");
+            std::vector<int16_t> rows(3 * static_cast<size_t>(width));
+            for (int16_t& v : rows)
+                v = random.uniform(0, 99) < invalid_percent
+                        ? kNone
+                        : static_cast<int16_t>(random.uniform(-200, 4000));
+            std::vector<int16_t> expected(static_cast<size_t>(width), 11);
+            std::vector<int16_t> actual(static_cast<size_t>(width), 11);
+            const int16_t* up = rows.data();
+            const int16_t* row = up + width;
+            const int16_t* down = row + width;
+            scalarKernels().median_row(up, row, down, width, kNone, expected.data());
+            simdKernels().median_row(up, row, down, width, kNone, actual.data());
+            ASSERT_EQ(actual, expected);
+        }
 }
 
 } // namespace
