@@ -387,6 +387,97 @@ template <class Access> KeyDef boolKey(std::string path, bool live, Access acces
     return def;
 }
 
+// Three numbers, [x, y, z].
+std::optional<cv::Vec3d> parseVec3(const YAML::Node& node)
+{
+    if (!node.IsSequence() || node.size() != 3)
+        return std::nullopt;
+    cv::Vec3d v;
+    for (std::size_t i = 0; i < 3; ++i) {
+        const auto value = node[i].IsScalar() ? parseReal(node[i].Scalar()) : std::nullopt;
+        if (!value)
+            return std::nullopt;
+        v[static_cast<int>(i)] = *value;
+    }
+    return v;
+}
+
+std::string showVec3(const cv::Vec3d& v)
+{
+    return "[" + formatNumber(v[0]) + ", " + formatNumber(v[1]) + ", " + formatNumber(v[2]) + "]";
+}
+
+template <class Access> KeyDef vec3Key(std::string path, bool live, Access access, std::string unit)
+{
+    KeyDef def{std::move(path), live, {}, {}};
+    def.read = [access, unit](const YAML::Node& node, ServiceConfig& config,
+                              const ReadContext&) -> ReadResult {
+        const auto value = parseVec3(node);
+        if (!value)
+            return ReadFailure{"not a list of three numbers", "[x, y, z] in " + unit};
+        access(config) = *value;
+        return std::nullopt;
+    };
+    def.show = [access](const ServiceConfig& config) { return showVec3(access(config)); };
+    return def;
+}
+
+// The keep-out zones: a list of boxes in the robot's base frame.
+KeyDef zonesKey()
+{
+    KeyDef def{"zones", kLive, {}, {}};
+    def.read = [](const YAML::Node& node, ServiceConfig& config, const ReadContext&) -> ReadResult {
+        const std::string expected =
+            "a list of {name, min: [x, y, z], max: [x, y, z], min_points, enter_frames, "
+            "leave_frames}, metres in the robot's base frame";
+        if (!node.IsNull() && !node.IsSequence())
+            return ReadFailure{"not a list", expected};
+        std::vector<ZoneSettings> zones;
+        for (std::size_t i = 0; i < node.size(); ++i) {
+            const YAML::Node item = node[i];
+            const std::string where = "zone " + std::to_string(i + 1);
+            if (!item.IsMap())
+                return ReadFailure{where + " is not a mapping", expected};
+            ZoneSettings zone;
+            for (const auto& entry : item) {
+                const std::string key = entry.first.as<std::string>();
+                const YAML::Node& value = entry.second;
+                if (key == "name" && value.IsScalar()) {
+                    zone.name = value.Scalar();
+                } else if (key == "min" || key == "max") {
+                    const auto v = parseVec3(value);
+                    if (!v)
+                        return ReadFailure{where + ": " + key + " is not [x, y, z]", expected};
+                    (key == "min" ? zone.min_m : zone.max_m) = *v;
+                } else if (key == "min_points" || key == "enter_frames" || key == "leave_frames") {
+                    const auto v = value.IsScalar() ? parseInteger(value.Scalar()) : std::nullopt;
+                    if (!v || *v < 1 || *v > 1000000)
+                        return ReadFailure{where + ": " + key + " is not a whole number >= 1", expected};
+                    (key == "min_points"     ? zone.min_points
+                     : key == "enter_frames" ? zone.enter_frames
+                                             : zone.leave_frames) = static_cast<int>(*v);
+                } else {
+                    return ReadFailure{where + ": unknown key " + key, expected};
+                }
+            }
+            zones.push_back(std::move(zone));
+        }
+        config.zones.zones = std::move(zones);
+        return std::nullopt;
+    };
+    def.show = [](const ServiceConfig& config) {
+        std::string text = "[";
+        for (const ZoneSettings& z : config.zones.zones)
+            text += (text.size() > 1 ? ", " : "") + std::string("{name: ") + z.name +
+                    ", min: " + showVec3(z.min_m) + ", max: " + showVec3(z.max_m) +
+                    ", min_points: " + std::to_string(z.min_points) +
+                    ", enter_frames: " + std::to_string(z.enter_frames) +
+                    ", leave_frames: " + std::to_string(z.leave_frames) + "}";
+        return text + "]";
+    };
+    return def;
+}
+
 // Text; an empty value (`group:`) is the empty string. Paths resolve against the
 // directory of the file.
 template <class Access> KeyDef textKey(std::string path, bool live, Access access, bool is_path)
@@ -808,6 +899,16 @@ std::vector<KeyDef> buildKeyTable()
         [](auto& c) -> auto& { return c.processing.nearest.range_limit_fraction; }, ""));
     add(boolKey(
         "point_cloud", kLive, [](auto& c) -> auto& { return c.processing.compute_cloud; }));
+    add(vec3Key(
+        "robot.camera_pose.translation_m", kLive,
+        [](auto& c) -> auto& { return c.zones.camera_pose.translation_m; }, "metres"));
+    add(vec3Key(
+        "robot.camera_pose.rpy_deg", kLive,
+        [](auto& c) -> auto& { return c.zones.camera_pose.rpy_deg; }, "degrees"));
+    add(realKey(
+        "robot.min_visible_fraction", kLive,
+        [](auto& c) -> auto& { return c.zones.min_visible_fraction; }, ""));
+    add(zonesKey());
     add(realKey(
         "calibration_health.interval_s", kLive,
         [](auto& c) -> auto& { return c.calibration_health.interval_s; }, "s"));
@@ -1489,6 +1590,19 @@ std::vector<Problem> checkValues(const ServiceConfig& config, const KeyLocations
     checkNearest(checker, config.processing.nearest);
     checker.real("calibration_health.interval_s", config.calibration_health.interval_s,
                  closed(0, 3600, " s"));
+    checker.real("robot.min_visible_fraction", config.zones.min_visible_fraction,
+                 closed(0, 1, " of a zone's volume"));
+    try {
+        validateZonesSettings(config.zones);
+    } catch (const std::invalid_argument& e) {
+        const std::string message = e.what();
+        const size_t colon = message.find(": ");
+        const std::string key = message.substr(0, colon);
+        // zones[i].field problems belong to the zones key; the others name their own.
+        checker.fail(key.rfind("zones[", 0) == 0 ? "zones" : key,
+                     colon == std::string::npos ? message : message.substr(colon + 2),
+                     key.rfind("zones[", 0) == 0 ? key : "see docs/configuration.md");
+    }
     checkSocket(checker, config.socket);
     checkPublish(checker, config.publish);
     const auto& levels = logLevelNames();

@@ -13,6 +13,7 @@
 
 #include "capture/v4l2_camera.hpp"
 #include "pipeline/stereo_processor.hpp"
+#include "pipeline/zones.hpp"
 
 namespace stereod {
 
@@ -102,6 +103,9 @@ struct ServiceConfig {
     std::string calibration_path;     // empty: the recording's calibration.yaml
     ProcessorSettings processing;
     HealthConfig calibration_health;
+    // The camera's pose on the robot and the keep-out zones in its base frame
+    // (robot.*, zones); no zones: none are watched.
+    ZonesSettings zones;
     SocketConfig socket;
     PublishConfig publish;
     std::string log_level = "info";   // trace, debug, info, warn, error, critical, off

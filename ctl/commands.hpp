@@ -129,6 +129,14 @@ struct BoardDistanceOptions {
     bool json = false;
 };
 
+// `stereoctl zones`: exit 0 all clear, 1 any occupied, 2 unknown, stale or none, 3 no service.
+struct ZonesOptions {
+    ServiceOptions service;
+    bool json = false;
+    bool watch = false;               // one block per frame until interrupted
+    double max_age_ms = 1000.0;       // older zones count as unknown
+};
+
 // `stereoctl check-calibration`: how well a calibration still rectifies a rig's pairs.
 // Exit 0 ok, 1 degraded or failed, 2 unknown (no verdict) or bad arguments.
 struct CheckCalibrationOptions {
@@ -170,6 +178,8 @@ int runExportRos(const ExportRosOptions& options);
 int runRecord(const RecordOptions& options);
 // ctl/board_distance_command.cpp
 int runBoardDistance(const BoardDistanceOptions& options);
+// ctl/zones_command.cpp
+int runZones(const ZonesOptions& options);
 // ctl/check_calibration_command.cpp
 int runCheckCalibration(const CheckCalibrationOptions& options);
 

@@ -93,6 +93,7 @@ struct Options {
     DevicesOptions devices;
     RecordOptions record;
     CheckCalibrationOptions check_calibration;
+    ZonesOptions zones;
 };
 
 CLI::App* declareRecord(CLI::App& app, RecordOptions& o)
@@ -360,6 +361,20 @@ CLI::App* declareCheckCalibration(CLI::App& app, CheckCalibrationOptions& o)
     return cmd;
 }
 
+CLI::App* declareZones(CLI::App& app, ZonesOptions& o)
+{
+    CLI::App* cmd = addServiceCommand(
+        app, "zones",
+        "the keep-out zones in the robot's frame: occupied, clear or unknown, the nearest point "
+        "in each (exit 0 all clear, 1 any occupied, 2 unknown or stale, 3 no service)",
+        o.service, &o.json, "print the zones as JSON");
+    cmd->add_flag("--watch", o.watch, "one block per frame until interrupted (Ctrl-C)");
+    cmd->add_option("--max-age-ms", o.max_age_ms, "zones older than this count as unknown")
+        ->check(kPositive)
+        ->capture_default_str();
+    return cmd;
+}
+
 CLI::App* declareDevices(CLI::App& app, DevicesOptions& o)
 {
     CLI::App* cmd = app.add_subcommand(
@@ -403,6 +418,7 @@ int main(int argc, char** argv)
         {declareRecord(app, o.record), [&] { return runRecord(o.record); }},
         {declareCheckCalibration(app, o.check_calibration),
          [&] { return runCheckCalibration(o.check_calibration); }},
+        {declareZones(app, o.zones), [&] { return runZones(o.zones); }},
     };
 
     try {

@@ -135,6 +135,8 @@ ParseResult parseSubscribe(const Json& request, const std::optional<Json>& id)
         subscribe.stream = StreamKind::Depth;
     } else if (name == streamName(StreamKind::Raw)) {
         subscribe.stream = StreamKind::Raw;
+    } else if (name == streamName(StreamKind::Zones)) {
+        subscribe.stream = StreamKind::Zones;
     } else {
         return badRequest(
             "unknown stream " + quoteText(name) + "; known: " + joinNames(knownStreams()), id);
@@ -201,6 +203,8 @@ ParseResult parseObject(const Json& request)
         return Request{ReloadRequest{}, id};
     if (name == "calibration")
         return Request{CalibrationRequest{}, id};
+    if (name == "zones")
+        return Request{ZonesRequest{}, id};
     return ProtocolError{
         ErrorCode::UnknownCommand,
         "unknown command " + quoteText(name) + "; known: " + joinNames(knownCommands()), id};
@@ -291,6 +295,8 @@ const char* streamName(StreamKind stream) noexcept
         return "depth";
     case StreamKind::Raw:
         return "raw";
+    case StreamKind::Zones:
+        return "zones";
     }
     return "readings";
 }
@@ -318,13 +324,13 @@ const std::vector<std::string>& knownCommands()
 {
     static const std::vector<std::string> names = {"hello",    "distance",  "status",
                                                    "snapshot", "subscribe", "reload",
-                                                   "calibration"};
+                                                   "calibration", "zones"};
     return names;
 }
 
 const std::vector<std::string>& knownStreams()
 {
-    static const std::vector<std::string> names = {"readings", "depth", "raw"};
+    static const std::vector<std::string> names = {"readings", "depth", "raw", "zones"};
     return names;
 }
 
@@ -461,6 +467,51 @@ Json readingToJson(const ReadingReport& report, int64_t now_ns)
     std::string text;
     appendReadingJson(text, report, now_ns);
     return Json::parse(text);
+}
+
+void appendZonesJson(std::string& out, const std::vector<ZoneReading>& zones)
+{
+    out.push_back('[');
+    for (std::size_t i = 0; i < zones.size(); ++i) {
+        const ZoneReading& zone = zones[i];
+        if (i > 0)
+            out.push_back(',');
+        JsonObjectWriter object(out);
+        object.field("name", zone.name);
+        object.field("state", zoneStateName(zone.state));
+        if (!zone.reason.empty())
+            object.field("reason", zone.reason);
+        object.field("points", zone.points);
+        if (zone.points > 0) {
+            object.field("nearest_m", roundTo(zone.nearest_m, 4));
+            std::string& point = object.openField("nearest_point_m");
+            point.push_back('[');
+            for (int k = 0; k < 3; ++k) {
+                if (k > 0)
+                    point.push_back(',');
+                appendJsonNumber(point, roundTo(zone.nearest_point_m[k], 4));
+            }
+            point.push_back(']');
+        }
+        object.field("visible_fraction", roundTo(zone.visible_fraction, 3));
+        object.close();
+    }
+    out.push_back(']');
+}
+
+void appendZonesEvent(std::string& out, const std::vector<ZoneReading>& zones, uint64_t frame,
+                      int64_t stamp_ns, int64_t now_ns, uint64_t skipped)
+{
+    JsonObjectWriter object(out);
+    object.field("event", "zones");
+    object.field("frame", frame);
+    object.field("stamp_ns", stamp_ns);
+    object.field("age_ms", roundTo(static_cast<double>(now_ns - stamp_ns) / 1e6, 3));
+    if (skipped > 0)
+        object.field("skipped", skipped);
+    appendZonesJson(object.openField("zones"), zones);
+    object.close();
+    out.push_back('\n');
 }
 
 void appendReadingEvent(std::string& out, const ReadingReport& report, int64_t now_ns,

@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "pipeline/reading.hpp"
+#include "pipeline/zones.hpp"
 
 namespace stereod {
 
@@ -45,7 +46,8 @@ enum class ErrorCode {
 const char* errorCodeName(ErrorCode code) noexcept;
 
 // Raw: the pairs as captured, before rectification (two u8_gray payloads per event).
-enum class StreamKind { Readings, Depth, Raw };
+// Zones: the keep-out zones of every frame (`{"event":"zones",...}` lines).
+enum class StreamKind { Readings, Depth, Raw, Zones };
 const char* streamName(StreamKind stream) noexcept;
 
 // RawLeft, RawRight: the pair's frames as captured, before rectification.
@@ -76,8 +78,11 @@ struct ReloadRequest {};
 // The calibration in force, as the text of its file.
 struct CalibrationRequest {};
 
+// The keep-out zones of the latest frame.
+struct ZonesRequest {};
+
 using Command = std::variant<HelloRequest, DistanceRequest, StatusRequest, SnapshotRequest,
-                             SubscribeRequest, ReloadRequest, CalibrationRequest>;
+                             SubscribeRequest, ReloadRequest, CalibrationRequest, ZonesRequest>;
 
 struct Request {
     Command command;
@@ -137,6 +142,16 @@ void appendReadingJson(std::string& out, const ReadingReport& report, int64_t no
 
 // The same object, for composing replies.
 Json readingToJson(const ReadingReport& report, int64_t now_ns);
+
+// The zones of a frame as a JSON array of objects (name, state, reason, points,
+// nearest_m, nearest_point_m, visible_fraction). Allocates nothing once `out` has the
+// capacity.
+void appendZonesJson(std::string& out, const std::vector<ZoneReading>& zones);
+
+// Appends `{"event":"zones","frame":N,"stamp_ns":S,"age_ms":A,"zones":[...]}\n`, with
+// "skipped" when `skipped` > 0.
+void appendZonesEvent(std::string& out, const std::vector<ZoneReading>& zones, uint64_t frame,
+                      int64_t stamp_ns, int64_t now_ns, uint64_t skipped);
 
 // Appends `{"event":"reading","reading":{...}}\n`, with "skipped" when `skipped` > 0.
 void appendReadingEvent(std::string& out, const ReadingReport& report, int64_t now_ns,

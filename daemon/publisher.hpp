@@ -27,6 +27,7 @@
 #include <opencv2/core/mat.hpp>
 
 #include "pipeline/stereo_processor.hpp"
+#include "pipeline/zones.hpp"
 
 namespace stereod {
 
@@ -89,6 +90,9 @@ struct PublishedFrame {
     FixedText reason_message; // why there is no reading, with numbers; may be empty
     PipelineStats stats;
     RawPair raw;              // the pair as captured, when raw frames were wanted
+    // The keep-out zones of this pair (empty when none are configured); each keeps its
+    // name's buffer from frame to frame.
+    std::vector<ZoneReading> zones;
 };
 
 class Publisher {

@@ -160,6 +160,7 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
         worker_->setHealthMonitor(health_.get());
         worker_->setWithholdWhenFailed(config_.calibration_health.withhold_when_failed);
     }
+    worker_->updateZones(config_.zones);
 
     ServerOptions server_options;
     server_options.socket = config_.socket;
@@ -507,6 +508,8 @@ ReloadOutcome Service::loadAndApply()
             worker_->setWithholdWhenFailed(proposed.calibration_health.withhold_when_failed);
         }
         config_.calibration_health = proposed.calibration_health;
+        worker_->updateZones(proposed.zones);
+        config_.zones = proposed.zones;
         config_.processing = proposed.processing;
         config_.publish = proposed.publish;
         config_.log_level = proposed.log_level;

@@ -877,6 +877,7 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
     report.message = frame.reason_message.view();
     reading_event_.clear();
     depth_header_.clear();
+    zones_event_.clear();
 
     const cv::Mat& depth = frame.depth_mm;
     DepthEventHeader header;
@@ -903,11 +904,14 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
             continue;
         const bool pending = client.unsent() > 0;
         bool appended = false;
-        for (const StreamKind stream : {StreamKind::Readings, StreamKind::Depth, StreamKind::Raw}) {
+        for (const StreamKind stream :
+             {StreamKind::Readings, StreamKind::Depth, StreamKind::Raw, StreamKind::Zones}) {
             const bool is_depth = stream == StreamKind::Depth;
             const bool is_raw = stream == StreamKind::Raw;
+            const bool is_zones = stream == StreamKind::Zones;
             Subscription& subscription =
-                is_raw ? client.raw : (is_depth ? client.depth : client.readings);
+                is_zones ? client.zones
+                         : (is_raw ? client.raw : (is_depth ? client.depth : client.readings));
             if (!subscription.active)
                 continue;
             // A pair taken before the subscriber's interest reached the worker has no raw
@@ -918,7 +922,7 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
             // wants every pair.
             const double config_hz = is_raw     ? 0.0
                                      : is_depth ? options_.publish.depth_max_hz
-                                                : options_.publish.readings_max_hz;
+                                                : options_.publish.readings_max_hz;   // readings, zones
             // Frames this thread never saw (it was busy) are lost to a stream that wants
             // every frame.
             const bool every_frame = config_hz <= 0.0 && !subscription.max_hz;
@@ -937,7 +941,17 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
                 continue;
             }
             compactOut(client);
-            if (is_raw) {
+            if (is_zones) {
+                if (subscription.skipped > 0) {
+                    appendZonesEvent(client.out, frame.zones, frame.result.frame,
+                                     frame.result.stamp_ns, now_ns, subscription.skipped);
+                } else {
+                    if (zones_event_.empty())
+                        appendZonesEvent(zones_event_, frame.zones, frame.result.frame,
+                                         frame.result.stamp_ns, now_ns, 0);
+                    client.out.append(zones_event_);
+                }
+            } else if (is_raw) {
                 if (subscription.skipped > 0) {
                     appendRawEventHeader(client.out, raw_header, subscription.skipped);
                 } else {
@@ -1333,6 +1347,7 @@ void SocketServer::handle(Client& client, const SubscribeRequest& request,
 {
     Subscription& subscription = request.stream == StreamKind::Raw     ? client.raw
                                  : request.stream == StreamKind::Depth ? client.depth
+                                 : request.stream == StreamKind::Zones ? client.zones
                                                                        : client.readings;
     if (request.stream == StreamKind::Raw)
         publisher_.wantRawUntil(monotonicNowNs() + kRawInterestNs);
@@ -1356,6 +1371,31 @@ void SocketServer::handle(Client& client, const ReloadRequest&, const std::optio
     answer["changed"] = outcome.changed;
     answer["restart_needed"] = outcome.restart_needed;
     reply(client, answer);
+}
+
+void SocketServer::handle(Client& client, const ZonesRequest&, const std::optional<Json>& id)
+{
+    const int64_t now_ns = monotonicNowNs();
+    const PublishedFrame* latest = publisher_.latest();
+    if (client.dead || dropIfBacklogged(client))
+        return;
+    compactOut(client);
+    JsonObjectWriter object(client.out);
+    object.field("ok", true);
+    if (id)
+        object.rawField("id", id->dump(-1, ' ', false, Json::error_handler_t::replace));
+    if (latest == nullptr) {
+        object.nullField("frame");
+        object.openField("zones").append("[]");
+    } else {
+        object.field("frame", latest->result.frame);
+        object.field("stamp_ns", latest->result.stamp_ns);
+        object.field("age_ms",
+                     roundTo(static_cast<double>(now_ns - latest->result.stamp_ns) / 1e6, 3));
+        appendZonesJson(object.openField("zones"), latest->zones);
+    }
+    object.close();
+    client.out.push_back('\n');
 }
 
 void SocketServer::handle(Client& client, const CalibrationRequest&, const std::optional<Json>& id)

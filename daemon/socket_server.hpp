@@ -175,10 +175,14 @@ class SocketServer {
         Subscription readings;
         Subscription depth;
         Subscription raw;
+        Subscription zones;
         std::optional<WaitingSnapshot> waiting;
 
         std::size_t unsent() const noexcept { return out.size() - out_sent; }
-        bool subscribed() const noexcept { return readings.active || depth.active || raw.active; }
+        bool subscribed() const noexcept
+        {
+            return readings.active || depth.active || raw.active || zones.active;
+        }
     };
 
     void addToEpoll(int fd, uint64_t tag, uint32_t events);
@@ -225,6 +229,7 @@ class SocketServer {
     void handle(Client& client, const SubscribeRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const ReloadRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const CalibrationRequest& request, const std::optional<Json>& id);
+    void handle(Client& client, const ZonesRequest& request, const std::optional<Json>& id);
 
     // Answers a snapshot from `frame` (its raw frames must be present when asked for).
     void sendSnapshot(Client& client, const SnapshotRequest& request,
@@ -263,6 +268,7 @@ class SocketServer {
     std::vector<char> read_buffer_; // recv() target, reused
     std::string reading_event_;     // the frame's reading event line, built once per frame
     std::string depth_header_;      // the frame's depth event header, built once per frame
+    std::string zones_event_;       // the frame's zones event line, built once per frame
     std::string raw_header_;        // the frame's raw event header, built once per frame
     std::size_t live_clients_ = 0;  // connections not closed yet
     bool listen_paused_ = false;    // out of descriptors: accept again on the next tick

@@ -69,6 +69,7 @@ Worker::~Worker()
     ring_.stop();
     join();
     delete pending_settings_.exchange(nullptr, std::memory_order_acq_rel);
+    delete pending_zones_.exchange(nullptr, std::memory_order_acq_rel);
 }
 
 void Worker::start()
@@ -94,6 +95,13 @@ void Worker::updateSettings(const ProcessorSettings& settings)
         pending_settings_.exchange(fresh.release(), std::memory_order_acq_rel));
 }
 
+void Worker::updateZones(const ZonesSettings& zones)
+{
+    auto fresh = std::make_unique<ZonesSettings>(zones);
+    std::unique_ptr<ZonesSettings> replaced(
+        pending_zones_.exchange(fresh.release(), std::memory_order_acq_rel));
+}
+
 void Worker::refreshRange()
 {
     stats_.range = processor_ != nullptr ? processor_->disparityRange() : DisparityRange{};
@@ -105,6 +113,16 @@ void Worker::refreshRange()
 
 void Worker::applyPendingSettings()
 {
+    if (std::unique_ptr<ZonesSettings> zones{
+            pending_zones_.exchange(nullptr, std::memory_order_acq_rel)}) {
+        try {
+            zones_.reconfigure(*zones);
+            spdlog::info("keep-out zones in force: {}", zones->zones.size());
+        } catch (const std::exception& e) {
+            spdlog::error("new keep-out zones refused, the previous ones stay in force: {}",
+                          e.what());
+        }
+    }
     std::unique_ptr<ProcessorSettings> settings(
         pending_settings_.exchange(nullptr, std::memory_order_acq_rel));
     if (!settings || processor_ == nullptr)
@@ -241,6 +259,33 @@ void Worker::processPair(StereoPair& pair)
     } else if (reading.reason == NoReadingReason::OutOfSync) {
         clearDepth(result);
         slot.depth_valid = false;
+    }
+
+    // Keep-out zones from the depth the reading trusts; without it, every zone is unknown
+    // for this pair (its hysteresis untouched) with the reading's reason.
+    if (!zones_.settings().zones.empty()) {
+        if (slot.depth_valid && processor_ != nullptr) {
+            const std::vector<ZoneReading>& zones =
+                zones_.update(result.depth_m, processor_->calibration().rectified,
+                              stats_.range.closest_depth_m, stamp_ns, frame);
+            slot.zones.resize(zones.size());
+            std::copy(zones.begin(), zones.end(), slot.zones.begin());
+        } else {
+            slot.zones.resize(zones_.readings().size());
+            for (std::size_t i = 0; i < slot.zones.size(); ++i) {
+                ZoneReading& zone = slot.zones[i];
+                zone.name = zones_.readings()[i].name;
+                zone.state = ZoneState::Unknown;
+                zone.reason = reasonCode(reading.reason);
+                zone.points = 0;
+                zone.visible_fraction = 0.0;
+                zone.occupied_now = false;
+                zone.stamp_ns = stamp_ns;
+                zone.frame = frame;
+            }
+        }
+    } else {
+        slot.zones.clear();
     }
 
     const int64_t publish_start_ns = monotonicNowNs();

@@ -33,6 +33,7 @@
 #include "daemon/log_limiter.hpp"
 #include "daemon/publisher.hpp"
 #include "pipeline/stereo_processor.hpp"
+#include "pipeline/zones.hpp"
 
 namespace stereod {
 
@@ -114,6 +115,12 @@ class Worker {
         withhold_when_failed_.store(withhold, std::memory_order_relaxed);
     }
 
+    // Hands over the camera pose and keep-out zones; the worker applies them before its
+    // next pair (zones whose name stays keep their hysteresis). Validated by the caller
+    // (validateZonesSettings). Never blocks the worker; zones not picked up yet are
+    // replaced.
+    void updateZones(const ZonesSettings& zones);
+
     // Hands new settings over; the worker applies them before its next pair (a frame
     // boundary). Never blocks the worker: an atomic pointer swap; settings not picked up
     // yet are replaced. If the processor refuses them, the worker logs why and keeps the
@@ -146,10 +153,12 @@ class Worker {
     std::thread thread_;
     std::atomic<double> max_skew_ms_;
     std::atomic<ProcessorSettings*> pending_settings_{nullptr}; // owned; see updateSettings()
+    std::atomic<ZonesSettings*> pending_zones_{nullptr};        // owned; see updateZones()
     std::atomic<int64_t> busy_since_ns_{0};
     std::atomic<bool> finished_{false};
 
     // Worker thread only.
+    ZoneMonitor zones_{ZonesSettings{}};
     PipelineStats stats_;
     RecentValues<double, kWindow> rectify_ms_, match_ms_, depth_ms_, nearest_ms_, cloud_ms_,
         publish_ms_;

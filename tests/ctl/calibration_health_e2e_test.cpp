@@ -63,12 +63,13 @@ void makeRecording(const std::string& dir, const std::string& left_prefix,
 
 class ServiceHealth {
 public:
-    ServiceHealth(test::TempDir& dir, const std::string& recording)
+    ServiceHealth(test::TempDir& dir, const std::string& recording, bool withhold = false)
         : socket_(dir.file("s.sock"))
     {
         const std::string config = dir.file("stereod.yaml");
         std::ofstream(config) << "calibration_health:\n  interval_s: 0.5\n"
-                                 "matcher:\n  num_disparities: 64\n";
+                              << "  withhold_when_failed: " << (withhold ? "true" : "false")
+                              << "\nmatcher:\n  num_disparities: 64\n";
         service_ = std::make_unique<ChildProcess>(
             std::vector<std::string>{stereodPath(), "--config", config, "--replay", recording,
                                      "--socket", socket_},
@@ -146,6 +147,30 @@ TEST(CalibrationHealthE2e, CalibrationViewsReadOk)
         runProcess({stereoctlPath(), "check-calibration", "--socket", service.socket(), "--json"});
     EXPECT_EQ(ask.exit_code, 0) << ask.out << ask.err;
     EXPECT_EQ(Json::parse(ask.out)["state"], "ok");
+}
+
+// The cameras swapped (the scenes' files as named: the other camera on each side): the
+// check fails, and with withhold_when_failed the readings give no distance.
+TEST(CalibrationHealthE2e, SwappedCamerasFailAndReadingsAreWithheldWhenAsked)
+{
+    test::TempDir dir;
+    const std::string recording = dir.file("swapped");
+    makeRecording(recording, kBaumer + "samples_baumer/left", kBaumer + "samples_baumer/right", 8);
+    ServiceHealth service(dir, recording, true);
+    const Json health = service.healthAfter(3);
+    std::printf("[health] service with the cameras swapped: %s\n", health.dump().c_str());
+    ASSERT_EQ(health["state"], "failed");
+    Json reading;
+    const auto deadline = std::chrono::steady_clock::now() + 5s;
+    while (std::chrono::steady_clock::now() < deadline) {
+        reading = service.distance();
+        if (reading.contains("reason"))
+            break;
+        std::this_thread::sleep_for(100ms);
+    }
+    EXPECT_FALSE(reading["valid"].get<bool>()) << reading.dump();
+    EXPECT_EQ(reading["reason"]["code"], "calibration_suspect") << reading.dump();
+    EXPECT_EQ(reading.value("calibration_suspect", false), true);
 }
 
 } // namespace

@@ -305,8 +305,8 @@ TEST(ProtocolReplies, HelloListsCommandsStreamsAndItems)
     EXPECT_FALSE(reply.contains("id"));
     EXPECT_EQ(reply["service"], "stereod");
     EXPECT_EQ(reply["protocol"], kProtocolVersion);
-    EXPECT_EQ(reply["commands"].size(), 7u);
-    EXPECT_EQ(reply["streams"], Json::parse(R"(["readings","depth","raw"])"));
+    EXPECT_EQ(reply["commands"].size(), 8u);
+    EXPECT_EQ(reply["streams"], Json::parse(R"(["readings","depth","raw","zones"])"));
     EXPECT_EQ(reply["snapshot_items"],
               Json::parse(R"(["left","disparity","depth","cloud","raw_left","raw_right"])"));
 }

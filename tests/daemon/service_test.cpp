@@ -226,7 +226,7 @@ TEST_F(ServiceTest, HelloEchoesTheId)
     EXPECT_EQ(reply["id"], "abc-1");
     EXPECT_EQ(reply["service"], "stereod");
     EXPECT_EQ(reply["protocol"], 1);
-    EXPECT_EQ(reply["streams"], Json::parse(R"(["readings","depth","raw"])"));
+    EXPECT_EQ(reply["streams"], Json::parse(R"(["readings","depth","raw","zones"])"));
     EXPECT_EQ(reply["calibrated"], true);
 }
 

@@ -1,0 +1,162 @@
+// Keep-out zones in the running service, end to end: stereod replays Middlebury's
+// Adirondack with its geometry and three zones (around the chair, in front of it, out of
+// view); `stereoctl zones` reads occupied, clear and unknown and exits 1; the zones
+// stream gives one event per frame; a reload with other zones applies them live.
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "ctl/client.hpp"
+#include "tests/ctl/process.hpp"
+
+namespace stereod {
+namespace {
+
+using namespace std::chrono_literals;
+using Json = nlohmann::ordered_json;
+using test::ChildProcess;
+using test::ProcessResult;
+using test::runProcess;
+using test::stereoctlPath;
+using test::stereodPath;
+
+const std::string kScene = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury2014/Adirondack/";
+
+const char* kZones = R"(matcher:
+  num_disparities: 160
+robot:
+  camera_pose:
+    translation_m: [0, 0, 0]
+    rpy_deg: [0, 0, 0]
+zones:
+  - {name: chair, min: [1.4, -0.3, -0.3], max: [1.9, 0.3, 0.3], enter_frames: 1}
+  - {name: front, min: [0.95, -0.15, -0.15], max: [1.2, 0.15, 0.15]}
+  - {name: out_of_view, min: [0.5, 3, -0.2], max: [1.5, 4, 0.2]}
+)";
+
+class ZonesService : public ::testing::Test {
+protected:
+    void SetUp() override
+    {
+        namespace fs = std::filesystem;
+        const std::string recording = dir_.file("rec");
+        fs::create_directories(recording + "/left");
+        fs::create_directories(recording + "/right");
+        std::ofstream csv(recording + "/frames.csv");
+        csv << "index,left_stamp_ns,right_stamp_ns,left,right\n";
+        for (int i = 0; i < 4; ++i) {
+            const std::string name = std::to_string(i) + ".png";
+            fs::create_symlink(kScene + "im0.png", recording + "/left/" + name);
+            fs::create_symlink(kScene + "im1.png", recording + "/right/" + name);
+            csv << i << "," << i * 100'000'000LL << "," << i * 100'000'000LL << ",left/" << name
+                << ",right/" << name << "\n";
+        }
+        csv.close();
+        // calib.txt: f 1038.018 px, principal point (322.037, 243.393), doffs 53.271 px,
+        // baseline 176.252 mm.
+        const ProcessResult calibrated = runProcess(
+            {stereoctlPath(), "calibrate", "--rectified", "--focal-px", "1038.018", "--baseline-m",
+             "0.176252", "--size", "718x496", "--cx", "322.037", "--cy", "243.393", "--doffs-px",
+             "53.271", "--out", recording + "/calibration.yaml"});
+        ASSERT_EQ(calibrated.exit_code, 0) << calibrated.err;
+        config_ = dir_.file("stereod.yaml");
+        std::ofstream(config_) << kZones;
+        socket_ = dir_.file("s.sock");
+        service_ = std::make_unique<ChildProcess>(
+            std::vector<std::string>{stereodPath(), "--config", config_, "--replay", recording,
+                                     "--socket", socket_},
+            dir_.file("stereod.log"));
+        // Until the zones come from a processed frame.
+        const auto deadline = std::chrono::steady_clock::now() + 30s;
+        while (std::chrono::steady_clock::now() < deadline) {
+            try {
+                ProtocolClient client(socket_, 2000ms);
+                if (!client.request({{"cmd", "zones"}})["frame"].is_null())
+                    return;
+            } catch (const std::exception&) {
+                // not listening yet
+            }
+            std::this_thread::sleep_for(100ms);
+        }
+        FAIL() << "no zones within 30 s";
+    }
+
+    ProcessResult ctl(std::vector<std::string> args)
+    {
+        args.insert(args.begin(), stereoctlPath());
+        args.insert(args.end(), {"--socket", socket_});
+        return runProcess(args);
+    }
+
+    test::TempDir dir_;
+    std::string config_, socket_;
+    std::unique_ptr<ChildProcess> service_;
+};
+
+TEST_F(ZonesService, OccupiedClearAndUnknownWithTheirExitCode)
+{
+    const ProcessResult run = ctl({"zones", "--json"});
+    EXPECT_EQ(run.exit_code, 1) << run.out << run.err;   // one is occupied
+    const Json reply = Json::parse(run.out);
+    ASSERT_EQ(reply["zones"].size(), 3u);
+    const Json& chair = reply["zones"][0];
+    EXPECT_EQ(chair["name"], "chair");
+    EXPECT_EQ(chair["state"], "occupied");
+    // Ground truth: the chair's nearest point in the box is 1.578 m from the camera.
+    EXPECT_NEAR(chair["nearest_m"].get<double>(), 1.578, 0.02 * 1.578);
+    EXPECT_EQ(reply["zones"][1]["state"], "clear");
+    EXPECT_EQ(reply["zones"][2]["state"], "unknown");
+    EXPECT_EQ(reply["zones"][2]["reason"], "not_visible");
+    EXPECT_GT(reply["stamp_ns"].get<int64_t>(), 0);
+
+    const ProcessResult text = ctl({"zones"});
+    EXPECT_NE(text.out.find("chair: occupied, nearest"), std::string::npos) << text.out;
+}
+
+TEST_F(ZonesService, TheStreamGivesOneEventPerFrame)
+{
+    ProtocolClient client(socket_, 5000ms);
+    client.request({{"cmd", "subscribe"}, {"stream", "zones"}});
+    uint64_t last = 0;
+    for (int i = 0; i < 3; ++i) {
+        const Json event = client.readJson();
+        ASSERT_EQ(event["event"], "zones") << event.dump();
+        EXPECT_EQ(event["zones"].size(), 3u);
+        EXPECT_GT(event["frame"].get<uint64_t>(), last);
+        last = event["frame"].get<uint64_t>();
+    }
+}
+
+TEST_F(ZonesService, ReloadAppliesNewZonesLive)
+{
+    std::ofstream(config_) << R"(matcher:
+  num_disparities: 160
+zones:
+  - {name: front, min: [0.95, -0.15, -0.15], max: [1.2, 0.15, 0.15]}
+)";
+    ProtocolClient client(socket_, 5000ms);
+    const Json reloaded = client.request({{"cmd", "reload"}});
+    EXPECT_TRUE(reloaded["ok"].get<bool>()) << reloaded.dump();
+    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    Json zones;
+    while (std::chrono::steady_clock::now() < deadline) {
+        zones = client.request({{"cmd", "zones"}})["zones"];
+        if (zones.size() == 1)
+            break;
+        std::this_thread::sleep_for(100ms);
+    }
+    ASSERT_EQ(zones.size(), 1u) << zones.dump();
+    EXPECT_EQ(zones[0]["name"], "front");
+    EXPECT_EQ(ctl({"zones"}).exit_code, 0);   // all clear
+}
+
+} // namespace
+} // namespace stereod
