@@ -135,6 +135,7 @@ struct ZonesOptions {
     bool json = false;
     bool watch = false;               // one block per frame until interrupted
     double max_age_ms = 1000.0;       // older zones count as unknown
+    std::string picture_path;         // .png: the zones drawn on the colourised depth
 };
 
 // `stereoctl check-calibration`: how well a calibration still rectifies a rig's pairs.

@@ -369,6 +369,9 @@ CLI::App* declareZones(CLI::App& app, ZonesOptions& o)
         "in each (exit 0 all clear, 1 any occupied, 2 unknown or stale, 3 no service)",
         o.service, &o.json, "print the zones as JSON");
     cmd->add_flag("--watch", o.watch, "one block per frame until interrupted (Ctrl-C)");
+    cmd->add_option("--picture", o.picture_path,
+                    "draw the zones, coloured by state, on the colourised depth of the latest "
+                    "frame (.png)");
     cmd->add_option("--max-age-ms", o.max_age_ms, "zones older than this count as unknown")
         ->check(kPositive)
         ->capture_default_str();

@@ -1,16 +1,22 @@
 // `stereoctl zones`: the keep-out zones of the running service (docs/stereoctl.md).
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <string>
 
 #include <fmt/format.h>
+#include <opencv2/imgproc.hpp>
 #include <nlohmann/json.hpp>
 
 #include "ctl/client.hpp"
 #include "ctl/commands.hpp"
 #include "ctl/exit_codes.hpp"
+#include "ctl/output.hpp"
+#include "ctl/payload.hpp"
 #include "ctl/signal_catcher.hpp"
+#include "pipeline/depth_io.hpp"
+#include "pipeline/zones.hpp"
 
 namespace stereod {
 
@@ -63,6 +69,94 @@ void print(const json& frame, const json& zones, bool stale, double age_ms)
         fmt::print("  {}\n", zoneLine(zone));
 }
 
+cv::Vec3d vec3(const json& value)
+{
+    if (!value.is_array() || value.size() != 3)
+        return {0, 0, 0};
+    return {value[0].get<double>(), value[1].get<double>(), value[2].get<double>()};
+}
+
+// The zones of `reply` drawn on the colourised depth of the latest frame: each box's twelve
+// edges projected into the rectified left image (parts behind the camera left out),
+// red occupied, green clear, yellow unknown, with its name and state.
+void drawPicture(ProtocolClient& client, const json& reply, const std::string& path)
+{
+    const json camera = reply.value("camera", json::object());
+    if (!camera.contains("focal_px"))
+        throw UsageError("--picture: the service runs uncalibrated: no depth to draw on");
+    const json snapshot = client.request({{"cmd", "snapshot"}, {"items", json::array({"depth"})}});
+    cv::Mat depth_mm;
+    for (const json& header : snapshot.value("payloads", json::array())) {
+        const Payload payload = parsePayload(header);
+        if (payload.name == "depth" && payload.format == "u16_mm")
+            readImagePayload(client, payload, CV_16UC1, depth_mm);
+        else
+            client.skipPayload(payload.bytes);
+    }
+    if (depth_mm.empty())
+        throw ClientError("the snapshot has no depth payload", 0);
+    cv::Mat depth_m;
+    depth_mm.convertTo(depth_m, CV_32FC1, 1e-3);
+    const auto [near_m, far_m] = depthDisplayRange(depth_m);
+    cv::Mat picture = colorizeDepth(depth_m, near_m, far_m);
+
+    const json pose = reply.value("camera_pose", json::object());
+    const CameraPose camera_pose{vec3(pose.value("translation_m", json())),
+                                 vec3(pose.value("rpy_deg", json()))};
+    const cv::Matx33d base_to_optical = opticalToBaseRotation(camera_pose).t();
+    const double f = camera["focal_px"].get<double>();
+    const double cx = camera["cx_px"].get<double>();
+    const double cy = camera["cy_px"].get<double>();
+    constexpr double kNearPlane = 0.05;   // m: edges are cut where they pass behind this
+    const auto optical = [&](const cv::Vec3d& base) {
+        return base_to_optical * (base - camera_pose.translation_m);
+    };
+    const auto pixel = [&](const cv::Vec3d& p) {
+        return cv::Point2d(f * p[0] / p[2] + cx, f * p[1] / p[2] + cy);
+    };
+    for (const json& zone : reply.value("zones", json::array())) {
+        const std::string state = zone.value("state", std::string("unknown"));
+        const cv::Scalar colour = state == "occupied" ? cv::Scalar(40, 40, 230)
+                                  : state == "clear"  ? cv::Scalar(60, 200, 60)
+                                                      : cv::Scalar(40, 220, 230);
+        const cv::Vec3d lo = vec3(zone.value("min_m", json()));
+        const cv::Vec3d hi = vec3(zone.value("max_m", json()));
+        cv::Vec3d corners[8];
+        for (int i = 0; i < 8; ++i)
+            corners[i] = optical({(i & 1) ? hi[0] : lo[0], (i & 2) ? hi[1] : lo[1],
+                                  (i & 4) ? hi[2] : lo[2]});
+        cv::Point label(picture.cols, picture.rows);
+        bool in_view = false;   // a label only for a zone the picture shows
+        const cv::Rect2d image(0, 0, picture.cols, picture.rows);
+        for (int a = 0; a < 8; ++a)
+            for (int bit = 1; bit < 8; bit <<= 1) {
+                const int b = a | bit;
+                if (b == a)
+                    continue;
+                cv::Vec3d p = corners[a], q = corners[b];
+                if (p[2] < kNearPlane && q[2] < kNearPlane)
+                    continue;
+                // Cut the edge where it passes behind the near plane.
+                if (p[2] < kNearPlane)
+                    p = q + (p - q) * ((q[2] - kNearPlane) / (q[2] - p[2]));
+                if (q[2] < kNearPlane)
+                    q = p + (q - p) * ((p[2] - kNearPlane) / (p[2] - q[2]));
+                const cv::Point2d from = pixel(p), to = pixel(q);
+                cv::line(picture, from, to, colour, 2, cv::LINE_AA);
+                in_view = in_view || image.contains(from) || image.contains(to);
+                label.x = std::min(label.x, static_cast<int>(std::min(from.x, to.x)));
+                label.y = std::min(label.y, static_cast<int>(std::min(from.y, to.y)));
+            }
+        if (in_view) {
+            label.x = std::clamp(label.x, 0, picture.cols - 1);
+            label.y = std::clamp(label.y - 6, 12, picture.rows - 1);
+            cv::putText(picture, zone.value("name", std::string()) + ": " + state, label,
+                        cv::FONT_HERSHEY_SIMPLEX, 0.5, colour, 1, cv::LINE_AA);
+        }
+    }
+    writeImagePng(path, picture);
+}
+
 } // namespace
 
 int runZones(const ZonesOptions& options)
@@ -78,6 +172,11 @@ int runZones(const ZonesOptions& options)
             fmt::print("{}\n", reply.dump(2));
         else
             print(reply.value("frame", json()), zones, stale, age_ms);
+        if (!options.picture_path.empty()) {
+            drawPicture(client, reply, options.picture_path);
+            if (!options.json)
+                fmt::print("wrote {}\n", options.picture_path);
+        }
         return exitCodeFor(zones, stale);
     }
     SignalCatcher signals;

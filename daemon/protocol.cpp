@@ -469,6 +469,29 @@ Json readingToJson(const ReadingReport& report, int64_t now_ns)
     return Json::parse(text);
 }
 
+namespace {
+
+void appendVec3(std::string& out, const cv::Vec3d& v)
+{
+    out.push_back('[');
+    for (int k = 0; k < 3; ++k) {
+        if (k > 0)
+            out.push_back(',');
+        appendJsonNumber(out, roundTo(v[k], 4));
+    }
+    out.push_back(']');
+}
+
+} // namespace
+
+void appendCameraPoseJson(std::string& out, const CameraPose& pose)
+{
+    JsonObjectWriter object(out);
+    appendVec3(object.openField("translation_m"), pose.translation_m);
+    appendVec3(object.openField("rpy_deg"), pose.rpy_deg);
+    object.close();
+}
+
 void appendZonesJson(std::string& out, const std::vector<ZoneReading>& zones)
 {
     out.push_back('[');
@@ -484,15 +507,10 @@ void appendZonesJson(std::string& out, const std::vector<ZoneReading>& zones)
         object.field("points", zone.points);
         if (zone.points > 0) {
             object.field("nearest_m", roundTo(zone.nearest_m, 4));
-            std::string& point = object.openField("nearest_point_m");
-            point.push_back('[');
-            for (int k = 0; k < 3; ++k) {
-                if (k > 0)
-                    point.push_back(',');
-                appendJsonNumber(point, roundTo(zone.nearest_point_m[k], 4));
-            }
-            point.push_back(']');
+            appendVec3(object.openField("nearest_point_m"), zone.nearest_point_m);
         }
+        appendVec3(object.openField("min_m"), zone.min_m);
+        appendVec3(object.openField("max_m"), zone.max_m);
         object.field("visible_fraction", roundTo(zone.visible_fraction, 3));
         object.close();
     }

@@ -148,6 +148,9 @@ Json readingToJson(const ReadingReport& report, int64_t now_ns);
 // capacity.
 void appendZonesJson(std::string& out, const std::vector<ZoneReading>& zones);
 
+// The camera's pose on the robot: {"translation_m":[x,y,z],"rpy_deg":[r,p,y]}.
+void appendCameraPoseJson(std::string& out, const CameraPose& pose);
+
 // Appends `{"event":"zones","frame":N,"stamp_ns":S,"age_ms":A,"zones":[...]}\n`, with
 // "skipped" when `skipped` > 0.
 void appendZonesEvent(std::string& out, const std::vector<ZoneReading>& zones, uint64_t frame,

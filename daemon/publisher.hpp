@@ -93,6 +93,7 @@ struct PublishedFrame {
     // The keep-out zones of this pair (empty when none are configured); each keeps its
     // name's buffer from frame to frame.
     std::vector<ZoneReading> zones;
+    CameraPose camera_pose;   // robot.camera_pose in force for this pair
 };
 
 class Publisher {

@@ -1393,6 +1393,17 @@ void SocketServer::handle(Client& client, const ZonesRequest&, const std::option
         object.field("age_ms",
                      roundTo(static_cast<double>(now_ns - latest->result.stamp_ns) / 1e6, 3));
         appendZonesJson(object.openField("zones"), latest->zones);
+        appendCameraPoseJson(object.openField("camera_pose"), latest->camera_pose);
+        if (options_.calibrated) {
+            // What a client needs to draw the zones on the rectified left image.
+            JsonObjectWriter camera(object.openField("camera"));
+            camera.field("focal_px", options_.geometry.focal_px);
+            camera.field("cx_px", options_.geometry.cx_px);
+            camera.field("cy_px", options_.geometry.cy_px);
+            camera.field("width", options_.geometry.image_size.width);
+            camera.field("height", options_.geometry.image_size.height);
+            camera.close();
+        }
     }
     object.close();
     client.out.push_back('\n');

@@ -263,6 +263,7 @@ void Worker::processPair(StereoPair& pair)
 
     // Keep-out zones from the depth the reading trusts; without it, every zone is unknown
     // for this pair (its hysteresis untouched) with the reading's reason.
+    slot.camera_pose = zones_.settings().camera_pose;
     if (!zones_.settings().zones.empty()) {
         if (slot.depth_valid && processor_ != nullptr) {
             const std::vector<ZoneReading>& zones =
@@ -275,6 +276,8 @@ void Worker::processPair(StereoPair& pair)
             for (std::size_t i = 0; i < slot.zones.size(); ++i) {
                 ZoneReading& zone = slot.zones[i];
                 zone.name = zones_.readings()[i].name;
+                zone.min_m = zones_.readings()[i].min_m;
+                zone.max_m = zones_.readings()[i].max_m;
                 zone.state = ZoneState::Unknown;
                 zone.reason = reasonCode(reading.reason);
                 zone.points = 0;

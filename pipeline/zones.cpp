@@ -117,6 +117,8 @@ void ZoneMonitor::reconfigure(const ZonesSettings& settings)
                 tracks[z] = tracks_[old];
                 readings[z] = readings_[old];
             }
+        readings[z].min_m = settings.zones[z].min_m;
+        readings[z].max_m = settings.zones[z].max_m;
     }
     settings_ = settings;
     rotation_ = opticalToBaseRotation(settings.camera_pose);

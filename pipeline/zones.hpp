@@ -67,6 +67,8 @@ const char* zoneStateName(ZoneState state) noexcept;
 
 struct ZoneReading {
     std::string name;
+    cv::Vec3d min_m{0.0, 0.0, 0.0};           // the zone's box, base frame (from its settings)
+    cv::Vec3d max_m{0.0, 0.0, 0.0};
     ZoneState state = ZoneState::Unknown;
     std::string reason;                       // for unknown: "not_visible", "no_frame"
     int points = 0;                           // depth points inside this frame (pixel_step counted once)

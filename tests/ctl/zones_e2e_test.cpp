@@ -13,6 +13,7 @@
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "ctl/client.hpp"
 #include "tests/ctl/process.hpp"
@@ -119,6 +120,27 @@ TEST_F(ZonesService, OccupiedClearAndUnknownWithTheirExitCode)
 
     const ProcessResult text = ctl({"zones"});
     EXPECT_NE(text.out.find("chair: occupied, nearest"), std::string::npos) << text.out;
+}
+
+// The zones drawn on the colourised depth: the chair's box in red where it projects.
+TEST_F(ZonesService, PictureDrawsTheZonesOnTheDepth)
+{
+    const std::string picture = dir_.file("zones.png");
+    const ProcessResult run = ctl({"zones", "--picture", picture});
+    EXPECT_EQ(run.exit_code, 1) << run.err;
+    const cv::Mat image = cv::imread(picture, cv::IMREAD_COLOR);
+    ASSERT_EQ(image.size(), cv::Size(718, 496));
+    // The chair box's front face spans roughly the middle of the image; its edges are the
+    // only pure red (occupied) strokes.
+    int red = 0, green = 0;
+    for (int y = 0; y < image.rows; ++y)
+        for (int x = 0; x < image.cols; ++x) {
+            const cv::Vec3b c = image.at<cv::Vec3b>(y, x);
+            red += c == cv::Vec3b(40, 40, 230);
+            green += c == cv::Vec3b(60, 200, 60);
+        }
+    EXPECT_GT(red, 1000);     // the occupied chair box
+    EXPECT_GT(green, 1000);   // the clear box in front
 }
 
 TEST_F(ZonesService, TheStreamGivesOneEventPerFrame)
