@@ -1,5 +1,6 @@
 #include "pipeline/calibration_formats.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -291,6 +292,13 @@ StereoCalibration calibrationFromRosCameraInfo(const RosCameraInfo& left,
              "this is the right camera of the pair (Tx = " + fmt::format("{}", left.p(0, 3)) +
                  " is not 0): are the left and right files swapped?");
 
+    for (const auto* camera : {&left, &right}) {
+        if (camera->distortion_model != "plumb_bob" &&
+            camera->distortion_model != "rational_polynomial")
+            fail(camera == &left ? left_origin : right_origin, 0, "distortion_model",
+                 "'" + camera->distortion_model + "' is not supported: stereod undistorts with "
+                 "OpenCV's pinhole models, plumb_bob and rational_polynomial");
+    }
     StereoCalibration c;
     c.left.camera_matrix = left.k;
     c.left.distortion = left.d;
@@ -308,6 +316,31 @@ StereoCalibration calibrationFromRosCameraInfo(const RosCameraInfo& left,
     c.Q = disparityToDepth(c.P1, c.P2);
     finish(c, left.image_size, left_origin + " + " + right_origin);
     return c;
+}
+
+ros2::CameraInfo cameraInfoMessage(const RosCameraInfo& info)
+{
+    ros2::CameraInfo m;
+    m.width = static_cast<uint32_t>(info.image_size.width);
+    m.height = static_cast<uint32_t>(info.image_size.height);
+    m.distortion_model = info.distortion_model;
+    m.d = info.d;
+    std::copy(info.k.val, info.k.val + 9, m.k.begin());
+    std::copy(info.r.val, info.r.val + 9, m.r.begin());
+    std::copy(info.p.val, info.p.val + 12, m.p.begin());
+    return m;
+}
+
+RosCameraInfo rosCameraInfoFromMessage(const ros2::CameraInfo& message)
+{
+    RosCameraInfo info;
+    info.image_size = cv::Size(static_cast<int>(message.width), static_cast<int>(message.height));
+    info.distortion_model = message.distortion_model;
+    info.d = message.d;
+    info.k = cv::Matx33d(message.k.data());
+    info.r = cv::Matx33d(message.r.data());
+    info.p = cv::Matx34d(message.p.data());
+    return info;
 }
 
 StereoCalibration importRosCameraInfo(const std::string& left_path, const std::string& right_path)

@@ -16,6 +16,7 @@
 #include <opencv2/core/types.hpp>
 
 #include "pipeline/calibration.hpp"
+#include "replay/ros2_messages.hpp"
 
 namespace stereod {
 
@@ -37,6 +38,10 @@ struct RosCameraInfo {
 std::pair<RosCameraInfo, RosCameraInfo> rosCameraInfoPair(
     const StereoCalibration& calibration, const std::string& left_origin = "left camera",
     const std::string& right_origin = "right camera");
+
+// The same as a sensor_msgs/msg/CameraInfo message (header left empty), and back.
+ros2::CameraInfo cameraInfoMessage(const RosCameraInfo& info);
+RosCameraInfo rosCameraInfoFromMessage(const ros2::CameraInfo& message);
 
 // A full calibration from the two camera_info messages of a ROS stereo pair (see
 // importRosCameraInfo); the origins name them in errors. Throws CalibrationError.

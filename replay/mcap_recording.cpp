@@ -213,6 +213,7 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
     struct Stamped {
         int64_t stamp_ns;
         mcap::MessageRef ref;
+        std::size_t order;   // position in the file among its topic's messages
     };
     std::vector<Stamped> lefts, rights;
     std::optional<ros2::CameraInfo> info[2];
@@ -221,7 +222,8 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
         try {
             if (m.channel_id == left_id || m.channel_id == right_id) {
                 const ros2::ImageView image = ros2::parseImage(m.data);
-                (m.channel_id == left_id ? lefts : rights).push_back({image.header.stamp.toNs(), ref});
+                auto& list = m.channel_id == left_id ? lefts : rights;
+                list.push_back({image.header.stamp.toNs(), ref, list.size()});
             } else if (m.channel_id == left_info_id && !info[0]) {
                 info[0] = ros2::parseCameraInfo(m.data);
             } else if (m.channel_id == right_info_id && !info[1]) {
@@ -255,19 +257,42 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
     }
     std::size_t j = 0;
     std::vector<bool> used(rights.size(), false);
+    std::vector<std::size_t> pair_order;
     for (const Stamped& l : lefts) {
-        while (j + 1 < rights.size() &&
-               std::llabs(rights[j + 1].stamp_ns - l.stamp_ns) <= std::llabs(rights[j].stamp_ns - l.stamp_ns)) {
-            ++j;
+        // The nearest right image; among equally near ones (a recording of a looping
+        // replay repeats its stamps) the first not yet used.
+        while (j + 1 < rights.size()) {
+            const int64_t here = std::llabs(rights[j].stamp_ns - l.stamp_ns);
+            const int64_t next = std::llabs(rights[j + 1].stamp_ns - l.stamp_ns);
+            if (next < here || (next == here && used[j])) {
+                ++j;
+            } else {
+                break;
+            }
         }
         if (j < rights.size() && !used[j] && std::llabs(rights[j].stamp_ns - l.stamp_ns) <= tolerance_ns) {
             used[j] = true;
             index.pairs.push_back({l.ref, rights[j].ref, l.stamp_ns, rights[j].stamp_ns});
+            pair_order.push_back(l.order);
         } else {
             ++index.unpaired_left;
         }
     }
     index.unpaired_right = rights.size() - index.pairs.size();
+    // Replayed in the order the left images were recorded (a recording of a looping replay
+    // repeats its stamps; a camera's only grow).
+    std::vector<std::size_t> by_file(index.pairs.size());
+    for (std::size_t i = 0; i < by_file.size(); ++i) {
+        by_file[i] = i;
+    }
+    std::sort(by_file.begin(), by_file.end(),
+              [&](std::size_t a, std::size_t b) { return pair_order[a] < pair_order[b]; });
+    std::vector<McapPair> ordered;
+    ordered.reserve(index.pairs.size());
+    for (std::size_t i : by_file) {
+        ordered.push_back(index.pairs[i]);
+    }
+    index.pairs = std::move(ordered);
     if (index.pairs.empty()) {
         refuse("no stereo pair: " + std::to_string(lefts.size()) + " images on " + index.left_topic +
                " and " + std::to_string(rights.size()) + " on " + index.right_topic +

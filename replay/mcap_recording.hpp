@@ -92,7 +92,7 @@ struct McapPair {
 struct McapStereoIndex {
     std::string left_topic;
     std::string right_topic;
-    std::vector<McapPair> pairs;              // by left stamp
+    std::vector<McapPair> pairs;              // in the order of the left images in the file
     uint64_t unpaired_left = 0;               // images with no partner within the tolerance
     uint64_t unpaired_right = 0;
     // The first camera_info of each side's sibling topic (`.../camera_info` beside the
@@ -105,7 +105,8 @@ struct McapStereoIndex {
 // defaults (/stereo/{left,right}/image_raw) when the bag has them, else the one pair of
 // sensor_msgs/msg/Image topics whose names say "left" and "right". A left image is paired
 // with the right image nearest in header stamp, within half the left stream's median
-// period (each right image used once); others are counted as unpaired.
+// period (each right image used once); others are counted as unpaired. Pairs keep the
+// order in which their left images appear in the file.
 // Throws mcap::McapError (EINVAL) naming the bag's image topics when no pair of topics
 // fits, or when no pair is found.
 McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_topic,

@@ -66,18 +66,7 @@ std::pair<ros2::CameraInfo, ros2::CameraInfo> cameraInfoPair(cv::Size size)
     const StereoCalibration calibration =
         makeRectifiedCalibration(size, 615.0, 0.10, size.width / 2.0 - 0.5, size.height / 2.0);
     const auto [l, r] = rosCameraInfoPair(calibration);
-    auto convert = [](const RosCameraInfo& c) {
-        ros2::CameraInfo info;
-        info.width = static_cast<uint32_t>(c.image_size.width);
-        info.height = static_cast<uint32_t>(c.image_size.height);
-        info.distortion_model = c.distortion_model;
-        info.d = c.d;
-        std::copy(c.k.val, c.k.val + 9, info.k.begin());
-        std::copy(c.r.val, c.r.val + 9, info.r.begin());
-        std::copy(c.p.val, c.p.val + 12, info.p.begin());
-        return info;
-    };
-    return {convert(l), convert(r)};
+    return {cameraInfoMessage(l), cameraInfoMessage(r)};
 }
 
 std::string base64(const cv::Mat& image)
