@@ -3,12 +3,14 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <sstream>
 #include <vector>
 
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 #include <opencv2/core.hpp>
 #include <yaml-cpp/yaml.h>
 
@@ -199,6 +201,58 @@ std::string rosCameraText(const std::string& name, const RosCameraInfo& info)
     return text;
 }
 
+// Significant digits the value was written with: the fewest that read back to it, give or
+// take the last bits of binary noise (ROS's INI parser, for one, computes its numbers and
+// writes 0.99998 as 0.99998000000000009).
+int significantDigits(double value)
+{
+    for (int digits = 1; digits < 15; ++digits) {
+        const double back = std::strtod(fmt::format("{:.{}g}", value, digits).c_str(), nullptr);
+        if (std::abs(back - value) <= 1e-14 * std::abs(value))
+            return digits;
+    }
+    return 17;
+}
+
+// A rotation read from a file is one to the precision of its numbers only: ROS's writers
+// (camera_calibration_parsers) print 5 or 6 significant digits, so R^T R of what they wrote
+// differs from the identity by up to a few 1e-5. Within what the digits explain, R is
+// replaced by the nearest rotation (SVD: U V^T) and the log says so; beyond that, R is left
+// as it is and the validation refuses it.
+cv::Matx33d nearestRotation(const cv::Matx33d& r, const std::string& origin, const char* key)
+{
+    const cv::Matx33d rtr = r.t() * r;
+    double worst = 0.0;
+    // The writer's precision: the most significant digits any element needed (its own
+    // trailing zeros, or a value that rounded to 1, show fewer).
+    int digits = 1;
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) {
+            worst = std::max(worst, std::abs(rtr(i, j) - (i == j ? 1.0 : 0.0)));
+            if (r(i, j) != 0.0)
+                digits = std::max(digits, significantDigits(r(i, j)));
+        }
+    }
+    // Half a unit in the last of those digits, for the largest elements (up to 1).
+    double half_unit = 0.0;
+    for (const double x : r.val) {
+        if (x != 0.0)
+            half_unit = std::max(half_unit, 0.5 * std::pow(10.0, std::floor(std::log10(std::abs(x))) - digits + 1));
+    }
+    // Each element of R^T R sums three products of elements up to 1: six rounding errors.
+    const double explained = 6.0 * half_unit;
+    if (worst <= 1e-15 || worst > explained || cv::determinant(r) <= 0.0)
+        return r;
+    cv::Mat w, u, vt;
+    cv::SVD::compute(cv::Mat(r), w, u, vt);
+    const cv::Mat nearest = u * vt;
+    spdlog::info("{}: {}: re-orthonormalized: R^T R differed from the identity by {:.3g}, which "
+                 "the precision of its numbers explains ({} significant digits, rounding "
+                 "errors up to {:.2g})",
+                 origin, key, worst, digits, half_unit);
+    return cv::Matx33d(nearest.ptr<double>());
+}
+
 RosCameraInfo rosCamera(cv::Size size, const CameraIntrinsics& camera,
                         const cv::Matx33d& rectification, const cv::Matx34d& projection,
                         const std::string& origin)
@@ -304,8 +358,8 @@ StereoCalibration calibrationFromRosCameraInfo(const RosCameraInfo& left,
     c.left.distortion = left.d;
     c.right.camera_matrix = right.k;
     c.right.distortion = right.d;
-    c.R1 = left.r;
-    c.R2 = right.r;
+    c.R1 = nearestRotation(left.r, left_origin, "rectification_matrix");
+    c.R2 = nearestRotation(right.r, right_origin, "rectification_matrix");
     c.P1 = left.p;
     c.P2 = right.p;
     // Both rectified frames are the same up to the baseline: X_rect_right = X_rect_left +

@@ -44,7 +44,9 @@ ros2::CameraInfo cameraInfoMessage(const RosCameraInfo& info);
 RosCameraInfo rosCameraInfoFromMessage(const ros2::CameraInfo& message);
 
 // A full calibration from the two camera_info messages of a ROS stereo pair (see
-// importRosCameraInfo); the origins name them in errors. Throws CalibrationError.
+// importRosCameraInfo); the origins name them in errors and in the log. A rectification
+// matrix that is a rotation only to the precision of its printed digits (ROS's writers keep
+// 5 or 6) is replaced by the nearest rotation, and the log says so. Throws CalibrationError.
 StereoCalibration calibrationFromRosCameraInfo(const RosCameraInfo& left,
                                               const RosCameraInfo& right,
                                               const std::string& left_origin,

@@ -13,6 +13,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-dev   # scripts/fuzz.sh: clang with libFuzzer and its sanitizer runtimes
   opencv-doc
+  camera-calibration-parsers-tools python3-camera-calibration-parsers   # ROS's own calibration parsers: the ROS format tests
   systemd   # systemd-analyze, systemd-sysusers, systemd-tmpfiles: the unit checks (tests/daemon)
 )
 
