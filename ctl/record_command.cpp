@@ -359,6 +359,7 @@ int runRecord(const RecordOptions& options)
     client.setCancelFd(signals.fd());
 
     const std::string calibration_text = serviceCalibration(client);
+    bool calibration_written = false;   // calibration.yaml, or camera_info in the bag
     std::optional<RecordingWriter> csv;
     std::optional<McapRecordingWriter> bag;
     PairWriter::WriteFn write;
@@ -371,9 +372,15 @@ int runRecord(const RecordOptions& options)
         if (!calibration_text.empty()) {
             // The calibration in force as camera_info beside every pair (ROS convention:
             // the right camera's P[3] = -fx' * baseline).
-            const auto [left, right] =
-                rosCameraInfoPair(parseCalibration(calibration_text, "the service's calibration"));
-            bag->setCameraInfo(cameraInfoMessage(left), cameraInfoMessage(right));
+            try {
+                const auto [left, right] = rosCameraInfoPair(
+                    parseCalibration(calibration_text, "the service's calibration"));
+                bag->setCameraInfo(cameraInfoMessage(left), cameraInfoMessage(right));
+                calibration_written = true;
+            } catch (const CalibrationError& error) {
+                // E.g. 12 or 14 distortion coefficients: no ROS distortion model holds them.
+                fmt::print(stderr, "stereoctl: the bag has no camera_info: {}\n", error.what());
+            }
         } else {
             fmt::print(stderr, "stereoctl: the service runs uncalibrated: the bag has no "
                                "camera_info\n");
@@ -385,6 +392,7 @@ int runRecord(const RecordOptions& options)
         csv.emplace(options.out_dir);
         if (!calibration_text.empty()) {
             csv->writeCalibrationText(calibration_text);
+            calibration_written = true;
         } else {
             fmt::print(stderr, "stereoctl: the service runs uncalibrated: the recording has no "
                                "calibration.yaml\n");
@@ -468,7 +476,7 @@ int runRecord(const RecordOptions& options)
                         {"dropped", dropped},
                         {"service_skipped", counts.service_skipped},
                         {"queue_dropped", counts.queue_dropped},
-                        {"calibration", !calibration_text.empty()},
+                        {"calibration", calibration_written},
                         {"ended", endingName(ending)}};
         if (ending == Ending::WriteFailed) {
             summary["error"] = write_error;
