@@ -32,6 +32,7 @@ Reader::Reader(const std::string& path) : path_(path)
         throw McapError(path + ": cannot stat: " + std::strerror(code), code);
     }
     const auto file_size = static_cast<uint64_t>(st.st_size);
+    file_size_ = file_size;
     try {
         std::string start;
         if (!readAt(0, kMagicSize + kRecordPrefixSize, start) ||
@@ -64,6 +65,10 @@ Reader::~Reader()
 
 bool Reader::readAt(uint64_t offset, uint64_t size, std::string& out) const
 {
+    // Lengths come from the file: one past its end is damage, not a reason to allocate.
+    if (offset > file_size_ || size > file_size_ - offset) {
+        return false;
+    }
     out.resize(size);
     uint64_t done = 0;
     while (done < size) {

@@ -83,6 +83,7 @@ private:
 
     std::string path_;
     int fd_ = -1;
+    uint64_t file_size_ = 0;       // as opened (a file still growing is read up to this)
     Header header_;
     std::map<uint16_t, Schema> schemas_;
     std::map<uint16_t, Channel> channels_;

@@ -321,6 +321,17 @@ void decompressChunk(const ChunkView& chunk, std::string& out)
         }
         out.assign(chunk.records);
     } else if (chunk.compression == "zstd") {
+        // The size is the file's word: check it against the frame's own before allocating.
+        const unsigned long long frame_size =
+            ZSTD_getFrameContentSize(chunk.records.data(), chunk.records.size());
+        if (frame_size == ZSTD_CONTENTSIZE_ERROR) {
+            throw McapError("zstd chunk: not a zstd frame");
+        }
+        if (frame_size == ZSTD_CONTENTSIZE_UNKNOWN ? chunk.uncompressed_size > kMaxUncompressedChunk
+                                                   : frame_size != chunk.uncompressed_size) {
+            throw McapError("zstd chunk: uncompressed size " + std::to_string(chunk.uncompressed_size) +
+                            " does not match its frame");
+        }
         out.resize(chunk.uncompressed_size);
         const std::size_t n = ZSTD_decompress(out.data(), out.size(), chunk.records.data(),
                                               chunk.records.size());

@@ -35,6 +35,8 @@ inline constexpr std::size_t kMagicSize = sizeof(kMagic);
 inline constexpr std::size_t kRecordPrefixSize = 9;
 // Footer content: summary_start, summary_offset_start (uint64), summary_crc (uint32).
 inline constexpr std::size_t kFooterContentSize = 20;
+// Largest chunk a reader decompresses when the zstd frame does not state its size.
+inline constexpr uint64_t kMaxUncompressedChunk = uint64_t{1} << 30;
 
 enum class Op : uint8_t {
     Header = 0x01,

@@ -269,5 +269,42 @@ TEST(McapFile, CorruptChunkEndsTheScanThere)
     EXPECT_EQ(reader.chunks().size(), 2u);
 }
 
+// Bad input on purpose: every byte of a small file flipped in turn (and the file cut at
+// every length). The reader either reads or throws McapError; it never crashes, reads out
+// of bounds (the ASan build checks) or loops.
+TEST(McapFile, DamagedFilesAreRefusedOrReadNeverCrash)
+{
+    test::TempDir dir;
+    WriterOptions options = smallChunks(WriterOptions::Compression::Zstd);
+    options.chunk_size_bytes = 2'000;
+    {
+        Writer writer(dir.file("small.mcap"), options);
+        const uint16_t schema = writer.addSchema("s", "ros2msg", "uint8 x\n");
+        const uint16_t channel = writer.addChannel(schema, "/t", "cdr", {{"k", "v"}});
+        for (int k = 0; k < 6; ++k) {
+            writer.write(channel, static_cast<uint64_t>(k), static_cast<uint64_t>(k), payload(k, 0, 700));
+        }
+    }
+    const std::string bytes = slurp(dir.file("small.mcap"));
+    const std::string path = dir.file("bad.mcap");
+    auto tryRead = [&](std::string_view content) {
+        spit(path, content);
+        try {
+            Reader reader(path);
+            std::size_t n = 0;
+            reader.forEachMessage([&](const MessageView& m, const MessageRef&) { n += m.data.size(); });
+        } catch (const McapError&) {
+        }
+    };
+    for (std::size_t i = 0; i < bytes.size(); ++i) {
+        std::string damaged = bytes;
+        damaged[i] = static_cast<char>(damaged[i] ^ 0xFF);
+        tryRead(damaged);
+    }
+    for (std::size_t n = 0; n < bytes.size(); n += 7) {
+        tryRead(std::string_view(bytes).substr(0, n));
+    }
+}
+
 } // namespace
 } // namespace stereod::mcap
