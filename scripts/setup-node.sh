@@ -4,11 +4,18 @@
 # package-lock.json pins them, into tests/mcap_interop/node_modules (ignored by git). The
 # npm cache lives outside the repository: $STEREOD_NPM_CACHE, or ~/.cache/stereod-npm.
 # Safe to run again: it does nothing when the installed tree matches the lock file.
-# Without node/npm it says so and succeeds: the interop tests then skip.
+# Installs the distribution's nodejs and npm when there is no node; if that fails, it says
+# so and succeeds: the interop tests then skip.
 set -euo pipefail
 source "$(dirname "$0")/common.sh"
 
 dir="$STEREOD_ROOT/tests/mcap_interop"
+if ! command -v npm >/dev/null || ! command -v node >/dev/null; then
+  # The distribution's Node.js (Debian 12: 18, which the packages run on although
+  # rosmsg2-serialization asks for 20). Only when none is there: a Node.js from elsewhere
+  # (NodeSource, nvm) is used as it is.
+  ensure_packages setup-node nodejs npm || true
+fi
 if ! command -v npm >/dev/null || ! command -v node >/dev/null; then
   echo "setup-node: node/npm not installed; the MCAP interop tests will skip"
   exit 0
