@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <limits>
 #include <map>
@@ -751,6 +752,12 @@ std::vector<KeyDef> buildKeyTable()
     add(boolKey(
         "source.replay.loop", kRestart, [](auto& c) -> auto& { return c.source.replay.loop; }));
     add(textKey(
+        "source.replay.topics.left", kRestart,
+        [](auto& c) -> auto& { return c.source.replay.left_topic; }, false));
+    add(textKey(
+        "source.replay.topics.right", kRestart,
+        [](auto& c) -> auto& { return c.source.replay.right_topic; }, false));
+    add(textKey(
         "source.cameras.left", kRestart, [](auto& c) -> auto& { return c.source.cameras.left; },
         false));
     add(textKey(
@@ -1381,10 +1388,22 @@ void checkSource(Checker& checker, const SourceConfig& source, const std::string
     checkCameras(checker, source);
 
     constexpr std::string_view kRecording =
-        "a recording directory (frames.csv, left/, right/) or a folder of left*/right* images";
+        "a recording directory (frames.csv, left/, right/), a folder of left*/right* images, "
+        "or a ROS 2 bag (FILE.mcap)";
     constexpr std::string_view kCalibration = "a calibration file (docs/calibration.md)";
     if (!source.replay.path.empty()) {
-        checkPath(checker, "source.replay.path", source.replay.path, true, kRecording);
+        // A regular file must be an MCAP bag: it starts with MCAP's magic bytes.
+        std::error_code error;
+        if (fs::is_regular_file(source.replay.path, error)) {
+            char magic[8] = {};
+            std::ifstream(source.replay.path, std::ios::binary).read(magic, sizeof magic);
+            if (std::string_view(magic, sizeof magic) != std::string_view("\x89MCAP0\r\n", 8)) {
+                checker.fail("source.replay.path", "is neither a directory nor an MCAP file",
+                             kRecording);
+            }
+        } else {
+            checkPath(checker, "source.replay.path", source.replay.path, true, kRecording);
+        }
     }
     // Without a calibration key the recording's own calibration.yaml is used; with
     // neither, the service runs uncalibrated (docs/service.md), which is no error.

@@ -39,7 +39,12 @@ enum class ReplayPacing {
 };
 
 struct ReplayConfig {
-    std::string path;                 // a recording directory or a folder of left*/right*
+    std::string path;                 // a recording directory, a folder of left*/right*, or
+                                      // a ROS 2 bag (MCAP file)
+    // A bag's image topics (source.replay.topics.left/right); empty: the defaults
+    // /stereo/{left,right}/image_raw, or the one pair whose names say left and right.
+    std::string left_topic;
+    std::string right_topic;
     ReplayPacing pacing = ReplayPacing::Paced;
     double fps = 10.0;                // nominal rate for plain folders (no frames.csv)
     bool loop = true;

@@ -154,7 +154,8 @@ struct CheckCalibrationOptions {
 // `stereoctl record`: the service's raw pairs written as a recording.
 struct RecordOptions {
     ServiceOptions service;
-    std::string out_dir;              // must not exist, or be empty
+    std::string out_dir;              // a directory that must not exist or be empty, or a
+                                      // new file ending in .mcap (a ROS 2 bag)
     std::optional<uint64_t> frames;   // stop after this many pairs; none: until stopped
     std::size_t queue_pairs = 32;     // pairs buffered between the socket and the disk
     bool json = false;

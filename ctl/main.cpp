@@ -100,11 +100,12 @@ CLI::App* declareRecord(CLI::App& app, RecordOptions& o)
 {
     CLI::App* cmd = addServiceCommand(
         app, "record",
-        "record the service's raw pairs as a recording (frames.csv, left/, right/, "
-        "calibration.yaml) until --frames, Ctrl-C or the service ends (exit 0 done, 2 cannot "
-        "write, 3 service gone)",
+        "record the service's raw pairs as a recording (a directory: frames.csv, left/, "
+        "right/, calibration.yaml; or FILE.mcap: a ROS 2 bag) until --frames, Ctrl-C or the "
+        "service ends (exit 0 done, 2 cannot write, 3 service gone)",
         o.service, &o.json, "print the summary as JSON");
-    cmd->add_option("--out", o.out_dir, "recording directory to create (new or empty)")
+    cmd->add_option("--out", o.out_dir,
+                    "recording directory to create (new or empty), or a new FILE.mcap")
         ->required();
     cmd->add_option("--frames", o.frames, "stop after this many pairs")
         ->check(CLI::Range(uint64_t{1}, std::numeric_limits<uint64_t>::max()));

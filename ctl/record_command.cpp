@@ -1,5 +1,7 @@
 // `stereoctl record`: the service's raw pairs (the `raw` stream of docs/protocol.md) written
-// as a recording (replay/recording.hpp) that the replay source plays back.
+// as a recording that the replay source plays back: a CSV+PNG directory
+// (replay/recording.hpp), or, when --out ends in `.mcap`, a ROS 2 bag
+// (replay/mcap_recording.hpp) with the calibration in force as camera_info.
 //
 // Two threads: this one reads the stream off the socket into a bounded pool of pair
 // buffers; a writer thread encodes and writes them with RecordingWriter. When every buffer
@@ -14,6 +16,7 @@
 #include <condition_variable>
 #include <cstdio>
 #include <deque>
+#include <functional>
 #include <filesystem>
 #include <mutex>
 #include <optional>
@@ -30,6 +33,9 @@
 #include "ctl/exit_codes.hpp"
 #include "ctl/payload.hpp"
 #include "ctl/signal_catcher.hpp"
+#include "pipeline/calibration.hpp"
+#include "pipeline/calibration_formats.hpp"
+#include "replay/mcap_recording.hpp"
 #include "replay/recording.hpp"
 
 namespace stereod {
@@ -133,7 +139,9 @@ private:
 // from any thread.
 class PairWriter {
 public:
-    PairWriter(RecordingWriter& writer, PairQueue& queue) : writer_(writer), queue_(queue)
+    using WriteFn = std::function<void(const PairBuffer&)>;
+
+    PairWriter(WriteFn write, PairQueue& queue) : write_(std::move(write)), queue_(queue)
     {
         thread_ = std::thread([this] { run(); });
     }
@@ -168,7 +176,7 @@ private:
             if (!failed()) {
                 const PairBuffer& pair = queue_.buffer(*index);
                 try {
-                    writer_.write(pair.left, pair.right, pair.left_stamp_ns, pair.right_stamp_ns);
+                    write_(pair);
                     written_.fetch_add(1, std::memory_order_acq_rel);
                 } catch (const std::exception& e) {
                     {
@@ -182,7 +190,7 @@ private:
         }
     }
 
-    RecordingWriter& writer_;
+    WriteFn write_;
     PairQueue& queue_;
     std::thread thread_;
     std::atomic<uint64_t> written_{0};
@@ -209,6 +217,26 @@ void checkOutputDirectory(const std::string& dir)
         throw UsageError("refusing --out " + dir +
                          ": the directory is not empty (a recording is never written over "
                          "existing files; choose a new directory)");
+    }
+}
+
+bool isMcapPath(const std::string& path)
+{
+    return path.size() > 5 && path.compare(path.size() - 5, 5, ".mcap") == 0;
+}
+
+// A new file in an existing directory: a user's bag is never overwritten.
+void checkOutputFile(const std::string& path)
+{
+    std::error_code error;
+    if (fs::exists(fs::symlink_status(path, error))) {
+        throw UsageError("refusing --out " + path + ": it exists (a recording is never written "
+                         "over an existing file; choose a new name)");
+    }
+    const fs::path parent = fs::path(path).parent_path();
+    if (!parent.empty() && !fs::is_directory(parent, error)) {
+        throw UsageError("cannot write --out " + path + ": " + parent.string() +
+                         " is not a directory");
     }
 }
 
@@ -319,23 +347,63 @@ int runRecord(const RecordOptions& options)
     if (options.queue_pairs == 0) {
         throw UsageError("--queue must be at least 1 pair");
     }
-    checkOutputDirectory(options.out_dir);
+    const bool mcap = isMcapPath(options.out_dir);
+    if (mcap) {
+        checkOutputFile(options.out_dir);
+    } else {
+        checkOutputDirectory(options.out_dir);
+    }
     SignalCatcher signals;
     ProtocolClient client(options.service.socket_path,
                           std::chrono::milliseconds(options.service.timeout_ms));
     client.setCancelFd(signals.fd());
 
     const std::string calibration_text = serviceCalibration(client);
-    RecordingWriter writer(options.out_dir);
-    if (!calibration_text.empty()) {
-        writer.writeCalibrationText(calibration_text);
+    bool calibration_written = false;   // calibration.yaml, or camera_info in the bag
+    std::optional<RecordingWriter> csv;
+    std::optional<McapRecordingWriter> bag;
+    PairWriter::WriteFn write;
+    if (mcap) {
+        try {
+            bag.emplace(options.out_dir);
+        } catch (const mcap::McapError& e) {
+            throw UsageError(e.what());
+        }
+        if (!calibration_text.empty()) {
+            // The calibration in force as camera_info beside every pair (ROS convention:
+            // the right camera's P[3] = -fx' * baseline).
+            try {
+                const auto [left, right] = rosCameraInfoPair(
+                    parseCalibration(calibration_text, "the service's calibration"));
+                bag->setCameraInfo(cameraInfoMessage(left), cameraInfoMessage(right));
+                calibration_written = true;
+            } catch (const CalibrationError& error) {
+                // E.g. 12 or 14 distortion coefficients: no ROS distortion model holds them.
+                fmt::print(stderr, "stereoctl: the bag has no camera_info: {}\n", error.what());
+            }
+        } else {
+            fmt::print(stderr, "stereoctl: the service runs uncalibrated: the bag has no "
+                               "camera_info\n");
+        }
+        write = [&bag](const PairBuffer& p) {
+            bag->write(p.left, p.right, p.left_stamp_ns, p.right_stamp_ns);
+        };
     } else {
-        fmt::print(stderr, "stereoctl: the service runs uncalibrated: the recording has no "
-                           "calibration.yaml\n");
+        csv.emplace(options.out_dir);
+        if (!calibration_text.empty()) {
+            csv->writeCalibrationText(calibration_text);
+            calibration_written = true;
+        } else {
+            fmt::print(stderr, "stereoctl: the service runs uncalibrated: the recording has no "
+                               "calibration.yaml\n");
+        }
+        write = [&csv](const PairBuffer& p) {
+            csv->write(p.left, p.right, p.left_stamp_ns, p.right_stamp_ns);
+        };
     }
 
     PairQueue queue(options.queue_pairs);
-    PairWriter pair_writer(writer, queue);
+    PairWriter pair_writer(write, queue);
     Counts counts;
     Progress progress;
     Ending ending = Ending::Frames;
@@ -386,9 +454,21 @@ int runRecord(const RecordOptions& options)
     if (pair_writer.failed()) {
         ending = Ending::WriteFailed;
     }
+    std::string close_error;
+    if (bag) {
+        // The summary and footer: what lets readers seek. A bag that misses them (a
+        // failed write, a kill) still replays up to its last complete chunk.
+        try {
+            bag->close();
+        } catch (const mcap::McapError& e) {
+            close_error = e.what();
+            ending = Ending::WriteFailed;
+        }
+    }
     progress.update(counts, pair_writer.written(), 0, queue.capacity(), true);
 
     const uint64_t written = pair_writer.written();
+    const std::string write_error = pair_writer.failed() ? pair_writer.error() : close_error;
     const uint64_t dropped = counts.service_skipped + counts.queue_dropped;
     if (options.json) {
         json summary = {{"dir", options.out_dir},
@@ -396,10 +476,10 @@ int runRecord(const RecordOptions& options)
                         {"dropped", dropped},
                         {"service_skipped", counts.service_skipped},
                         {"queue_dropped", counts.queue_dropped},
-                        {"calibration", !calibration_text.empty()},
+                        {"calibration", calibration_written},
                         {"ended", endingName(ending)}};
         if (ending == Ending::WriteFailed) {
-            summary["error"] = pair_writer.error();
+            summary["error"] = write_error;
         } else if (ending == Ending::ServiceGone) {
             summary["error"] = gone_reason;
         }
@@ -412,7 +492,7 @@ int runRecord(const RecordOptions& options)
     }
     switch (ending) {
     case Ending::WriteFailed:
-        fmt::print(stderr, "stereoctl: recording stopped: {}\n", pair_writer.error());
+        fmt::print(stderr, "stereoctl: recording stopped: {}\n", write_error);
         return kExitUsage;
     case Ending::ServiceGone:
         fmt::print(stderr, "stereoctl: recording ended, the service went away: {}\n",

@@ -21,6 +21,7 @@
 
 #include "daemon/json_writer.hpp"
 #include "daemon/camera_source_factory.hpp"
+#include "pipeline/calibration_formats.hpp"
 #include "replay/recording.hpp"
 #include "replay/replay_source.hpp"
 
@@ -650,9 +651,13 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle
     std::unique_ptr<FrameSource> source;
     std::string source_name;            // for messages: the recording or the cameras
     std::string recording_calibration;  // a replay's own calibration.yaml, if any
+    // A replayed bag's camera_info pair, if any: the calibration when none is given.
+    std::optional<std::pair<ros2::CameraInfo, ros2::CameraInfo>> bag_camera_info;
     if (config.source.kind == SourceKind::Replay) {
         ReplayOptions replay;
         replay.path = config.source.replay.path;
+        replay.left_topic = config.source.replay.left_topic;
+        replay.right_topic = config.source.replay.right_topic;
         replay.pacing = config.source.replay.pacing == ReplayPacing::Lockstep
                             ? ReplayOptions::Pacing::Lockstep
                             : ReplayOptions::Pacing::Paced;
@@ -666,6 +671,7 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle
             throw StartupError(ExitCode::Source,
                                "cannot replay " + replay.path + ": " + source_status.last_error);
         recording_calibration = replay_source->calibrationPath();
+        bag_camera_info = replay_source->bagCameraInfo();
         source_name = replay.path;
         source = std::move(replay_source);
     } else {
@@ -695,6 +701,19 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle
                      calibration->rectified.image_size.width,
                      calibration->rectified.image_size.height, calibration->rectified.focal_px,
                      calibration->rectified.baseline_m);
+    } else if (bag_camera_info) {
+        const std::string origin = source_name + " (camera_info)";
+        try {
+            calibration = calibrationFromRosCameraInfo(
+                rosCameraInfoFromMessage(bag_camera_info->first),
+                rosCameraInfoFromMessage(bag_camera_info->second), origin + " left",
+                origin + " right");
+            calibration_text = formatCalibration(*calibration, origin);
+        } catch (const std::exception& e) {
+            throw StartupError(ExitCode::Calibration, e.what());
+        }
+        spdlog::info("calibration from {}: focal {:.1f} px, baseline {:.4f} m", origin,
+                     calibration->rectified.focal_px, calibration->rectified.baseline_m);
     } else {
         spdlog::warn("no calibration given (--calib, `calibration` in the configuration) and "
                      "none in {}",

@@ -745,6 +745,14 @@ StereoCalibration loadCalibration(const std::string& path)
     return parseCalibration(text.str(), path);
 }
 
+std::string formatCalibration(const StereoCalibration& calibration, const std::string& origin)
+{
+    validateCalibration(calibration, origin);
+    Writer writer;
+    writer.write(calibration);
+    return writer.text();
+}
+
 void saveCalibration(const StereoCalibration& calibration, const std::string& path)
 {
     validateCalibration(calibration, path);

@@ -89,6 +89,8 @@ StereoCalibration parseCalibration(const std::string& yaml_text, const std::stri
 // Writes the file (atomically: a temporary file renamed over the target). Throws
 // CalibrationError when it cannot.
 void saveCalibration(const StereoCalibration& calibration, const std::string& path);
+// The text saveCalibration() writes (validated first; CalibrationError names `origin`).
+std::string formatCalibration(const StereoCalibration& calibration, const std::string& origin);
 
 // Throws CalibrationError unless frames of `frame_size` fit the calibration.
 void checkFrameSize(const StereoCalibration& calibration, cv::Size frame_size,

@@ -1,13 +1,16 @@
 #include "pipeline/calibration_formats.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <sstream>
 #include <vector>
 
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 #include <opencv2/core.hpp>
 #include <yaml-cpp/yaml.h>
 
@@ -184,30 +187,93 @@ std::string rosMatrix(const char* key, const cv::Matx<double, R, C>& m)
                        formatList(m.val, R * C, C, 9));
 }
 
-std::string rosCameraText(const std::string& name, cv::Size size, const CameraIntrinsics& camera,
-                          const cv::Matx33d& rectification, const cv::Matx34d& projection,
-                          const std::string& path)
+std::string rosCameraText(const std::string& name, const RosCameraInfo& info)
 {
-    std::vector<double> d = camera.distortion;
-    std::string model = "plumb_bob";
-    if (d.size() <= 5) {
-        d.resize(5, 0.0);
-    } else if (d.size() == 8) {
-        model = "rational_polynomial";
+    std::string text = fmt::format("image_width: {}\nimage_height: {}\ncamera_name: {}\n",
+                                   info.image_size.width, info.image_size.height, name);
+    text += rosMatrix("camera_matrix", info.k);
+    text += "distortion_model: " + info.distortion_model + "\n";
+    text += fmt::format("distortion_coefficients:\n  rows: 1\n  cols: {}\n  data: {}\n",
+                        info.d.size(),
+                        formatList(info.d.data(), static_cast<int>(info.d.size()), 8, 9));
+    text += rosMatrix("rectification_matrix", info.r);
+    text += rosMatrix("projection_matrix", info.p);
+    return text;
+}
+
+// Significant digits the value was written with: the fewest that read back to it, give or
+// take the last bits of binary noise (ROS's INI parser, for one, computes its numbers and
+// writes 0.99998 as 0.99998000000000009).
+int significantDigits(double value)
+{
+    for (int digits = 1; digits < 15; ++digits) {
+        const double back = std::strtod(fmt::format("{:.{}g}", value, digits).c_str(), nullptr);
+        if (std::abs(back - value) <= 1e-14 * std::abs(value))
+            return digits;
+    }
+    return 17;
+}
+
+// A rotation read from a file is one to the precision of its numbers only: ROS's writers
+// (camera_calibration_parsers) print 5 or 6 significant digits, so R^T R of what they wrote
+// differs from the identity by up to a few 1e-5. Within what the digits explain, R is
+// replaced by the nearest rotation (SVD: U V^T) and the log says so; beyond that, R is left
+// as it is and the validation refuses it.
+cv::Matx33d nearestRotation(const cv::Matx33d& r, const std::string& origin, const char* key)
+{
+    const cv::Matx33d rtr = r.t() * r;
+    double worst = 0.0;
+    // The writer's precision: the most significant digits any element needed (its own
+    // trailing zeros, or a value that rounded to 1, show fewer).
+    int digits = 1;
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) {
+            worst = std::max(worst, std::abs(rtr(i, j) - (i == j ? 1.0 : 0.0)));
+            if (r(i, j) != 0.0)
+                digits = std::max(digits, significantDigits(r(i, j)));
+        }
+    }
+    // Half a unit in the last of those digits, for the largest elements (up to 1).
+    double half_unit = 0.0;
+    for (const double x : r.val) {
+        if (x != 0.0)
+            half_unit = std::max(half_unit, 0.5 * std::pow(10.0, std::floor(std::log10(std::abs(x))) - digits + 1));
+    }
+    // Each element of R^T R sums three products of elements up to 1: six rounding errors.
+    const double explained = 6.0 * half_unit;
+    if (worst <= 1e-15 || worst > explained || cv::determinant(r) <= 0.0)
+        return r;
+    cv::Mat w, u, vt;
+    cv::SVD::compute(cv::Mat(r), w, u, vt);
+    const cv::Mat nearest = u * vt;
+    spdlog::info("{}: {}: re-orthonormalized: R^T R differed from the identity by {:.3g}, which "
+                 "the precision of its numbers explains ({} significant digits, rounding "
+                 "errors up to {:.2g})",
+                 origin, key, worst, digits, half_unit);
+    return cv::Matx33d(nearest.ptr<double>());
+}
+
+RosCameraInfo rosCamera(cv::Size size, const CameraIntrinsics& camera,
+                        const cv::Matx33d& rectification, const cv::Matx34d& projection,
+                        const std::string& origin)
+{
+    RosCameraInfo info;
+    info.image_size = size;
+    info.d = camera.distortion;
+    info.distortion_model = "plumb_bob";
+    if (info.d.size() <= 5) {
+        info.d.resize(5, 0.0);
+    } else if (info.d.size() == 8) {
+        info.distortion_model = "rational_polynomial";
     } else {
-        fail(path, 0, "distortion",
-             std::to_string(d.size()) + " coefficients have no ROS distortion model "
+        fail(origin, 0, "distortion",
+             std::to_string(info.d.size()) + " coefficients have no ROS distortion model "
              "(plumb_bob takes 5, rational_polynomial 8)");
     }
-    std::string text = fmt::format("image_width: {}\nimage_height: {}\ncamera_name: {}\n",
-                                   size.width, size.height, name);
-    text += rosMatrix("camera_matrix", camera.camera_matrix);
-    text += "distortion_model: " + model + "\n";
-    text += fmt::format("distortion_coefficients:\n  rows: 1\n  cols: {}\n  data: {}\n", d.size(),
-                        formatList(d.data(), static_cast<int>(d.size()), 8, 9));
-    text += rosMatrix("rectification_matrix", rectification);
-    text += rosMatrix("projection_matrix", projection);
-    return text;
+    info.k = camera.camera_matrix;
+    info.r = rectification;
+    info.p = projection;
+    return info;
 }
 
 void writeText(const std::string& path, const std::string& text)
@@ -264,64 +330,116 @@ std::vector<double> distortionFrom(const cv::Mat& d, const std::string& path, co
 
 } // namespace
 
-StereoCalibration importRosCameraInfo(const std::string& left_path, const std::string& right_path)
+StereoCalibration calibrationFromRosCameraInfo(const RosCameraInfo& left,
+                                              const RosCameraInfo& right,
+                                              const std::string& left_origin,
+                                              const std::string& right_origin)
 {
-    const RosCamera left = RosReader(left_path).read();
-    const RosCamera right = RosReader(right_path).read();
     if (left.image_size != right.image_size)
-        fail(right_path, 0, "image_width",
+        fail(right_origin, 0, "image_width",
              "the right camera's images are " + std::to_string(right.image_size.width) + "x" +
-                 std::to_string(right.image_size.height) + " but the left's (" + left_path +
+                 std::to_string(right.image_size.height) + " but the left's (" + left_origin +
                  ") are " + std::to_string(left.image_size.width) + "x" +
                  std::to_string(left.image_size.height));
-    if (left.projection(0, 3) != 0.0 && right.projection(0, 3) == 0.0)
-        fail(left_path, 0, "projection_matrix",
-             "this is the right camera of the pair (Tx = " + fmt::format("{}", left.projection(0, 3)) +
+    if (left.p(0, 3) != 0.0 && right.p(0, 3) == 0.0)
+        fail(left_origin, 0, "projection_matrix",
+             "this is the right camera of the pair (Tx = " + fmt::format("{}", left.p(0, 3)) +
                  " is not 0): are the left and right files swapped?");
 
+    for (const auto* camera : {&left, &right}) {
+        if (camera->distortion_model != "plumb_bob" &&
+            camera->distortion_model != "rational_polynomial")
+            fail(camera == &left ? left_origin : right_origin, 0, "distortion_model",
+                 "'" + camera->distortion_model + "' is not supported: stereod undistorts with "
+                 "OpenCV's pinhole models, plumb_bob and rational_polynomial");
+    }
     StereoCalibration c;
-    c.left = left.intrinsics;
-    c.right = right.intrinsics;
-    c.R1 = left.rectification;
-    c.R2 = right.rectification;
-    c.P1 = left.projection;
-    c.P2 = right.projection;
+    c.left.camera_matrix = left.k;
+    c.left.distortion = left.d;
+    c.right.camera_matrix = right.k;
+    c.right.distortion = right.d;
+    c.R1 = nearestRotation(left.r, left_origin, "rectification_matrix");
+    c.R2 = nearestRotation(right.r, right_origin, "rectification_matrix");
+    c.P1 = left.p;
+    c.P2 = right.p;
     // Both rectified frames are the same up to the baseline: X_rect_right = X_rect_left +
     // (Tx, Ty, 0), X_rect = R_i X_i.
     c.R = c.R2.t() * c.R1;
     const cv::Vec3d shift(c.P2(0, 3) / c.P2(0, 0), c.P2(1, 3) / c.P2(1, 1), 0.0);
     c.T = c.R2.t() * shift;
     c.Q = disparityToDepth(c.P1, c.P2);
-    finish(c, left.image_size, left_path + " + " + right_path);
+    finish(c, left.image_size, left_origin + " + " + right_origin);
     return c;
+}
+
+ros2::CameraInfo cameraInfoMessage(const RosCameraInfo& info)
+{
+    ros2::CameraInfo m;
+    m.width = static_cast<uint32_t>(info.image_size.width);
+    m.height = static_cast<uint32_t>(info.image_size.height);
+    m.distortion_model = info.distortion_model;
+    m.d = info.d;
+    std::copy(info.k.val, info.k.val + 9, m.k.begin());
+    std::copy(info.r.val, info.r.val + 9, m.r.begin());
+    std::copy(info.p.val, info.p.val + 12, m.p.begin());
+    return m;
+}
+
+RosCameraInfo rosCameraInfoFromMessage(const ros2::CameraInfo& message)
+{
+    RosCameraInfo info;
+    info.image_size = cv::Size(static_cast<int>(message.width), static_cast<int>(message.height));
+    info.distortion_model = message.distortion_model;
+    info.d = message.d;
+    info.k = cv::Matx33d(message.k.data());
+    info.r = cv::Matx33d(message.r.data());
+    info.p = cv::Matx34d(message.p.data());
+    return info;
+}
+
+StereoCalibration importRosCameraInfo(const std::string& left_path, const std::string& right_path)
+{
+    const RosCamera left = RosReader(left_path).read();
+    const RosCamera right = RosReader(right_path).read();
+    auto info = [](const RosCamera& camera) {
+        RosCameraInfo i;
+        i.image_size = camera.image_size;
+        i.d = camera.intrinsics.distortion;
+        i.k = camera.intrinsics.camera_matrix;
+        i.r = camera.rectification;
+        i.p = camera.projection;
+        return i;
+    };
+    return calibrationFromRosCameraInfo(info(left), info(right), left_path, right_path);
+}
+
+std::pair<RosCameraInfo, RosCameraInfo> rosCameraInfoPair(const StereoCalibration& calibration,
+                                                          const std::string& left_origin,
+                                                          const std::string& right_origin)
+{
+    const cv::Size size = calibration.rectified.image_size;
+    if (calibration.kind == StereoCalibration::Kind::Full) {
+        return {rosCamera(size, calibration.left, calibration.R1, calibration.P1, left_origin),
+                rosCamera(size, calibration.right, calibration.R2, calibration.P2, right_origin)};
+    }
+    const RectifiedGeometry& g = calibration.rectified;
+    const double cx_right = g.cx_px + g.doffs_px;
+    CameraIntrinsics left, right;
+    left.camera_matrix = {g.focal_px, 0, g.cx_px, 0, g.focal_px, g.cy_px, 0, 0, 1};
+    right.camera_matrix = {g.focal_px, 0, cx_right, 0, g.focal_px, g.cy_px, 0, 0, 1};
+    const cv::Matx34d p1(g.focal_px, 0, g.cx_px, 0, 0, g.focal_px, g.cy_px, 0, 0, 0, 1, 0);
+    const cv::Matx34d p2(g.focal_px, 0, cx_right, -g.focal_px * g.baseline_m, 0, g.focal_px,
+                         g.cy_px, 0, 0, 0, 1, 0);
+    return {rosCamera(size, left, cv::Matx33d::eye(), p1, left_origin),
+            rosCamera(size, right, cv::Matx33d::eye(), p2, right_origin)};
 }
 
 void exportRosCameraInfo(const StereoCalibration& calibration, const std::string& left_path,
                          const std::string& right_path, const std::string& camera_name)
 {
-    const cv::Size size = calibration.rectified.image_size;
-    std::string left_text, right_text;
-    if (calibration.kind == StereoCalibration::Kind::Full) {
-        left_text = rosCameraText(camera_name + "/left", size, calibration.left, calibration.R1,
-                                  calibration.P1, left_path);
-        right_text = rosCameraText(camera_name + "/right", size, calibration.right,
-                                   calibration.R2, calibration.P2, right_path);
-    } else {
-        const RectifiedGeometry& g = calibration.rectified;
-        const double cx_right = g.cx_px + g.doffs_px;
-        CameraIntrinsics left, right;
-        left.camera_matrix = {g.focal_px, 0, g.cx_px, 0, g.focal_px, g.cy_px, 0, 0, 1};
-        right.camera_matrix = {g.focal_px, 0, cx_right, 0, g.focal_px, g.cy_px, 0, 0, 1};
-        const cv::Matx34d p1(g.focal_px, 0, g.cx_px, 0, 0, g.focal_px, g.cy_px, 0, 0, 0, 1, 0);
-        const cv::Matx34d p2(g.focal_px, 0, cx_right, -g.focal_px * g.baseline_m, 0, g.focal_px,
-                             g.cy_px, 0, 0, 0, 1, 0);
-        left_text = rosCameraText(camera_name + "/left", size, left, cv::Matx33d::eye(), p1,
-                                  left_path);
-        right_text = rosCameraText(camera_name + "/right", size, right, cv::Matx33d::eye(), p2,
-                                   right_path);
-    }
-    writeText(left_path, left_text);
-    writeText(right_path, right_text);
+    const auto pair = rosCameraInfoPair(calibration, left_path, right_path);
+    writeText(left_path, rosCameraText(camera_name + "/left", pair.first));
+    writeText(right_path, rosCameraText(camera_name + "/right", pair.second));
 }
 
 StereoCalibration importOpenCvStereoCalib(const std::string& intrinsics_path,

@@ -10,12 +10,47 @@
 // the line where YAML gives one, the key and the problem.
 
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <opencv2/core/types.hpp>
 
 #include "pipeline/calibration.hpp"
+#include "replay/ros2_messages.hpp"
 
 namespace stereod {
+
+// One camera of a ROS stereo pair, as sensor_msgs/CameraInfo and its YAML file hold it.
+// ROS conventions: the right camera's projection has P(0,3) = -fx' * baseline_m (Tx, in
+// pixel-metres; negative for a right camera to the right of the left one), the left's 0.
+struct RosCameraInfo {
+    cv::Size image_size;
+    std::string distortion_model = "plumb_bob";   // or "rational_polynomial"
+    std::vector<double> d;                          // OpenCV order, 5 or 8 coefficients
+    cv::Matx33d k = cv::Matx33d::eye();             // camera matrix
+    cv::Matx33d r = cv::Matx33d::eye();             // rectification rotation
+    cv::Matx34d p;                                  // projection after rectification
+};
+
+// The calibration as the two camera_info messages of a ROS stereo pair (what
+// exportRosCameraInfo writes to files, and the recorder to MCAP). Throws CalibrationError
+// for distortion with no ROS model, naming `left_origin` or `right_origin`.
+std::pair<RosCameraInfo, RosCameraInfo> rosCameraInfoPair(
+    const StereoCalibration& calibration, const std::string& left_origin = "left camera",
+    const std::string& right_origin = "right camera");
+
+// The same as a sensor_msgs/msg/CameraInfo message (header left empty), and back.
+ros2::CameraInfo cameraInfoMessage(const RosCameraInfo& info);
+RosCameraInfo rosCameraInfoFromMessage(const ros2::CameraInfo& message);
+
+// A full calibration from the two camera_info messages of a ROS stereo pair (see
+// importRosCameraInfo); the origins name them in errors and in the log. A rectification
+// matrix that is a rotation only to the precision of its printed digits (ROS's writers keep
+// 5 or 6) is replaced by the nearest rotation, and the log says so. Throws CalibrationError.
+StereoCalibration calibrationFromRosCameraInfo(const RosCameraInfo& left,
+                                              const RosCameraInfo& right,
+                                              const std::string& left_origin,
+                                              const std::string& right_origin);
 
 // Reads a ROS stereo pair of camera_info files into a full calibration. R and T are not in
 // camera_info: they follow from the rectification, R = R2^T R1 and

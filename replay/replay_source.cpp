@@ -169,8 +169,16 @@ bool decodeImage(const std::string& path, cv::Size expected, const std::string& 
 ReplaySource::ReplaySource(ReplayOptions options) : options_(std::move(options))
 {
     try {
-        recording_ = openRecording(options_.path, options_.fps);
+        if (isMcapFile(options_.path)) {
+            openBag();
+        } else {
+            recording_ = openRecording(options_.path, options_.fps);
+        }
     } catch (const RecordingError& e) {
+        open_error_ = -e.code();
+        fail(e.what());
+        return;
+    } catch (const mcap::McapError& e) {
         open_error_ = -e.code();
         fail(e.what());
         return;
@@ -320,28 +328,80 @@ void ReplaySource::planSchedule()
                      entries[first_back - 1].left_stamp_ns, static_cast<double>(period_ns_) / 1e6);
 }
 
+void ReplaySource::openBag()
+{
+    bag_ = std::make_unique<mcap::Reader>(options_.path);
+    if (bag_->truncated())
+        spdlog::warn("replay: {}: {}; replaying the pairs before it", options_.path,
+                     bag_->problem());
+    McapStereoIndex index = indexMcapStereo(*bag_, options_.left_topic, options_.right_topic);
+    for (const std::string& note : index.notes)
+        spdlog::info("replay: {}: {}", options_.path, note);
+    if (index.unpaired_left + index.unpaired_right > 0)
+        spdlog::warn("replay: {}: {} left and {} right images have no partner within half a "
+                     "frame period and are skipped",
+                     options_.path, index.unpaired_left, index.unpaired_right);
+    recording_.dir = options_.path;
+    recording_.has_index = true;
+    recording_.entries.reserve(index.pairs.size());
+    for (std::size_t i = 0; i < index.pairs.size(); ++i) {
+        RecordingEntry entry;
+        entry.index = i;
+        entry.left_stamp_ns = index.pairs[i].left_stamp_ns;
+        entry.right_stamp_ns = index.pairs[i].right_stamp_ns;
+        // For messages: which message of the bag.
+        entry.left_path = options_.path + " " + index.left_topic + " @" + std::to_string(entry.left_stamp_ns);
+        entry.right_path = options_.path + " " + index.right_topic + " @" + std::to_string(entry.right_stamp_ns);
+        recording_.entries.push_back(std::move(entry));
+    }
+    bag_pairs_ = std::move(index.pairs);
+    bag_camera_info_ = std::move(index.camera_info);
+}
+
 bool ReplaySource::decodePair(std::size_t i, BadPair& bad)
 {
     const RecordingEntry& entry = recording_.entries[i];
-    // Each side is checked against the size it must have before it is decoded: the
-    // replay's frame size once known, else the left image's for the right one. So the
-    // file blamed is the one at fault, and a decompression bomb is never decoded.
-    const std::string replay_size =
-        frame_size_.empty() ? std::string()
-                            : "the replay is " + sizeText(frame_size_) + " (its first readable pair)";
-    if (!decodeImage(entry.left_path, frame_size_, replay_size, file_bytes_, left_image_,
-                     bad.reason, bad.code)) {
-        bad.side = kLeft;
-        bad.path = entry.left_path;
-        return false;
-    }
-    const std::string left_size =
-        frame_size_.empty() ? "its left image is " + sizeText(left_image_.size()) : replay_size;
-    if (!decodeImage(entry.right_path, left_image_.size(), left_size, file_bytes_, right_image_,
-                     bad.reason, bad.code)) {
-        bad.side = kRight;
-        bad.path = entry.right_path;
-        return false;
+    if (bag_) {
+        bad.code = EINVAL;
+        try {
+            if (!decodeMcapImage(*bag_, bag_pairs_[i].left, left_image_, bad.reason)) {
+                bad.side = kLeft;
+                bad.path = entry.left_path;
+                return false;
+            }
+            if (!decodeMcapImage(*bag_, bag_pairs_[i].right, right_image_, bad.reason)) {
+                bad.side = kRight;
+                bad.path = entry.right_path;
+                return false;
+            }
+        } catch (const mcap::McapError& e) {
+            // A chunk that went bad since the index was made (a file being rewritten).
+            bad.side = kLeft;
+            bad.path = entry.left_path;
+            bad.reason = e.what();
+            return false;
+        }
+    } else {
+        // Each side is checked against the size it must have before it is decoded: the
+        // replay's frame size once known, else the left image's for the right one. So the
+        // file blamed is the one at fault, and a decompression bomb is never decoded.
+        const std::string replay_size =
+            frame_size_.empty() ? std::string()
+                                : "the replay is " + sizeText(frame_size_) + " (its first readable pair)";
+        if (!decodeImage(entry.left_path, frame_size_, replay_size, file_bytes_, left_image_,
+                         bad.reason, bad.code)) {
+            bad.side = kLeft;
+            bad.path = entry.left_path;
+            return false;
+        }
+        const std::string left_size =
+            frame_size_.empty() ? "its left image is " + sizeText(left_image_.size()) : replay_size;
+        if (!decodeImage(entry.right_path, left_image_.size(), left_size, file_bytes_, right_image_,
+                         bad.reason, bad.code)) {
+            bad.side = kRight;
+            bad.path = entry.right_path;
+            return false;
+        }
     }
     return true;
 }

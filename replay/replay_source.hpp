@@ -1,6 +1,7 @@
 #pragma once
-// The replay of a recording (replay/recording.hpp) behind the same FrameSource interface
-// as the cameras.
+// The replay of a recording (replay/recording.hpp) or of a ROS 2 bag in MCAP
+// (replay/mcap_recording.hpp: any bag with two sensor_msgs/msg/Image topics) behind the
+// same FrameSource interface as the cameras.
 //
 // Two pacings:
 //  - paced: pairs are delivered at their recorded time spacing, like live cameras
@@ -46,12 +47,15 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "capture/frame_pool.hpp"
 #include "capture/frame_source.hpp"
+#include "replay/mcap_recording.hpp"
 #include "replay/recording.hpp"
 
 namespace stereod {
@@ -62,7 +66,12 @@ struct ReplayOptions {
         Lockstep,   // as fast as the consumer takes pairs; nothing dropped
     };
 
-    std::string path;             // a recording directory or a folder of left*/right*
+    std::string path;             // a recording directory, a folder of left*/right*, or an
+                                  // MCAP file (recognised by its magic bytes)
+    // The image topics of an MCAP bag; empty: /stereo/{left,right}/image_raw, or the one
+    // pair of image topics whose names say left and right (indexMcapStereo()).
+    std::string left_topic;
+    std::string right_topic;
     Pacing pacing = Pacing::Paced;
     bool loop = true;             // start over at the end instead of finishing
     double fps = 10.0;            // nominal rate of a plain folder (no frames.csv)
@@ -101,6 +110,11 @@ public:
     // The recording's calibration.yaml, or empty when it has none (the service uses it
     // when no calibration is given).
     const std::string& calibrationPath() const noexcept { return recording_.calibration_path; }
+    // A bag's camera_info pair (the first message of each side), when it has one.
+    const std::optional<std::pair<ros2::CameraInfo, ros2::CameraInfo>>& bagCameraInfo() const noexcept
+    {
+        return bag_camera_info_;
+    }
     // Pairs listed in the recording (readable or not).
     std::size_t pairCount() const noexcept { return recording_.entries.size(); }
     const ReplayOptions& options() const noexcept { return options_; }
@@ -115,6 +129,9 @@ private:
     };
 
     void run() noexcept;
+    // Indexes an MCAP bag into recording_ (entries without paths) and bag_pairs_. Throws
+    // mcap::McapError.
+    void openBag();
     // Decodes entry `i` into left_image_/right_image_. False (and `bad` filled) when the
     // pair cannot be used.
     bool decodePair(std::size_t i, BadPair& bad);
@@ -134,6 +151,11 @@ private:
 
     const ReplayOptions options_;
     Recording recording_;
+    // An MCAP bag: the reader (used by the constructor, then by the replay thread only),
+    // where each pair's messages are, and its camera_info.
+    std::unique_ptr<mcap::Reader> bag_;
+    std::vector<McapPair> bag_pairs_;
+    std::optional<std::pair<ros2::CameraInfo, ros2::CameraInfo>> bag_camera_info_;
     cv::Size frame_size_;
     // When each pair is due, in ns after the pass's first pair: the recorded spacing,
     // except that a stamp stepping back counts as one period (planSchedule()).

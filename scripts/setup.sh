@@ -8,10 +8,12 @@ packages=(
   build-essential cmake ninja-build pkg-config git
   libopencv-dev libv4l-dev libturbojpeg0-dev libeigen3-dev libyaml-cpp-dev libspdlog-dev libsystemd-dev
   nlohmann-json3-dev libcli11-dev
+  libzstd-dev zlib1g-dev   # MCAP recordings: zstd chunks, CRC-32
   libhwy-dev   # Highway: portable SIMD with run-time dispatch, for the census-sgm matcher
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-dev   # scripts/fuzz.sh: clang with libFuzzer and its sanitizer runtimes
   opencv-doc
+  camera-calibration-parsers-tools python3-camera-calibration-parsers   # ROS's own calibration parsers: the ROS format tests
   systemd   # systemd-analyze, systemd-sysusers, systemd-tmpfiles: the unit checks (tests/daemon)
 )
 

@@ -19,6 +19,7 @@ while [ $# -gt 0 ]; do
 done
 
 "$STEREOD_ROOT/scripts/setup.sh"
+"$STEREOD_ROOT/scripts/setup-node.sh"   # the MCAP interop tests' Node.js packages
 
 cmake_args=()
 [ "${CI:-}" = "true" ] && cmake_args+=(-DSTEREOD_WERROR=ON)

@@ -517,14 +517,14 @@ TEST(ConfigPaths, ARecordingWithoutCalibrationRunsUncalibrated)
             << error.problems()[0];
     }
 
-    // A path that is a file, not a directory.
+    // A path that is a file, neither a directory nor an MCAP bag.
     const fs::path wrong = dir.write("wrong.yaml", "source:\n  replay:\n    path: robot.yaml\n");
     try {
         loadConfig(wrong.string());
         FAIL();
     } catch (const ConfigError& error) {
         ASSERT_EQ(error.problems().size(), 1u) << error.what();
-        EXPECT_NE(error.problems()[0].find(":3: source.replay.path: is not a directory"),
+        EXPECT_NE(error.problems()[0].find(":3: source.replay.path: is neither a directory nor an MCAP file"),
                   std::string::npos)
             << error.problems()[0];
     }

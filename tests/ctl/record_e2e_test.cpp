@@ -22,6 +22,8 @@
 #include "capture/frame_source.hpp"
 #include "ctl/client.hpp"
 #include "pipeline/calibration.hpp"
+#include "pipeline/calibration_formats.hpp"
+#include "replay/mcap_recording.hpp"
 #include "replay/recording.hpp"
 #include "replay/replay_source.hpp"
 #include "tests/ctl/process.hpp"
@@ -349,6 +351,184 @@ TEST_F(RecordE2e, KilledRecorderLeavesARecordingThatReplays)
     for (const auto& file : fs::directory_iterator(out + "/left"))
         left_files += file.path().extension() == ".png" ? 1 : 0;
     EXPECT_LE(left_files, recording.entries.size() + 1);
+}
+
+// Every pair of the bag is a source pair (stamps and pixels); returns how many there are.
+std::size_t expectBagOfSourcePairs(const std::string& path,
+                                   const std::vector<SourcePair>& source)
+{
+    mcap::Reader reader(path);
+    const McapStereoIndex index = indexMcapStereo(reader, "", "");
+    EXPECT_EQ(index.left_topic, kMcapLeftImageTopic);
+    for (const McapPair& p : index.pairs) {
+        const auto match = std::find_if(source.begin(), source.end(), [&](const SourcePair& s) {
+            return s.left_stamp_ns == p.left_stamp_ns && s.right_stamp_ns == p.right_stamp_ns;
+        });
+        EXPECT_NE(match, source.end()) << "stamps " << p.left_stamp_ns << "/" << p.right_stamp_ns;
+        if (match == source.end())
+            continue;
+        cv::Mat left, right;
+        std::string why;
+        EXPECT_TRUE(decodeMcapImage(reader, p.left, left, why)) << why;
+        EXPECT_TRUE(decodeMcapImage(reader, p.right, right, why)) << why;
+        EXPECT_TRUE(sameImage(left, match->left));
+        EXPECT_TRUE(sameImage(right, match->right));
+    }
+    return index.pairs.size();
+}
+
+// The first reading of the service on `socket` that is not "no frame yet".
+Json firstReading(const std::string& socket, ChildProcess& service, const std::string& log)
+{
+    const auto deadline = std::chrono::steady_clock::now() + kStartLimit;
+    while (std::chrono::steady_clock::now() < deadline && service.running()) {
+        try {
+            ProtocolClient client(socket, 2000ms);
+            Json reading = client.request({{"cmd", "distance"}}).value("reading", Json::object());
+            if (reading.value("reason", Json::object()).value("code", "") != "no_frame_yet")
+                return reading;
+        } catch (const std::exception&) {
+        }
+        std::this_thread::sleep_for(20ms);
+    }
+    ADD_FAILURE() << "no reading from " << socket << "\n" << "see " << log;
+    return Json::object();
+}
+
+TEST_F(RecordE2e, McapRecordingHoldsThePairsAndTheCalibration)
+{
+    startService(true);
+    const std::string out = dir_.file("rec.mcap");
+    const ProcessResult recorded = ctl({"record", "--out", out, "--frames", "8", "--json"});
+    ASSERT_EQ(recorded.exit_code, 0) << recorded.out << recorded.err;
+    const Json summary = Json::parse(recorded.out);
+    EXPECT_EQ(summary["pairs"], 8);
+    EXPECT_EQ(summary["calibration"], true);
+    EXPECT_EQ(expectBagOfSourcePairs(out, source_), 8u);
+
+    mcap::Reader reader(out);
+    EXPECT_TRUE(reader.hasSummary());
+    EXPECT_EQ(reader.header().profile, "ros2");
+    const McapStereoIndex index = indexMcapStereo(reader, "", "");
+    ASSERT_TRUE(index.camera_info.has_value());
+    // The calibration in force, through ROS's convention (right P[3] = -fx' * B).
+    EXPECT_NEAR(index.camera_info->second.p[3], -kFocalPx * kBaselineM, 1e-9);
+    const StereoCalibration back = calibrationFromRosCameraInfo(
+        rosCameraInfoFromMessage(index.camera_info->first),
+        rosCameraInfoFromMessage(index.camera_info->second), "left", "right");
+    EXPECT_NEAR(back.rectified.focal_px, kFocalPx, 1e-9);
+    EXPECT_NEAR(back.rectified.baseline_m, kBaselineM, 1e-12);
+
+    // And @mcap/core reads it, when the interop packages are installed (the full check
+    // is tests/replay/mcap_interop_test.cpp).
+    const std::string interop = std::string(STEREOD_SOURCE_DIR) + "/tests/mcap_interop";
+    if (!std::string(STEREOD_NODE).empty() &&
+        fs::exists(interop + "/node_modules/@mcap/core/package.json")) {
+        const ProcessResult node = runProcess({STEREOD_NODE, interop + "/read_ours.mjs", out});
+        ASSERT_EQ(node.exit_code, 0) << node.err;
+        const Json got = Json::parse(node.out);
+        EXPECT_EQ(got["profile"], "ros2");
+        EXPECT_EQ(got["messageCount"], 32);
+        EXPECT_EQ(got["streamDone"], true);
+        EXPECT_EQ(got["counted"][kMcapLeftImageTopic], 8);
+        EXPECT_EQ(got["counted"][kMcapRightInfoTopic], 8);
+        EXPECT_EQ(got["first"][kMcapLeftImageTopic]["message"]["width"], kSize.width);
+        EXPECT_EQ(got["first"][kMcapLeftImageTopic]["message"]["encoding"], "mono8");
+    }
+
+    // Never over a user's file.
+    const ProcessResult again = ctl({"record", "--out", out, "--frames", "1"});
+    EXPECT_EQ(again.exit_code, 2) << again.out << again.err;
+    EXPECT_NE(again.err.find("exists"), std::string::npos) << again.err;
+}
+
+TEST_F(RecordE2e, KilledMcapRecorderLeavesABagThatReplays)
+{
+    startService(true);
+    const std::string out = dir_.file("killed.mcap");
+    ChildProcess recorder({stereoctlPath(), "record", "--out", out, "--socket", socket_},
+                          dir_.file("record.log"));
+    // Until two chunks (4 MiB each, about 19 pairs of 384x288) are on disk, then kill -9
+    // in the middle of whatever it does.
+    const auto deadline = std::chrono::steady_clock::now() + 60s;
+    std::error_code error;
+    while (std::chrono::steady_clock::now() < deadline &&
+           (!fs::exists(out) || fs::file_size(out, error) < 9u << 20))
+        std::this_thread::sleep_for(10ms);
+    ASSERT_GE(fs::file_size(out, error), 9u << 20) << readFile(dir_.file("record.log"));
+    recorder.sendSignal(SIGKILL);
+    ASSERT_TRUE(recorder.waitFor(10s));
+
+    mcap::Reader reader(out);
+    EXPECT_FALSE(reader.hasSummary());
+    EXPECT_GE(reader.chunks().size(), 2u);
+    EXPECT_GE(expectBagOfSourcePairs(out, source_), 30u);
+
+    // stereod replays it, with the calibration its camera_info carries.
+    const std::string log = dir_.file("replay.log");
+    const std::string socket = dir_.file("r.sock");
+    ChildProcess replay({stereodPath(), "--replay", out, "--socket", socket}, log);
+    const Json reading = firstReading(socket, replay, log);
+    EXPECT_EQ(reading.value("valid", false), true) << reading.dump() << readFile(log);
+    EXPECT_NE(readFile(log).find("calibration from"), std::string::npos) << readFile(log);
+    replay.sendSignal(SIGTERM);
+    replay.waitFor(10s);
+}
+
+// A bag as a robot's recorder writes it (@mcap/core's writer and rosmsg2-serialization:
+// its own topic names, an unrelated third image topic, camera_info beside the images)
+// replays through stereod and gives the distance the CSV recording of the same pairs gives.
+TEST_F(RecordE2e, BagFromAnIndependentWriterGivesTheDistanceOfTheCsvRecording)
+{
+    const std::string interop = std::string(STEREOD_SOURCE_DIR) + "/tests/mcap_interop";
+    if (std::string(STEREOD_NODE).empty())
+        GTEST_SKIP() << "node is not installed";
+    ASSERT_TRUE(fs::exists(interop + "/node_modules/@mcap/core/package.json"))
+        << "run scripts/setup-node.sh";
+    startService(true);
+    const Json csv_reading = firstReading(socket_, *service_, log_);
+    ASSERT_EQ(csv_reading.value("valid", false), true) << csv_reading.dump();
+
+    const auto [left_info, right_info] = rosCameraInfoPair(loadCalibration(calibration_));
+    auto info_json = [](const RosCameraInfo& i) {
+        const ros2::CameraInfo m = cameraInfoMessage(i);
+        return Json{{"width", m.width}, {"height", m.height}, {"distortion_model", m.distortion_model},
+                    {"d", m.d}, {"k", m.k}, {"r", m.r}, {"p", m.p}};
+    };
+    Json spec = {{"left_topic", "/rig/cam_left/image_mono"},
+                 {"right_topic", "/rig/cam_right/image_mono"},
+                 {"other_topic", "/rig/front/image_color"},
+                 {"left_info", info_json(left_info)},
+                 {"right_info", info_json(right_info)},
+                 {"pairs", Json::array()}};
+    for (std::size_t k = 0; k < source_.size(); ++k) {
+        const std::string l = dir_.file("l" + std::to_string(k) + ".pgm");
+        const std::string r = dir_.file("r" + std::to_string(k) + ".pgm");
+        ASSERT_TRUE(cv::imwrite(l, source_[k].left));
+        ASSERT_TRUE(cv::imwrite(r, source_[k].right));
+        spec["pairs"].push_back({{"left", l}, {"right", r},
+                                 {"left_stamp_ns", source_[k].left_stamp_ns},
+                                 {"right_stamp_ns", source_[k].right_stamp_ns}});
+    }
+    std::ofstream(dir_.file("spec.json")) << spec.dump();
+    const std::string bag = dir_.file("robot.mcap");
+    const ProcessResult wrote =
+        runProcess({STEREOD_NODE, interop + "/write_bag.mjs", bag, dir_.file("spec.json")});
+    ASSERT_EQ(wrote.exit_code, 0) << wrote.err;
+
+    // No --calib: the calibration comes from the bag's camera_info.
+    const std::string log = dir_.file("bag.log");
+    const std::string socket = dir_.file("b.sock");
+    ChildProcess replay({stereodPath(), "--replay", bag, "--socket", socket}, log);
+    const Json bag_reading = firstReading(socket, replay, log);
+    ASSERT_EQ(bag_reading.value("valid", false), true) << bag_reading.dump() << readFile(log);
+    EXPECT_NE(readFile(log).find("image topics chosen by name"), std::string::npos) << readFile(log);
+    // The pairs differ only in brightness: any two readings agree within 1 %.
+    const double csv_m = csv_reading["distance_m"].get<double>();
+    const double bag_m = bag_reading["distance_m"].get<double>();
+    EXPECT_NEAR(bag_m, csv_m, csv_m * 0.01) << bag_reading.dump() << "\n" << csv_reading.dump();
+    replay.sendSignal(SIGTERM);
+    replay.waitFor(10s);
 }
 
 TEST_F(RecordE2e, FullDiskStopsTheRecordingAndNotTheService)

@@ -4,6 +4,9 @@
 
 #include <cstdio>
 #include <fstream>
+#include <regex>
+#include <sstream>
+#include <unistd.h>
 #include <functional>
 #include <string>
 #include <vector>
@@ -16,6 +19,7 @@
 #include "pipeline/calibration_formats.hpp"
 #include "pipeline/chessboard_calibration.hpp"
 #include "pipeline/rectifier.hpp"
+#include "tests/ctl/process.hpp"
 #include "tests/pipeline/test_support.hpp"
 
 namespace stereod {
@@ -123,6 +127,115 @@ TEST_F(CalibrationFormatsTest, RosCameraInfoPairRoundTrips)
     const std::string text = test::readFile(left);
     EXPECT_TRUE(contains(text, "camera_name: rig/left")) << text;
     EXPECT_TRUE(contains(text, "distortion_model: plumb_bob")) << text;
+}
+
+// Depths of the two calibrations at disparities across the range agree within `relative`.
+void expectSameDepths(const StereoCalibration& a, const StereoCalibration& b, double relative)
+{
+    for (double d : {4.0, 16.0, 64.0, 160.0}) {
+        const double za = a.rectified.depthFromDisparity(d);
+        EXPECT_NEAR(b.rectified.depthFromDisparity(d), za, za * relative) << "d = " << d;
+    }
+}
+
+// Rewrites every number of a camera_info file with `digits` significant digits, as ROS's
+// writers leave them.
+void roundNumbers(const std::string& path, int digits)
+{
+    const std::string text = test::readFile(path);
+    const std::regex number(R"(-?\d+\.\d+(e-?\d+)?)");
+    std::string out;
+    auto last = text.cbegin();
+    for (std::sregex_iterator it(text.begin(), text.end(), number), end; it != end; ++it) {
+        out.append(last, text.cbegin() + it->position());
+        char buffer[64];
+        std::snprintf(buffer, sizeof buffer, "%.*g", digits, std::stod(it->str()));
+        out += buffer;
+        last = text.cbegin() + it->position() + it->length();
+    }
+    out.append(last, text.cend());
+    writeFile(path, out);
+}
+
+TEST_F(CalibrationFormatsTest, RosFilesWithFewDigitsImportReOrthonormalized)
+{
+    const StereoCalibration& c = calibration();
+    test::ScratchDir dir("stereod_formats");
+    const std::string left = dir.file("left.yaml"), right = dir.file("right.yaml");
+    exportRosCameraInfo(c, left, right, "rig");
+    roundNumbers(left, 5);
+    roundNumbers(right, 5);
+    // Five digits: R^T R is off the identity by more than the strict check allows.
+    const StereoCalibration back = importRosCameraInfo(left, right);
+    const cv::Matx33d should_be_identity = back.R1.t() * back.R1;
+    EXPECT_LT(maxDifference(should_be_identity, cv::Matx33d::eye()), 1e-12);
+    EXPECT_LT(maxDifference(back.R1, c.R1), 1e-4);
+    expectSameDepths(c, back, 1e-3);
+
+    // A matrix that is no rotation beyond what its digits explain is still refused.
+    exportRosCameraInfo(c, left, right, "rig");
+    std::string text = test::readFile(left);
+    const auto at = text.find("rectification_matrix:");
+    ASSERT_NE(at, std::string::npos);
+    const auto data = text.find("data: [", at) + 7;
+    text.replace(data, text.find(']', data) - data, "0.998123, 0, 0, 0, 1, 0, 0, 0, 1");
+    writeFile(left, text);
+    const std::string why = refusal([&] { importRosCameraInfo(left, right); });
+    EXPECT_TRUE(contains(why, "not a rotation")) << why;
+}
+
+// ROS's own tools: Debian's camera-calibration-parsers (the `convert` tool and the Python
+// module). Installed by scripts/setup.sh; the test skips where they are missing.
+const std::string kRosConvert = "/usr/lib/camera_calibration_parsers/convert";
+const std::string kPython = "/usr/bin/python3";
+
+TEST_F(CalibrationFormatsTest, RosOwnToolsReadOurExportAndRewriteItImportably)
+{
+    if (::access(kRosConvert.c_str(), X_OK) != 0)
+        GTEST_SKIP() << kRosConvert << " missing (Debian package camera-calibration-parsers-tools)";
+    const StereoCalibration& c = calibration();
+    test::ScratchDir dir("stereod_formats");
+    const std::string left = dir.file("left.yaml"), right = dir.file("right.yaml");
+    exportRosCameraInfo(c, left, right, "rig");
+
+    // ROS's parser reads our export with K, D, R, P equal to ours.
+    const std::string script =
+        "import sys, camera_calibration_parsers as p\n"
+        "for f in sys.argv[1:]:\n"
+        "    name, info = p.readCalibration(f)\n"
+        "    print(name, *[repr(float(v)) for m in (info.K, info.D, info.R, info.P) for v in m])\n";
+    const test::ProcessResult read = test::runProcess({kPython, "-c", script, left, right});
+    ASSERT_EQ(read.exit_code, 0) << read.err;
+    std::istringstream lines(read.out);
+    const RosCameraInfo ours[2] = {rosCameraInfoPair(c).first, rosCameraInfoPair(c).second};
+    for (const RosCameraInfo& info : ours) {
+        std::string name;
+        lines >> name;
+        EXPECT_EQ(name, &info == &ours[0] ? "rig/left" : "rig/right");
+        std::vector<double> expected(info.k.val, info.k.val + 9);
+        expected.insert(expected.end(), info.d.begin(), info.d.end());
+        expected.insert(expected.end(), info.r.val, info.r.val + 9);
+        expected.insert(expected.end(), info.p.val, info.p.val + 12);
+        for (std::size_t i = 0; i < expected.size(); ++i) {
+            double v = 0;
+            lines >> v;
+            EXPECT_EQ(v, expected[i]) << name << " value " << i;
+        }
+    }
+    // The right camera's P[3] = -fx' * baseline, negative: ROS's sign convention.
+    EXPECT_LT(ours[1].p(0, 3), 0.0);
+    EXPECT_NEAR(ours[1].p(0, 3), -c.rectified.focal_px * c.rectified.baseline_m, 1e-9);
+
+    // Rewritten by ROS's writer through its INI format (5 decimals), then imported.
+    for (const std::string& side : {std::string("left"), std::string("right")}) {
+        const std::string yaml = dir.file(side + ".yaml");
+        const std::string ini = dir.file(side + ".ini");
+        const std::string again = dir.file(side + "2.yaml");
+        ASSERT_EQ(test::runProcess({kRosConvert, yaml, ini}).exit_code, 0);
+        ASSERT_EQ(test::runProcess({kRosConvert, ini, again}).exit_code, 0);
+    }
+    const StereoCalibration back = importRosCameraInfo(dir.file("left2.yaml"), dir.file("right2.yaml"));
+    expectSameDepths(c, back, 1e-3);
 }
 
 TEST(CalibrationFormats, ReadsARosPairAsCameraInfoWritesIt)

@@ -691,5 +691,48 @@ TEST_F(ReplaySourceTest, RecordingCalibrationIsExposed)
     EXPECT_EQ(source.calibrationPath(), tmp_.file("rec/calibration.yaml"));
 }
 
+// A ROS 2 bag replays like a recording: every pair in order, lockstep, then finished; its
+// camera_info is exposed for the service's calibration.
+TEST_F(ReplaySourceTest, McapBagReplaysLikeARecording)
+{
+    pairs_ = test::tsukubaPairs(6);
+    test::stampPairs(pairs_, 7'000'000'000, 40 * kMs);
+    const std::string bag = tmp_.file("run.mcap");
+    {
+        McapRecordingWriter writer(bag);
+        ros2::CameraInfo info;
+        info.width = 96;
+        info.height = 72;
+        info.p = {100, 0, 48, -10, 0, 100, 36, 0, 0, 0, 1, 0};
+        writer.setCameraInfo(info, info);
+        for (const TestPair& p : pairs_)
+            writer.write(p.left, p.right, p.left_stamp_ns, p.right_stamp_ns);
+    }   // closed by the destructor
+    Rig rig(lockstep(bag), 2);
+    ReplaySource& source = rig.source;
+    EXPECT_EQ(source.frameSize(), cv::Size(96, 72));
+    EXPECT_EQ(source.pairCount(), 6u);
+    ASSERT_TRUE(source.bagCameraInfo().has_value());
+    EXPECT_EQ(source.bagCameraInfo()->second.p[3], -10.0);
+    ASSERT_EQ(source.start(rig.ring), 0) << source.status().last_error;
+    std::vector<StereoPair> got = popPairs(rig.ring, 6);
+    ASSERT_EQ(got.size(), 6u);
+    for (std::size_t k = 0; k < got.size(); ++k)
+        expectPairMatches(got[k], pairs_[k], k);
+    ASSERT_TRUE(waitForState(source, SourceState::Finished));
+    EXPECT_EQ(rig.ring.dropped(), 0u);
+    got.clear();
+    source.stop();
+
+    // Topics that are not in the bag: start fails naming the bag and its image topics.
+    ReplayOptions wrong = lockstep(bag);
+    wrong.left_topic = "/cam/left";
+    Rig bad(wrong, 2);
+    EXPECT_EQ(bad.source.start(bad.ring), -EINVAL);
+    EXPECT_NE(bad.source.status().last_error.find("/stereo/left/image_raw"), std::string::npos)
+        << bad.source.status().last_error;
+    bad.source.stop();
+}
+
 } // namespace
 } // namespace stereod

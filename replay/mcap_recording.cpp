@@ -1,0 +1,352 @@
+#include "replay/mcap_recording.hpp"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstring>
+#include <map>
+
+#include <opencv2/imgproc.hpp>
+
+namespace stereod {
+
+namespace {
+
+// The QoS rosbag2 records for a sensor stream (reliable, volatile, keep last): the
+// `ros2` profile requires the key; `ros2 bag play` uses it to publish.
+constexpr const char* kOfferedQos =
+    "- history: 1\n"
+    "  depth: 10\n"
+    "  reliability: 1\n"
+    "  durability: 2\n"
+    "  deadline:\n"
+    "    sec: 9223372036\n"
+    "    nsec: 854775807\n"
+    "  lifespan:\n"
+    "    sec: 9223372036\n"
+    "    nsec: 854775807\n"
+    "  liveliness: 1\n"
+    "  liveliness_lease_duration:\n"
+    "    sec: 9223372036\n"
+    "    nsec: 854775807\n"
+    "  avoid_ros_namespace_conventions: false\n";
+
+constexpr const char* kLeftFrame = "stereo_left_optical_frame";
+constexpr const char* kRightFrame = "stereo_right_optical_frame";
+
+std::string lower(std::string s)
+{
+    std::transform(s.begin(), s.end(), s.begin(),
+                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    return s;
+}
+
+// `/a/b/image_raw` -> `/a/b/camera_info`.
+std::string siblingInfoTopic(const std::string& image_topic)
+{
+    const auto slash = image_topic.rfind('/');
+    return (slash == std::string::npos ? std::string() : image_topic.substr(0, slash + 1)) +
+           "camera_info";
+}
+
+} // namespace
+
+bool isMcapFile(const std::string& path)
+{
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) {
+        return false;
+    }
+    uint8_t start[mcap::kMagicSize] = {};
+    const ssize_t n = ::pread(fd, start, sizeof start, 0);
+    ::close(fd);
+    return n == static_cast<ssize_t>(sizeof start) &&
+           std::memcmp(start, mcap::kMagic, sizeof start) == 0;
+}
+
+mcap::WriterOptions McapRecordingWriter::defaultOptions()
+{
+    mcap::WriterOptions o;
+    o.profile = "ros2";
+    o.library = "stereod";
+    return o;
+}
+
+McapRecordingWriter::McapRecordingWriter(const std::string& path, mcap::WriterOptions options)
+    : writer_(path, std::move(options))
+{
+    const std::map<std::string, std::string> metadata = {{"offered_qos_profiles", kOfferedQos}};
+    const uint16_t image = writer_.addSchema(ros2::kImageType, "ros2msg", ros2::imageSchemaText());
+    const uint16_t info =
+        writer_.addSchema(ros2::kCameraInfoType, "ros2msg", ros2::cameraInfoSchemaText());
+    left_channel_ = writer_.addChannel(image, kMcapLeftImageTopic, "cdr", metadata);
+    right_channel_ = writer_.addChannel(image, kMcapRightImageTopic, "cdr", metadata);
+    left_info_channel_ = writer_.addChannel(info, kMcapLeftInfoTopic, "cdr", metadata);
+    right_info_channel_ = writer_.addChannel(info, kMcapRightInfoTopic, "cdr", metadata);
+}
+
+void McapRecordingWriter::setCameraInfo(const ros2::CameraInfo& left, const ros2::CameraInfo& right)
+{
+    camera_info_.emplace(left, right);
+    camera_info_->first.header.frame_id = kLeftFrame;
+    camera_info_->second.header.frame_id = kRightFrame;
+}
+
+void McapRecordingWriter::writeImage(uint16_t channel, const cv::Mat& image, int64_t stamp_ns,
+                                     const char* frame_id)
+{
+    const auto width = static_cast<uint32_t>(image.cols);
+    const auto height = static_cast<uint32_t>(image.rows);
+    const ros2::Header header{ros2::Time::fromNs(stamp_ns), frame_id};
+    if (image.isContinuous()) {
+        ros2::serializeImage(header, height, width, "mono8", width, image.data, image.total(),
+                             message_);
+    } else {
+        const cv::Mat packed = image.clone();
+        ros2::serializeImage(header, height, width, "mono8", width, packed.data, packed.total(),
+                             message_);
+    }
+    const auto t = static_cast<uint64_t>(stamp_ns);
+    writer_.write(channel, t, t, message_, static_cast<uint32_t>(pairs_));
+}
+
+uint64_t McapRecordingWriter::write(const cv::Mat& left, const cv::Mat& right,
+                                    int64_t left_stamp_ns, int64_t right_stamp_ns)
+{
+    if (left.type() != CV_8UC1 || right.type() != CV_8UC1 || left.size() != right.size() ||
+        left.empty()) {
+        throw mcap::McapError(writer_.path() + ": a pair must be two 8-bit grayscale images of one size");
+    }
+    if (size_.empty()) {
+        size_ = left.size();
+    } else if (left.size() != size_) {
+        throw mcap::McapError(writer_.path() + ": pair of " + std::to_string(left.cols) + "x" +
+                              std::to_string(left.rows) + " in a recording of " +
+                              std::to_string(size_.width) + "x" + std::to_string(size_.height));
+    }
+    writeImage(left_channel_, left, left_stamp_ns, kLeftFrame);
+    writeImage(right_channel_, right, right_stamp_ns, kRightFrame);
+    if (camera_info_) {
+        camera_info_->first.header.stamp = ros2::Time::fromNs(left_stamp_ns);
+        camera_info_->second.header.stamp = ros2::Time::fromNs(right_stamp_ns);
+        ros2::serializeCameraInfo(camera_info_->first, message_);
+        writer_.write(left_info_channel_, static_cast<uint64_t>(left_stamp_ns),
+                      static_cast<uint64_t>(left_stamp_ns), message_, static_cast<uint32_t>(pairs_));
+        ros2::serializeCameraInfo(camera_info_->second, message_);
+        writer_.write(right_info_channel_, static_cast<uint64_t>(right_stamp_ns),
+                      static_cast<uint64_t>(right_stamp_ns), message_, static_cast<uint32_t>(pairs_));
+    }
+    return pairs_++;
+}
+
+McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_topic,
+                                const std::string& right_topic)
+{
+    McapStereoIndex index;
+    // Image channels by topic.
+    std::map<std::string, uint16_t> image_topics;
+    std::map<std::string, uint16_t> info_topics;
+    for (const auto& [id, channel] : reader.channels()) {
+        const auto schema = reader.schemas().find(channel.schema_id);
+        if (schema == reader.schemas().end() || channel.message_encoding != "cdr") {
+            continue;
+        }
+        if (schema->second.name == ros2::kImageType || schema->second.name == "sensor_msgs/Image") {
+            image_topics[channel.topic] = id;
+        } else if (schema->second.name == ros2::kCameraInfoType ||
+                   schema->second.name == "sensor_msgs/CameraInfo") {
+            info_topics[channel.topic] = id;
+        }
+    }
+    std::string listed;
+    for (const auto& [topic, id] : image_topics) {
+        listed += (listed.empty() ? "" : ", ") + topic;
+    }
+    if (listed.empty()) {
+        listed = "none";
+    }
+    auto refuse = [&](const std::string& why) {
+        throw mcap::McapError(reader.path() + ": " + why + " (its sensor_msgs/msg/Image topics in CDR: " +
+                              listed + ")");
+    };
+
+    if (!left_topic.empty() || !right_topic.empty()) {
+        index.left_topic = left_topic.empty() ? kMcapLeftImageTopic : left_topic;
+        index.right_topic = right_topic.empty() ? kMcapRightImageTopic : right_topic;
+        for (const std::string* t : {&index.left_topic, &index.right_topic}) {
+            if (image_topics.count(*t) == 0) {
+                refuse("no sensor_msgs/msg/Image topic '" + *t + "'");
+            }
+        }
+    } else if (image_topics.count(kMcapLeftImageTopic) && image_topics.count(kMcapRightImageTopic)) {
+        index.left_topic = kMcapLeftImageTopic;
+        index.right_topic = kMcapRightImageTopic;
+    } else {
+        std::vector<std::string> lefts, rights;
+        for (const auto& [topic, id] : image_topics) {
+            const std::string name = lower(topic);
+            const bool l = name.find("left") != std::string::npos;
+            const bool r = name.find("right") != std::string::npos;
+            if (l && !r) {
+                lefts.push_back(topic);
+            } else if (r && !l) {
+                rights.push_back(topic);
+            }
+        }
+        if (lefts.size() != 1 || rights.size() != 1) {
+            refuse("cannot tell which image topics are the left and right cameras; set "
+                   "source.replay.topics.left and .right");
+        }
+        index.left_topic = lefts.front();
+        index.right_topic = rights.front();
+        index.notes.push_back("image topics chosen by name: left " + index.left_topic +
+                              ", right " + index.right_topic);
+    }
+    const uint16_t left_id = image_topics.at(index.left_topic);
+    const uint16_t right_id = image_topics.at(index.right_topic);
+    const std::string left_info = siblingInfoTopic(index.left_topic);
+    const std::string right_info = siblingInfoTopic(index.right_topic);
+    const int left_info_id = info_topics.count(left_info) ? info_topics.at(left_info) : -1;
+    const int right_info_id = info_topics.count(right_info) ? info_topics.at(right_info) : -1;
+
+    struct Stamped {
+        int64_t stamp_ns;
+        mcap::MessageRef ref;
+        std::size_t order;   // position in the file among its topic's messages
+    };
+    std::vector<Stamped> lefts, rights;
+    std::optional<ros2::CameraInfo> info[2];
+    uint64_t bad = 0;
+    reader.forEachMessage([&](const mcap::MessageView& m, const mcap::MessageRef& ref) {
+        try {
+            if (m.channel_id == left_id || m.channel_id == right_id) {
+                const ros2::ImageView image = ros2::parseImage(m.data);
+                auto& list = m.channel_id == left_id ? lefts : rights;
+                list.push_back({image.header.stamp.toNs(), ref, list.size()});
+            } else if (m.channel_id == left_info_id && !info[0]) {
+                info[0] = ros2::parseCameraInfo(m.data);
+            } else if (m.channel_id == right_info_id && !info[1]) {
+                info[1] = ros2::parseCameraInfo(m.data);
+            }
+        } catch (const ros2::CdrError&) {
+            ++bad;
+        }
+    });
+    if (bad > 0) {
+        index.notes.push_back(std::to_string(bad) + " messages that do not decode were skipped");
+    }
+    if (info[0] && info[1]) {
+        index.camera_info.emplace(*info[0], *info[1]);
+    }
+    auto by_stamp = [](const Stamped& a, const Stamped& b) { return a.stamp_ns < b.stamp_ns; };
+    std::stable_sort(lefts.begin(), lefts.end(), by_stamp);
+    std::stable_sort(rights.begin(), rights.end(), by_stamp);
+
+    // Tolerance: half the median spacing of the left stream (20 ms when it cannot tell).
+    int64_t tolerance_ns = 20'000'000;
+    if (lefts.size() >= 2) {
+        std::vector<int64_t> gaps;
+        for (std::size_t i = 1; i < lefts.size(); ++i) {
+            gaps.push_back(lefts[i].stamp_ns - lefts[i - 1].stamp_ns);
+        }
+        std::nth_element(gaps.begin(), gaps.begin() + static_cast<std::ptrdiff_t>(gaps.size() / 2), gaps.end());
+        if (gaps[gaps.size() / 2] > 0) {
+            tolerance_ns = gaps[gaps.size() / 2] / 2;
+        }
+    }
+    std::size_t j = 0;
+    std::vector<bool> used(rights.size(), false);
+    std::vector<std::size_t> pair_order;
+    for (const Stamped& l : lefts) {
+        // The nearest right image; among equally near ones (a recording of a looping
+        // replay repeats its stamps) the first not yet used.
+        while (j + 1 < rights.size()) {
+            const int64_t here = std::llabs(rights[j].stamp_ns - l.stamp_ns);
+            const int64_t next = std::llabs(rights[j + 1].stamp_ns - l.stamp_ns);
+            if (next < here || (next == here && used[j])) {
+                ++j;
+            } else {
+                break;
+            }
+        }
+        if (j < rights.size() && !used[j] && std::llabs(rights[j].stamp_ns - l.stamp_ns) <= tolerance_ns) {
+            used[j] = true;
+            index.pairs.push_back({l.ref, rights[j].ref, l.stamp_ns, rights[j].stamp_ns});
+            pair_order.push_back(l.order);
+        } else {
+            ++index.unpaired_left;
+        }
+    }
+    index.unpaired_right = rights.size() - index.pairs.size();
+    // Replayed in the order the left images were recorded (a recording of a looping replay
+    // repeats its stamps; a camera's only grow).
+    std::vector<std::size_t> by_file(index.pairs.size());
+    for (std::size_t i = 0; i < by_file.size(); ++i) {
+        by_file[i] = i;
+    }
+    std::sort(by_file.begin(), by_file.end(),
+              [&](std::size_t a, std::size_t b) { return pair_order[a] < pair_order[b]; });
+    std::vector<McapPair> ordered;
+    ordered.reserve(index.pairs.size());
+    for (std::size_t i : by_file) {
+        ordered.push_back(index.pairs[i]);
+    }
+    index.pairs = std::move(ordered);
+    if (index.pairs.empty()) {
+        refuse("no stereo pair: " + std::to_string(lefts.size()) + " images on " + index.left_topic +
+               " and " + std::to_string(rights.size()) + " on " + index.right_topic +
+               " have no stamps within " + std::to_string(tolerance_ns / 1000) + " us of each other");
+    }
+    return index;
+}
+
+bool decodeMcapImage(mcap::Reader& reader, const mcap::MessageRef& ref, cv::Mat& out,
+                     std::string& reason)
+{
+    ros2::ImageView image;
+    try {
+        image = ros2::parseImage(reader.message(ref).data);
+    } catch (const std::exception& e) {
+        reason = e.what();
+        return false;
+    }
+    const int rows = static_cast<int>(image.height);
+    const int cols = static_cast<int>(image.width);
+    auto* data = const_cast<char*>(image.data.data());   // wrapped read-only, then copied
+    int type = -1;
+    int conversion = -1;
+    if (image.encoding == "mono8" || image.encoding == "8UC1") {
+        type = CV_8UC1;
+    } else if (image.encoding == "rgb8") {
+        type = CV_8UC3;
+        conversion = cv::COLOR_RGB2GRAY;
+    } else if (image.encoding == "bgr8") {
+        type = CV_8UC3;
+        conversion = cv::COLOR_BGR2GRAY;
+    } else if (image.encoding == "rgba8") {
+        type = CV_8UC4;
+        conversion = cv::COLOR_RGBA2GRAY;
+    } else if (image.encoding == "bgra8") {
+        type = CV_8UC4;
+        conversion = cv::COLOR_BGRA2GRAY;
+    } else {
+        reason = "image encoding '" + image.encoding +
+                 "' is not replayed (mono8, rgb8, bgr8, rgba8 and bgra8 are)";
+        return false;
+    }
+    if (rows <= 0 || cols <= 0 || image.step < static_cast<uint32_t>(cols * CV_ELEM_SIZE(type))) {
+        reason = "image of " + std::to_string(cols) + "x" + std::to_string(rows) + " with step " +
+                 std::to_string(image.step) + " is malformed";
+        return false;
+    }
+    const cv::Mat view(rows, cols, type, data, image.step);
+    if (conversion < 0) {
+        view.copyTo(out);
+    } else {
+        cv::cvtColor(view, out, conversion);
+    }
+    return true;
+}
+
+} // namespace stereod

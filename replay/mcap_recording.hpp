@@ -1,0 +1,120 @@
+#pragma once
+// Stereo recordings as ROS 2 bags in MCAP (replay/mcap_writer.hpp, replay/ros2_messages.hpp):
+// what `stereoctl record --out FILE.mcap` writes and `stereod --replay FILE.mcap` reads.
+//
+// Written (profile `ros2`, message encoding `cdr`, schema encoding `ros2msg`):
+//   /stereo/left/image_raw     sensor_msgs/msg/Image, mono8 as captured
+//   /stereo/right/image_raw    sensor_msgs/msg/Image
+//   /stereo/left/camera_info   sensor_msgs/msg/CameraInfo, with every pair when the
+//   /stereo/right/camera_info  calibration is known (the right one's p[3] = -fx' * B)
+// log_time, publish_time and header.stamp are the capture stamps (ns, CLOCK_MONOTONIC
+// for live recordings); frame ids stereo_{left,right}_optical_frame (REP 103 optical
+// frames: x right, y down, z forward).
+//
+// Read: any MCAP whose channels carry two sensor_msgs/msg/Image streams (ours, or a ROS 2
+// bag from a robot), paired by header stamp; the camera_info channels beside the image
+// topics give the calibration when present.
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <opencv2/core/mat.hpp>
+
+#include "replay/mcap_reader.hpp"
+#include "replay/mcap_writer.hpp"
+#include "replay/ros2_messages.hpp"
+
+namespace stereod {
+
+inline constexpr const char* kMcapLeftImageTopic = "/stereo/left/image_raw";
+inline constexpr const char* kMcapRightImageTopic = "/stereo/right/image_raw";
+inline constexpr const char* kMcapLeftInfoTopic = "/stereo/left/camera_info";
+inline constexpr const char* kMcapRightInfoTopic = "/stereo/right/camera_info";
+
+// True when `path` names an MCAP file (by its first bytes; a directory is not).
+bool isMcapFile(const std::string& path);
+
+// Writes pairs as a ROS 2 bag. Chunks (zstd by default) are flushed as they fill, so a
+// writer killed mid-way leaves every complete chunk readable (replay/mcap_writer.hpp).
+// Errors throw mcap::McapError (the errno in code()).
+//
+// Thread-bound: one thread writes.
+class McapRecordingWriter {
+public:
+    // Creates `path` (never overwrites an existing file).
+    explicit McapRecordingWriter(const std::string& path, mcap::WriterOptions options = defaultOptions());
+
+    static mcap::WriterOptions defaultOptions();
+
+    // The calibration in force, written as camera_info beside every later pair (stamped
+    // like the pair). The header stamps and frame ids are set here.
+    void setCameraInfo(const ros2::CameraInfo& left, const ros2::CameraInfo& right);
+
+    // Appends one pair: two CV_8UC1 images of the same size with their capture times.
+    // Returns its index (0, 1, ...). Throws mcap::McapError (EINVAL for a wrong image).
+    uint64_t write(const cv::Mat& left, const cv::Mat& right, int64_t left_stamp_ns,
+                   int64_t right_stamp_ns);
+
+    // Writes the summary and closes the file. Throws mcap::McapError.
+    void close() { writer_.close(); }
+
+    uint64_t pairsWritten() const noexcept { return pairs_; }
+    const mcap::Writer& file() const noexcept { return writer_; }
+
+private:
+    void writeImage(uint16_t channel, const cv::Mat& image, int64_t stamp_ns,
+                    const char* frame_id);
+
+    mcap::Writer writer_;
+    uint16_t left_channel_ = 0;
+    uint16_t right_channel_ = 0;
+    uint16_t left_info_channel_ = 0;
+    uint16_t right_info_channel_ = 0;
+    std::optional<std::pair<ros2::CameraInfo, ros2::CameraInfo>> camera_info_;
+    cv::Size size_;
+    uint64_t pairs_ = 0;
+    std::string message_;          // scratch: one serialized message, reused
+};
+
+// One pair of a bag: where its two Image messages are, and their header stamps.
+struct McapPair {
+    mcap::MessageRef left;
+    mcap::MessageRef right;
+    int64_t left_stamp_ns = 0;
+    int64_t right_stamp_ns = 0;
+};
+
+struct McapStereoIndex {
+    std::string left_topic;
+    std::string right_topic;
+    std::vector<McapPair> pairs;              // in the order of the left images in the file
+    uint64_t unpaired_left = 0;               // images with no partner within the tolerance
+    uint64_t unpaired_right = 0;
+    // The first camera_info of each side's sibling topic (`.../camera_info` beside the
+    // image topic), when both exist.
+    std::optional<std::pair<ros2::CameraInfo, ros2::CameraInfo>> camera_info;
+    std::vector<std::string> notes;           // what was chosen and why, for the log
+};
+
+// Indexes the stereo pairs of a bag. Topics: the given ones; when both are empty, the
+// defaults (/stereo/{left,right}/image_raw) when the bag has them, else the one pair of
+// sensor_msgs/msg/Image topics whose names say "left" and "right". A left image is paired
+// with the right image nearest in header stamp, within half the left stream's median
+// period (each right image used once); others are counted as unpaired. Pairs keep the
+// order in which their left images appear in the file.
+// Throws mcap::McapError (EINVAL) naming the bag's image topics when no pair of topics
+// fits, or when no pair is found.
+McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_topic,
+                                const std::string& right_topic);
+
+// Decodes one Image message into `out` as 8-bit grayscale (mono8 as is, rgb8/bgr8/
+// rgba8/bgra8 converted). False, with the reason, for other encodings or bad messages.
+bool decodeMcapImage(mcap::Reader& reader, const mcap::MessageRef& ref, cv::Mat& out,
+                     std::string& reason);
+
+} // namespace stereod
