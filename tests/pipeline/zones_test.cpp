@@ -3,6 +3,7 @@
 // Depth comes from the pipeline's own matcher; the truth from the ground-truth
 // disparities through the same geometry.
 
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -198,6 +199,31 @@ TEST(Zones, HysteresisHoldsOverFlickeringFrames)
     EXPECT_EQ(state(missed), ZoneState::Occupied);
     EXPECT_EQ(state(missed), ZoneState::Occupied);
     EXPECT_NE(state(missed), ZoneState::Occupied);     // three misses in a row do
+}
+
+// What three zones cost per frame at 718x496 (printed for the record, not asserted:
+// timings belong in benchmarks).
+TEST(Zones, CostPerFrameIsPrinted)
+{
+    const SceneDepth& s = scene();
+    ZonesSettings settings = oneZone({1.4, -0.3, -0.3}, {1.9, 0.3, 0.3});
+    for (const char* name : {"front", "side"}) {
+        ZoneSettings zone = settings.zones[0];
+        zone.name = name;
+        settings.zones.push_back(zone);
+    }
+    ZoneMonitor monitor(settings);
+    monitor.update(s.measured_m, s.geometry, s.closest_m, 0, 0);
+    const auto start = std::chrono::steady_clock::now();
+    constexpr int kFrames = 20;
+    for (int i = 0; i < kFrames; ++i)
+        monitor.update(s.measured_m, s.geometry, s.closest_m, i, static_cast<uint64_t>(i));
+    const double ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count() /
+        kFrames;
+    std::printf("[zones] three zones at %dx%d: %.2f ms per frame\n", s.measured_m.cols,
+                s.measured_m.rows, ms);
+    EXPECT_EQ(monitor.readings().size(), 3u);
 }
 
 TEST(Zones, ReconfigureKeepsTheStateOfZonesThatStay)
