@@ -19,9 +19,9 @@ case "${1:-}" in
 esac
 
 "$STEREOD_ROOT/scripts/setup.sh"
-build="$STEREOD_ROOT/build"
-echo "== build ($build)"
-build_tree "$build" -DSTEREOD_BUILD_TESTS=OFF -DSTEREOD_BUILD_BENCH=OFF
+build="$STEREOD_BUILD_DIR"
+echo "== build ($build: stereod, stereoctl)"
+build_tree "$build" "${main_tree_options[@]}" -- stereod stereoctl
 
 demo="$build/demo"
 samples="$(opencv_samples_dir)"
