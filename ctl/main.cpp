@@ -40,18 +40,52 @@ std::string oneLineFailure(const CLI::App*, const CLI::Error& error)
     return fmt::format("stereoctl: {} (see --help)\n", error.what());
 }
 
+// The socket path of a command that talks to the service: its own --socket option and the
+// options it fills.
+struct CommandSocket {
+    const CLI::Option* option = nullptr;
+    ServiceOptions* service = nullptr;
+};
+using CommandSockets = std::vector<CommandSocket>;
+
+const char* const kSocketHelp =
+    "the service's Unix socket (also before the command, or from STEREOD_SOCKET)";
+
+// --socket on a command. It takes no value from the environment itself: STEREOD_SOCKET
+// belongs to the application's --socket (before the command), which this one overrides
+// (resolveSockets).
+CLI::Option* addSocketOption(CLI::App* command, ServiceOptions& options, const char* help,
+                             CommandSockets& sockets)
+{
+    CLI::Option* option =
+        command->add_option("--socket", options.socket_path, help)->capture_default_str();
+    sockets.push_back({option, &options});
+    return option;
+}
+
+// Where each command's socket comes from, first found: its own --socket (after the
+// command), --socket before the command, STEREOD_SOCKET, the default.
+void resolveSockets(const CLI::Option& global_option, const std::string& global_path,
+                    const CommandSockets& sockets)
+{
+    if (global_option.count() == 0) {
+        return;
+    }
+    for (const CommandSocket& socket : sockets) {
+        if (socket.option->count() == 0) {
+            socket.service->socket_path = global_path;
+        }
+    }
+}
+
 // A command that talks to the service: --socket, --timeout-ms, and --json when `json` is
 // given.
 CLI::App* addServiceCommand(CLI::App& app, const char* name, const char* description,
-                            ServiceOptions& options, bool* json = nullptr,
-                            const char* json_help = nullptr)
+                            ServiceOptions& options, CommandSockets& sockets,
+                            bool* json = nullptr, const char* json_help = nullptr)
 {
     CLI::App* command = app.add_subcommand(name, description);
-    command
-        ->add_option("--socket", options.socket_path,
-                     "the service's Unix socket (also from STEREOD_SOCKET)")
-        ->envname("STEREOD_SOCKET")
-        ->capture_default_str();
+    addSocketOption(command, options, kSocketHelp, sockets);
     command->add_option("--timeout-ms", options.timeout_ms, "limit on each wait for the service")
         ->check(kPositive)
         ->capture_default_str();
@@ -96,14 +130,14 @@ struct Options {
     ZonesOptions zones;
 };
 
-CLI::App* declareRecord(CLI::App& app, RecordOptions& o)
+CLI::App* declareRecord(CLI::App& app, RecordOptions& o, CommandSockets& sockets)
 {
     CLI::App* cmd = addServiceCommand(
         app, "record",
         "record the service's raw pairs as a recording (a directory: frames.csv, left/, "
         "right/, calibration.yaml; or FILE.mcap: a ROS 2 bag) until --frames, Ctrl-C or the "
         "service ends (exit 0 done, 2 cannot write, 3 service gone)",
-        o.service, &o.json, "print the summary as JSON");
+        o.service, sockets, &o.json, "print the summary as JSON");
     cmd->add_option("--out", o.out_dir,
                     "recording directory to create (new or empty), or a new FILE.mcap")
         ->required();
@@ -116,23 +150,23 @@ CLI::App* declareRecord(CLI::App& app, RecordOptions& o)
     return cmd;
 }
 
-CLI::App* declareDistance(CLI::App& app, DistanceOptions& o)
+CLI::App* declareDistance(CLI::App& app, DistanceOptions& o, CommandSockets& sockets)
 {
     CLI::App* cmd = addServiceCommand(
         app, "distance",
         "the nearest-object distance now (exit 0 valid, 1 no reading in range, 2 stale or not "
         "producing, 3 service unreachable)",
-        o.service, &o.json, "print the reading object as JSON");
+        o.service, sockets, &o.json, "print the reading object as JSON");
     cmd->add_option("--max-age-ms", o.max_age_ms, "refuse a reading older than this (ms)")
         ->check(kPositive);
     return cmd;
 }
 
-CLI::App* declareSnapshot(CLI::App& app, SnapshotOptions& o)
+CLI::App* declareSnapshot(CLI::App& app, SnapshotOptions& o, CommandSockets& sockets)
 {
     CLI::App* cmd = addServiceCommand(
         app, "snapshot", "write the service's latest result to files (at least one option)",
-        o.service);
+        o.service, sockets);
     cmd->add_option("--depth", o.depth_path, "depth as PNG, uint16 millimetres (0 = invalid)");
     cmd->add_option("--disparity", o.disparity_path,
                     "disparity as .pfm (float, inf = invalid) or .png (uint16 x256)");
@@ -179,7 +213,7 @@ CLI::App* declareDepth(CLI::App& app, DepthOptions& o)
     return cmd;
 }
 
-CLI::App* declareCalibrate(CLI::App& app, CalibrateOptions& o)
+CLI::App* declareCalibrate(CLI::App& app, CalibrateOptions& o, CommandSockets& sockets)
 {
     CLI::App* cmd = app.add_subcommand(
         "calibrate", "write a calibration file: from chessboard pairs (--left --right --board "
@@ -221,10 +255,10 @@ CLI::App* declareCalibrate(CLI::App& app, CalibrateOptions& o)
     CLI::Option* count =
         cmd->add_option("--count", o.count, "with --live: accepted pairs to collect")
             ->check(CLI::Range(3, 1000));
-    cmd->add_option("--socket", o.service.socket_path,
-                    "with --live: the service's Unix socket (also from STEREOD_SOCKET)")
-        ->envname("STEREOD_SOCKET")
-        ->capture_default_str();
+    addSocketOption(cmd, o.service,
+                    "with --live: the service's Unix socket (also before the command, or from "
+                    "STEREOD_SOCKET)",
+                    sockets);
     CLI::Option* timeout_ms =
         cmd->add_option("--timeout-ms", o.service.timeout_ms,
                         "with --live: limit on each wait for the service")
@@ -333,7 +367,8 @@ CLI::App* declareBoardDistance(CLI::App& app, BoardDistanceOptions& o)
     return cmd;
 }
 
-CLI::App* declareCheckCalibration(CLI::App& app, CheckCalibrationOptions& o)
+CLI::App* declareCheckCalibration(CLI::App& app, CheckCalibrationOptions& o,
+                                  CommandSockets& sockets)
 {
     CLI::App* cmd = app.add_subcommand(
         "check-calibration",
@@ -343,10 +378,12 @@ CLI::App* declareCheckCalibration(CLI::App& app, CheckCalibrationOptions& o)
     CLI::Option* left = cmd->add_option("--left", o.left_glob, "raw left images: a glob, quoted, sorted");
     CLI::Option* right = cmd->add_option("--right", o.right_glob, "raw right images, paired in sorted order");
     CLI::Option* calib = cmd->add_option("--calib", o.calib_path, "the full calibration to check (YAML)");
-    CLI::Option* socket = cmd->add_option(
-        "--socket", o.service.socket_path,
+    CLI::Option* socket = addSocketOption(
+        cmd, o.service,
         "without --left/--right/--calib: the running service's figures (its "
-        "calibration_health), from this socket");
+        "calibration_health), from this socket (also before the command, or from "
+        "STEREOD_SOCKET)",
+        sockets);
     left->needs(right)->needs(calib)->excludes(socket);
     right->needs(left);
     calib->needs(left);
@@ -362,13 +399,13 @@ CLI::App* declareCheckCalibration(CLI::App& app, CheckCalibrationOptions& o)
     return cmd;
 }
 
-CLI::App* declareZones(CLI::App& app, ZonesOptions& o)
+CLI::App* declareZones(CLI::App& app, ZonesOptions& o, CommandSockets& sockets)
 {
     CLI::App* cmd = addServiceCommand(
         app, "zones",
         "the keep-out zones in the robot's frame: occupied, clear or unknown, the nearest point "
         "in each (exit 0 all clear, 1 any occupied, 2 unknown or stale, 3 no service)",
-        o.service, &o.json, "print the zones as JSON");
+        o.service, sockets, &o.json, "print the zones as JSON");
     cmd->add_flag("--watch", o.watch, "one block per frame until interrupted (Ctrl-C)");
     cmd->add_option("--picture", o.picture_path,
                     "draw the zones, coloured by state, on the colourised depth of the latest "
@@ -400,29 +437,38 @@ int main(int argc, char** argv)
     app.failure_message(oneLineFailure);
     app.require_subcommand(0, 1);
     Options o;
+    // --socket before the command, as git, docker and systemctl take their global options;
+    // the commands that do not talk to the service ignore it.
+    std::string global_socket;
+    CLI::Option* global_socket_option =
+        app.add_option("--socket", global_socket,
+                       "the service's Unix socket, for every command that talks to the service "
+                       "(also from STEREOD_SOCKET; a command's own --socket wins)")
+            ->envname("STEREOD_SOCKET");
+    CommandSockets sockets;
     const std::vector<std::pair<CLI::App*, std::function<int()>>> commands = {
-        {declareDistance(app, o.distance), [&] { return runDistance(o.distance); }},
+        {declareDistance(app, o.distance, sockets), [&] { return runDistance(o.distance); }},
         {addServiceCommand(app, "status",
                            "source state per camera, fps, dropped frames, pairing skew, "
                            "per-stage latency, clients",
-                           o.status.service, &o.status.json,
+                           o.status.service, sockets, &o.status.json,
                            "print the service's status object as JSON"),
          [&] { return runStatus(o.status); }},
         {addServiceCommand(app, "watch", "one line per new reading until interrupted (Ctrl-C)",
-                           o.watch.service, &o.watch.json,
+                           o.watch.service, sockets, &o.watch.json,
                            "print each reading event as one JSON line"),
          [&] { return runWatch(o.watch); }},
-        {declareSnapshot(app, o.snapshot), [&] { return runSnapshot(o.snapshot); }},
+        {declareSnapshot(app, o.snapshot, sockets), [&] { return runSnapshot(o.snapshot); }},
         {declareDepth(app, o.depth), [&] { return runDepth(o.depth); }},
-        {declareCalibrate(app, o.calibrate), [&] { return runCalibrate(o.calibrate); }},
+        {declareCalibrate(app, o.calibrate, sockets), [&] { return runCalibrate(o.calibrate); }},
         {declareExportRos(app, o.export_ros), [&] { return runExportRos(o.export_ros); }},
         {declareBoardDistance(app, o.board_distance),
          [&] { return runBoardDistance(o.board_distance); }},
         {declareDevices(app, o.devices), [&] { return runDevices(o.devices); }},
-        {declareRecord(app, o.record), [&] { return runRecord(o.record); }},
-        {declareCheckCalibration(app, o.check_calibration),
+        {declareRecord(app, o.record, sockets), [&] { return runRecord(o.record); }},
+        {declareCheckCalibration(app, o.check_calibration, sockets),
          [&] { return runCheckCalibration(o.check_calibration); }},
-        {declareZones(app, o.zones), [&] { return runZones(o.zones); }},
+        {declareZones(app, o.zones, sockets), [&] { return runZones(o.zones); }},
     };
 
     try {
@@ -431,6 +477,7 @@ int main(int argc, char** argv)
         const int code = app.exit(error);
         return code == 0 ? kExitOk : kExitUsage;
     }
+    resolveSockets(*global_socket_option, global_socket, sockets);
 
     try {
         for (const auto& [command, run] : commands) {

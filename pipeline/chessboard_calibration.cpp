@@ -542,31 +542,42 @@ ChessboardCalibrationResult calibrateChessboard(const std::vector<std::string>& 
                                          "each");
     const cv::Size grid = innerCorners(options.board);
     std::vector<PairReport> pairs(left_paths.size());
+    // The size of the calibration is that of the first pair with the board in both images;
+    // a pair without the board is reported and skipped whatever its size (a glob such as
+    // 'left*.jpg' may catch an unrelated picture), but every pair used must match.
     cv::Size image_size;
-    std::string first_path;
-    auto checkSize = [&](const cv::Mat& image, const std::string& path) {
-        if (first_path.empty()) {
-            image_size = image.size();
-            first_path = path;
-        } else if (image.size() != image_size) {
-            throw ChessboardCalibrationError(
-                "image sizes differ: " + path + " is " + describeSize(image.size()) + " but " +
-                first_path + " is " + describeSize(image_size) +
-                "; all images must come from the same two cameras at one resolution");
-        }
+    const PairReport* first_used = nullptr;
+    auto checkSize = [&](const cv::Mat& image, const std::string& path, const PairReport& pair) {
+        if (image.size() == image_size)
+            return;
+        throw ChessboardCalibrationError(
+            "image sizes differ in pair " + pair.left_path + " / " + pair.right_path + ": " +
+            path + " is " + describeSize(image.size()) + " but the first pair used (" +
+            first_used->left_path + " / " + first_used->right_path + ") is " +
+            describeSize(image_size) +
+            "; all the pairs used (the board found in both images) must come from the same "
+            "two cameras at one resolution");
     };
     for (size_t i = 0; i < pairs.size(); ++i) {
         PairReport& p = pairs[i];
         p.left_path = left_paths[i];
         p.right_path = right_paths[i];
         const cv::Mat left = readGray(p.left_path);
-        checkSize(left, p.left_path);
         const cv::Mat right = readGray(p.right_path);
-        checkSize(right, p.right_path);
+        if (image_size.empty())
+            image_size = left.size();   // a fallback until a pair is used
         p.left_found = findBoardCorners(left, grid, p.left_corners);
         p.right_found = findBoardCorners(right, grid, p.right_corners);
         if (progress)
             progress({static_cast<int>(i) + 1, static_cast<int>(pairs.size()), &p});
+        if (!p.left_found || !p.right_found)
+            continue;
+        if (first_used == nullptr) {
+            first_used = &p;
+            image_size = left.size();
+        }
+        checkSize(left, p.left_path, p);
+        checkSize(right, p.right_path, p);
     }
     return calibrateFromCorners(std::move(pairs), image_size, options);
 }

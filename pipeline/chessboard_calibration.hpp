@@ -151,8 +151,11 @@ ChessboardCalibrationResult calibrateFromCorners(std::vector<PairReport> pairs,
                                                  const ChessboardCalibrationOptions& options);
 
 // Reads the pairs (left_paths[i] with right_paths[i]), searches the corners and
-// calibrates. Throws ChessboardCalibrationError naming the file for an unreadable image,
-// both files and their sizes when sizes differ, and as calibrateFromCorners.
+// calibrates. A pair without the board in both images is reported (progress, the pair's
+// rejection) and skipped whatever its size; the pairs used must all have the size of the
+// first one used. Throws ChessboardCalibrationError naming the file for an unreadable
+// image, the odd pair, its file and the sizes when a used pair's size differs, and as
+// calibrateFromCorners.
 ChessboardCalibrationResult calibrateChessboard(const std::vector<std::string>& left_paths,
                                                 const std::vector<std::string>& right_paths,
                                                 const ChessboardCalibrationOptions& options,

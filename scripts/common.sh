@@ -8,6 +8,17 @@ opencv_samples_dir() {
   if [ -f "$system/aloeL.jpg" ]; then echo "$system"; else echo "$STEREOD_ROOT/.deps/opencv-doc$system"; fi
 }
 
+# build/, the tree the README's two commands share, and the options both configure it
+# with, whatever its cache holds: tests and benchmarks on, warnings as errors in CI. The
+# demo builds only its targets, so neither command undoes the other's configuration and
+# the second reuses the first's objects (a demo that turned the tests off left a later
+# test.sh with no test to run).
+STEREOD_BUILD_DIR="$STEREOD_ROOT/build"
+main_tree_options=(-DSTEREOD_BUILD_TESTS=ON -DSTEREOD_BUILD_BENCH=ON)
+if [ "${CI:-}" = "true" ]; then
+  main_tree_options+=(-DSTEREOD_WERROR=ON)
+fi
+
 # build_tree DIR [cmake args...] [-- TARGET...]: configure and build into DIR (all
 # targets unless some are named after --).
 build_tree() {

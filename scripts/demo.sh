@@ -19,9 +19,9 @@ case "${1:-}" in
 esac
 
 "$STEREOD_ROOT/scripts/setup.sh"
-build="$STEREOD_ROOT/build"
-echo "== build ($build)"
-build_tree "$build" -DSTEREOD_BUILD_TESTS=OFF -DSTEREOD_BUILD_BENCH=OFF
+build="$STEREOD_BUILD_DIR"
+echo "== build ($build: stereod, stereoctl)"
+build_tree "$build" "${main_tree_options[@]}" -- stereod stereoctl
 
 demo="$build/demo"
 samples="$(opencv_samples_dir)"
@@ -47,6 +47,12 @@ start_service() {
     [ "$status" -eq 0 ] && break
     sleep 0.5
   done
+}
+
+# json_number KEY JSON: the number under "KEY" in a one-line JSON object (empty when
+# absent or null).
+json_number() {
+  printf '%s' "$2" | tr -d ' \n' | sed -n "s/.*\"$1\":\([-0-9.eE+]*\).*/\1/p"
 }
 
 show_service() {
@@ -90,19 +96,38 @@ if [ "$scene" = chessboard ]; then
   config="$STEREOD_ROOT/config/examples/chessboard-demo.yaml"
   start_service "$recording" "$config" 60
   show_service
+  # One reading, and the board's pose in that reading's own frame: the frame index the
+  # service reports names the recorded pair (frame % pairs: the recording loops). A second
+  # `stereoctl distance` could answer for a later frame, so there is none.
   echo "== stereoctl distance --json"
   set +e; reading=$("$stereoctl" distance --socket "$socket" --json); status=$?; set -e
   echo "$reading"
-  echo "== stereoctl distance"
-  "$stereoctl" distance --socket "$socket" || true
-  frame=$(printf '%s' "$reading" | tr -d ' \n' | sed -n 's/.*"frame":\([0-9]*\).*/\1/p')
-  if [ "$status" -eq 0 ] && [ -n "$frame" ]; then
-    pair="${lefts[$((frame % ${#lefts[@]}))]}"
-    measured=$(printf '%s' "$reading" | tr -d ' \n' | sed -n 's/.*"distance_m":\([0-9.]*\).*/\1/p')
-    echo "== what the board's pose says (frame $frame: ${pair##*/})"
-    "$stereoctl" board-distance "$pair" --calib "$recording/calibration.yaml" \
-      --config "$config" || true
-    echo "stereoctl distance: $measured m (frame $frame)"
+  frame=$(json_number frame "$reading")
+  measured=$(json_number distance_m "$reading")
+  if [ "$status" -ne 0 ] || [ -z "$frame" ] || [ -z "$measured" ]; then
+    echo "demo: stereod gave no reading (stereoctl distance exit $status)" >&2
+    [ "$status" -ne 0 ] && exit "$status"
+    exit 1
+  fi
+  pair="${lefts[$((frame % ${#lefts[@]}))]}"
+  echo "== frame $frame (${pair##*/}): stereod's reading and the board's pose"
+  board_distance=("$stereoctl" board-distance "$pair" --calib "$recording/calibration.yaml"
+                  --config "$config")
+  set +e
+  posed_text=$("${board_distance[@]}")
+  posed=$("${board_distance[@]}" --json)
+  set -e
+  board=$(json_number distance_m "$posed")
+  awk -v m="$measured" 'BEGIN { printf "stereoctl distance        %.3f m\n", m }'
+  echo "stereoctl board-distance  $posed_text"
+  if [ -z "$board" ]; then
+    awk -v frame="$frame" -v name="${pair##*/}" -v m="$measured" 'BEGIN {
+      printf "demo: frame %s (%s): stereod %.3f m; the board is not in the region\n",
+             frame, name, m }'
+  else
+    awk -v frame="$frame" -v name="${pair##*/}" -v m="$measured" -v b="$board" 'BEGIN {
+      printf "demo: frame %s (%s): stereod %.3f m, the board'"'"'s pose %.3f m (%+.1f %%)\n",
+             frame, name, m, b, 100 * (m - b) / b }'
   fi
   exit "$status"
 fi

@@ -103,6 +103,23 @@ TEST(StereoctlCalibrateChessboard, PrintsThePerPairTableAndASummary)
     EXPECT_NE(run.out.find("wrote calibration " + out), std::string::npos) << run.out;
 }
 
+// The glob a user types in opencv-doc's folder, 'left*.jpg', also catches left.jpg
+// (612x459, no board): that pair is reported and skipped, the other 13 calibrate.
+TEST(StereoctlCalibrateChessboard, SkipsAPairWithoutTheBoardThatTheGlobCaught)
+{
+    test::TempDir dir;
+    const std::string out = dir.file("rig.yaml");
+    const ProcessResult run =
+        runProcess(calibrateCommand(kSamples + "left*.jpg", kSamples + "right*.jpg", "9x6", out));
+    ASSERT_EQ(run.exit_code, 0) << run.err;
+    EXPECT_NE(run.err.find("corners: pair 1/14 left.jpg right.jpg ... not found"),
+              std::string::npos)
+        << run.err;
+    EXPECT_NE(run.out.find("no: board not found in either image"), std::string::npos) << run.out;
+    EXPECT_NE(run.out.find("13 of 14 pairs used"), std::string::npos) << run.out;
+    EXPECT_EQ(loadCalibration(out).rectified.image_size, cv::Size(640, 480));
+}
+
 TEST(StereoctlCalibrateChessboard, RefusesABoardSizeFoundNowhere)
 {
     test::TempDir dir;

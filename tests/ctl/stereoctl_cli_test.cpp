@@ -1,6 +1,7 @@
 // The command line of `stereoctl` without a service: calibrate, help, argument errors,
 // and the exit code 3 of every client command when the service cannot be reached.
 
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -140,6 +141,70 @@ TEST(StereoctlUnreachable, SocketComesFromTheEnvironmentWhenNotGiven)
                      {"STEREOD_SOCKET=" + from_env});
     EXPECT_EQ(run.exit_code, 3);
     EXPECT_NE(run.err.find(from_option), std::string::npos) << run.err;
+}
+
+// --socket before the command, as git, docker and systemctl users write global options:
+// every command that talks to the service takes it there as well as after itself.
+TEST(StereoctlUnreachable, SocketBeforeTheCommandIsTakenByEveryClientCommand)
+{
+    test::TempDir dir;
+    const std::string socket = dir.file("before.sock");
+    const std::vector<std::vector<std::string>> cases = {
+        {"distance"},
+        {"distance", "--json"},
+        {"status"},
+        {"watch"},
+        {"snapshot", "--depth", dir.file("d.png")},
+        {"record", "--out", dir.file("recording")},
+        {"calibrate", "--live", "--count", "6", "--board", "9x6", "--square-m", "0.025", "--out",
+         dir.file("rig.yaml")}};
+    for (const auto& command : cases) {
+        std::vector<std::string> argv = {stereoctlPath(), "--socket", socket};
+        argv.insert(argv.end(), command.begin(), command.end());
+        const ProcessResult run = runProcess(argv);
+        EXPECT_EQ(run.exit_code, 3) << command.at(0) << ": " << run.err;
+        EXPECT_NE(run.err.find(socket), std::string::npos) << command.at(0) << ": " << run.err;
+    }
+}
+
+// The command's own --socket, then --socket before the command, then STEREOD_SOCKET.
+TEST(StereoctlUnreachable, SocketAfterTheCommandWinsThenBeforeItThenTheEnvironment)
+{
+    test::TempDir dir;
+    const std::string after = dir.file("after.sock");
+    const std::string before = dir.file("before.sock");
+    const std::string from_env = dir.file("env.sock");
+    const std::string env = "STEREOD_SOCKET=" + from_env;
+
+    ProcessResult run =
+        runProcess({stereoctlPath(), "--socket", before, "distance", "--socket", after}, {env});
+    EXPECT_EQ(run.exit_code, 3) << run.err;
+    EXPECT_NE(run.err.find(after), std::string::npos) << run.err;
+
+    run = runProcess({stereoctlPath(), "--socket", before, "status"}, {env});
+    EXPECT_EQ(run.exit_code, 3) << run.err;
+    EXPECT_NE(run.err.find(before), std::string::npos) << run.err;
+
+    run = runProcess({stereoctlPath(), "status", "--socket", after}, {env});
+    EXPECT_EQ(run.exit_code, 3) << run.err;
+    EXPECT_NE(run.err.find(after), std::string::npos) << run.err;
+
+    run = runProcess({stereoctlPath(), "status"}, {env});
+    EXPECT_EQ(run.exit_code, 3) << run.err;
+    EXPECT_NE(run.err.find(from_env), std::string::npos) << run.err;
+}
+
+// A command that does not talk to the service ignores --socket before it.
+TEST(StereoctlUnreachable, OfflineCommandsIgnoreTheSocketBeforeThem)
+{
+    test::TempDir dir;
+    const std::string out = dir.file("rig.yaml");
+    const ProcessResult run = runProcess(
+        {stereoctlPath(), "--socket", dir.file("absent.sock"), "calibrate", "--rectified",
+         "--focal-px", "615", "--baseline-m", "0.1", "--size", "384x288", "--out", out},
+        {"STEREOD_SOCKET=" + dir.file("env.sock")});
+    EXPECT_EQ(run.exit_code, 0) << run.err;
+    EXPECT_TRUE(std::filesystem::exists(out));
 }
 
 TEST(StereoctlUnreachable, DefaultSocketIsTheServicesPath)

@@ -452,17 +452,44 @@ std::string refusal(const std::vector<std::string>& left, const std::vector<std:
 
 using test::contains;
 
-TEST(ChessboardCalibration, RefusesImagesOfDifferingSizesNamingThem)
+// `--left 'left*.jpg'` in opencv-doc's folder also catches left.jpg (612x459, no board):
+// such a pair is reported and skipped, its size never compared with the others'.
+TEST(ChessboardCalibration, SkipsAPairWithoutTheBoardWhateverItsSize)
+{
+    std::vector<std::string> left = {kSamples + "left.jpg"};
+    std::vector<std::string> right = {kSamples + "right.jpg"};
+    samplePaths(left, right, 7);
+    ASSERT_EQ(cv::imread(left[0], cv::IMREAD_GRAYSCALE).size(), cv::Size(612, 459));
+    int reported = 0;
+    const ChessboardCalibrationResult r =
+        calibrateChessboard(left, right, sampleOptions(), [&](const CornerProgress&) {
+            ++reported;
+        });
+    EXPECT_EQ(reported, 7);
+    EXPECT_EQ(r.pairs_used, 6);
+    EXPECT_FALSE(r.pairs[0].used);
+    EXPECT_EQ(r.pairs[0].rejection, "board not found in either image");
+    EXPECT_EQ(r.calibration.rectified.image_size, cv::Size(640, 480));
+}
+
+// Two used pairs (the board found in both images) of different sizes: refused, naming the
+// odd pair, the file and both sizes.
+TEST(ChessboardCalibration, RefusesUsedPairsOfDifferingSizesNamingThem)
 {
     test::ScratchDir dir("stereod_chessboard");
-    const std::string small = dir.file("right02_small.png");
-    cv::Mat image = cv::imread(samplePath("right", 2), cv::IMREAD_GRAYSCALE);
-    cv::resize(image, image, {320, 240});
-    ASSERT_TRUE(cv::imwrite(small, image));
-    const std::string message = refusal({samplePath("left", 1), samplePath("left", 2)},
-                                        {samplePath("right", 1), small});
-    EXPECT_TRUE(contains(message, small)) << message;
-    EXPECT_TRUE(contains(message, "320x240")) << message;
+    // A border added on the right and at the bottom (700x520): the board itself is as in
+    // the original pair, so it is found in both images of the odd pair.
+    std::vector<std::string> large;
+    for (const char* side : {"left", "right"}) {
+        large.push_back(dir.file(std::string(side) + "02_large.png"));
+        cv::Mat image = cv::imread(samplePath(side, 2), cv::IMREAD_GRAYSCALE);
+        cv::copyMakeBorder(image, image, 0, 40, 0, 60, cv::BORDER_REPLICATE);
+        ASSERT_TRUE(cv::imwrite(large.back(), image));
+    }
+    const std::string message = refusal({samplePath("left", 1), large[0]},
+                                        {samplePath("right", 1), large[1]});
+    EXPECT_TRUE(contains(message, "pair " + large[0] + " / " + large[1])) << message;
+    EXPECT_TRUE(contains(message, "700x520")) << message;
     EXPECT_TRUE(contains(message, samplePath("left", 1))) << message;
     EXPECT_TRUE(contains(message, "640x480")) << message;
 }
