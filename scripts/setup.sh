@@ -14,6 +14,7 @@ packages=(
   clang libclang-rt-dev   # scripts/fuzz.sh: clang with libFuzzer and its sanitizer runtimes
   opencv-doc
   camera-calibration-parsers-tools python3-camera-calibration-parsers   # ROS's own calibration parsers: the ROS format tests
+  python3-numpy python3-pytest python3-setuptools python3-venv   # python/: the Python client and its tests
   systemd   # systemd-analyze, systemd-sysusers, systemd-tmpfiles: the unit checks (tests/daemon)
 )
 
