@@ -51,6 +51,7 @@ struct SnapshotOptions {
     std::string cloud_path;           // .ply
     std::string colormap_path;        // .png, colourised depth
     std::string left_path;            // .png, rectified left image
+    std::string confidence_path;      // .png, per-pixel match confidence (0 = no disparity)
 };
 
 // The geometry of a pair that comes rectified (--rectified --focal-px ...). The parser

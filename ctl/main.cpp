@@ -174,6 +174,8 @@ CLI::App* declareSnapshot(CLI::App& app, SnapshotOptions& o, CommandSockets& soc
                                              "intensity)");
     cmd->add_option("--colormap", o.colormap_path, "colourised depth as PNG (near warm, far cool)");
     cmd->add_option("--left", o.left_path, "the rectified left image as PNG");
+    cmd->add_option("--confidence", o.confidence_path,
+                    "the per-pixel match confidence as PNG (0 = no disparity, 1..255)");
     return cmd;
 }
 

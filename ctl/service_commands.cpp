@@ -250,9 +250,10 @@ int runSnapshot(const SnapshotOptions& options)
     const bool want_disparity = !options.disparity_path.empty();
     const bool want_left = !options.left_path.empty();
     const bool want_cloud = !options.cloud_path.empty();
-    if (!want_depth && !want_disparity && !want_left && !want_cloud) {
+    const bool want_confidence = !options.confidence_path.empty();
+    if (!want_depth && !want_disparity && !want_left && !want_cloud && !want_confidence) {
         throw UsageError("nothing to write: give at least one of --depth, --disparity, --cloud, "
-                         "--colormap, --left");
+                         "--colormap, --left, --confidence");
     }
     json items = json::array();
     if (want_depth) {
@@ -266,6 +267,9 @@ int runSnapshot(const SnapshotOptions& options)
     }
     if (want_cloud) {
         items.push_back("cloud");
+    }
+    if (want_confidence) {
+        items.push_back("confidence");
     }
 
     ProtocolClient client = connect(options.service);
@@ -282,8 +286,10 @@ int runSnapshot(const SnapshotOptions& options)
     cv::Mat depth_mm;
     cv::Mat disparity;
     cv::Mat left;
+    cv::Mat confidence;
     std::vector<CloudPoint> cloud;
     bool have_depth = false, have_disparity = false, have_left = false, have_cloud = false;
+    bool have_confidence = false;
     for (const json& header : payloads) {
         const Payload payload = parsePayload(header);
         if (payload.name == "depth" && payload.format == "u16_mm") {
@@ -295,6 +301,9 @@ int runSnapshot(const SnapshotOptions& options)
         } else if (payload.name == "left" && payload.format == "u8_gray") {
             readImagePayload(client, payload, CV_8UC1, left);
             have_left = true;
+        } else if (payload.name == "confidence" && payload.format == "u8_confidence") {
+            readImagePayload(client, payload, CV_8UC1, confidence);
+            have_confidence = true;
         } else if (payload.name == "cloud" && payload.format == "f32_xyzi") {
             if (payload.bytes != payload.points * sizeof(CloudPoint)) {
                 throw ClientError(fmt::format("the service announced {} cloud points in {} bytes, "
@@ -321,6 +330,7 @@ int runSnapshot(const SnapshotOptions& options)
     require(want_disparity, have_disparity, "disparity");
     require(want_left, have_left, "left");
     require(want_cloud, have_cloud, "cloud");
+    require(want_confidence, have_confidence, "confidence");
 
     const std::string frame = number(reply, "frame", 0);
     if (want_depth) {
@@ -352,6 +362,11 @@ int runSnapshot(const SnapshotOptions& options)
         writePly(options.cloud_path, cloud);
         fmt::print("wrote cloud {} ({} points, frame {})\n", options.cloud_path, cloud.size(),
                    frame);
+    }
+    if (want_confidence) {
+        writeConfidencePng(options.confidence_path, confidence);
+        fmt::print("wrote confidence {} ({}x{}, frame {})\n", options.confidence_path,
+                   confidence.cols, confidence.rows, frame);
     }
     return kExitOk;
 }

@@ -81,7 +81,7 @@ std::optional<SnapshotItem> snapshotItemFromName(std::string_view name)
 {
     for (const SnapshotItem item :
          {SnapshotItem::Depth, SnapshotItem::Disparity, SnapshotItem::Left, SnapshotItem::Cloud,
-          SnapshotItem::RawLeft, SnapshotItem::RawRight}) {
+          SnapshotItem::RawLeft, SnapshotItem::RawRight, SnapshotItem::Confidence}) {
         if (name == snapshotItemName(item))
             return item;
     }
@@ -316,6 +316,8 @@ const char* snapshotItemName(SnapshotItem item) noexcept
         return "raw_left";
     case SnapshotItem::RawRight:
         return "raw_right";
+    case SnapshotItem::Confidence:
+        return "confidence";
     }
     return "depth";
 }
@@ -336,8 +338,9 @@ const std::vector<std::string>& knownStreams()
 
 const std::vector<std::string>& knownSnapshotItems()
 {
-    static const std::vector<std::string> names = {"left",  "disparity", "depth",
-                                                   "cloud", "raw_left",  "raw_right"};
+    static const std::vector<std::string> names = {"left",     "disparity", "depth",
+                                                   "cloud",    "raw_left",  "raw_right",
+                                                   "confidence"};
     return names;
 }
 

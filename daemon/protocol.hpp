@@ -51,7 +51,8 @@ enum class StreamKind { Readings, Depth, Raw, Zones };
 const char* streamName(StreamKind stream) noexcept;
 
 // RawLeft, RawRight: the pair's frames as captured, before rectification.
-enum class SnapshotItem { Depth, Disparity, Left, Cloud, RawLeft, RawRight };
+// Confidence: the matcher's per-pixel confidence (u8, 0 = no disparity, 1..255).
+enum class SnapshotItem { Depth, Disparity, Left, Cloud, RawLeft, RawRight, Confidence };
 const char* snapshotItemName(SnapshotItem item) noexcept;
 
 struct HelloRequest {};

@@ -1247,6 +1247,9 @@ void SocketServer::sendSnapshot(Client& client, const SnapshotRequest& request,
             payloads.push_back(std::move(payload));
             break;
         }
+        case SnapshotItem::Confidence:
+            payloads.push_back(imagePayload("confidence", "u8_confidence", result.confidence));
+            break;
         }
     }
     answer["payloads"] = std::move(payloads);
@@ -1272,6 +1275,9 @@ void SocketServer::sendSnapshot(Client& client, const SnapshotRequest& request,
             break;
         case SnapshotItem::RawRight:
             appendMatBytes(client.out, latest->raw.right);
+            break;
+        case SnapshotItem::Confidence:
+            appendMatBytes(client.out, result.confidence);
             break;
         }
     }

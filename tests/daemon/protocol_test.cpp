@@ -308,7 +308,7 @@ TEST(ProtocolReplies, HelloListsCommandsStreamsAndItems)
     EXPECT_EQ(reply["commands"].size(), 8u);
     EXPECT_EQ(reply["streams"], Json::parse(R"(["readings","depth","raw","zones"])"));
     EXPECT_EQ(reply["snapshot_items"],
-              Json::parse(R"(["left","disparity","depth","cloud","raw_left","raw_right"])"));
+              Json::parse(R"(["left","disparity","depth","cloud","raw_left","raw_right","confidence"])"));
 }
 
 TEST(ProtocolReplies, ErrorCodeNamesAreTheDocumentedOnes)
