@@ -497,7 +497,7 @@ void ReplaySource::run() noexcept
     const bool paced = options_.pacing == ReplayOptions::Pacing::Paced;
     const int64_t period_ns = period_ns_;
     // A loop goes on one period after the last pair, as the recording would have.
-    const int64_t loop_ns = schedule_ns_.back() + period_ns;
+    const int64_t loop_ns = saturatingAddNs(schedule_ns_.back(), period_ns);
 
     int64_t base_ns = monotonicNowNs();   // when the first pair of this pass is due
     for (;;) {
@@ -539,14 +539,14 @@ void ReplaySource::run() noexcept
             if (paced) {
                 // The pacing sleep is the only lock this thread takes on its way, and it
                 // is the stop() wake-up mutex, never shared with the consumer.
-                const int64_t due_ns = base_ns + schedule_ns_[i];
+                const int64_t due_ns = saturatingAddNs(base_ns, schedule_ns_[i]);
                 if (!sleepUntil(due_ns))
                     return;
                 // Fell behind (decoding slower than the recorded rate): shift the schedule
                 // rather than burst to catch up, as a camera would.
                 const int64_t late_ns = monotonicNowNs() - due_ns;
                 if (late_ns > period_ns)
-                    base_ns += late_ns;
+                    base_ns = saturatingAddNs(base_ns, late_ns);
             }
 
             // Delivery: stamps, then the ring. From here to the counters: atomics only.
@@ -578,7 +578,7 @@ void ReplaySource::run() noexcept
                          pairs_.load(std::memory_order_relaxed));
             return;
         }
-        base_ns += loop_ns;
+        base_ns = saturatingAddNs(base_ns, loop_ns);
     }
 }
 

@@ -44,7 +44,14 @@ constexpr std::size_t kDepthBytes = 384 * 288 * 2;
 constexpr int kPairs = 6;
 constexpr int kCorruptPair = 2; // its left image is not a PNG
 constexpr int kMissingPair = 4; // its right image is not there
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+// GCC says so with __SANITIZE_*__, clang (which builds the sanitizer runs) with
+// __has_feature.
+#if defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+#define STEREOD_TEST_SANITIZED 1
+#endif
+#endif
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__) || defined(STEREOD_TEST_SANITIZED)
 constexpr bool kSanitized = true;
 #else
 constexpr bool kSanitized = false;
