@@ -1412,19 +1412,32 @@ void checkSource(Checker& checker, const SourceConfig& source, const std::string
     }
 }
 
+// A refusal thrown by a part's own validation, "key: problem", as the checker's problem
+// for that key (`fallback_key` when the message names none). A list item's key
+// ("zones[1].max") belongs to the list's key, and the item is named in what is expected.
+void failAsRefused(Checker& checker, const std::string& message, const std::string& fallback_key)
+{
+    const std::string docs = "see docs/configuration.md";
+    const size_t colon = message.find(": ");
+    if (colon == std::string::npos) {
+        checker.fail(fallback_key, message, docs);
+        return;
+    }
+    const std::string key = message.substr(0, colon);
+    const size_t bracket = key.find('[');
+    if (bracket != std::string::npos)
+        checker.fail(key.substr(0, bracket), message.substr(colon + 2), key);
+    else
+        checker.fail(key, message.substr(colon + 2), docs);
+}
+
 // census-sgm's own limits are the matcher's (one place): its first refusal, by key.
 void checkCensusSgm(Checker& checker, const MatcherSettings& matcher)
 {
     try {
         validateCensusSgm(matcher);
     } catch (const std::invalid_argument& e) {
-        const std::string message = e.what();
-        const size_t colon = message.find(": ");
-        if (colon == std::string::npos)
-            checker.fail("matcher.algorithm", message, "settings census-sgm can work with");
-        else
-            checker.fail(message.substr(0, colon), message.substr(colon + 2),
-                         "see docs/configuration.md");
+        failAsRefused(checker, e.what(), "matcher.algorithm");
     }
 }
 
@@ -1614,13 +1627,7 @@ std::vector<Problem> checkValues(const ServiceConfig& config, const KeyLocations
     try {
         validateZonesSettings(config.zones);
     } catch (const std::invalid_argument& e) {
-        const std::string message = e.what();
-        const size_t colon = message.find(": ");
-        const std::string key = message.substr(0, colon);
-        // zones[i].field problems belong to the zones key; the others name their own.
-        checker.fail(key.rfind("zones[", 0) == 0 ? "zones" : key,
-                     colon == std::string::npos ? message : message.substr(colon + 2),
-                     key.rfind("zones[", 0) == 0 ? key : "see docs/configuration.md");
+        failAsRefused(checker, e.what(), "zones");
     }
     checkSocket(checker, config.socket);
     checkPublish(checker, config.publish);

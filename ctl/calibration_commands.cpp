@@ -50,12 +50,6 @@ ChessboardSpec parseBoard(const std::string& text, double square_m)
     return board;
 }
 
-std::string fileName(const std::string& path)
-{
-    const std::size_t slash = path.rfind('/');
-    return slash == std::string::npos ? path : path.substr(slash + 1);
-}
-
 std::string optionalPx(const std::optional<double>& value)
 {
     return value ? fmt::format("{:.3f}", *value) : "-";

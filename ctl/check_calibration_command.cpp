@@ -25,11 +25,6 @@ namespace {
 
 using json = nlohmann::ordered_json;
 
-std::string fileName(const std::string& path)
-{
-    return std::filesystem::path(path).filename().string();
-}
-
 cv::Mat readGray(const std::string& path, cv::Size expected)
 {
     const cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);

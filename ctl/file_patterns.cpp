@@ -32,4 +32,10 @@ std::vector<std::string> expandGlob(const std::string& pattern, const char* opti
     return paths;
 }
 
+std::string fileName(const std::string& path)
+{
+    const std::size_t slash = path.rfind('/');
+    return slash == std::string::npos ? path : path.substr(slash + 1);
+}
+
 } // namespace stereod

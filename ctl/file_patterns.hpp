@@ -13,4 +13,7 @@ namespace stereod {
 // pattern cannot be read.
 std::vector<std::string> expandGlob(const std::string& pattern, const char* option);
 
+// The last component of a path, for reports ("left01.png").
+std::string fileName(const std::string& path);
+
 } // namespace stereod

@@ -1111,6 +1111,16 @@ void SocketServer::handle(Client& client, const HelloRequest&, const std::option
     reply(client, answer);
 }
 
+JsonObjectWriter SocketServer::openDirectReply(Client& client, const std::optional<Json>& id)
+{
+    compactOut(client);
+    JsonObjectWriter object(client.out);
+    object.field("ok", true);
+    if (id)
+        object.rawField("id", id->dump(-1, ' ', false, Json::error_handler_t::replace));
+    return object;
+}
+
 void SocketServer::handle(Client& client, const DistanceRequest& request,
                           const std::optional<Json>& id)
 {
@@ -1123,11 +1133,7 @@ void SocketServer::handle(Client& client, const DistanceRequest& request,
     if (client.dead || dropIfBacklogged(client))
         return;
     // Written directly: `distance` may be polled at a high rate.
-    compactOut(client);
-    JsonObjectWriter object(client.out);
-    object.field("ok", true);
-    if (id)
-        object.rawField("id", id->dump(-1, ' ', false, Json::error_handler_t::replace));
+    JsonObjectWriter object = openDirectReply(client, id);
     appendReadingJson(object.openField("reading"), report, now_ns);
     object.close();
     client.out.push_back('\n');
@@ -1385,11 +1391,7 @@ void SocketServer::handle(Client& client, const ZonesRequest&, const std::option
     const PublishedFrame* latest = publisher_.latest();
     if (client.dead || dropIfBacklogged(client))
         return;
-    compactOut(client);
-    JsonObjectWriter object(client.out);
-    object.field("ok", true);
-    if (id)
-        object.rawField("id", id->dump(-1, ' ', false, Json::error_handler_t::replace));
+    JsonObjectWriter object = openDirectReply(client, id);
     if (latest == nullptr) {
         object.nullField("frame");
         object.openField("zones").append("[]");

@@ -29,6 +29,7 @@
 
 #include "config/service_config.hpp"
 #include "daemon/log_limiter.hpp"
+#include "daemon/json_writer.hpp"
 #include "daemon/protocol.hpp"
 #include "daemon/publisher.hpp"
 #include "daemon/unique_fd.hpp"
@@ -230,6 +231,9 @@ class SocketServer {
     void handle(Client& client, const ReloadRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const CalibrationRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const ZonesRequest& request, const std::optional<Json>& id);
+    // A reply written straight into the client's output, without a Json tree: `"ok": true`
+    // and the id written; the caller adds its fields, closes it and ends the line.
+    JsonObjectWriter openDirectReply(Client& client, const std::optional<Json>& id);
 
     // Answers a snapshot from `frame` (its raw frames must be present when asked for).
     void sendSnapshot(Client& client, const SnapshotRequest& request,

@@ -265,28 +265,14 @@ void Worker::processPair(StereoPair& pair)
     // for this pair (its hysteresis untouched) with the reading's reason.
     slot.camera_pose = zones_.settings().camera_pose;
     if (!zones_.settings().zones.empty()) {
-        if (slot.depth_valid && processor_ != nullptr) {
-            const std::vector<ZoneReading>& zones =
-                zones_.update(result.depth_m, processor_->calibration().rectified,
-                              stats_.range.closest_depth_m, stamp_ns, frame);
-            slot.zones.resize(zones.size());
-            std::copy(zones.begin(), zones.end(), slot.zones.begin());
-        } else {
-            slot.zones.resize(zones_.readings().size());
-            for (std::size_t i = 0; i < slot.zones.size(); ++i) {
-                ZoneReading& zone = slot.zones[i];
-                zone.name = zones_.readings()[i].name;
-                zone.min_m = zones_.readings()[i].min_m;
-                zone.max_m = zones_.readings()[i].max_m;
-                zone.state = ZoneState::Unknown;
-                zone.reason = reasonCode(reading.reason);
-                zone.points = 0;
-                zone.visible_fraction = 0.0;
-                zone.occupied_now = false;
-                zone.stamp_ns = stamp_ns;
-                zone.frame = frame;
-            }
-        }
+        const std::vector<ZoneReading>& zones =
+            slot.depth_valid && processor_ != nullptr
+                ? zones_.update(result.depth_m, processor_->calibration().rectified,
+                                stats_.range.closest_depth_m, stamp_ns, frame)
+                : zones_.markUnknown(reasonCode(reading.reason), stamp_ns, frame);
+        // Element-wise assignment: the names keep their buffers from frame to frame.
+        slot.zones.resize(zones.size());
+        std::copy(zones.begin(), zones.end(), slot.zones.begin());
     } else {
         slot.zones.clear();
     }

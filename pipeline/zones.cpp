@@ -158,6 +158,23 @@ double ZoneMonitor::visibleFraction(const ZoneSettings& zone, const cv::Mat& dep
     return static_cast<double>(visible) / (static_cast<double>(n) * n * n);
 }
 
+const std::vector<ZoneReading>& ZoneMonitor::markUnknown(const char* reason, int64_t stamp_ns,
+                                                         uint64_t frame)
+{
+    for (ZoneReading& zone : readings_) {
+        zone.state = ZoneState::Unknown;
+        zone.reason = reason;
+        zone.points = 0;
+        zone.nearest_m = 0.0;
+        zone.nearest_point_m = cv::Vec3d(0, 0, 0);
+        zone.visible_fraction = 0.0;
+        zone.occupied_now = false;
+        zone.stamp_ns = stamp_ns;
+        zone.frame = frame;
+    }
+    return readings_;
+}
+
 const std::vector<ZoneReading>& ZoneMonitor::update(const cv::Mat& depth_m, const RectifiedGeometry& g,
                                                     double closest_depth_m, int64_t stamp_ns,
                                                     uint64_t frame)

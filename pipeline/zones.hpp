@@ -94,6 +94,11 @@ public:
                                            double closest_depth_m, int64_t stamp_ns,
                                            uint64_t frame);
 
+    // A pair whose depth is not to be trusted (out of sync, a bad frame): every zone is
+    // unknown for it with `reason`, and no zone's hysteresis moves.
+    const std::vector<ZoneReading>& markUnknown(const char* reason, int64_t stamp_ns,
+                                                uint64_t frame);
+
     // New zones or pose, applied live: the hysteresis of zones whose name stays is kept.
     void reconfigure(const ZonesSettings& settings);
 
