@@ -20,13 +20,14 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <dirent.h>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <vector>
+
+#include <dirent.h>
 #include <time.h>
 #include <unistd.h>
-#include <vector>
 
 #include "capture/frame.hpp"
 #include "capture/stereo_camera_source.hpp"
@@ -38,7 +39,7 @@ namespace fs = std::filesystem;
 using namespace stereod;
 
 struct Case {
-    const char* format;          // fourcc in the fake's description
+    const char* format; // fourcc in the fake's description
     PixelFormatChoice choice;
     int width;
     int height;
@@ -52,7 +53,7 @@ struct Result {
     double latency_p99_ms = 0.0;
     double latency_max_ms = 0.0;
     double cpu_ms_per_frame = 0.0;
-    double cpu_percent = 0.0;     // of one core, for both cameras and the sync
+    double cpu_percent = 0.0; // of one core, for both cameras and the sync
     uint64_t unpaired = 0;
     std::string error;
 };
@@ -103,7 +104,8 @@ double percentile(std::vector<double> values, double q)
     if (values.empty())
         return 0.0;
     std::sort(values.begin(), values.end());
-    const size_t index = std::min(values.size() - 1, static_cast<size_t>(q * static_cast<double>(values.size())));
+    const size_t index =
+        std::min(values.size() - 1, static_cast<size_t>(q * static_cast<double>(values.size())));
     return values[index];
 }
 
@@ -138,7 +140,8 @@ Result run(const Case& c, double seconds, const fs::path& dir)
         camera->width = c.width;
         camera->height = c.height;
         camera->fps = 30.0;
-        camera->buffer_count = cameraBufferCount(ring_capacity, options.sync, options.inbox_capacity);
+        camera->buffer_count =
+            cameraBufferCount(ring_capacity, options.sync, options.inbox_capacity);
     }
     options.left.device = "/dev/video-bench-L";
     options.right.device = "/dev/video-bench-R";
@@ -178,9 +181,12 @@ Result run(const Case& c, double seconds, const fs::path& dir)
         result.pairs = latencies_ms.size();
         result.latency_p50_ms = percentile(latencies_ms, 0.5);
         result.latency_p99_ms = percentile(latencies_ms, 0.99);
-        result.latency_max_ms = latencies_ms.empty() ? 0.0 : *std::max_element(latencies_ms.begin(), latencies_ms.end());
+        result.latency_max_ms = latencies_ms.empty()
+                                    ? 0.0
+                                    : *std::max_element(latencies_ms.begin(), latencies_ms.end());
         if (result.pairs > 0) {
-            result.cpu_ms_per_frame = static_cast<double>(cpu_ns) / 1e6 / (2.0 * static_cast<double>(result.pairs));
+            result.cpu_ms_per_frame =
+                static_cast<double>(cpu_ns) / 1e6 / (2.0 * static_cast<double>(result.pairs));
             result.cpu_percent = 100.0 * static_cast<double>(cpu_ns) / 1e9 / result.seconds;
         }
     }
@@ -197,7 +203,8 @@ int main(int argc, char** argv)
         if (std::strcmp(argv[i], "--seconds") == 0 && i + 1 < argc) {
             seconds = std::atof(argv[++i]);
         } else {
-            std::fprintf(stderr, "capture_bench: unknown argument '%s' (expected --seconds S)\n", argv[i]);
+            std::fprintf(stderr, "capture_bench: unknown argument '%s' (expected --seconds S)\n",
+                         argv[i]);
             return 2;
         }
     }
@@ -215,25 +222,32 @@ int main(int argc, char** argv)
     };
     std::vector<Result> results;
     for (const Case& c : cases) {
-        std::fprintf(stderr, "capture_bench: %s %dx%d for %.1f s...\n", c.format, c.width, c.height, seconds);
+        std::fprintf(stderr, "capture_bench: %s %dx%d for %.1f s...\n", c.format, c.width, c.height,
+                     seconds);
         results.push_back(run(c, seconds, dir));
     }
     fs::remove_all(dir);
 
     int status = 0;
-    std::printf("\nCapture to pair, two fake cameras at 30 fps (stamp -> pair popped from the ring)\n\n");
-    std::printf("| format | size      | pairs | pairs/s | unpaired | latency p50 ms | p99 ms | max ms | CPU ms/frame | CPU %% of a core |\n");
-    std::printf("|--------|-----------|------:|--------:|---------:|---------------:|-------:|-------:|-------------:|----------------:|\n");
+    std::printf(
+        "\nCapture to pair, two fake cameras at 30 fps (stamp -> pair popped from the ring)\n\n");
+    std::printf("| format | size      | pairs | pairs/s | unpaired | latency p50 ms | p99 ms | max "
+                "ms | CPU ms/frame | CPU %% of a core |\n");
+    std::printf("|--------|-----------|------:|--------:|---------:|---------------:|-------:|-----"
+                "--:|-------------:|----------------:|\n");
     for (const Result& r : results) {
         if (!r.error.empty()) {
-            std::printf("| %s | %dx%d | error: %s |\n", r.c.format, r.c.width, r.c.height, r.error.c_str());
+            std::printf("| %s | %dx%d | error: %s |\n", r.c.format, r.c.width, r.c.height,
+                        r.error.c_str());
             status = 1;
             continue;
         }
-        std::printf("| %-6s | %4dx%-4d | %5llu | %7.1f | %8llu | %14.2f | %6.2f | %6.2f | %12.3f | %15.1f |\n",
+        std::printf("| %-6s | %4dx%-4d | %5llu | %7.1f | %8llu | %14.2f | %6.2f | %6.2f | %12.3f | "
+                    "%15.1f |\n",
                     r.c.format, r.c.width, r.c.height, static_cast<unsigned long long>(r.pairs),
-                    static_cast<double>(r.pairs) / r.seconds, static_cast<unsigned long long>(r.unpaired),
-                    r.latency_p50_ms, r.latency_p99_ms, r.latency_max_ms, r.cpu_ms_per_frame, r.cpu_percent);
+                    static_cast<double>(r.pairs) / r.seconds,
+                    static_cast<unsigned long long>(r.unpaired), r.latency_p50_ms, r.latency_p99_ms,
+                    r.latency_max_ms, r.cpu_ms_per_frame, r.cpu_percent);
     }
     return status;
 }

@@ -40,8 +40,8 @@ void BM_MjpegTurboJpegGray(benchmark::State& state)
             state.SkipWithError(decoder.lastError());
         benchmark::DoNotOptimize(gray.data);
     }
-    state.counters["fps"] = benchmark::Counter(static_cast<double>(state.iterations()),
-                                               benchmark::Counter::kIsRate);
+    state.counters["fps"] =
+        benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
 }
 
 void BM_MjpegOpenCvImdecodeGray(benchmark::State& state)
@@ -53,8 +53,8 @@ void BM_MjpegOpenCvImdecodeGray(benchmark::State& state)
         cv::imdecode(jpeg, cv::IMREAD_GRAYSCALE, &gray);
         benchmark::DoNotOptimize(gray.data);
     }
-    state.counters["fps"] = benchmark::Counter(static_cast<double>(state.iterations()),
-                                               benchmark::Counter::kIsRate);
+    state.counters["fps"] =
+        benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
 }
 
 void BM_YuyvLuma(benchmark::State& state)
@@ -68,14 +68,20 @@ void BM_YuyvLuma(benchmark::State& state)
         decoder.decode(yuyv.data(), yuyv.size(), gray);
         benchmark::DoNotOptimize(gray.data);
     }
-    state.counters["fps"] = benchmark::Counter(static_cast<double>(state.iterations()),
-                                               benchmark::Counter::kIsRate);
+    state.counters["fps"] =
+        benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
 }
 
 } // namespace
 
-BENCHMARK(BM_MjpegTurboJpegGray)->Args({640, 480})->Args({1280, 720})->Unit(benchmark::kMicrosecond);
-BENCHMARK(BM_MjpegOpenCvImdecodeGray)->Args({640, 480})->Args({1280, 720})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_MjpegTurboJpegGray)
+    ->Args({640, 480})
+    ->Args({1280, 720})
+    ->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_MjpegOpenCvImdecodeGray)
+    ->Args({640, 480})
+    ->Args({1280, 720})
+    ->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_YuyvLuma)->Args({640, 480})->Args({1280, 720})->Unit(benchmark::kMicrosecond);
 
 BENCHMARK_MAIN();

@@ -176,7 +176,8 @@ int main(int argc, char** argv)
         out["rps"] = static_cast<double>(answered) / elapsed_s;
         out["p50_ms"] = percentile(latencies, 50.0);
         out["p99_ms"] = percentile(latencies, 99.0);
-        out["max_ms"] = latencies.empty() ? 0.0 : *std::max_element(latencies.begin(), latencies.end());
+        out["max_ms"] =
+            latencies.empty() ? 0.0 : *std::max_element(latencies.begin(), latencies.end());
         out["errors"] = errors;
         if (!first_error.empty())
             out["first_error"] = first_error;

@@ -5,12 +5,11 @@
 #include <climits>
 #include <cstdlib>
 #include <cstring>
-#include <string.h>
 
 #include <dirent.h>
-
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
+#include <string.h>
 
 namespace stereod {
 
@@ -51,7 +50,7 @@ DeviceList listCaptureDevices(const std::string& dev_dir, const std::string& by_
         return strverscmp(a.c_str(), b.c_str()) < 0;
     });
 
-    std::vector<std::pair<std::string, std::string>> by_id;   // (link, its target)
+    std::vector<std::pair<std::string, std::string>> by_id; // (link, its target)
     for (const std::string& name : directoryEntries(by_id_dir)) {
         const std::string link = by_id_dir + "/" + name;
         by_id.emplace_back(link, resolved(link));
@@ -64,7 +63,7 @@ DeviceList listCaptureDevices(const std::string& dev_dir, const std::string& by_
         V4l2Device device;
         const int rc = device.open(path);
         if (rc == -ENODEV || rc == -ENOTTY)
-            continue;   // not a capture device: a UVC metadata node, an encoder, ...
+            continue; // not a capture device: a UVC metadata node, an encoder, ...
         if (rc < 0) {
             list.problems.push_back(device.errorText());
             continue;

@@ -13,16 +13,16 @@
 namespace stereod {
 
 struct DeviceInfo {
-    std::string path;                        // /dev/videoN
-    std::vector<std::string> by_id_paths;    // /dev/v4l/by-id/... links to it (stable across
-                                             // reboots and ports: use these in the config)
+    std::string path;                     // /dev/videoN
+    std::vector<std::string> by_id_paths; // /dev/v4l/by-id/... links to it (stable across
+                                          // reboots and ports: use these in the config)
     DeviceIdentity identity;
-    std::vector<FormatDescription> formats;  // native formats, sizes and rates
+    std::vector<FormatDescription> formats; // native formats, sizes and rates
 };
 
 struct DeviceList {
-    std::vector<DeviceInfo> devices;         // capture devices, in device-number order
-    std::vector<std::string> problems;       // video nodes that could not be examined, why
+    std::vector<DeviceInfo> devices;   // capture devices, in device-number order
+    std::vector<std::string> problems; // video nodes that could not be examined, why
 };
 
 // Every `video*` node in `dev_dir` that can capture with streaming I/O. Nodes that are

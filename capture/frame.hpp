@@ -19,7 +19,7 @@ struct Frame;
 // list, a V4L2 camera queues the kernel buffer again (QBUF). Implementations must be
 // callable from any thread and must not block.
 class FrameRecycler {
-public:
+  public:
     virtual ~FrameRecycler() = default;
     virtual void recycle(Frame* frame) noexcept = 0;
 };
@@ -27,10 +27,10 @@ public:
 // One grayscale image from one camera. The pixels belong to the recycler that handed the
 // frame out; a Frame is never copied, it travels as a FrameHandle.
 struct Frame {
-    cv::Mat image;                 // CV_8UC1, header over a buffer owned by `owner`
-    int64_t stamp_ns = 0;          // capture time on CLOCK_MONOTONIC
-    int64_t source_stamp_ns = 0;   // the source's own stamp (recorded stamp on replay)
-    uint64_t sequence = 0;         // per-camera sequence number from the source
+    cv::Mat image;               // CV_8UC1, header over a buffer owned by `owner`
+    int64_t stamp_ns = 0;        // capture time on CLOCK_MONOTONIC
+    int64_t source_stamp_ns = 0; // the source's own stamp (recorded stamp on replay)
+    uint64_t sequence = 0;       // per-camera sequence number from the source
     FrameRecycler* owner = nullptr;
 };
 
@@ -67,17 +67,17 @@ constexpr int64_t saturatingAddNs(int64_t a, int64_t b) noexcept
 // |value|, with INT64_MIN giving INT64_MAX.
 constexpr int64_t saturatingAbsNs(int64_t value) noexcept
 {
-    return value >= 0 ? value
-                       : (value == std::numeric_limits<int64_t>::min()
-                              ? std::numeric_limits<int64_t>::max()
-                              : -value);
+    return value >= 0
+               ? value
+               : (value == std::numeric_limits<int64_t>::min() ? std::numeric_limits<int64_t>::max()
+                                                               : -value);
 }
 
 // A left and a right frame taken at (nearly) the same instant.
 struct StereoPair {
     FrameHandle left;
     FrameHandle right;
-    uint64_t index = 0;            // pair number from the source, starting at 0
+    uint64_t index = 0; // pair number from the source, starting at 0
 
     // Capture time of the pair: the left frame's stamp (the reference camera).
     int64_t stampNs() const noexcept { return left ? left->stamp_ns : 0; }

@@ -11,9 +11,12 @@ namespace stereod {
 const char* toString(DecodeStatus status) noexcept
 {
     switch (status) {
-    case DecodeStatus::Ok: return "ok";
-    case DecodeStatus::ShortBuffer: return "short buffer";
-    case DecodeStatus::Corrupt: return "corrupt";
+    case DecodeStatus::Ok:
+        return "ok";
+    case DecodeStatus::ShortBuffer:
+        return "short buffer";
+    case DecodeStatus::Corrupt:
+        return "corrupt";
     }
     return "unknown";
 }
@@ -22,7 +25,8 @@ FrameDecoder::FrameDecoder(uint32_t fourcc, int width, int height, uint32_t byte
     : fourcc_(fourcc), width_(width), height_(height), bytes_per_line_(bytes_per_line),
       in_place_(fourcc == V4L2_PIX_FMT_GREY)
 {
-    assert(fourcc == V4L2_PIX_FMT_GREY || fourcc == V4L2_PIX_FMT_YUYV || fourcc == V4L2_PIX_FMT_MJPEG);
+    assert(fourcc == V4L2_PIX_FMT_GREY || fourcc == V4L2_PIX_FMT_YUYV ||
+           fourcc == V4L2_PIX_FMT_MJPEG);
     if (fourcc == V4L2_PIX_FMT_MJPEG)
         jpeg_ = tjInitDecompress();
 }
@@ -42,7 +46,8 @@ DecodeStatus FrameDecoder::checkInPlace(std::size_t bytes_used) const noexcept
     return bytes_used >= needed ? DecodeStatus::Ok : DecodeStatus::ShortBuffer;
 }
 
-DecodeStatus FrameDecoder::decode(const uint8_t* data, std::size_t bytes_used, cv::Mat& gray) noexcept
+DecodeStatus FrameDecoder::decode(const uint8_t* data, std::size_t bytes_used,
+                                  cv::Mat& gray) noexcept
 {
     assert(gray.type() == CV_8UC1 && gray.cols == width_ && gray.rows == height_);
     error_ = "";
@@ -74,8 +79,8 @@ DecodeStatus FrameDecoder::decode(const uint8_t* data, std::size_t bytes_used, c
         int height = 0;
         int subsampling = 0;
         int colorspace = 0;
-        if (tjDecompressHeader3(handle, data, static_cast<unsigned long>(bytes_used), &width, &height,
-                                &subsampling, &colorspace) != 0) {
+        if (tjDecompressHeader3(handle, data, static_cast<unsigned long>(bytes_used), &width,
+                                &height, &subsampling, &colorspace) != 0) {
             error_ = tjGetErrorStr2(handle);
             return DecodeStatus::Corrupt;
         }

@@ -20,8 +20,8 @@ namespace stereod {
 
 enum class DecodeStatus {
     Ok,
-    ShortBuffer,   // bytesused smaller than the format needs (wrong byte count)
-    Corrupt,       // the data do not decode (truncated or damaged JPEG, wrong size)
+    ShortBuffer, // bytesused smaller than the format needs (wrong byte count)
+    Corrupt,     // the data do not decode (truncated or damaged JPEG, wrong size)
 };
 
 const char* toString(DecodeStatus status) noexcept;
@@ -29,7 +29,7 @@ const char* toString(DecodeStatus status) noexcept;
 // Thread-bound: one decoder per capture thread. Holds the TurboJPEG handle for MJPEG;
 // decoding allocates nothing.
 class FrameDecoder {
-public:
+  public:
     // `fourcc` is V4L2_PIX_FMT_GREY, _YUYV or _MJPEG; `bytes_per_line` as the driver set it
     // (0 for MJPEG). Anything else is a programming error (the negotiation refuses it).
     FrameDecoder(uint32_t fourcc, int width, int height, uint32_t bytes_per_line);
@@ -50,13 +50,13 @@ public:
     // The reason of the last failure (TurboJPEG's message for MJPEG).
     const char* lastError() const noexcept { return error_; }
 
-private:
+  private:
     uint32_t fourcc_ = 0;
     int width_ = 0;
     int height_ = 0;
     uint32_t bytes_per_line_ = 0;
     bool in_place_ = false;
-    void* jpeg_ = nullptr;     // tjhandle
+    void* jpeg_ = nullptr; // tjhandle
     const char* error_ = "";
 };
 

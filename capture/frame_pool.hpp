@@ -19,7 +19,7 @@
 namespace stereod {
 
 class FramePool final : public FrameRecycler {
-public:
+  public:
     // `count` buffers of `size` and OpenCV `type` (CV_8UC1 for grayscale frames).
     FramePool(std::size_t count, cv::Size size, int type = CV_8UC1);
     ~FramePool() override;
@@ -39,7 +39,7 @@ public:
     // How many acquire() calls found every buffer taken.
     uint64_t exhausted() const noexcept { return exhausted_.load(std::memory_order_relaxed); }
 
-private:
+  private:
     cv::Size size_;
     std::vector<Frame> frames_;
     std::unique_ptr<std::atomic<bool>[]> in_use_;

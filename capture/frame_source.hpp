@@ -16,37 +16,37 @@ namespace stereod {
 using PairRing = SpscRing<StereoPair>;
 
 enum class SourceState {
-    Stopped,   // not started, or stopped on request
-    Starting,  // opening devices / files
-    Running,   // delivering frames
-    Stalled,   // open, but no frame for longer than expected
-    Failed,    // lost (device vanished, files unreadable); may recover
-    Finished,  // a replay that reached its end without looping
+    Stopped,  // not started, or stopped on request
+    Starting, // opening devices / files
+    Running,  // delivering frames
+    Stalled,  // open, but no frame for longer than expected
+    Failed,   // lost (device vanished, files unreadable); may recover
+    Finished, // a replay that reached its end without looping
 };
 
 const char* toString(SourceState state) noexcept;
 
 // What one camera (or one side of a recording) is doing, for `status`.
 struct CameraStatus {
-    std::string name;          // "left", "right", or a device path
+    std::string name; // "left", "right", or a device path
     SourceState state = SourceState::Stopped;
-    std::string last_error;    // empty when none
-    double fps = 0.0;          // measured delivery rate
-    uint64_t frames = 0;       // frames delivered
-    uint64_t dropped = 0;      // frames lost before pairing (gaps, pool exhausted)
-    uint64_t bad_frames = 0;   // corrupt or unreadable frames skipped
+    std::string last_error;     // empty when none
+    double fps = 0.0;           // measured delivery rate
+    uint64_t frames = 0;        // frames delivered
+    uint64_t dropped = 0;       // frames lost before pairing (gaps, pool exhausted)
+    uint64_t bad_frames = 0;    // corrupt or unreadable frames skipped
     std::string last_bad_frame; // why the latest bad frame was skipped; empty when none
-    uint64_t unpaired = 0;     // frames stereo sync dropped without a partner
+    uint64_t unpaired = 0;      // frames stereo sync dropped without a partner
 };
 
 struct SourceStatus {
-    std::string kind;          // "replay", "v4l2", "side-by-side"
+    std::string kind; // "replay", "v4l2", "side-by-side"
     SourceState state = SourceState::Stopped;
     std::string last_error;
     std::vector<CameraStatus> cameras;
-    uint64_t pairs = 0;              // pairs delivered into the ring
-    uint64_t unpaired_dropped = 0;   // frames dropped for lack of a partner in time
-    double skew_mean_ms = 0.0;       // |right - left| capture time of delivered pairs
+    uint64_t pairs = 0;            // pairs delivered into the ring
+    uint64_t unpaired_dropped = 0; // frames dropped for lack of a partner in time
+    double skew_mean_ms = 0.0;     // |right - left| capture time of delivered pairs
     double skew_p99_ms = 0.0;
     double skew_max_ms = 0.0;
     // Stereo sync found the two cameras' frames consistently apart (capture/stereo_sync.hpp):
@@ -61,7 +61,7 @@ struct SourceStatus {
 // Thread-safety: start()/stop() from one controlling thread; status() from any thread.
 // The source's own threads deliver into the ring and take no lock on the frame path.
 class FrameSource {
-public:
+  public:
     virtual ~FrameSource() = default;
 
     // Starts delivering pairs into `ring` (borrowed until stop() returns) from the

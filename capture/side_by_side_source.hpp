@@ -37,7 +37,7 @@ namespace stereod {
 // Thread-safety: split() from one thread at a time; halves may be released on any thread.
 // Lock-free and allocation-free.
 class FrameSplitter final : public FrameRecycler {
-public:
+  public:
     explicit FrameSplitter(std::size_t slots);
     ~FrameSplitter() override;
 
@@ -52,7 +52,7 @@ public:
 
     std::size_t inUse() const noexcept;
 
-private:
+  private:
     struct Slot {
         FrameHandle whole;
         Frame halves[2];
@@ -70,7 +70,7 @@ struct SideBySideOptions {
 };
 
 class SideBySideSource final : public FrameSource {
-public:
+  public:
     // Nothing is opened yet. Throws std::invalid_argument for an odd frame width.
     explicit SideBySideSource(SideBySideOptions options);
     ~SideBySideSource() override;
@@ -88,7 +88,7 @@ public:
 
     V4l2CameraStatus cameraStatus() const { return camera_.status(); }
 
-private:
+  private:
     void run() noexcept;
 
     const SideBySideOptions options_;
@@ -97,13 +97,13 @@ private:
     std::atomic<uint32_t> wake_{0};
     std::atomic<bool> stop_requested_{false};
     V4l2Camera camera_;
-    PairRing* ring_ = nullptr;      // borrowed between start() and stop()
+    PairRing* ring_ = nullptr; // borrowed between start() and stop()
     std::thread thread_;
 
     std::atomic<uint64_t> pairs_{0};
     std::atomic<uint64_t> split_dropped_{0}; // frames dropped for want of a free slot
     mutable std::mutex error_mutex_;
-    std::string start_error_;       // guarded by error_mutex_
+    std::string start_error_; // guarded by error_mutex_
 };
 
 } // namespace stereod

@@ -30,12 +30,10 @@ namespace stereod {
 // cores robots use; std::hardware_destructive_interference_size is not ABI-stable).
 inline constexpr std::size_t kCacheLine = 64;
 
-template <typename T>
-class SpscRing {
-public:
+template <typename T> class SpscRing {
+  public:
     explicit SpscRing(std::size_t capacity)
-        : capacity_(std::bit_ceil(capacity < 2 ? std::size_t{2} : capacity)),
-          mask_(capacity_ - 1),
+        : capacity_(std::bit_ceil(capacity < 2 ? std::size_t{2} : capacity)), mask_(capacity_ - 1),
           slots_(std::make_unique<Slot[]>(capacity_))
     {
         for (std::size_t i = 0; i < capacity_; ++i)
@@ -137,7 +135,7 @@ public:
         return head >= tail ? head - tail : 0;
     }
 
-private:
+  private:
     struct Slot {
         std::atomic<std::size_t> sequence{0};
         std::optional<T> value;
@@ -163,7 +161,8 @@ private:
         for (;;) {
             Slot& slot = slots_[pos & mask_];
             const std::size_t seq = slot.sequence.load(std::memory_order_acquire);
-            const auto diff = static_cast<std::ptrdiff_t>(seq) - static_cast<std::ptrdiff_t>(pos + 1);
+            const auto diff =
+                static_cast<std::ptrdiff_t>(seq) - static_cast<std::ptrdiff_t>(pos + 1);
             if (diff == 0) {
                 if (tail_.compare_exchange_weak(pos, pos + 1, std::memory_order_acq_rel,
                                                 std::memory_order_relaxed)) {

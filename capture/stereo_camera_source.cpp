@@ -17,12 +17,18 @@ constexpr int kDriverBuffers = 2;
 int severity(SourceState state) noexcept
 {
     switch (state) {
-    case SourceState::Running: return 0;
-    case SourceState::Stopped: return 1;
-    case SourceState::Starting: return 2;
-    case SourceState::Stalled: return 3;
-    case SourceState::Finished: return 4;
-    case SourceState::Failed: return 5;
+    case SourceState::Running:
+        return 0;
+    case SourceState::Stopped:
+        return 1;
+    case SourceState::Starting:
+        return 2;
+    case SourceState::Stalled:
+        return 3;
+    case SourceState::Finished:
+        return 4;
+    case SourceState::Failed:
+        return 5;
     }
     return 5;
 }
@@ -39,8 +45,8 @@ int cameraBufferCount(std::size_t ring_capacity, const SyncSettings& sync,
 {
     // The worker holds one pair; the sync thread holds one frame in hand besides those
     // waiting.
-    return static_cast<int>(kDriverBuffers + inbox_capacity + sync.max_pending + 1 +
-                            ring_capacity + 1);
+    return static_cast<int>(kDriverBuffers + inbox_capacity + sync.max_pending + 1 + ring_capacity +
+                            1);
 }
 
 std::vector<std::string> controlMismatches(const V4l2CameraStatus& left,
@@ -92,8 +98,8 @@ int StereoCameraSource::start(PairRing& ring)
     sync_.start(ring);
     V4l2Camera* cameras[2] = {&left_, &right_};
     for (int side = 0; side < 2; ++side) {
-        const int rc = cameras[side]->start(sync_.inbox(static_cast<StereoSide>(side)),
-                                            &sync_.wake());
+        const int rc =
+            cameras[side]->start(sync_.inbox(static_cast<StereoSide>(side)), &sync_.wake());
         if (rc < 0) {
             const V4l2CameraStatus failed = cameras[side]->status();
             {
@@ -111,8 +117,7 @@ int StereoCameraSource::start(PairRing& ring)
     const V4l2CameraStatus right = right_.status();
     for (const std::string& mismatch : controlMismatches(left, right))
         spdlog::warn("stereo cameras differ: {}: matching suffers", mismatch);
-    if (left.format.format_name != right.format.format_name ||
-        left.format.fps != right.format.fps)
+    if (left.format.format_name != right.format.format_name || left.format.fps != right.format.fps)
         spdlog::warn("stereo cameras differ: left {} at {:.2f} fps, right {} at {:.2f} fps",
                      left.format.format_name, left.format.fps, right.format.format_name,
                      right.format.fps);

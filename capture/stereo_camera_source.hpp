@@ -33,7 +33,7 @@
 namespace stereod {
 
 struct StereoCameraOptions {
-    CameraSettings left;            // everything but `device` should equal right's
+    CameraSettings left; // everything but `device` should equal right's
     CameraSettings right;
     SyncSettings sync;
     std::size_t inbox_capacity = 4; // frames queued per camera before the sync thread
@@ -51,7 +51,7 @@ std::vector<std::string> controlMismatches(const V4l2CameraStatus& left,
                                            const V4l2CameraStatus& right);
 
 class StereoCameraSource final : public FrameSource {
-public:
+  public:
     // Nothing is opened yet. Throws std::invalid_argument for bad sync settings.
     explicit StereoCameraSource(StereoCameraOptions options);
     ~StereoCameraSource() override;
@@ -71,14 +71,14 @@ public:
     // Either camera's full status, for tests and `status` details.
     V4l2CameraStatus cameraStatus(StereoSide side) const;
 
-private:
+  private:
     const StereoCameraOptions options_;
     StereoSyncThread sync_;
     V4l2Camera left_;
     V4l2Camera right_;
-    bool running_ = false;          // controlling thread only
+    bool running_ = false; // controlling thread only
     mutable std::mutex error_mutex_;
-    std::string start_error_;       // why start() failed; guarded by error_mutex_
+    std::string start_error_; // why start() failed; guarded by error_mutex_
 };
 
 } // namespace stereod

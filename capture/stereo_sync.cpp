@@ -302,7 +302,8 @@ void StereoSyncThread::offer(StereoSide side, FrameHandle frame)
 {
     if (!frame)
         return;
-    inbox_[static_cast<int>(side)].push(CapturedFrame{std::move(frame), static_cast<uint32_t>(side)});
+    inbox_[static_cast<int>(side)].push(
+        CapturedFrame{std::move(frame), static_cast<uint32_t>(side)});
     epoch_.fetch_add(1, std::memory_order_release);
     epoch_.notify_one();
 }

@@ -52,7 +52,7 @@ namespace stereod {
 enum class StereoSide : int { Left = 0, Right = 1 };
 
 struct SyncSettings {
-    int64_t max_skew_ns = 5'000'000;  // partners at most this far apart in capture time
+    int64_t max_skew_ns = 5'000'000; // partners at most this far apart in capture time
     // Frames held per side waiting for a partner (1 to 8). Must exceed the number of
     // frames one camera can be delivered ahead of the other, or pairs are lost.
     std::size_t max_pending = 4;
@@ -60,16 +60,16 @@ struct SyncSettings {
 
 // Why frames of one side were dropped without a partner.
 struct SideDrops {
-    uint64_t stale = 0;         // rules 2 and 3: no partner possible any more
-    uint64_t overflow = 0;      // rule 4: the other side was silent
-    uint64_t out_of_order = 0;  // rule 1: stamp not newer than the previous frame's
+    uint64_t stale = 0;        // rules 2 and 3: no partner possible any more
+    uint64_t overflow = 0;     // rule 4: the other side was silent
+    uint64_t out_of_order = 0; // rule 1: stamp not newer than the previous frame's
 
     uint64_t total() const noexcept { return stale + overflow + out_of_order; }
 };
 
 struct SyncStats {
     uint64_t pairs = 0;
-    SideDrops drops[2];               // indexed by StereoSide
+    SideDrops drops[2]; // indexed by StereoSide
     // |right - left| of the recent pairs (the last kSkewWindow), in ms.
     double skew_mean_ms = 0.0;
     double skew_p99_ms = 0.0;
@@ -78,8 +78,8 @@ struct SyncStats {
     double skew_signed_mean_ms = 0.0;
     // A persistent offset between the cameras' clocks (see the header comment).
     bool offset_detected = false;
-    double offset_estimate_ms = 0.0;  // right minus left, modulo the frame period
-    std::size_t offset_samples = 0;   // distances the estimate is made of
+    double offset_estimate_ms = 0.0; // right minus left, modulo the frame period
+    std::size_t offset_samples = 0;  // distances the estimate is made of
 
     uint64_t unpaired() const noexcept { return drops[0].total() + drops[1].total(); }
 };
@@ -87,10 +87,10 @@ struct SyncStats {
 // The pure pairing logic (rules above). Thread-bound: one thread adds frames and takes
 // pairs. Dropped frames are released (their buffers given back) inside add()/takePair().
 class StereoSync {
-public:
+  public:
     static constexpr std::size_t kMaxPending = 8;
-    static constexpr std::size_t kSkewWindow = 256;   // pairs in the skew statistics
-    static constexpr std::size_t kOffsetWindow = 64;  // distances in the offset estimate
+    static constexpr std::size_t kSkewWindow = 256;  // pairs in the skew statistics
+    static constexpr std::size_t kOffsetWindow = 64; // distances in the offset estimate
     // Distances needed before an offset is reported.
     static constexpr std::size_t kOffsetMinSamples = 16;
 
@@ -118,7 +118,7 @@ public:
     }
     const SyncSettings& settings() const noexcept { return settings_; }
 
-private:
+  private:
     struct Queue {
         std::array<FrameHandle, kMaxPending> frames;
         std::size_t head = 0;
@@ -147,7 +147,7 @@ private:
     uint64_t pairs_ = 0;
     SideDrops drops_[2];
 
-    std::array<int64_t, kSkewWindow> skew_ns_{};      // signed right - left of recent pairs
+    std::array<int64_t, kSkewWindow> skew_ns_{}; // signed right - left of recent pairs
     std::size_t skew_next_ = 0;
     std::size_t skew_count_ = 0;
     std::array<int64_t, kOffsetWindow> distance_ns_{};
@@ -164,7 +164,7 @@ private:
 // offer() for that side); start()/stop() from the controlling thread; stats() from any
 // thread.
 class StereoSyncThread {
-public:
+  public:
     // `inbox_capacity`: frames queued per side between a capture thread and the sync
     // thread before the oldest is dropped (counted as overflow).
     explicit StereoSyncThread(SyncSettings settings, std::size_t inbox_capacity = 4);
@@ -191,13 +191,13 @@ public:
     // from full inboxes (overflow). Any thread.
     SyncStats stats() const noexcept;
 
-private:
+  private:
     void run() noexcept;
     void publishStats() noexcept;
 
-    StereoSync sync_;                  // sync thread only (while running)
+    StereoSync sync_; // sync thread only (while running)
     CapturedRing inbox_[2];
-    std::atomic<uint32_t> epoch_{0};   // bumped by every push and by stop(); waited on
+    std::atomic<uint32_t> epoch_{0}; // bumped by every push and by stop(); waited on
     std::atomic<bool> stop_requested_{false};
     PairRing* ring_ = nullptr;
     std::thread thread_;

@@ -4,16 +4,15 @@
 #include <cerrno>
 #include <cstring>
 #include <mutex>
-#include <strings.h>
 #include <thread>
 #include <utility>
 
+#include <fmt/format.h>
 #include <poll.h>
+#include <spdlog/spdlog.h>
+#include <strings.h>
 #include <sys/eventfd.h>
 #include <unistd.h>
-
-#include <fmt/format.h>
-#include <spdlog/spdlog.h>
 
 #include "capture/frame_decoder.hpp"
 #include "capture/frame_pool.hpp"
@@ -24,10 +23,14 @@ namespace stereod {
 const char* toString(PixelFormatChoice format) noexcept
 {
     switch (format) {
-    case PixelFormatChoice::Auto: return "auto";
-    case PixelFormatChoice::Grey: return "grey";
-    case PixelFormatChoice::Yuyv: return "yuyv";
-    case PixelFormatChoice::Mjpeg: return "mjpeg";
+    case PixelFormatChoice::Auto:
+        return "auto";
+    case PixelFormatChoice::Grey:
+        return "grey";
+    case PixelFormatChoice::Yuyv:
+        return "yuyv";
+    case PixelFormatChoice::Mjpeg:
+        return "mjpeg";
     }
     return "unknown";
 }
@@ -47,9 +50,9 @@ namespace {
 // Where each kernel buffer of a BufferSet is. Only a releasing holder moves Held to
 // Returned; everything else happens on the capture thread.
 enum BufferState : uint8_t {
-    kWithDriver = 0,   // queued, or being handled by the capture thread
-    kHeld = 1,         // handed out as a frame
-    kReturned = 2,     // released by its holder; the capture thread queues it again
+    kWithDriver = 0, // queued, or being handled by the capture thread
+    kHeld = 1,       // handed out as a frame
+    kReturned = 2,   // released by its holder; the capture thread queues it again
 };
 
 constexpr int64_t kNsPerMs = 1'000'000;
@@ -79,7 +82,7 @@ void wakeUp(int event_fd) noexcept
 // Thread-safety: recycle() from any thread; everything else on the capture thread (or
 // the controlling thread while that thread is not running).
 class BufferSet final : public FrameRecycler {
-public:
+  public:
     explicit BufferSet(int wake_fd) : wake_fd_(wake_fd) {}
 
     // After allocateBuffers(): the frames and their states.
@@ -126,14 +129,14 @@ public:
     V4l2Device device;
     std::vector<Frame> frames;
     std::unique_ptr<std::atomic<uint8_t>[]> states;
-    std::size_t queued = 0;    // buffers with the driver (capture thread only)
+    std::size_t queued = 0; // buffers with the driver (capture thread only)
 
-private:
+  private:
     int wake_fd_;
 };
 
 class V4l2Camera::Impl {
-public:
+  public:
     Impl(const CameraSettings& settings, uint32_t index, std::string name)
         : settings_(settings), index_(index), name_(std::move(name))
     {
@@ -216,7 +219,7 @@ public:
         return out;
     }
 
-private:
+  private:
     // --- state shared with status() -------------------------------------------------
 
     void setState(SourceState state, std::string error)
@@ -269,7 +272,8 @@ private:
             pool_ = std::make_unique<FramePool>(set->device.bufferCount() + kExtraPoolFrames,
                                                 cv::Size(format.width, format.height));
         stall_timeout_ms_ = stallTimeoutMs(format.fps);
-        frame_period_ns_ = static_cast<int64_t>(1e9 / (format.fps > 0.0 ? format.fps : std::max(settings_.fps, 1.0)));
+        frame_period_ns_ = static_cast<int64_t>(
+            1e9 / (format.fps > 0.0 ? format.fps : std::max(settings_.fps, 1.0)));
         empty_since_ns_ = 0;
         have_sequence_ = false;
         sequence_base_ = next_sequence_;
@@ -309,9 +313,8 @@ private:
     // Closes retired opens whose frames have all come back.
     void collectRetired() noexcept
     {
-        std::erase_if(retired_, [](const std::unique_ptr<BufferSet>& set) {
-            return set->heldCount() == 0;
-        });
+        std::erase_if(retired_,
+                      [](const std::unique_ptr<BufferSet>& set) { return set->heldCount() == 0; });
     }
 
     // --- the capture thread ----------------------------------------------------------
@@ -369,7 +372,8 @@ private:
         }
 
         const int64_t now_ns = monotonicNowNs();
-        const int64_t last_ns = std::max(last_frame_ns_.load(std::memory_order_relaxed), stream_start_ns_);
+        const int64_t last_ns =
+            std::max(last_frame_ns_.load(std::memory_order_relaxed), stream_start_ns_);
         const int64_t silent_ms = (now_ns - last_ns) / kNsPerMs;
 
         if (set.queued == 0) {
@@ -380,7 +384,8 @@ private:
                 empty_since_ns_ = now_ns;
             const int64_t empty_ns = now_ns - empty_since_ns_;
             if (!exhausted_ && empty_ns < frame_period_ns_) {
-                waitForWake(static_cast<int>((frame_period_ns_ - empty_ns + kNsPerMs - 1) / kNsPerMs));
+                waitForWake(
+                    static_cast<int>((frame_period_ns_ - empty_ns + kNsPerMs - 1) / kNsPerMs));
                 return;
             }
             if (!exhausted_) {
@@ -388,7 +393,8 @@ private:
                 pool_exhausted_.fetch_add(1, std::memory_order_relaxed);
                 setState(SourceState::Stalled,
                          fmt::format("{}: all {} capture buffers are held by the consumer "
-                                     "(pool exhausted)", settings_.device, set.frames.size()));
+                                     "(pool exhausted)",
+                                     settings_.device, set.frames.size()));
                 spdlog::warn("camera {}: all {} capture buffers held; waiting for one back", name_,
                              set.frames.size());
             }
@@ -400,9 +406,8 @@ private:
         if (silent_ms >= stall_timeout_ms_ && !stalled_ && !exhausted_) {
             stalled_ = true;
             const std::string what = silenceText(silent_ms);
-            setState(SourceState::Stalled,
-                     fmt::format("{}: {} (stall timeout {} ms)", settings_.device, what,
-                                 stall_timeout_ms_));
+            setState(SourceState::Stalled, fmt::format("{}: {} (stall timeout {} ms)",
+                                                       settings_.device, what, stall_timeout_ms_));
             spdlog::warn("camera {}: {}", name_, what);
         }
         const int64_t reopen_ms =
@@ -482,7 +487,8 @@ private:
         }
 
         if ((buffer.flags & V4L2_BUF_FLAG_ERROR) != 0)
-            return skipBad(set, buffer.index, "the driver flagged the frame as corrupt (V4L2_BUF_FLAG_ERROR)");
+            return skipBad(set, buffer.index,
+                           "the driver flagged the frame as corrupt (V4L2_BUF_FLAG_ERROR)");
 
         FrameHandle frame;
         if (decoder_->inPlace()) {
@@ -499,12 +505,13 @@ private:
                     pool_exhausted_.fetch_add(1, std::memory_order_relaxed);
                     setState(SourceState::Stalled,
                              fmt::format("{}: all {} frame buffers are held by the consumer "
-                                         "(pool exhausted)", settings_.device, pool_->capacity()));
+                                         "(pool exhausted)",
+                                         settings_.device, pool_->capacity()));
                 }
                 return requeue(set, buffer.index);
             }
-            const DecodeStatus decoded =
-                decoder_->decode(set.device.buffer(buffer.index).data, buffer.bytes_used, frame->image);
+            const DecodeStatus decoded = decoder_->decode(set.device.buffer(buffer.index).data,
+                                                          buffer.bytes_used, frame->image);
             if (decoded != DecodeStatus::Ok)
                 return skipBad(set, buffer.index, decoder_->lastError());
             if (!requeue(set, buffer.index))
@@ -523,7 +530,8 @@ private:
         last_frame_ns_.store(now_ns, std::memory_order_relaxed);
         bad_since_good_ = 0;
         updateFps(now_ns);
-        if (stalled_ || exhausted_ || state_.load(std::memory_order_relaxed) != SourceState::Running) {
+        if (stalled_ || exhausted_ ||
+            state_.load(std::memory_order_relaxed) != SourceState::Running) {
             stalled_ = false;
             exhausted_ = false;
             setState(SourceState::Running, {});
@@ -572,7 +580,8 @@ private:
         ++fps_window_frames_;
         const int64_t elapsed_ns = now_ns - fps_window_start_ns_;
         if (elapsed_ns >= 1'000 * kNsPerMs) {
-            fps_.store(static_cast<double>(fps_window_frames_) * 1e9 / static_cast<double>(elapsed_ns),
+            fps_.store(static_cast<double>(fps_window_frames_) * 1e9 /
+                           static_cast<double>(elapsed_ns),
                        std::memory_order_relaxed);
             fps_window_start_ns_ = now_ns;
             fps_window_frames_ = 0;
@@ -585,25 +594,25 @@ private:
 
     std::thread thread_;
     std::atomic<bool> stop_requested_{false};
-    int wake_fd_ = -1;                        // eventfd: stop() and returned buffers
+    int wake_fd_ = -1; // eventfd: stop() and returned buffers
     CapturedRing* ring_ = nullptr;
     std::atomic<uint32_t>* wake_ = nullptr;
 
     // The capture thread's (the controlling thread's while it is not running).
     std::unique_ptr<BufferSet> active_;
-    std::vector<std::unique_ptr<BufferSet>> retired_;   // closed opens with frames still held
+    std::vector<std::unique_ptr<BufferSet>> retired_; // closed opens with frames still held
     std::unique_ptr<FrameDecoder> decoder_;
-    std::unique_ptr<FramePool> pool_;                    // decoded frames (YUYV, MJPEG)
+    std::unique_ptr<FramePool> pool_; // decoded frames (YUYV, MJPEG)
     int stall_timeout_ms_ = kMinStallTimeoutMs;
     int64_t frame_period_ns_ = 0;
-    int64_t empty_since_ns_ = 0;              // when the last buffer left the driver; 0: one is queued
+    int64_t empty_since_ns_ = 0; // when the last buffer left the driver; 0: one is queued
     bool have_sequence_ = false;
     uint32_t last_v4l2_sequence_ = 0;
     uint64_t sequence_base_ = 0;
     uint64_t next_sequence_ = 0;
     int64_t stream_start_ns_ = 0;
     bool stalled_ = false;
-    uint64_t bad_since_good_ = 0;             // bad frames since the last good one
+    uint64_t bad_since_good_ = 0; // bad frames since the last good one
     bool exhausted_ = false;
     bool warned_stamps_ = false;
     int64_t fps_window_start_ns_ = 0;
@@ -622,10 +631,10 @@ private:
     std::atomic<bool> kernel_monotonic_{false};
 
     mutable std::mutex status_mutex_;
-    std::string last_error_;                  // guarded by status_mutex_
-    std::string last_bad_frame_;              // guarded by status_mutex_
-    NegotiatedFormat format_;                 // guarded by status_mutex_
-    std::vector<ControlReading> controls_;    // guarded by status_mutex_
+    std::string last_error_;               // guarded by status_mutex_
+    std::string last_bad_frame_;           // guarded by status_mutex_
+    NegotiatedFormat format_;              // guarded by status_mutex_
+    std::vector<ControlReading> controls_; // guarded by status_mutex_
 };
 
 V4l2Camera::V4l2Camera(CameraSettings settings, uint32_t index, std::string name)

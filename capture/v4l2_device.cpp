@@ -7,16 +7,15 @@
 #include <utility>
 
 #include <fcntl.h>
-#include <sys/mman.h>
-
 #include <fmt/format.h>
 #include <libv4l2.h>
+#include <sys/mman.h>
 
 namespace stereod {
 
 namespace {
 
-constexpr double kRateTolerance = 0.01;   // a rate matches within 1 %
+constexpr double kRateTolerance = 0.01; // a rate matches within 1 %
 
 double intervalToFps(const v4l2_fract& interval) noexcept
 {
@@ -61,10 +60,14 @@ constexpr uint32_t kAutoOrder[] = {V4L2_PIX_FMT_GREY, V4L2_PIX_FMT_YUYV, V4L2_PI
 uint32_t choiceFourcc(PixelFormatChoice choice) noexcept
 {
     switch (choice) {
-    case PixelFormatChoice::Grey: return V4L2_PIX_FMT_GREY;
-    case PixelFormatChoice::Yuyv: return V4L2_PIX_FMT_YUYV;
-    case PixelFormatChoice::Mjpeg: return V4L2_PIX_FMT_MJPEG;
-    case PixelFormatChoice::Auto: break;
+    case PixelFormatChoice::Grey:
+        return V4L2_PIX_FMT_GREY;
+    case PixelFormatChoice::Yuyv:
+        return V4L2_PIX_FMT_YUYV;
+    case PixelFormatChoice::Mjpeg:
+        return V4L2_PIX_FMT_MJPEG;
+    case PixelFormatChoice::Auto:
+        break;
     }
     return 0;
 }
@@ -118,7 +121,8 @@ std::string describeFormat(const FormatDescription& format)
                 text += (i == 0 ? "" : "/") + formatRate(size.fps[i]);
             text += " fps";
         } else if (size.max_fps > 0.0) {
-            text += fmt::format(" @ {}..{} fps", formatRate(size.min_fps), formatRate(size.max_fps));
+            text +=
+                fmt::format(" @ {}..{} fps", formatRate(size.min_fps), formatRate(size.max_fps));
         }
     }
     if (format.sizes.empty())
@@ -132,12 +136,9 @@ V4l2Device::~V4l2Device()
 }
 
 V4l2Device::V4l2Device(V4l2Device&& other) noexcept
-    : fd_(std::exchange(other.fd_, -1)),
-      streaming_(std::exchange(other.streaming_, false)),
-      path_(std::move(other.path_)),
-      identity_(std::move(other.identity_)),
-      buffers_(std::move(other.buffers_)),
-      error_(std::move(other.error_))
+    : fd_(std::exchange(other.fd_, -1)), streaming_(std::exchange(other.streaming_, false)),
+      path_(std::move(other.path_)), identity_(std::move(other.identity_)),
+      buffers_(std::move(other.buffers_)), error_(std::move(other.error_))
 {
     other.buffers_.clear();
 }
@@ -244,7 +245,7 @@ int V4l2Device::enumerateFormats(std::vector<FormatDescription>& formats)
             frame_size.index = s;
             frame_size.pixel_format = desc.pixelformat;
             if (xioctl(VIDIOC_ENUM_FRAMESIZES, &frame_size) < 0)
-                break;   // EINVAL ends the list; a driver without the ioctl lists none
+                break; // EINVAL ends the list; a driver without the ioctl lists none
             FrameSizeDescription size;
             if (frame_size.type == V4L2_FRMSIZE_TYPE_DISCRETE) {
                 size.width = static_cast<int>(frame_size.discrete.width);
@@ -263,7 +264,8 @@ int V4l2Device::enumerateFormats(std::vector<FormatDescription>& formats)
                 v4l2_frmivalenum interval{};
                 interval.index = r;
                 interval.pixel_format = desc.pixelformat;
-                interval.width = static_cast<uint32_t>(size.isRange() ? size.max_width : size.width);
+                interval.width =
+                    static_cast<uint32_t>(size.isRange() ? size.max_width : size.width);
                 interval.height =
                     static_cast<uint32_t>(size.isRange() ? size.max_height : size.height);
                 if (xioctl(VIDIOC_ENUM_FRAMEINTERVALS, &interval) < 0)
@@ -301,10 +303,11 @@ int V4l2Device::negotiate(const CameraSettings& settings, NegotiatedFormat& out)
         candidates.push_back(choiceFourcc(settings.format));
 
     const FormatDescription* chosen = nullptr;
-    std::string passed_over;   // for `auto`: the better formats and why they were not taken
+    std::string passed_over; // for `auto`: the better formats and why they were not taken
     for (uint32_t fourcc : candidates) {
-        const auto it = std::find_if(formats.begin(), formats.end(),
-                                     [fourcc](const FormatDescription& f) { return f.fourcc == fourcc; });
+        const auto it =
+            std::find_if(formats.begin(), formats.end(),
+                         [fourcc](const FormatDescription& f) { return f.fourcc == fourcc; });
         if (it == formats.end()) {
             passed_over += fmt::format("{}{} not offered", passed_over.empty() ? "" : "; ",
                                        fourccName(fourcc));
@@ -331,23 +334,23 @@ int V4l2Device::negotiate(const CameraSettings& settings, NegotiatedFormat& out)
             chosen = &*it;
             break;
         }
-        passed_over += fmt::format("{}{} not at {}x{} @ {} fps", passed_over.empty() ? "" : "; ",
-                                   it->name, settings.width, settings.height,
-                                   formatRate(settings.fps));
+        passed_over +=
+            fmt::format("{}{} not at {}x{} @ {} fps", passed_over.empty() ? "" : "; ", it->name,
+                        settings.width, settings.height, formatRate(settings.fps));
     }
 
     if (chosen == nullptr) {
         std::string offered;
         for (const FormatDescription& f : formats) {
-            const bool usable =
-                std::find(std::begin(kAutoOrder), std::end(kAutoOrder), f.fourcc) != std::end(kAutoOrder);
+            const bool usable = std::find(std::begin(kAutoOrder), std::end(kAutoOrder), f.fourcc) !=
+                                std::end(kAutoOrder);
             offered += fmt::format("{}{}{}", offered.empty() ? "" : "; ", describeFormat(f),
                                    usable ? "" : " (not usable)");
         }
-        error_ = fmt::format("{} ({}) cannot deliver {} {}x{} @ {} fps; it offers: {}", path_,
-                             identity_.card, is_auto ? "GREY, YUYV or MJPG" : fourccName(candidates[0]),
-                             settings.width, settings.height, formatRate(settings.fps),
-                             offered.empty() ? "no formats" : offered);
+        error_ = fmt::format(
+            "{} ({}) cannot deliver {} {}x{} @ {} fps; it offers: {}", path_, identity_.card,
+            is_auto ? "GREY, YUYV or MJPG" : fourccName(candidates[0]), settings.width,
+            settings.height, formatRate(settings.fps), offered.empty() ? "no formats" : offered);
         return -EINVAL;
     }
 
@@ -362,8 +365,8 @@ int V4l2Device::negotiate(const CameraSettings& settings, NegotiatedFormat& out)
     if (format.fmt.pix.pixelformat != chosen->fourcc ||
         format.fmt.pix.width != static_cast<uint32_t>(settings.width) ||
         format.fmt.pix.height != static_cast<uint32_t>(settings.height)) {
-        error_ = fmt::format("{} ({}): asked {} {}x{}, the driver set {} {}x{}; it offers: {}", path_,
-                             identity_.card, chosen->name, settings.width, settings.height,
+        error_ = fmt::format("{} ({}): asked {} {}x{}, the driver set {} {}x{}; it offers: {}",
+                             path_, identity_.card, chosen->name, settings.width, settings.height,
                              fourccName(format.fmt.pix.pixelformat), format.fmt.pix.width,
                              format.fmt.pix.height, describeFormat(*chosen));
         return -EINVAL;
@@ -406,14 +409,14 @@ int V4l2Device::negotiate(const CameraSettings& settings, NegotiatedFormat& out)
                                  formatRate(settings.fps));
 
     if (is_auto) {
-        out.reason = fmt::format("auto chose {} at {}x{} @ {} fps (preference GREY > YUYV > MJPG: "
-                                 "{}){}{}",
-                                 chosen->name, settings.width, settings.height,
-                                 formatRate(settings.fps),
-                                 chosen->fourcc == V4L2_PIX_FMT_GREY   ? "no conversion, no copy"
-                                 : chosen->fourcc == V4L2_PIX_FMT_YUYV ? "luma plane copied, no decode"
-                                                                       : "decoded to grayscale",
-                                 passed_over.empty() ? "" : "; " + passed_over, rate_note);
+        out.reason =
+            fmt::format("auto chose {} at {}x{} @ {} fps (preference GREY > YUYV > MJPG: "
+                        "{}){}{}",
+                        chosen->name, settings.width, settings.height, formatRate(settings.fps),
+                        chosen->fourcc == V4L2_PIX_FMT_GREY   ? "no conversion, no copy"
+                        : chosen->fourcc == V4L2_PIX_FMT_YUYV ? "luma plane copied, no decode"
+                                                              : "decoded to grayscale",
+                        passed_over.empty() ? "" : "; " + passed_over, rate_note);
     } else {
         out.reason = fmt::format("{} as configured{}", chosen->name, rate_note);
     }
@@ -468,8 +471,8 @@ ControlReading V4l2Device::setControl(const char* name, uint32_t id, int64_t val
     if (query.type == V4L2_CTRL_TYPE_INTEGER || query.type == V4L2_CTRL_TYPE_BOOLEAN) {
         const int64_t step = std::max<int64_t>(query.step, 1);
         const int64_t clamped =
-            query.minimum + (std::clamp<int64_t>(raw, query.minimum, query.maximum) - query.minimum) /
-                                step * step;
+            query.minimum +
+            (std::clamp<int64_t>(raw, query.minimum, query.maximum) - query.minimum) / step * step;
         if (clamped != raw)
             reading.error = fmt::format("asked {}, device range {}..{} step {}: set {}", value,
                                         query.minimum * unit, query.maximum * unit, step * unit,
@@ -491,14 +494,16 @@ ControlReading V4l2Device::setControl(const char* name, uint32_t id, int64_t val
     return reading;
 }
 
-std::vector<ControlReading> V4l2Device::applyControls(const CameraControls& controls, bool lock_exposure)
+std::vector<ControlReading> V4l2Device::applyControls(const CameraControls& controls,
+                                                      bool lock_exposure)
 {
     std::vector<ControlReading> readings;
     // Auto exposure first: the absolute exposure is inactive (or refused) while it is on.
     if (lock_exposure || controls.auto_exposure.has_value()) {
         const bool want_auto = !lock_exposure && *controls.auto_exposure;
-        ControlReading reading = setControl("auto_exposure", V4L2_CID_EXPOSURE_AUTO,
-                                            want_auto ? V4L2_EXPOSURE_AUTO : V4L2_EXPOSURE_MANUAL, 1);
+        ControlReading reading =
+            setControl("auto_exposure", V4L2_CID_EXPOSURE_AUTO,
+                       want_auto ? V4L2_EXPOSURE_AUTO : V4L2_EXPOSURE_MANUAL, 1);
         // Many UVC cameras offer only manual and aperture priority (their "auto").
         if (want_auto && reading.present && !reading.error.empty()) {
             ControlReading aperture = setControl("auto_exposure", V4L2_CID_EXPOSURE_AUTO,
@@ -509,20 +514,24 @@ std::vector<ControlReading> V4l2Device::applyControls(const CameraControls& cont
         readings.push_back(std::move(reading));
     }
     if (controls.exposure_us.has_value()) {
-        readings.push_back(setControl("exposure_us", V4L2_CID_EXPOSURE_ABSOLUTE, *controls.exposure_us, 100));
+        readings.push_back(
+            setControl("exposure_us", V4L2_CID_EXPOSURE_ABSOLUTE, *controls.exposure_us, 100));
     } else if (lock_exposure) {
         // Freeze the exposure the device has now.
         const ControlReading current = readControl("exposure_us", V4L2_CID_EXPOSURE_ABSOLUTE, 100);
         if (current.present && current.error.empty())
-            readings.push_back(setControl("exposure_us", V4L2_CID_EXPOSURE_ABSOLUTE, current.actual_value, 100));
+            readings.push_back(
+                setControl("exposure_us", V4L2_CID_EXPOSURE_ABSOLUTE, current.actual_value, 100));
         else
             readings.push_back(current);
     }
     if (controls.gain.has_value())
         readings.push_back(setControl("gain", V4L2_CID_GAIN, *controls.gain, 1));
     if (controls.auto_white_balance.has_value() || controls.white_balance_k.has_value()) {
-        const bool want_auto = controls.white_balance_k.has_value() ? false : *controls.auto_white_balance;
-        readings.push_back(setControl("auto_white_balance", V4L2_CID_AUTO_WHITE_BALANCE, want_auto ? 1 : 0, 1));
+        const bool want_auto =
+            controls.white_balance_k.has_value() ? false : *controls.auto_white_balance;
+        readings.push_back(
+            setControl("auto_white_balance", V4L2_CID_AUTO_WHITE_BALANCE, want_auto ? 1 : 0, 1));
     }
     if (controls.white_balance_k.has_value())
         readings.push_back(setControl("white_balance_k", V4L2_CID_WHITE_BALANCE_TEMPERATURE,
@@ -533,8 +542,9 @@ std::vector<ControlReading> V4l2Device::applyControls(const CameraControls& cont
 
     // Then everything else the project knows, as the device has it.
     for (ControlReading& reading : readControls()) {
-        const bool listed = std::any_of(readings.begin(), readings.end(),
-                                        [&](const ControlReading& r) { return r.id == reading.id; });
+        const bool listed =
+            std::any_of(readings.begin(), readings.end(),
+                        [&](const ControlReading& r) { return r.id == reading.id; });
         if (!listed)
             readings.push_back(std::move(reading));
     }
@@ -613,7 +623,7 @@ void V4l2Device::releaseBuffers() noexcept
     request.count = 0;
     request.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
     request.memory = V4L2_MEMORY_MMAP;
-    xioctl(VIDIOC_REQBUFS, &request);   // a vanished device refuses; nothing left to free then
+    xioctl(VIDIOC_REQBUFS, &request); // a vanished device refuses; nothing left to free then
 }
 
 int V4l2Device::queueBuffer(uint32_t index)

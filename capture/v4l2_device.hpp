@@ -24,25 +24,25 @@ namespace stereod {
 
 // One frame size a format offers, with the frame rates offered at that size.
 struct FrameSizeDescription {
-    int width = 0;                  // px; a discrete size, or the smallest of a range
+    int width = 0; // px; a discrete size, or the smallest of a range
     int height = 0;
-    int max_width = 0;              // px; a range (stepwise/continuous) when > 0
+    int max_width = 0; // px; a range (stepwise/continuous) when > 0
     int max_height = 0;
     int step_width = 0;
     int step_height = 0;
-    std::vector<double> fps;        // discrete rates, fastest first
-    double min_fps = 0.0;           // a range of rates when max_fps > 0
+    std::vector<double> fps; // discrete rates, fastest first
+    double min_fps = 0.0;    // a range of rates when max_fps > 0
     double max_fps = 0.0;
 
     bool isRange() const noexcept { return max_width > 0; }
     bool contains(int w, int h) const noexcept;
-    bool offersRate(double rate) const noexcept;   // within 1 %
+    bool offersRate(double rate) const noexcept; // within 1 %
 };
 
 struct FormatDescription {
     uint32_t fourcc = 0;
-    std::string name;               // the fourcc as text: "GREY", "YUYV", "MJPG"
-    std::string description;        // the driver's text
+    std::string name;        // the fourcc as text: "GREY", "YUYV", "MJPG"
+    std::string description; // the driver's text
     bool compressed = false;
     std::vector<FrameSizeDescription> sizes;
 };
@@ -53,30 +53,30 @@ std::string fourccName(uint32_t fourcc);
 std::string describeFormat(const FormatDescription& format);
 
 struct DeviceIdentity {
-    std::string driver;             // v4l2_capability.driver ("uvcvideo")
-    std::string card;               // the camera's name
-    std::string bus_info;           // "usb-0000:00:14.0-3"
-    uint32_t device_caps = 0;       // V4L2_CAP_* of this node
+    std::string driver;       // v4l2_capability.driver ("uvcvideo")
+    std::string card;         // the camera's name
+    std::string bus_info;     // "usb-0000:00:14.0-3"
+    uint32_t device_caps = 0; // V4L2_CAP_* of this node
 };
 
 // A buffer dequeued from the driver.
 struct DequeuedBuffer {
     uint32_t index = 0;
     uint32_t bytes_used = 0;
-    uint32_t flags = 0;             // V4L2_BUF_FLAG_*
-    uint32_t sequence = 0;          // the driver's frame counter
-    int64_t timestamp_ns = 0;       // the driver's stamp; its clock is in `flags`
+    uint32_t flags = 0;       // V4L2_BUF_FLAG_*
+    uint32_t sequence = 0;    // the driver's frame counter
+    int64_t timestamp_ns = 0; // the driver's stamp; its clock is in `flags`
 };
 
 struct MappedBuffer {
     uint8_t* data = nullptr;
-    std::size_t length = 0;         // bytes mapped
+    std::size_t length = 0; // bytes mapped
 };
 
 // Thread-bound: one thread at a time uses a device (the capture thread once streaming).
 // Move-only; the destructor stops streaming, unmaps and closes.
 class V4l2Device {
-public:
+  public:
     V4l2Device() = default;
     ~V4l2Device();
     V4l2Device(V4l2Device&& other) noexcept;
@@ -127,7 +127,7 @@ public:
     // Why the last failing call failed: "VIDIOC_S_FMT on /dev/video0: Invalid argument".
     const std::string& errorText() const noexcept { return error_; }
 
-private:
+  private:
     int fail(const char* what, int error_number);
     int xioctl(unsigned long request, void* arg);
     int queryControl(uint32_t id, v4l2_queryctrl& query);

@@ -1,7 +1,5 @@
 #include "config/service_config.hpp"
 
-#include "pipeline/census_sgm_matcher.hpp"
-
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
@@ -26,6 +24,8 @@
 #include <unistd.h>
 #include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
+
+#include "pipeline/census_sgm_matcher.hpp"
 
 namespace stereod {
 
@@ -453,7 +453,8 @@ KeyDef zonesKey()
                 } else if (key == "min_points" || key == "enter_frames" || key == "leave_frames") {
                     const auto v = value.IsScalar() ? parseInteger(value.Scalar()) : std::nullopt;
                     if (!v || *v < 1 || *v > 1000000)
-                        return ReadFailure{where + ": " + key + " is not a whole number >= 1", expected};
+                        return ReadFailure{where + ": " + key + " is not a whole number >= 1",
+                                           expected};
                     (key == "min_points"     ? zone.min_points
                      : key == "enter_frames" ? zone.enter_frames
                                              : zone.leave_frames) = static_cast<int>(*v);
@@ -630,7 +631,8 @@ template <class Access> KeyDef idListKey(std::string path, bool live, Access acc
     KeyDef def{std::move(path), live, {}, {}};
     def.read = [access](const YAML::Node& node, ServiceConfig& config,
                         const ReadContext&) -> ReadResult {
-        const std::string expected = "a list of numeric ids from 0 to 4294967294, like [1000, 1001]";
+        const std::string expected =
+            "a list of numeric ids from 0 to 4294967294, like [1000, 1001]";
         std::vector<uint32_t> ids;
         if (!node.IsNull() && !node.IsSequence()) {
             return ReadFailure{"not a list", expected};
@@ -764,8 +766,8 @@ std::vector<KeyDef> buildKeyTable()
         "source.cameras.right", kRestart, [](auto& c) -> auto& { return c.source.cameras.right; },
         false));
     add(textKey(
-        "source.cameras.device", kRestart,
-        [](auto& c) -> auto& { return c.source.cameras.device; }, false));
+        "source.cameras.device", kRestart, [](auto& c) -> auto& { return c.source.cameras.device; },
+        false));
     add(choiceKey(
         "source.cameras.format", kRestart, [](auto& c) -> auto& { return c.source.cameras.format; },
         Names<PixelFormatChoice>{{"auto", PixelFormatChoice::Auto},
@@ -783,16 +785,18 @@ std::vector<KeyDef> buildKeyTable()
     add(boolKey(
         "source.cameras.lock_exposure", kRestart,
         [](auto& c) -> auto& { return c.source.cameras.lock_exposure; }));
-    add(keepBoolKey("source.cameras.controls.auto_exposure",
-                    [](auto& c) -> auto& { return c.source.cameras.controls.auto_exposure; }));
+    add(keepBoolKey(
+        "source.cameras.controls.auto_exposure",
+        [](auto& c) -> auto& { return c.source.cameras.controls.auto_exposure; }));
     add(keepIntegerKey(
         "source.cameras.controls.exposure_us",
         [](auto& c) -> auto& { return c.source.cameras.controls.exposure_us; }, "us"));
     add(keepIntegerKey(
         "source.cameras.controls.gain",
         [](auto& c) -> auto& { return c.source.cameras.controls.gain; }, "device units"));
-    add(keepBoolKey("source.cameras.controls.auto_white_balance",
-                    [](auto& c) -> auto& { return c.source.cameras.controls.auto_white_balance; }));
+    add(keepBoolKey(
+        "source.cameras.controls.auto_white_balance",
+        [](auto& c) -> auto& { return c.source.cameras.controls.auto_white_balance; }));
     add(keepIntegerKey(
         "source.cameras.controls.white_balance_k",
         [](auto& c) -> auto& { return c.source.cameras.controls.white_balance_k; }, "kelvin"));
@@ -1333,8 +1337,8 @@ void checkCameras(Checker& checker, const SourceConfig& source)
                         std::numeric_limits<int>::max(), " (device units)");
     }
     if (controls.white_balance_k) {
-        checker.integer("source.cameras.controls.white_balance_k", *controls.white_balance_k,
-                        1000, 20000, " K");
+        checker.integer("source.cameras.controls.white_balance_k", *controls.white_balance_k, 1000,
+                        20000, " K");
     }
     if (cameras.lock_exposure && controls.auto_exposure.value_or(false)) {
         checker.fail("source.cameras.lock_exposure",
@@ -1362,8 +1366,8 @@ void checkCameras(Checker& checker, const SourceConfig& source)
         if (checker.usable({"source.max_skew_ms", "source.cameras.fps"}) &&
             source.max_skew_ms >= half_period_ms) {
             checker.fail("source.max_skew_ms", "not below half the frame period",
-                         "< " + formatNumber(half_period_ms) +
-                             " ms at source.cameras.fps " + formatNumber(cameras.fps));
+                         "< " + formatNumber(half_period_ms) + " ms at source.cameras.fps " +
+                             formatNumber(cameras.fps));
         }
     } else if (source.kind == SourceKind::SideBySide) {
         if (cameras.device.empty()) {
@@ -1494,7 +1498,6 @@ void checkMatcher(Checker& checker, const MatcherSettings& matcher)
     } else if (matcher.block_size < block_lo || matcher.block_size > block_hi) {
         checker.fail("matcher.block_size", "out of range", block_expected);
     }
-
 
     // SGBM keeps its path costs in 16 bits, so penalties stay below 32768.
     constexpr int kMaxPenalty = 32767;

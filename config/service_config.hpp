@@ -20,48 +20,48 @@ namespace stereod {
 // Every problem found in a configuration, each one "FILE:LINE: key: problem". what()
 // holds all of them, one per line, ready to print. Immutable, so thread-safe.
 class ConfigError : public std::runtime_error {
-public:
+  public:
     explicit ConfigError(std::vector<std::string> problems);
     const std::vector<std::string>& problems() const noexcept { return problems_; }
 
-private:
+  private:
     std::vector<std::string> problems_;
 };
 
 enum class SourceKind {
-    Replay,      // a recording on disk (source.replay)
-    V4l2,        // two V4L2 cameras, paired by stereo sync (source.cameras.left/right)
-    SideBySide,  // one V4L2 device whose frames hold left|right halves (source.cameras.device)
+    Replay,     // a recording on disk (source.replay)
+    V4l2,       // two V4L2 cameras, paired by stereo sync (source.cameras.left/right)
+    SideBySide, // one V4L2 device whose frames hold left|right halves (source.cameras.device)
 };
 enum class ReplayPacing {
-    Paced,     // frames delivered at their recorded times, like real cameras
-    Lockstep,  // as fast as the worker consumes, nothing dropped, repeatable
+    Paced,    // frames delivered at their recorded times, like real cameras
+    Lockstep, // as fast as the worker consumes, nothing dropped, repeatable
 };
 
 struct ReplayConfig {
-    std::string path;                 // a recording directory, a folder of left*/right*, or
-                                      // a ROS 2 bag (MCAP file)
+    std::string path; // a recording directory, a folder of left*/right*, or
+                      // a ROS 2 bag (MCAP file)
     // A bag's image topics (source.replay.topics.left/right); empty: the defaults
     // /stereo/{left,right}/image_raw, or the one pair whose names say left and right.
     std::string left_topic;
     std::string right_topic;
     ReplayPacing pacing = ReplayPacing::Paced;
-    double fps = 10.0;                // nominal rate for plain folders (no frames.csv)
+    double fps = 10.0; // nominal rate for plain folders (no frames.csv)
     bool loop = true;
 };
 
 // The V4L2 cameras of source.type v4l2 (two devices) or side_by_side (one device). The
 // controls are applied alike to both cameras; an unset control keeps the device's value.
 struct CamerasConfig {
-    std::string left;                 // device path (/dev/videoN or /dev/v4l/by-id/...)
+    std::string left; // device path (/dev/videoN or /dev/v4l/by-id/...)
     std::string right;
-    std::string device;               // side_by_side: the one device
+    std::string device; // side_by_side: the one device
     PixelFormatChoice format = PixelFormatChoice::Auto;
-    int width = 640;                  // px of each device's frame (side_by_side: both halves)
+    int width = 640; // px of each device's frame (side_by_side: both halves)
     int height = 480;
-    double fps = 30.0;                // asked frame rate
+    double fps = 30.0; // asked frame rate
     CameraControls controls;
-    bool lock_exposure = false;       // manual exposure, frozen (controls.exposure_us if set)
+    bool lock_exposure = false; // manual exposure, frozen (controls.exposure_us if set)
 };
 
 struct SourceConfig {
@@ -75,11 +75,11 @@ struct SourceConfig {
 
 struct SocketConfig {
     std::string path = "/run/stereod/stereod.sock";
-    uint32_t mode = 0660;             // file mode of the socket
-    std::string group;                // empty: the service's own group
+    uint32_t mode = 0660; // file mode of the socket
+    std::string group;    // empty: the service's own group
     int max_clients = 64;
     uint32_t max_request_bytes = 65536;
-    double idle_timeout_s = 0.0;      // 0: clients may stay idle
+    double idle_timeout_s = 0.0; // 0: clients may stay idle
     // Who may talk to the service, on top of the file mode: when either list is not
     // empty, a peer (by SO_PEERCRED) is served only if its uid is in allow_uids or its
     // primary or a supplementary gid is in allow_gids; others get `not_allowed`.
@@ -88,24 +88,24 @@ struct SocketConfig {
 };
 
 struct PublishConfig {
-    double readings_max_hz = 0.0;     // 0: every frame
-    double depth_max_hz = 10.0;       // depth-frame subscribers get at most this rate
+    double readings_max_hz = 0.0; // 0: every frame
+    double depth_max_hz = 10.0;   // depth-frame subscribers get at most this rate
     // A subscriber whose unsent data exceed this is dropped (it still loses frames, one
     // at a time, before that).
     uint32_t max_client_backlog_bytes = 64u << 20;
-    double max_reading_age_ms = 1000.0;   // default for `distance` without max_age_ms
+    double max_reading_age_ms = 1000.0; // default for `distance` without max_age_ms
 };
 
 // Calibration health while running (docs/configuration.md).
 struct HealthConfig {
-    double interval_s = 2.0;          // between checks; 0 turns them off
+    double interval_s = 2.0;           // between checks; 0 turns them off
     bool withhold_when_failed = false; // failed: readings become calibration_suspect
 };
 
 struct ServiceConfig {
-    std::string origin;               // file the configuration came from, or "<defaults>"
+    std::string origin; // file the configuration came from, or "<defaults>"
     SourceConfig source;
-    std::string calibration_path;     // empty: the recording's calibration.yaml
+    std::string calibration_path; // empty: the recording's calibration.yaml
     ProcessorSettings processing;
     HealthConfig calibration_health;
     // The camera's pose on the robot and the keep-out zones in its base frame
@@ -113,7 +113,7 @@ struct ServiceConfig {
     ZonesSettings zones;
     SocketConfig socket;
     PublishConfig publish;
-    std::string log_level = "info";   // trace, debug, info, warn, error, critical, off
+    std::string log_level = "info"; // trace, debug, info, warn, error, critical, off
 };
 
 // Built-in defaults (what `stereod` runs without --config).

@@ -67,8 +67,8 @@ int runBoardDistance(const BoardDistanceOptions& options)
     } else if (depth) {
         fmt::print("{:.3f} m by the board's pose (percentile {:g} of its plane over the {:.0f} % "
                    "of the region it covers, {:.3f} to {:.3f} m; board centre at {:.3f} m)\n",
-                   depth->depth_m, nearest.percentile, 100.0 * depth->coverage,
-                   depth->nearest_m, depth->farthest_m, pose.centre_m[2]);
+                   depth->depth_m, nearest.percentile, 100.0 * depth->coverage, depth->nearest_m,
+                   depth->farthest_m, pose.centre_m[2]);
     } else {
         fmt::print("no board in the region: the board (centre at {:.3f} m) lies outside it\n",
                    pose.centre_m[2]);

@@ -6,7 +6,6 @@
 //    files into ours; `stereoctl export-ros`: ours out as a ROS camera_info pair
 //    (pipeline/calibration_formats.hpp).
 
-
 #include <algorithm>
 #include <charconv>
 #include <cstdio>
@@ -20,8 +19,8 @@
 #include "ctl/calibration_report.hpp"
 #include "ctl/commands.hpp"
 #include "ctl/exit_codes.hpp"
-#include "pipeline/calibration_formats.hpp"
 #include "ctl/file_patterns.hpp"
+#include "pipeline/calibration_formats.hpp"
 #include "pipeline/chessboard_calibration.hpp"
 
 namespace stereod {
@@ -82,8 +81,8 @@ void printReport(const ChessboardCalibrationResult& r, const std::string& out_pa
 {
     std::size_t name_width = 4;
     for (const PairReport& p : r.pairs) {
-        name_width = std::max(name_width, fileName(p.left_path).size() + 1 +
-                                              fileName(p.right_path).size());
+        name_width =
+            std::max(name_width, fileName(p.left_path).size() + 1 + fileName(p.right_path).size());
     }
     fmt::print("{:<{}}  found  RMS left  RMS right  epipolar (rows)  used\n", "pair", name_width);
     for (const PairReport& p : r.pairs) {
@@ -116,14 +115,14 @@ void printReport(const ChessboardCalibrationResult& r, const std::string& out_pa
 }
 
 json reportJson(const ChessboardCalibrationResult& r, const CalibrateOptions& options,
-               const json& extra_json)
+                const json& extra_json)
 {
     json rejected = json::array();
     json pairs = json::array();
     for (const PairReport& p : r.pairs) {
         if (!p.used) {
-            rejected.push_back({{"left", p.left_path}, {"right", p.right_path},
-                                {"reason", p.rejection}});
+            rejected.push_back(
+                {{"left", p.left_path}, {"right", p.right_path}, {"reason", p.rejection}});
         }
         pairs.push_back({{"left", p.left_path},
                          {"right", p.right_path},
@@ -141,24 +140,25 @@ json reportJson(const ChessboardCalibrationResult& r, const CalibrateOptions& op
     if (!options.preview_path.empty()) {
         files["preview"] = options.preview_path;
     }
-    json report = {{"rms_px", r.rms_px},
-            {"epipolar_error_px", r.epipolar_error_px},
-            {"epipolar_distance_px", r.epipolar_distance_px},
-            {"pairs_used", r.pairs_used},
-            {"pairs_total", r.pairs.size()},
-            {"outliers_dropped", r.outliers_dropped},
-            {"pairs_rejected", rejected},
-            {"baseline_m", r.baseline_m},
-            {"focal_px", c.rectified.focal_px},
-            {"left_rms_px", r.left_rms_px},
-            {"right_rms_px", r.right_rms_px},
-            {"image", {{"width", c.rectified.image_size.width},
-                       {"height", c.rectified.image_size.height}}},
-            {"board", {{"cols", c.board->cols}, {"rows", c.board->rows},
-                       {"square_m", c.board->square_m}}},
-            {"alpha", options.alpha},
-            {"pairs", pairs},
-            {"files", files}};
+    json report = {
+        {"rms_px", r.rms_px},
+        {"epipolar_error_px", r.epipolar_error_px},
+        {"epipolar_distance_px", r.epipolar_distance_px},
+        {"pairs_used", r.pairs_used},
+        {"pairs_total", r.pairs.size()},
+        {"outliers_dropped", r.outliers_dropped},
+        {"pairs_rejected", rejected},
+        {"baseline_m", r.baseline_m},
+        {"focal_px", c.rectified.focal_px},
+        {"left_rms_px", r.left_rms_px},
+        {"right_rms_px", r.right_rms_px},
+        {"image",
+         {{"width", c.rectified.image_size.width}, {"height", c.rectified.image_size.height}}},
+        {"board",
+         {{"cols", c.board->cols}, {"rows", c.board->rows}, {"square_m", c.board->square_m}}},
+        {"alpha", options.alpha},
+        {"pairs", pairs},
+        {"files", files}};
     if (extra_json.is_object()) {
         report.update(extra_json);
     }

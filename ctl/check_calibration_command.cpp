@@ -105,10 +105,13 @@ std::string meaning(const HealthMeasurement& m)
 int exitCodeFor(HealthState state)
 {
     switch (state) {
-    case HealthState::Ok: return kExitOk;
+    case HealthState::Ok:
+        return kExitOk;
     case HealthState::Degraded:
-    case HealthState::Failed: return kExitNoReading;
-    case HealthState::Unknown: return kExitUsage;
+    case HealthState::Failed:
+        return kExitNoReading;
+    case HealthState::Unknown:
+        return kExitUsage;
     }
     return kExitUsage;
 }
@@ -196,7 +199,8 @@ int runCheckCalibration(const CheckCalibrationOptions& options)
 
     if (options.fix) {
         cv::Vec2d degrees;
-        const StereoCalibration corrected = correctRightRotation(calibration, overall.used, &degrees);
+        const StereoCalibration corrected =
+            correctRightRotation(calibration, overall.used, &degrees);
         std::vector<HealthMeasurement> after_all;
         for (const PairFigures& p : measurePairs(corrected, left, right))
             after_all.push_back(p.measurement);

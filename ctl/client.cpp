@@ -1,15 +1,15 @@
 #include "ctl/client.hpp"
 
-#include <poll.h>
-#include <sys/socket.h>
-#include <sys/un.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <system_error>
 #include <thread>
+
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
 
 namespace stereod {
 
@@ -136,8 +136,7 @@ void ProtocolClient::waitFor(short events, const char* doing)
     for (;;) {
         int remaining_ms = timeout_ms;
         if (timeout_ms >= 0) {
-            const auto left =
-                std::chrono::ceil<std::chrono::milliseconds>(deadline - Clock::now());
+            const auto left = std::chrono::ceil<std::chrono::milliseconds>(deadline - Clock::now());
             remaining_ms = static_cast<int>(std::max<long long>(left.count(), 0));
         }
         const int ready = ::poll(fds, count, remaining_ms);
@@ -312,7 +311,7 @@ nlohmann::ordered_json ProtocolClient::request(const nlohmann::ordered_json& req
 void ProtocolClient::readPayload(void* data, std::size_t bytes)
 {
     if (bytes == 0) {
-        return;   // `data` may be null then (an empty vector's)
+        return; // `data` may be null then (an empty vector's)
     }
     auto* out = static_cast<char*>(data);
     const std::size_t buffered = std::min(bytes, rx_.size() - rx_begin_);

@@ -20,7 +20,7 @@ namespace stereod {
 // The service cannot be reached or the connection failed: what() names the socket path
 // and the reason (the errno text where a system call failed).
 class ClientError : public std::runtime_error {
-public:
+  public:
     ClientError(const std::string& message, int error_number)
         : std::runtime_error(message), error_number_(error_number)
     {
@@ -29,33 +29,33 @@ public:
     // reply that is not JSON, the service closing the connection).
     int errorNumber() const noexcept { return error_number_; }
 
-private:
+  private:
     int error_number_;
 };
 
 // A wait for the service was cut short because the cancel descriptor became readable
 // (see ProtocolClient::setCancelFd).
 class ClientCancelled : public std::runtime_error {
-public:
+  public:
     using std::runtime_error::runtime_error;
 };
 
 // The service answered `"ok": false`. code() is the protocol's stable error code
 // ("not_available", "bad_request", ...); what() is "code: message".
 class ServiceError : public std::runtime_error {
-public:
+  public:
     ServiceError(std::string code, const std::string& message)
         : std::runtime_error(code + ": " + message), code_(std::move(code))
     {
     }
     const std::string& code() const noexcept { return code_; }
 
-private:
+  private:
     std::string code_;
 };
 
 class ProtocolClient {
-public:
+  public:
     // No limit on a wait (for streams that may be quiet for a long time).
     static constexpr std::chrono::milliseconds kWaitForever{-1};
     // Longest line accepted from the service, newline excluded: a guard against a peer
@@ -106,7 +106,7 @@ public:
     // The connected socket, for poll() loops of the caller; -1 after a move.
     int fd() const noexcept { return fd_; }
 
-private:
+  private:
     void connectSocket();
     // Blocks until the socket is ready for `events` (POLLIN/POLLOUT); throws on timeout,
     // cancellation or a poll error. `doing` says what was waited for, for messages.
@@ -122,8 +122,8 @@ private:
     std::chrono::milliseconds timeout_;
     int fd_ = -1;
     int cancel_fd_ = -1;
-    std::string rx_;                  // bytes received and not consumed yet
-    std::size_t rx_begin_ = 0;        // first unconsumed byte in rx_
+    std::string rx_;           // bytes received and not consumed yet
+    std::size_t rx_begin_ = 0; // first unconsumed byte in rx_
 };
 
 } // namespace stereod

@@ -1,10 +1,9 @@
 #include "ctl/file_patterns.hpp"
 
-#include <glob.h>
-
 #include <algorithm>
 
 #include <fmt/format.h>
+#include <glob.h>
 
 #include "ctl/commands.hpp"
 
@@ -25,8 +24,8 @@ std::vector<std::string> expandGlob(const std::string& pattern, const char* opti
         throw UsageError(fmt::format("{} '{}' matches no file", option, pattern));
     }
     if (status != 0) {
-        throw UsageError(fmt::format("{} '{}': cannot read a directory of the pattern", option,
-                                     pattern));
+        throw UsageError(
+            fmt::format("{} '{}': cannot read a directory of the pattern", option, pattern));
     }
     std::sort(paths.begin(), paths.end());
     return paths;

@@ -44,7 +44,7 @@ struct RawPair {
     uint64_t frame = 0;
     int64_t left_stamp_ns = 0;
     int64_t right_stamp_ns = 0;
-    cv::Mat left;                     // CV_8UC1, as captured (before rectification)
+    cv::Mat left; // CV_8UC1, as captured (before rectification)
     cv::Mat right;
 };
 
@@ -57,8 +57,8 @@ void readRawPair(ProtocolClient& client, const json& event, RawPair& pair)
     pair.right_stamp_ns = event.value("right_stamp_ns", int64_t{0});
     const auto payloads = event.find("payloads");
     if (payloads == event.end() || !payloads->is_array()) {
-        throw ClientError("a raw event from " + client.socketPath() + " has no payloads list: " +
-                              event.dump(),
+        throw ClientError("a raw event from " + client.socketPath() +
+                              " has no payloads list: " + event.dump(),
                           0);
     }
     bool have_left = false, have_right = false;
@@ -141,7 +141,7 @@ const char* stopName(Stop stop)
 //
 // Thread-bound.
 class LiveCollector {
-public:
+  public:
     LiveCollector(const CalibrateOptions& options, const ChessboardCalibrationOptions& calibration,
                   std::string pairs_dir)
         : options_(options), grid_(calibration.board.cols, calibration.board.rows),
@@ -234,7 +234,7 @@ public:
                   {"coverage_missing", missing}}}};
     }
 
-private:
+  private:
     void accept(const RawPair& pair, const BoardAppearance& left)
     {
         const int number = static_cast<int>(pairs_.size()) + 1;
@@ -278,7 +278,7 @@ private:
     const cv::Size grid_;
     const std::string pairs_dir_;
     const int name_digits_;
-    std::optional<CalibrationCoverage> coverage_;   // made at the first pair (its size)
+    std::optional<CalibrationCoverage> coverage_; // made at the first pair (its size)
     cv::Size image_size_;
     std::vector<cv::Point2f> left_corners_;
     std::vector<cv::Point2f> right_corners_;
@@ -333,10 +333,10 @@ int runLiveCalibration(const CalibrateOptions& options)
         std::fflush(stderr);
 
         const std::optional<Clock::time_point> deadline =
-            options.timeout_s ? std::optional(start + std::chrono::duration_cast<Clock::duration>(
-                                                          std::chrono::duration<double>(
-                                                              *options.timeout_s)))
-                              : std::nullopt;
+            options.timeout_s
+                ? std::optional(start + std::chrono::duration_cast<Clock::duration>(
+                                            std::chrono::duration<double>(*options.timeout_s)))
+                : std::nullopt;
         const std::chrono::milliseconds wait_limit(options.service.timeout_ms);
         RawPair pair;
         // Set while the wait in progress is the one the deadline cut short.

@@ -81,8 +81,8 @@ void resolveSockets(const CLI::Option& global_option, const std::string& global_
 // A command that talks to the service: --socket, --timeout-ms, and --json when `json` is
 // given.
 CLI::App* addServiceCommand(CLI::App& app, const char* name, const char* description,
-                            ServiceOptions& options, CommandSockets& sockets,
-                            bool* json = nullptr, const char* json_help = nullptr)
+                            ServiceOptions& options, CommandSockets& sockets, bool* json = nullptr,
+                            const char* json_help = nullptr)
 {
     CLI::App* command = app.add_subcommand(name, description);
     addSocketOption(command, options, kSocketHelp, sockets);
@@ -106,8 +106,8 @@ CLI::Option* addRectifiedOptions(CLI::App* cmd, RectifiedOptions& o, const char*
         cmd->add_option("--baseline-m", o.baseline_m, "baseline (m)")->check(kPositive);
     CLI::Option* cx = cmd->add_option("--cx", o.cx_px, "principal point x (px; default: centre)");
     CLI::Option* cy = cmd->add_option("--cy", o.cy_px, "principal point y (px; default: centre)");
-    CLI::Option* doffs = cmd->add_option("--doffs-px", o.doffs_px,
-                                         "right minus left principal point x (px)");
+    CLI::Option* doffs =
+        cmd->add_option("--doffs-px", o.doffs_px, "right minus left principal point x (px)");
     rectified->needs(focal)->needs(baseline);
     for (CLI::Option* geometry : {focal, baseline, cx, cy, doffs}) {
         geometry->needs(rectified);
@@ -170,8 +170,9 @@ CLI::App* declareSnapshot(CLI::App& app, SnapshotOptions& o, CommandSockets& soc
     cmd->add_option("--depth", o.depth_path, "depth as PNG, uint16 millimetres (0 = invalid)");
     cmd->add_option("--disparity", o.disparity_path,
                     "disparity as .pfm (float, inf = invalid) or .png (uint16 x256)");
-    cmd->add_option("--cloud", o.cloud_path, "point cloud as binary .ply (x y z metres, "
-                                             "intensity)");
+    cmd->add_option("--cloud", o.cloud_path,
+                    "point cloud as binary .ply (x y z metres, "
+                    "intensity)");
     cmd->add_option("--colormap", o.colormap_path, "colourised depth as PNG (near warm, far cool)");
     cmd->add_option("--left", o.left_path, "the rectified left image as PNG");
     cmd->add_option("--confidence", o.confidence_path,
@@ -202,8 +203,9 @@ CLI::App* declareDepth(CLI::App& app, DepthOptions& o)
     cmd->add_option("--min-depth-m", o.min_depth_m,
                     "closest depth to see (m); sets the disparity range")
         ->check(kPositive);
-    cmd->add_option("--roi", o.roi, "region for the nearest object: x,y,w,h fractions of the "
-                                    "image");
+    cmd->add_option("--roi", o.roi,
+                    "region for the nearest object: x,y,w,h fractions of the "
+                    "image");
     cmd->add_option("--disparity", o.disparity_path, "write the disparity (.pfm or .png)");
     cmd->add_option("--depth", o.depth_path, "write the depth (.png, uint16 mm)");
     cmd->add_option("--cloud", o.cloud_path, "write the point cloud (.ply)");
@@ -235,9 +237,10 @@ CLI::App* declareCalibrate(CLI::App& app, CalibrateOptions& o, CommandSockets& s
                                          "of 10x7 squares is 9x6)");
     CLI::Option* square =
         cmd->add_option("--square-m", o.square_m, "side of one square (m)")->check(kPositive);
-    CLI::Option* preview = cmd->add_option(
-        "--preview", o.preview_path, "write the first pair rectified side by side with row lines "
-                                     "(PNG)");
+    CLI::Option* preview =
+        cmd->add_option("--preview", o.preview_path,
+                        "write the first pair rectified side by side with row lines "
+                        "(PNG)");
     CLI::Option* alpha = cmd->add_option("--alpha", o.alpha,
                                          "rectified scale: 0 crops to pixels with image data, 1 "
                                          "keeps every raw pixel")
@@ -261,25 +264,25 @@ CLI::App* declareCalibrate(CLI::App& app, CalibrateOptions& o, CommandSockets& s
                     "with --live: the service's Unix socket (also before the command, or from "
                     "STEREOD_SOCKET)",
                     sockets);
-    CLI::Option* timeout_ms =
-        cmd->add_option("--timeout-ms", o.service.timeout_ms,
-                        "with --live: limit on each wait for the service")
-            ->check(kPositive)
-            ->capture_default_str();
+    CLI::Option* timeout_ms = cmd->add_option("--timeout-ms", o.service.timeout_ms,
+                                              "with --live: limit on each wait for the service")
+                                  ->check(kPositive)
+                                  ->capture_default_str();
     CLI::Option* save_pairs = cmd->add_option(
         "--save-pairs", o.save_pairs_dir,
         "with --live: directory for the accepted pairs, left_NNN.png and right_NNN.png "
         "(default: beside --out, OUT-pairs/)");
-    CLI::Option* timeout_s = cmd->add_option(
-        "--timeout-s", o.timeout_s,
-        "with --live: stop collecting after this long and calibrate with the pairs accepted "
-        "(default: until --count pairs or Ctrl-C)")
-                                 ->check(kPositive);
-    CLI::Option* max_hz =
-        cmd->add_option("--max-hz", o.max_hz, "with --live: raw pairs asked of the service per "
-                                              "second")
-            ->check(kPositive)
-            ->capture_default_str();
+    CLI::Option* timeout_s =
+        cmd->add_option(
+               "--timeout-s", o.timeout_s,
+               "with --live: stop collecting after this long and calibrate with the pairs accepted "
+               "(default: until --count pairs or Ctrl-C)")
+            ->check(kPositive);
+    CLI::Option* max_hz = cmd->add_option("--max-hz", o.max_hz,
+                                          "with --live: raw pairs asked of the service per "
+                                          "second")
+                              ->check(kPositive)
+                              ->capture_default_str();
     live->needs(count)->needs(board)->needs(square);
     for (CLI::Option* live_only : {count, timeout_ms, save_pairs, timeout_s, max_hz}) {
         live_only->needs(live);
@@ -289,10 +292,10 @@ CLI::App* declareCalibrate(CLI::App& app, CalibrateOptions& o, CommandSockets& s
     board->needs(square);
     square->needs(board);
 
-    CLI::Option* from_ros =
-        cmd->add_option("--from-ros", o.from_ros, "import a ROS camera_info pair: LEFT.yaml "
-                                                  "RIGHT.yaml")
-            ->expected(2);
+    CLI::Option* from_ros = cmd->add_option("--from-ros", o.from_ros,
+                                            "import a ROS camera_info pair: LEFT.yaml "
+                                            "RIGHT.yaml")
+                                ->expected(2);
     CLI::Option* from_opencv =
         cmd->add_option("--from-opencv", o.from_opencv,
                         "import OpenCV stereo_calib output: INTRINSICS.yml EXTRINSICS.yml "
@@ -348,8 +351,7 @@ CLI::App* declareExportRos(CLI::App& app, ExportRosOptions& o)
     cmd->add_option("--calib", o.calib_path, "calibration file (YAML)")->required();
     cmd->add_option("--left", o.left_path, "left camera_info file to write")->required();
     cmd->add_option("--right", o.right_path, "right camera_info file to write")->required();
-    cmd->add_option("--camera-name", o.camera_name,
-                    "camera_name prefix: NAME/left and NAME/right")
+    cmd->add_option("--camera-name", o.camera_name, "camera_name prefix: NAME/left and NAME/right")
         ->capture_default_str();
     return cmd;
 }
@@ -377,15 +379,18 @@ CLI::App* declareCheckCalibration(CLI::App& app, CheckCalibrationOptions& o,
         "how well a calibration still rectifies the rig's pairs, or (without --left) the "
         "running service's cameras: the row offset of matching features after "
         "rectification (exit 0 ok, 1 degraded or failed, 2 no verdict, 3 no service)");
-    CLI::Option* left = cmd->add_option("--left", o.left_glob, "raw left images: a glob, quoted, sorted");
-    CLI::Option* right = cmd->add_option("--right", o.right_glob, "raw right images, paired in sorted order");
-    CLI::Option* calib = cmd->add_option("--calib", o.calib_path, "the full calibration to check (YAML)");
-    CLI::Option* socket = addSocketOption(
-        cmd, o.service,
-        "without --left/--right/--calib: the running service's figures (its "
-        "calibration_health), from this socket (also before the command, or from "
-        "STEREOD_SOCKET)",
-        sockets);
+    CLI::Option* left =
+        cmd->add_option("--left", o.left_glob, "raw left images: a glob, quoted, sorted");
+    CLI::Option* right =
+        cmd->add_option("--right", o.right_glob, "raw right images, paired in sorted order");
+    CLI::Option* calib =
+        cmd->add_option("--calib", o.calib_path, "the full calibration to check (YAML)");
+    CLI::Option* socket =
+        addSocketOption(cmd, o.service,
+                        "without --left/--right/--calib: the running service's figures (its "
+                        "calibration_health), from this socket (also before the command, or from "
+                        "STEREOD_SOCKET)",
+                        sockets);
     left->needs(right)->needs(calib)->excludes(socket);
     right->needs(left);
     calib->needs(left);
@@ -494,8 +499,9 @@ int main(int argc, char** argv)
         return kExitUnreachable;
     } catch (const nlohmann::ordered_json::exception& error) {
         // A reply with a field of the wrong type: the peer does not speak this protocol.
-        fmt::print(stderr, "stereoctl: the reply from the service does not follow the protocol: "
-                           "{}\n",
+        fmt::print(stderr,
+                   "stereoctl: the reply from the service does not follow the protocol: "
+                   "{}\n",
                    error.what());
         return kExitUnreachable;
     } catch (const ServiceError& error) {

@@ -12,12 +12,12 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "config/service_config.hpp"
-#include "pipeline/census_sgm_matcher.hpp"
 #include "ctl/commands.hpp"
 #include "ctl/exit_codes.hpp"
 #include "ctl/output.hpp"
 #include "daemon/protocol.hpp"
 #include "pipeline/calibration.hpp"
+#include "pipeline/census_sgm_matcher.hpp"
 #include "pipeline/depth_io.hpp"
 #include "pipeline/stereo_processor.hpp"
 
@@ -40,8 +40,7 @@ std::vector<std::string_view> split(std::string_view text, char separator)
     }
 }
 
-template <typename T>
-bool parseNumber(std::string_view text, T& value)
+template <typename T> bool parseNumber(std::string_view text, T& value)
 {
     const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
     return error == std::errc() && end == text.data() + text.size();
@@ -121,10 +120,10 @@ ProcessorSettings depthSettings(const DepthOptions& options)
     }
     if (options.min_depth_m) {
         matcher.min_depth_m = *options.min_depth_m;
-        matcher.num_disparities = 0;   // derived from the closest depth
+        matcher.num_disparities = 0; // derived from the closest depth
     }
     if (options.max_disparity) {
-        constexpr int kStep = 16;      // the matchers search multiples of 16 disparities
+        constexpr int kStep = 16; // the matchers search multiples of 16 disparities
         matcher.num_disparities = (*options.max_disparity + kStep - 1) / kStep * kStep;
     }
     if (!options.roi.empty()) {
@@ -276,8 +275,8 @@ int runCalibrate(const CalibrateOptions& options)
     const RectifiedGeometry& g = calibration.rectified;
     fmt::print("wrote rectified calibration {}: {}x{}, f {:.3f} px, B {:.4f} m, c ({:.2f}, {:.2f}) "
                "px, doffs {:.3f} px\n",
-               options.out_path, g.image_size.width, g.image_size.height, g.focal_px,
-               g.baseline_m, g.cx_px, g.cy_px, g.doffs_px);
+               options.out_path, g.image_size.width, g.image_size.height, g.focal_px, g.baseline_m,
+               g.cx_px, g.cy_px, g.doffs_px);
     return kExitOk;
 }
 

@@ -14,15 +14,17 @@ namespace stereod {
 namespace {
 
 // The pipeline's order, which is also the order people read the table in.
-constexpr std::array<const char*, 6> kStageOrder = {"rectify", "match",  "depth",
+constexpr std::array<const char*, 6> kStageOrder = {"rectify", "match", "depth",
                                                     "nearest", "cloud", "publish"};
 
 } // namespace
 
 nlohmann::ordered_json stageTimingsToJson(const StageTimings& timings)
 {
-    return {{"rectify", timings.rectify_ms}, {"match", timings.match_ms},
-            {"depth", timings.depth_ms},     {"nearest", timings.nearest_ms},
+    return {{"rectify", timings.rectify_ms},
+            {"match", timings.match_ms},
+            {"depth", timings.depth_ms},
+            {"nearest", timings.nearest_ms},
             {"cloud", timings.cloud_ms}};
 }
 
@@ -39,8 +41,8 @@ void printStageTable(std::FILE* out, const nlohmann::ordered_json& stage_ms)
     }
     for (const auto& item : stage_ms.items()) {
         const std::string& stage = item.key();
-        const bool known = std::find(kStageOrder.begin(), kStageOrder.end(), stage) !=
-                           kStageOrder.end();
+        const bool known =
+            std::find(kStageOrder.begin(), kStageOrder.end(), stage) != kStageOrder.end();
         if (!known && item.value().is_number()) {
             rows.emplace_back(stage, item.value().get<double>());
         }

@@ -13,9 +13,8 @@ std::size_t payloadBytes(const nlohmann::ordered_json& header)
         return 0;
     }
     if (!bytes->is_number_unsigned()) {
-        throw ClientError("a header from the service has a \"bytes\" that is not a count: " +
-                              header.dump(),
-                          0);
+        throw ClientError(
+            "a header from the service has a \"bytes\" that is not a count: " + header.dump(), 0);
     }
     return bytes->get<std::size_t>();
 }

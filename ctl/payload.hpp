@@ -24,7 +24,7 @@ struct Payload {
     int height = 0;
     std::size_t points = 0;
     std::size_t bytes = 0;
-    int64_t stamp_ns = 0;             // capture time of a raw frame; 0 when not given
+    int64_t stamp_ns = 0; // capture time of a raw frame; 0 when not given
 };
 
 // The `bytes` of a header or descriptor: 0 when absent. Throws ClientError when it is not

@@ -12,11 +12,16 @@ namespace stereod {
 namespace {
 
 constexpr std::array kAllReasons = {
-    NoReadingReason::None,           NoReadingReason::NoFrameYet,
-    NoReadingReason::TooFewValidPixels, NoReadingReason::NothingInRange,
-    NoReadingReason::OutOfSync,      NoReadingReason::SourceDown,
-    NoReadingReason::BadFrame,       NoReadingReason::Stale,
-    NoReadingReason::Uncalibrated,   NoReadingReason::NearerThanRange,
+    NoReadingReason::None,
+    NoReadingReason::NoFrameYet,
+    NoReadingReason::TooFewValidPixels,
+    NoReadingReason::NothingInRange,
+    NoReadingReason::OutOfSync,
+    NoReadingReason::SourceDown,
+    NoReadingReason::BadFrame,
+    NoReadingReason::Stale,
+    NoReadingReason::Uncalibrated,
+    NoReadingReason::NearerThanRange,
     NoReadingReason::CalibrationSuspect,
 };
 

@@ -9,15 +9,13 @@
 // dropped: the socket is always drained, so the service never holds a backlog for us
 // (and its own backlog bound protects its worker anyway).
 
-#include <unistd.h>
-
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
 #include <deque>
-#include <functional>
 #include <filesystem>
+#include <functional>
 #include <mutex>
 #include <optional>
 #include <string>
@@ -27,6 +25,7 @@
 
 #include <fmt/format.h>
 #include <opencv2/core.hpp>
+#include <unistd.h>
 
 #include "ctl/client.hpp"
 #include "ctl/commands.hpp"
@@ -57,7 +56,7 @@ struct PairBuffer {
 //
 // Thread-safe: every member function may be called from either thread.
 class PairQueue {
-public:
+  public:
     explicit PairQueue(std::size_t capacity) : buffers_(capacity)
     {
         for (std::size_t i = 0; i < capacity; ++i) {
@@ -123,13 +122,13 @@ public:
     // writer between pop() and release().
     PairBuffer& buffer(std::size_t index) { return buffers_[index]; }
 
-private:
+  private:
     std::vector<PairBuffer> buffers_;
     mutable std::mutex mutex_;
     std::condition_variable changed_;
-    std::vector<std::size_t> free_;   // guarded by mutex_
-    std::deque<std::size_t> ready_;   // guarded by mutex_
-    bool closed_ = false;             // guarded by mutex_
+    std::vector<std::size_t> free_; // guarded by mutex_
+    std::deque<std::size_t> ready_; // guarded by mutex_
+    bool closed_ = false;           // guarded by mutex_
 };
 
 // The writer thread: writes queued pairs until the queue is closed and drained, or a write
@@ -138,7 +137,7 @@ private:
 // Thread contract: constructed and joined by the reader thread; written() and failed()
 // from any thread.
 class PairWriter {
-public:
+  public:
     using WriteFn = std::function<void(const PairBuffer&)>;
 
     PairWriter(WriteFn write, PairQueue& queue) : write_(std::move(write)), queue_(queue)
@@ -169,7 +168,7 @@ public:
         return error_;
     }
 
-private:
+  private:
     void run()
     {
         while (const std::optional<std::size_t> index = queue_.pop()) {
@@ -196,7 +195,7 @@ private:
     std::atomic<uint64_t> written_{0};
     std::atomic<bool> failed_{false};
     mutable std::mutex error_mutex_;
-    std::string error_;               // guarded by error_mutex_
+    std::string error_; // guarded by error_mutex_
 };
 
 // A new directory, or an existing empty one: a user's data is never overwritten.
@@ -230,7 +229,8 @@ void checkOutputFile(const std::string& path)
 {
     std::error_code error;
     if (fs::exists(fs::symlink_status(path, error))) {
-        throw UsageError("refusing --out " + path + ": it exists (a recording is never written "
+        throw UsageError("refusing --out " + path +
+                         ": it exists (a recording is never written "
                          "over an existing file; choose a new name)");
     }
     const fs::path parent = fs::path(path).parent_path();
@@ -259,15 +259,15 @@ const char* endingName(Ending ending)
 }
 
 struct Counts {
-    uint64_t received = 0;         // pairs read whole off the socket into a buffer
-    uint64_t service_skipped = 0;  // the events' "skipped": pairs the service did not send us
-    uint64_t queue_dropped = 0;    // pairs read past because every buffer was full
+    uint64_t received = 0;        // pairs read whole off the socket into a buffer
+    uint64_t service_skipped = 0; // the events' "skipped": pairs the service did not send us
+    uint64_t queue_dropped = 0;   // pairs read past because every buffer was full
 };
 
 // The progress line: on a terminal rewritten in place every second, else a line every
 // five seconds (a log).
 class Progress {
-public:
+  public:
     Progress() : terminal_(::isatty(STDERR_FILENO) == 1) {}
 
     void update(const Counts& counts, uint64_t written, std::size_t queued, std::size_t capacity,
@@ -292,7 +292,7 @@ public:
         std::fflush(stderr);
     }
 
-private:
+  private:
     bool terminal_;
     std::chrono::steady_clock::time_point last_{};
 };
@@ -359,7 +359,7 @@ int runRecord(const RecordOptions& options)
     client.setCancelFd(signals.fd());
 
     const std::string calibration_text = serviceCalibration(client);
-    bool calibration_written = false;   // calibration.yaml, or camera_info in the bag
+    bool calibration_written = false; // calibration.yaml, or camera_info in the bag
     std::optional<RecordingWriter> csv;
     std::optional<McapRecordingWriter> bag;
     PairWriter::WriteFn write;
@@ -439,8 +439,7 @@ int runRecord(const RecordOptions& options)
             } else {
                 queue.giveBack(*slot);
             }
-            progress.update(counts, pair_writer.written(), queue.queued(), queue.capacity(),
-                            false);
+            progress.update(counts, pair_writer.written(), queue.queued(), queue.capacity(), false);
         }
     } catch (const ClientCancelled&) {
         ending = Ending::Signal;
@@ -487,16 +486,14 @@ int runRecord(const RecordOptions& options)
     } else {
         fmt::print("recorded {} pairs to {} ({} dropped: {} skipped by the service, {} with the "
                    "queue full)\n",
-                   written, options.out_dir, dropped, counts.service_skipped,
-                   counts.queue_dropped);
+                   written, options.out_dir, dropped, counts.service_skipped, counts.queue_dropped);
     }
     switch (ending) {
     case Ending::WriteFailed:
         fmt::print(stderr, "stereoctl: recording stopped: {}\n", write_error);
         return kExitUsage;
     case Ending::ServiceGone:
-        fmt::print(stderr, "stereoctl: recording ended, the service went away: {}\n",
-                   gone_reason);
+        fmt::print(stderr, "stereoctl: recording ended, the service went away: {}\n", gone_reason);
         return kExitUnreachable;
     case Ending::Frames:
     case Ending::Signal:

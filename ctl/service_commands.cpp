@@ -183,9 +183,8 @@ int runDistance(const DistanceOptions& options)
     const json reply = client.request(request);
     const json& reading = member(reply, "reading");
     if (!reading.is_object()) {
-        throw ClientError("the distance reply from " + options.service.socket_path +
-                              " has no reading object",
-                          0);
+        throw ClientError(
+            "the distance reply from " + options.service.socket_path + " has no reading object", 0);
     }
     if (options.json) {
         fmt::print("{}\n", reading.dump());
@@ -276,9 +275,8 @@ int runSnapshot(const SnapshotOptions& options)
     const json reply = client.request({{"cmd", "snapshot"}, {"items", items}});
     const json& payloads = member(reply, "payloads");
     if (!payloads.is_array()) {
-        throw ClientError("the snapshot reply from " + options.service.socket_path +
-                              " has no payloads list",
-                          0);
+        throw ClientError(
+            "the snapshot reply from " + options.service.socket_path + " has no payloads list", 0);
     }
 
     // Every payload is read off the socket before anything is written, so that a slow
@@ -335,7 +333,7 @@ int runSnapshot(const SnapshotOptions& options)
     const std::string frame = number(reply, "frame", 0);
     if (want_depth) {
         cv::Mat depth_m;
-        depth_mm.convertTo(depth_m, CV_32FC1, 1e-3);   // 0 (invalid) stays 0
+        depth_mm.convertTo(depth_m, CV_32FC1, 1e-3); // 0 (invalid) stays 0
         if (!options.depth_path.empty()) {
             writeDepthPng(options.depth_path, depth_m);
             fmt::print("wrote depth {} ({}x{}, frame {})\n", options.depth_path, depth_m.cols,
@@ -350,8 +348,8 @@ int runSnapshot(const SnapshotOptions& options)
     }
     if (want_disparity) {
         writeDisparity(options.disparity_path, disparity);
-        fmt::print("wrote disparity {} ({}x{}, frame {})\n", options.disparity_path,
-                   disparity.cols, disparity.rows, frame);
+        fmt::print("wrote disparity {} ({}x{}, frame {})\n", options.disparity_path, disparity.cols,
+                   disparity.rows, frame);
     }
     if (want_left) {
         writeImagePng(options.left_path, left);

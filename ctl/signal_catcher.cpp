@@ -1,13 +1,13 @@
 #include "ctl/signal_catcher.hpp"
 
+#include <cerrno>
+#include <stdexcept>
+#include <system_error>
+
 #include <poll.h>
 #include <pthread.h>
 #include <sys/signalfd.h>
 #include <unistd.h>
-
-#include <cerrno>
-#include <stdexcept>
-#include <system_error>
 
 namespace stereod {
 

@@ -11,7 +11,7 @@ namespace stereod {
 // Blocks SIGINT and SIGTERM and takes them through a signalfd instead; restores the mask
 // on destruction. Throws std::runtime_error (with the errno text) when it cannot.
 class SignalCatcher {
-public:
+  public:
     SignalCatcher();
     ~SignalCatcher();
     SignalCatcher(const SignalCatcher&) = delete;
@@ -24,7 +24,7 @@ public:
     // looks at the descriptor when it has to wait, and a busy stream may never make it.
     bool pending() const;
 
-private:
+  private:
     sigset_t signals_{};
     sigset_t previous_{};
     int fd_ = -1;

@@ -6,8 +6,8 @@
 #include <string>
 
 #include <fmt/format.h>
-#include <opencv2/imgproc.hpp>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "ctl/client.hpp"
 #include "ctl/commands.hpp"
@@ -107,7 +107,7 @@ void drawPicture(ProtocolClient& client, const json& reply, const std::string& p
     const double f = camera["focal_px"].get<double>();
     const double cx = camera["cx_px"].get<double>();
     const double cy = camera["cy_px"].get<double>();
-    constexpr double kNearPlane = 0.05;   // m: edges are cut where they pass behind this
+    constexpr double kNearPlane = 0.05; // m: edges are cut where they pass behind this
     const auto optical = [&](const cv::Vec3d& base) {
         return base_to_optical * (base - camera_pose.translation_m);
     };
@@ -123,10 +123,10 @@ void drawPicture(ProtocolClient& client, const json& reply, const std::string& p
         const cv::Vec3d hi = vec3(zone.value("max_m", json()));
         cv::Vec3d corners[8];
         for (int i = 0; i < 8; ++i)
-            corners[i] = optical({(i & 1) ? hi[0] : lo[0], (i & 2) ? hi[1] : lo[1],
-                                  (i & 4) ? hi[2] : lo[2]});
+            corners[i] = optical(
+                {(i & 1) ? hi[0] : lo[0], (i & 2) ? hi[1] : lo[1], (i & 4) ? hi[2] : lo[2]});
         cv::Point label(picture.cols, picture.rows);
-        bool in_view = false;   // a label only for a zone the picture shows
+        bool in_view = false; // a label only for a zone the picture shows
         const cv::Rect2d image(0, 0, picture.cols, picture.rows);
         for (int a = 0; a < 8; ++a)
             for (int bit = 1; bit < 8; bit <<= 1) {

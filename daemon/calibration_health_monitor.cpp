@@ -1,13 +1,12 @@
 #include "daemon/calibration_health_monitor.hpp"
 
-#include <sys/resource.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 
 #include <spdlog/spdlog.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include "capture/frame.hpp"
 
@@ -132,9 +131,10 @@ void CalibrationHealthMonitor::measureOffered()
     std::vector<std::pair<double, double>> recent;
     for (const Sample& s : history_)
         if (stamp_ns_ - s.stamp_ns <= kTrendWindowNs)
-            recent.emplace_back(static_cast<double>(s.stamp_ns - stamp_ns_) / 60e9, s.row_offset_px);
-    const bool spans = recent.size() >= 3 &&
-                       (recent.back().first - recent.front().first) * 60.0 >= 10.0;
+            recent.emplace_back(static_cast<double>(s.stamp_ns - stamp_ns_) / 60e9,
+                                s.row_offset_px);
+    const bool spans =
+        recent.size() >= 3 && (recent.back().first - recent.front().first) * 60.0 >= 10.0;
 
     HealthState previous;
     {

@@ -27,20 +27,20 @@ namespace stereod {
 struct HealthReport {
     bool enabled = false;
     HealthState state = HealthState::Unknown;
-    std::string reason = "no_check_yet";   // see HealthMeasurement::reason
+    std::string reason = "no_check_yet"; // see HealthMeasurement::reason
     int matches = 0;
-    double row_offset_px = 0.0;            // signed median, right row - left row
+    double row_offset_px = 0.0; // signed median, right row - left row
     double row_offset_p90_px = 0.0;
     // Change of the row offset per minute, from the checks of the last minutes (0 with
     // fewer than three checks ten seconds apart).
     double trend_px_per_min = 0.0;
     uint64_t checks = 0;
-    int64_t checked_stamp_ns = 0;          // capture stamp of the pair last checked
-    double check_ms = 0.0;                 // what the last check cost, on its own thread
+    int64_t checked_stamp_ns = 0; // capture stamp of the pair last checked
+    double check_ms = 0.0;        // what the last check cost, on its own thread
 };
 
 class CalibrationHealthMonitor {
-public:
+  public:
     // interval_s <= 0: no checks (state unknown, reason "off").
     explicit CalibrationHealthMonitor(double interval_s);
     ~CalibrationHealthMonitor();
@@ -60,21 +60,21 @@ public:
 
     void setInterval(double interval_s);
 
-private:
+  private:
     void run();
     void measureOffered();
 
     std::atomic<int64_t> interval_ns_;
     std::atomic<int64_t> next_due_ns_{0};
-    std::atomic<bool> busy_{false};          // a pair is waiting or being measured
+    std::atomic<bool> busy_{false}; // a pair is waiting or being measured
     std::atomic<HealthState> state_{HealthState::Unknown};
     std::atomic<double> row_offset_px_{0.0};
 
     mutable std::mutex mutex_;
-    std::condition_variable wake_;           // a pair was offered, or stop
-    bool stop_ = false;                      // guarded by mutex_
-    bool ready_ = false;                     // guarded by mutex_: an offered pair is copied
-    HealthReport report_;                    // guarded by mutex_
+    std::condition_variable wake_; // a pair was offered, or stop
+    bool stop_ = false;            // guarded by mutex_
+    bool ready_ = false;           // guarded by mutex_: an offered pair is copied
+    HealthReport report_;          // guarded by mutex_
 
     // Owned by whoever holds busy_: the worker fills them, the thread measures them.
     cv::Mat left_, right_;
@@ -85,7 +85,7 @@ private:
         int64_t stamp_ns;
         double row_offset_px;
     };
-    std::vector<Sample> history_;            // recent checks, for the trend
+    std::vector<Sample> history_; // recent checks, for the trend
     std::thread thread_;
 };
 

@@ -29,8 +29,8 @@ void blockSignalsBeforeLibraries(int, char**, char**)
     stereod::blockServiceSignals();
 }
 
-[[gnu::section(".preinit_array"), gnu::used]] void (*const kBlockSignalsEarly)(int, char**, char**) =
-    &blockSignalsBeforeLibraries;
+[[gnu::section(".preinit_array"),
+  gnu::used]] void (*const kBlockSignalsEarly)(int, char**, char**) = &blockSignalsBeforeLibraries;
 
 int exitCode(ExitCode code)
 {
@@ -55,8 +55,9 @@ int checkConfig(const std::string& path)
         return exitCode(ExitCode::InvalidConfig);
     }
     if (calibration_path.empty())
-        std::cout << path << ": valid (no calibration named: the processing settings are "
-                             "checked against the frames at start-up)\n";
+        std::cout << path
+                  << ": valid (no calibration named: the processing settings are "
+                     "checked against the frames at start-up)\n";
     else
         std::cout << path << ": valid with the calibration " << calibration_path << '\n';
     return exitCode(ExitCode::Ok);
@@ -111,8 +112,9 @@ int main(int argc, char** argv)
     // the default path): refused here.
     const CLI::Validator non_empty_path(
         [](std::string& value) {
-            return value.empty() ? std::string("an empty path; leave the option out for the default")
-                                 : std::string();
+            return value.empty()
+                       ? std::string("an empty path; leave the option out for the default")
+                       : std::string();
         },
         "PATH");
     for (CLI::Option* option :
@@ -125,8 +127,8 @@ int main(int argc, char** argv)
     auto* list_option = app.add_flag("--list-devices", list_devices,
                                      "list the V4L2 cameras (formats, sizes, frame rates, "
                                      "/dev/v4l/by-id paths) and exit: 0 found, 1 none");
-    list_option->excludes(config_option, check_option, replay_option, calib_option,
-                          socket_option, level_option);
+    list_option->excludes(config_option, check_option, replay_option, calib_option, socket_option,
+                          level_option);
     app.footer("Exit codes: 0 ok; 1 failure while running; 2 bad arguments; 3 invalid "
                "configuration; 4 calibration problem; 5 source problem; 6 socket problem.");
 

@@ -236,12 +236,13 @@ std::size_t formatReasonMessage(const Reading& reading, char* buffer, std::size_
                                 reasonText(reading.reason), reading.calibration_row_offset_px);
         break;
     case NoReadingReason::NearerThanRange:
-        written = std::snprintf(buffer, size,
-                                "%s: nearer than %.3f m (%.1f %% of the region at the range's near "
-                                "limit); raise matcher.num_disparities or lower matcher.min_depth_m "
-                                "to measure it",
-                                reasonText(reading.reason), reading.nearer_than_m,
-                                100.0 * reading.range_limit_fraction);
+        written =
+            std::snprintf(buffer, size,
+                          "%s: nearer than %.3f m (%.1f %% of the region at the range's near "
+                          "limit); raise matcher.num_disparities or lower matcher.min_depth_m "
+                          "to measure it",
+                          reasonText(reading.reason), reading.nearer_than_m,
+                          100.0 * reading.range_limit_fraction);
         break;
     default:
         written = std::snprintf(buffer, size, "%s", reasonText(reading.reason));
@@ -324,9 +325,8 @@ const char* snapshotItemName(SnapshotItem item) noexcept
 
 const std::vector<std::string>& knownCommands()
 {
-    static const std::vector<std::string> names = {"hello",    "distance",  "status",
-                                                   "snapshot", "subscribe", "reload",
-                                                   "calibration", "zones"};
+    static const std::vector<std::string> names = {
+        "hello", "distance", "status", "snapshot", "subscribe", "reload", "calibration", "zones"};
     return names;
 }
 
@@ -338,9 +338,8 @@ const std::vector<std::string>& knownStreams()
 
 const std::vector<std::string>& knownSnapshotItems()
 {
-    static const std::vector<std::string> names = {"left",     "disparity", "depth",
-                                                   "cloud",    "raw_left",  "raw_right",
-                                                   "confidence"};
+    static const std::vector<std::string> names = {"left",     "disparity", "depth",     "cloud",
+                                                   "raw_left", "raw_right", "confidence"};
     return names;
 }
 

@@ -69,9 +69,8 @@ const PublishedFrame* Publisher::latest() noexcept
 void Publisher::wantRawUntil(int64_t deadline_ns) noexcept
 {
     int64_t current = raw_wanted_until_ns_.load(std::memory_order_relaxed);
-    while (current < deadline_ns &&
-           !raw_wanted_until_ns_.compare_exchange_weak(current, deadline_ns,
-                                                       std::memory_order_relaxed)) {
+    while (current < deadline_ns && !raw_wanted_until_ns_.compare_exchange_weak(
+                                        current, deadline_ns, std::memory_order_relaxed)) {
     }
 }
 

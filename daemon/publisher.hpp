@@ -50,12 +50,12 @@ class FixedText {
 
 // The worker's counters and rolling means, as of the frame they travel with.
 struct PipelineStats {
-    uint64_t frames = 0;            // pairs processed since start
-    uint64_t bad_frames = 0;        // pairs that gave a bad_frame reading
-    uint64_t out_of_sync = 0;       // pairs whose skew exceeded source.max_skew_ms
-    double fps = 0.0;               // processed pairs per second over the last frames
-    StageTimings stage_mean_ms;     // mean of each stage over the last frames, ms
-    double publish_mean_ms = 0.0;   // mean of the publish stage (depth to mm, hand-off)
+    uint64_t frames = 0;          // pairs processed since start
+    uint64_t bad_frames = 0;      // pairs that gave a bad_frame reading
+    uint64_t out_of_sync = 0;     // pairs whose skew exceeded source.max_skew_ms
+    double fps = 0.0;             // processed pairs per second over the last frames
+    StageTimings stage_mean_ms;   // mean of each stage over the last frames, ms
+    double publish_mean_ms = 0.0; // mean of the publish stage (depth to mm, hand-off)
     // From a pair's capture stamp to its result's publication, over the last pairs, ms.
     double latency_p50_ms = 0.0;
     double latency_p99_ms = 0.0;
@@ -67,18 +67,18 @@ struct PipelineStats {
 // while raw frames are wanted (Publisher::wantRawUntil()). The buffers keep their size
 // from frame to frame, so copying allocates only for the first frames of a size.
 struct RawPair {
-    bool present = false;     // false: the pair was not copied (nobody asked for raw frames)
-    cv::Mat left;             // CV_8UC1, continuous
-    cv::Mat right;            // CV_8UC1, continuous
-    int64_t left_stamp_ns = 0;  // each camera's own capture stamp (Frame::source_stamp_ns)
+    bool present = false;      // false: the pair was not copied (nobody asked for raw frames)
+    cv::Mat left;              // CV_8UC1, continuous
+    cv::Mat right;             // CV_8UC1, continuous
+    int64_t left_stamp_ns = 0; // each camera's own capture stamp (Frame::source_stamp_ns)
     int64_t right_stamp_ns = 0;
 };
 
 // One processed pair, as the I/O thread needs it. Every buffer keeps its capacity from
 // frame to frame, so a slot allocates only for the first frames of a size.
 struct PublishedFrame {
-    DepthResult result;       // the chain's output; result.reading is the reading
-    cv::Mat depth_mm;         // CV_16UC1, millimetres, 0 = invalid (u16_mm payload)
+    DepthResult result; // the chain's output; result.reading is the reading
+    cv::Mat depth_mm;   // CV_16UC1, millimetres, 0 = invalid (u16_mm payload)
     // Whether depth_mm holds this pair's depth. False when it was cleared (a bad frame, a
     // pair out of sync: depth the reading refuses to trust) or never made (uncalibrated).
     // A reading without a distance for want of data in the region (too few valid pixels,
@@ -89,11 +89,11 @@ struct PublishedFrame {
     int64_t published_ns = 0; // CLOCK_MONOTONIC when published, set by publish()
     FixedText reason_message; // why there is no reading, with numbers; may be empty
     PipelineStats stats;
-    RawPair raw;              // the pair as captured, when raw frames were wanted
+    RawPair raw; // the pair as captured, when raw frames were wanted
     // The keep-out zones of this pair (empty when none are configured); each keeps its
     // name's buffer from frame to frame.
     std::vector<ZoneReading> zones;
-    CameraPose camera_pose;   // robot.camera_pose in force for this pair
+    CameraPose camera_pose; // robot.camera_pose in force for this pair
 };
 
 class Publisher {

@@ -19,8 +19,8 @@
 #include <systemd/sd-daemon.h>
 #include <unistd.h>
 
-#include "daemon/json_writer.hpp"
 #include "daemon/camera_source_factory.hpp"
+#include "daemon/json_writer.hpp"
 #include "pipeline/calibration_formats.hpp"
 #include "replay/recording.hpp"
 #include "replay/replay_source.hpp"
@@ -353,8 +353,8 @@ void Service::describe(Json& status, const PublishedFrame* latest, const SourceH
                        int64_t now_ns)
 {
     status["uptime_s"] = roundTo(static_cast<double>(now_ns - started_ns_) / 1e9, 1);
-    status["state"] = health.down     ? "source_down"
-                      : !calibration_ ? "uncalibrated"
+    status["state"] = health.down         ? "source_down"
+                      : !calibration_     ? "uncalibrated"
                       : latest != nullptr ? "running"
                                           : "starting";
 
@@ -532,8 +532,8 @@ ReloadOutcome Service::reloadConfig()
     if (!outcome.ok) {
         spdlog::error("reload refused, the running configuration stays in force: {}",
                       outcome.message);
-        last_error_ = "reload refused, the running configuration stays in force: " +
-                      outcome.message;
+        last_error_ =
+            "reload refused, the running configuration stays in force: " + outcome.message;
     } else {
         spdlog::info("configuration reloaded from {}: changed: [{}]; need a restart: [{}]",
                      options_.config_path, fmt::join(outcome.changed, ", "),
@@ -623,8 +623,8 @@ std::string checkConfiguration(const std::string& path)
     const StereoCalibration calibration = loadCalibrationFile(calibration_path, text);
     const std::string problem = processingProblem(config.processing, calibration, path);
     if (!problem.empty())
-        throw StartupError(ExitCode::InvalidConfig, problem + " (calibration " +
-                                                        calibration_path + ")");
+        throw StartupError(ExitCode::InvalidConfig,
+                           problem + " (calibration " + calibration_path + ")");
     return calibration_path;
 }
 
@@ -640,8 +640,7 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle
             validateConfig(config);
         }
     } catch (const ConfigError& e) {
-        throw StartupError(exitCodeFor(e),
-                           std::string("invalid configuration:\n") + e.what());
+        throw StartupError(exitCodeFor(e), std::string("invalid configuration:\n") + e.what());
     } catch (const std::exception& e) {
         throw StartupError(ExitCode::InvalidConfig,
                            std::string("cannot read the configuration: ") + e.what());
@@ -649,8 +648,8 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle
     applyLogLevel(config.log_level);
 
     std::unique_ptr<FrameSource> source;
-    std::string source_name;            // for messages: the recording or the cameras
-    std::string recording_calibration;  // a replay's own calibration.yaml, if any
+    std::string source_name;           // for messages: the recording or the cameras
+    std::string recording_calibration; // a replay's own calibration.yaml, if any
     // A replayed bag's camera_info pair, if any: the calibration when none is given.
     std::optional<std::pair<ros2::CameraInfo, ros2::CameraInfo>> bag_camera_info;
     if (config.source.kind == SourceKind::Replay) {
@@ -695,19 +694,18 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle
     std::string calibration_text;
     if (!calibration_path.empty()) {
         calibration = loadCalibrationFile(calibration_path, calibration_text);
-        spdlog::info("calibration {}: {}, {}x{}, focal {:.1f} px, baseline {:.4f} m",
-                     calibration_path,
-                     calibration->kind == StereoCalibration::Kind::Full ? "full" : "rectified-only",
-                     calibration->rectified.image_size.width,
-                     calibration->rectified.image_size.height, calibration->rectified.focal_px,
-                     calibration->rectified.baseline_m);
+        spdlog::info(
+            "calibration {}: {}, {}x{}, focal {:.1f} px, baseline {:.4f} m", calibration_path,
+            calibration->kind == StereoCalibration::Kind::Full ? "full" : "rectified-only",
+            calibration->rectified.image_size.width, calibration->rectified.image_size.height,
+            calibration->rectified.focal_px, calibration->rectified.baseline_m);
     } else if (bag_camera_info) {
         const std::string origin = source_name + " (camera_info)";
         try {
-            calibration = calibrationFromRosCameraInfo(
-                rosCameraInfoFromMessage(bag_camera_info->first),
-                rosCameraInfoFromMessage(bag_camera_info->second), origin + " left",
-                origin + " right");
+            calibration =
+                calibrationFromRosCameraInfo(rosCameraInfoFromMessage(bag_camera_info->first),
+                                             rosCameraInfoFromMessage(bag_camera_info->second),
+                                             origin + " left", origin + " right");
             calibration_text = formatCalibration(*calibration, origin);
         } catch (const std::exception& e) {
             throw StartupError(ExitCode::Calibration, e.what());

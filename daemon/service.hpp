@@ -175,7 +175,7 @@ class Service final : private ServerBackend {
     SystemdNotifier notifier_;
     // When the event loop last ran its timer, for the watchdog's pinger thread.
     std::atomic<int64_t> last_tick_ns_{0};
-    WatchdogPinger watchdog_pinger_; // after notifier_ and last_tick_ns_, which it uses
+    WatchdogPinger watchdog_pinger_;     // after notifier_ and last_tick_ns_, which it uses
     SourceCounterWatch source_counters_; // bad/dropped/unpaired frames into the log
     std::string last_error_; // the newest error for STATUS= (a refused reload), or empty
     int64_t stop_requested_ns_ = 0;

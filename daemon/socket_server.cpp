@@ -920,9 +920,10 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
                 continue;
             // The raw stream is limited only by the subscriber's own max_hz: a recorder
             // wants every pair.
-            const double config_hz = is_raw     ? 0.0
-                                     : is_depth ? options_.publish.depth_max_hz
-                                                : options_.publish.readings_max_hz;   // readings, zones
+            const double config_hz = is_raw ? 0.0
+                                     : is_depth
+                                         ? options_.publish.depth_max_hz
+                                         : options_.publish.readings_max_hz; // readings, zones
             // Frames this thread never saw (it was busy) are lost to a stream that wants
             // every frame.
             const bool every_frame = config_hz <= 0.0 && !subscription.max_hz;

@@ -28,8 +28,8 @@
 #include <sys/types.h>
 
 #include "config/service_config.hpp"
-#include "daemon/log_limiter.hpp"
 #include "daemon/json_writer.hpp"
+#include "daemon/log_limiter.hpp"
 #include "daemon/protocol.hpp"
 #include "daemon/publisher.hpp"
 #include "daemon/unique_fd.hpp"
@@ -236,8 +236,8 @@ class SocketServer {
     JsonObjectWriter openDirectReply(Client& client, const std::optional<Json>& id);
 
     // Answers a snapshot from `frame` (its raw frames must be present when asked for).
-    void sendSnapshot(Client& client, const SnapshotRequest& request,
-                      const std::optional<Json>& id, const PublishedFrame& frame);
+    void sendSnapshot(Client& client, const SnapshotRequest& request, const std::optional<Json>& id,
+                      const PublishedFrame& frame);
     // Answers the client's waiting snapshot from `frame` (nullptr: with `error`), then
     // serves the requests that queued up behind it.
     void finishWaiting(Client& client, const PublishedFrame* frame, std::string_view error);

@@ -6,9 +6,7 @@
 
 namespace stereod {
 
-SourceCounterWatch::SourceCounterWatch(int64_t interval_ns) noexcept : interval_ns_(interval_ns)
-{
-}
+SourceCounterWatch::SourceCounterWatch(int64_t interval_ns) noexcept : interval_ns_(interval_ns) {}
 
 bool SourceCounterWatch::due(int64_t now_ns) const noexcept
 {
@@ -35,8 +33,7 @@ std::vector<SourceCounterWatch::Report> SourceCounterWatch::look(const SourceSta
                                                                  int64_t now_ns)
 {
     std::vector<Report> reports;
-    const double seconds =
-        looked_ ? static_cast<double>(now_ns - last_look_ns_) / 1e9 : 0.0;
+    const double seconds = looked_ ? static_cast<double>(now_ns - last_look_ns_) / 1e9 : 0.0;
     std::vector<Counts> counts;
     counts.reserve(status.cameras.size());
     for (const CameraStatus& camera : status.cameras) {

@@ -131,8 +131,7 @@ void SystemdNotifier::stopping()
     send("STOPPING=1\nSTATUS=stopping");
 }
 
-WatchdogPinger::WatchdogPinger(SystemdNotifier& notifier,
-                               std::function<bool(int64_t now_ns)> alive)
+WatchdogPinger::WatchdogPinger(SystemdNotifier& notifier, std::function<bool(int64_t now_ns)> alive)
     : notifier_(notifier), alive_(std::move(alive))
 {
 }

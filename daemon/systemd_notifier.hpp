@@ -31,10 +31,10 @@
 namespace stereod {
 
 // The watchdog rule. The service is alive when its event loop turns (it ran its timer
-// within one watchdog interval) and the worker is not stuck: it is waiting for a pair (`busy_since_ns` = 0), or it
-// has been on the pair in hand for less than `stuck_after_ns`. A source that is idle for
-// a legitimate reason (a replay that finished, a camera unplugged) leaves the worker
-// waiting: the service is alive and keeps pinging, and says in STATUS= why there is no
+// within one watchdog interval) and the worker is not stuck: it is waiting for a pair
+// (`busy_since_ns` = 0), or it has been on the pair in hand for less than `stuck_after_ns`. A
+// source that is idle for a legitimate reason (a replay that finished, a camera unplugged) leaves
+// the worker waiting: the service is alive and keeps pinging, and says in STATUS= why there is no
 // reading.
 bool workerMakesProgress(int64_t busy_since_ns, int64_t now_ns, int64_t stuck_after_ns) noexcept;
 
@@ -43,12 +43,12 @@ struct StatusFacts {
     bool source_down = false;
     std::string_view down_reason; // when source_down
     bool uncalibrated = false;
-    bool have_frame = false;      // a result has been published
-    double fps = 0.0;             // processing rate now (0 when frames stopped)
-    uint64_t frame = 0;           // the newest result's frame number
-    uint64_t clients = 0;         // open connections
+    bool have_frame = false; // a result has been published
+    double fps = 0.0;        // processing rate now (0 when frames stopped)
+    uint64_t frame = 0;      // the newest result's frame number
+    uint64_t clients = 0;    // open connections
     const SourceStatus* source = nullptr;
-    std::string_view last_error;  // the newest error worth a person's eye, or empty
+    std::string_view last_error; // the newest error worth a person's eye, or empty
 };
 
 // "running: 9.8 fps, frame 1234, 2 clients; left streaming, right streaming; last error:

@@ -310,8 +310,9 @@ void Worker::processPair(StereoPair& pair)
         for (std::size_t i = 0; i < n; ++i)
             latency_sorted_[i] = latency_ms_[i];
         const auto percentile = [&](double p) {
-            const auto nth = latency_sorted_.begin() +
-                             static_cast<std::ptrdiff_t>(std::floor(p * static_cast<double>(n - 1)));
+            const auto nth =
+                latency_sorted_.begin() +
+                static_cast<std::ptrdiff_t>(std::floor(p * static_cast<double>(n - 1)));
             std::nth_element(latency_sorted_.begin(), nth,
                              latency_sorted_.begin() + static_cast<std::ptrdiff_t>(n));
             return *nth;

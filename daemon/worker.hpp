@@ -136,7 +136,7 @@ class Worker {
     bool finished() const noexcept { return finished_.load(std::memory_order_acquire); }
 
   private:
-    static constexpr std::size_t kWindow = 32; // frames in the rolling means
+    static constexpr std::size_t kWindow = 32;         // frames in the rolling means
     static constexpr std::size_t kLatencyWindow = 256; // frames in the latency percentiles
 
     void run();
@@ -162,8 +162,8 @@ class Worker {
     PipelineStats stats_;
     RecentValues<double, kWindow> rectify_ms_, match_ms_, depth_ms_, nearest_ms_, cloud_ms_,
         publish_ms_;
-    RecentValues<int64_t, kWindow> processed_ns_; // when each pair was done, for the rate
-    RecentValues<double, kLatencyWindow> latency_ms_; // capture stamp to publication
+    RecentValues<int64_t, kWindow> processed_ns_;         // when each pair was done, for the rate
+    RecentValues<double, kLatencyWindow> latency_ms_;     // capture stamp to publication
     std::array<double, kLatencyWindow> latency_sorted_{}; // scratch for the percentiles
     LogLimiter log_limiter_; // failing pairs: one line per 5 s, the rest counted
 };

@@ -41,9 +41,9 @@ BoardPose boardPoseFromCorners(const StereoCalibration& calibration, const Chess
                                     "distortion of the raw left camera), got a rectified-only one");
     if (board.cols < 2 || board.rows < 2 || !(board.square_m > 0.0))
         throw std::invalid_argument("board pose: board must have at least 2x2 inner corners and "
-                                    "a square size > 0, got " + std::to_string(board.cols) + "x" +
-                                    std::to_string(board.rows) + " with " +
-                                    std::to_string(board.square_m) + " m");
+                                    "a square size > 0, got " +
+                                    std::to_string(board.cols) + "x" + std::to_string(board.rows) +
+                                    " with " + std::to_string(board.square_m) + " m");
     const size_t count = static_cast<size_t>(board.cols) * static_cast<size_t>(board.rows);
     if (left_corners.size() != count)
         throw std::invalid_argument("board pose: " + std::to_string(left_corners.size()) +
@@ -81,7 +81,8 @@ BoardPose boardPoseFromCorners(const StereoCalibration& calibration, const Chess
     BoardPose pose;
     pose.normal = to_rectified * cv::Vec3d(0.0, 0.0, 1.0);
     pose.offset_m = pose.normal.dot(origin);
-    pose.centre_m = toCamera(onBoard((board.cols - 1) / 2.0, (board.rows - 1) / 2.0, board.square_m));
+    pose.centre_m =
+        toCamera(onBoard((board.cols - 1) / 2.0, (board.rows - 1) / 2.0, board.square_m));
     pose.reprojection_rms_px = std::sqrt(squared / static_cast<double>(count));
     const RectifiedGeometry& g = calibration.rectified;
     const std::array<cv::Point3d, 4> outline = {
@@ -89,7 +90,8 @@ BoardPose boardPoseFromCorners(const StereoCalibration& calibration, const Chess
         onBoard(board.cols, board.rows, board.square_m), onBoard(-1, board.rows, board.square_m)};
     for (size_t i = 0; i < outline.size(); ++i) {
         const cv::Vec3d x = toCamera(outline[i]);
-        pose.outline_px[i] = {g.focal_px * x[0] / x[2] + g.cx_px, g.focal_px * x[1] / x[2] + g.cy_px};
+        pose.outline_px[i] = {g.focal_px * x[0] / x[2] + g.cx_px,
+                              g.focal_px * x[1] / x[2] + g.cy_px};
     }
     return pose;
 }
@@ -117,9 +119,8 @@ std::optional<BoardDepthInRegion> boardDepthInRegion(const BoardPose& pose,
         for (int x = 0; x < mask.cols; ++x) {
             if (!on_board[x])
                 continue;
-            const double z = pose.depthAt({static_cast<double>(region.x + x),
-                                           static_cast<double>(region.y + y)},
-                                          geometry);
+            const double z = pose.depthAt(
+                {static_cast<double>(region.x + x), static_cast<double>(region.y + y)}, geometry);
             if (z > 0.0)
                 depths.push_back(z);
         }
@@ -134,8 +135,8 @@ std::optional<BoardDepthInRegion> boardDepthInRegion(const BoardPose& pose,
     const auto [nearest_it, farthest_it] = std::minmax_element(depths.begin(), depths.end());
     result.nearest_m = *nearest_it;
     result.farthest_m = *farthest_it;
-    const auto nth = depths.begin() +
-                     static_cast<std::ptrdiff_t>(percentileIndex(nearest.percentile, depths.size()));
+    const auto nth = depths.begin() + static_cast<std::ptrdiff_t>(
+                                          percentileIndex(nearest.percentile, depths.size()));
     std::nth_element(depths.begin(), nth, depths.end());
     result.depth_m = *nth;
     return result;

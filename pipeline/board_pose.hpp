@@ -26,14 +26,14 @@ namespace stereod {
 // The board's plane in the frame of the rectified left camera (x right, y down, z forward,
 // metres): the frame the service's depth map is in.
 struct BoardPose {
-    cv::Vec3d normal;                  // unit normal of the plane
-    double offset_m = 0.0;             // normal . X = offset_m for every point X of the plane
-    cv::Vec3d centre_m;                // centre of the inner corners
+    cv::Vec3d normal;      // unit normal of the plane
+    double offset_m = 0.0; // normal . X = offset_m for every point X of the plane
+    cv::Vec3d centre_m;    // centre of the inner corners
     // The printed pattern's outer edge (the inner corners' outline grown by one square on
     // every side) in the rectified left image, pixels, in order around the board. The
     // board's frame and margins, which lie beyond, are not counted as board.
     std::array<cv::Point2d, 4> outline_px;
-    double reprojection_rms_px = 0.0;  // of the corners under the pose, raw left image
+    double reprojection_rms_px = 0.0; // of the corners under the pose, raw left image
 
     // Depth (z, metres) of the plane along the ray of rectified left pixel `pixel`;
     // 0 when the ray misses the plane (parallel, or the plane behind the camera).
@@ -49,14 +49,14 @@ BoardPose boardPoseFromCorners(const StereoCalibration& calibration, const Chess
 
 // What the board's plane says the service's reading should be in a region.
 struct BoardDepthInRegion {
-    uint32_t region_pixels = 0;        // pixels of the region (NearestSettings::roi)
-    uint32_t board_pixels = 0;         // of those, the pixels on the board's pattern
-    double coverage = 0.0;             // board_pixels / region_pixels
+    uint32_t region_pixels = 0; // pixels of the region (NearestSettings::roi)
+    uint32_t board_pixels = 0;  // of those, the pixels on the board's pattern
+    double coverage = 0.0;      // board_pixels / region_pixels
     // The configured percentile (NearestSettings::percentile, the same index rule as the
     // service's nearest object) of the plane's depths at the board's pixels in the
     // region: the distance of the nearest object when the board is it.
     double depth_m = 0.0;
-    double nearest_m = 0.0;            // the plane's depth range over those pixels
+    double nearest_m = 0.0; // the plane's depth range over those pixels
     double farthest_m = 0.0;
 };
 

@@ -1,8 +1,5 @@
 #include "pipeline/calibration.hpp"
 
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <array>
 #include <cerrno>
 #include <charconv>
@@ -15,6 +12,8 @@
 #include <map>
 #include <sstream>
 
+#include <sys/stat.h>
+#include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
 namespace stereod {
@@ -58,8 +57,8 @@ std::string formatNumber(double value)
     // Plain decimals (0.0008, not 8e-04) unless they get long (1e+20, 1e-12).
     constexpr size_t kLongestPlain = 20;
     std::array<char, 400> text{};
-    const auto fixed = std::to_chars(text.data(), text.data() + text.size(), value,
-                                     std::chars_format::fixed);
+    const auto fixed =
+        std::to_chars(text.data(), text.data() + text.size(), value, std::chars_format::fixed);
     if (fixed.ec == std::errc() && static_cast<size_t>(fixed.ptr - text.data()) <= kLongestPlain)
         return std::string(text.data(), fixed.ptr);
     const auto shortest = std::to_chars(text.data(), text.data() + text.size(), value);
@@ -76,10 +75,8 @@ std::string formatNumber(double value)
 // Validation, shared by the loader and by calibrations assembled in code.
 
 class Validator {
-public:
-    Validator(const std::string& origin, const KeyLines& lines) : origin_(origin), lines_(lines)
-    {
-    }
+  public:
+    Validator(const std::string& origin, const KeyLines& lines) : origin_(origin), lines_(lines) {}
 
     [[noreturn]] void fail(const std::string& key, const std::string& problem) const
     {
@@ -245,20 +242,20 @@ public:
                        "supported");
         if (c.P2(0, 3) >= 0.0)
             fail("P2", "element (0,3) = -focal * baseline must be < 0 (the right camera on "
-                       "the right), got " + formatNumber(c.P2(0, 3)));
+                       "the right), got " +
+                           formatNumber(c.P2(0, 3)));
         const RectifiedGeometry derived = rectifiedFromProjections(c.P1, c.P2, size);
         geometry(derived, true);
         if (std::abs(derived.baseline_m - t_norm) > kConsistencyTolerance * t_norm)
-            fail("P2", "baseline " + formatNumber(derived.baseline_m) +
-                           " m disagrees with |T| = " + formatNumber(t_norm) +
-                           " m (same unit expected in both)");
+            fail("P2", "baseline " + formatNumber(derived.baseline_m) + " m disagrees with |T| = " +
+                           formatNumber(t_norm) + " m (same unit expected in both)");
         if (std::abs(c.Q(2, 3) - derived.focal_px) > kConsistencyTolerance * derived.focal_px)
             fail("Q", "element (2,3) " + formatNumber(c.Q(2, 3)) +
                           " should be the focal length of P1, " + formatNumber(derived.focal_px));
         const double inv_b = 1.0 / derived.baseline_m;
         if (std::abs(c.Q(3, 2) - inv_b) > kConsistencyTolerance * inv_b)
-            fail("Q", "element (3,2) " + formatNumber(c.Q(3, 2)) +
-                          " should be 1/baseline, " + formatNumber(inv_b));
+            fail("Q", "element (3,2) " + formatNumber(c.Q(3, 2)) + " should be 1/baseline, " +
+                          formatNumber(inv_b));
         if (c.rectified.focal_px != derived.focal_px || c.rectified.cx_px != derived.cx_px ||
             c.rectified.cy_px != derived.cy_px || c.rectified.baseline_m != derived.baseline_m ||
             c.rectified.doffs_px != derived.doffs_px)
@@ -287,7 +284,7 @@ public:
             geometry(c.rectified, false);
     }
 
-private:
+  private:
     const std::string& origin_;
     const KeyLines& lines_;
 };
@@ -296,7 +293,7 @@ private:
 // Parsing.
 
 class Parser {
-public:
+  public:
     explicit Parser(const std::string& origin) : origin_(origin) {}
 
     const KeyLines& lines() const { return lines_; }
@@ -437,9 +434,9 @@ public:
         const int rows = requireInteger(node, key, "rows");
         const int cols = requireInteger(node, key, "cols");
         if (rows != R || cols != C)
-            fail(node, key, "expected a " + std::to_string(R) + "x" + std::to_string(C) +
-                                " matrix, got rows " + std::to_string(rows) + " cols " +
-                                std::to_string(cols));
+            fail(node, key,
+                 "expected a " + std::to_string(R) + "x" + std::to_string(C) +
+                     " matrix, got rows " + std::to_string(rows) + " cols " + std::to_string(cols));
         const YAML::Node data_node = require(node, key, "data");
         const std::vector<double> data = numbers(data_node, key + ".data");
         if (data.size() != static_cast<size_t>(R * C))
@@ -568,7 +565,7 @@ public:
         fail(kind, "kind", "expected 'full' or 'rectified', got '" + kind_text + "'");
     }
 
-private:
+  private:
     const std::string& origin_;
     KeyLines lines_;
 };
@@ -577,7 +574,7 @@ private:
 // Writing.
 
 class Writer {
-public:
+  public:
     std::string text() const { return out_.str(); }
 
     void line(const std::string& s) { out_ << s << '\n'; }
@@ -592,8 +589,7 @@ public:
     }
 
     template <int R, int C>
-    void matrix(const std::string& indent, const std::string& key,
-                const cv::Matx<double, R, C>& m)
+    void matrix(const std::string& indent, const std::string& key, const cv::Matx<double, R, C>& m)
     {
         out_ << indent << key << ":\n";
         out_ << indent << "  rows: " << R << "\n";
@@ -673,7 +669,7 @@ public:
                  ", square_m: " + formatNumber(c.board->square_m) + "}");
     }
 
-private:
+  private:
     std::ostringstream out_;
 };
 
@@ -707,8 +703,9 @@ StereoCalibration parseCalibration(const std::string& yaml_text, const std::stri
 {
     // OpenCV's FileStorage writes "%YAML:1.0", which is not YAML 1.2: say what it is.
     if (yaml_text.rfind("%YAML:1.0", 0) == 0)
-        fail(origin, 1, "", "this is an OpenCV FileStorage file, not a stereod calibration; "
-                            "convert it to the layout in docs/calibration.md");
+        fail(origin, 1, "",
+             "this is an OpenCV FileStorage file, not a stereod calibration; "
+             "convert it to the layout in docs/calibration.md");
     YAML::Node root;
     try {
         root = YAML::Load(yaml_text);
@@ -812,9 +809,9 @@ void checkFrameSize(const StereoCalibration& calibration, cv::Size frame_size,
                  describeSize(expected) + " images");
 }
 
-StereoCalibration makeRectifiedCalibration(cv::Size image_size, double focal_px,
-                                           double baseline_m, std::optional<double> cx_px,
-                                           std::optional<double> cy_px, double doffs_px)
+StereoCalibration makeRectifiedCalibration(cv::Size image_size, double focal_px, double baseline_m,
+                                           std::optional<double> cx_px, std::optional<double> cy_px,
+                                           double doffs_px)
 {
     StereoCalibration c;
     c.kind = StereoCalibration::Kind::RectifiedOnly;

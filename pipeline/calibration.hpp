@@ -21,23 +21,23 @@ namespace stereod {
 
 // A calibration file that cannot be used. what() names the file, the key and the problem.
 class CalibrationError : public std::runtime_error {
-public:
+  public:
     using std::runtime_error::runtime_error;
 };
 
 // Throws CalibrationError with the message every calibration error has:
 // "origin[:line]: [key: ]problem" (line 0: none known; key empty: the file as a whole).
 // For readers of other calibration formats (pipeline/calibration_formats.hpp).
-[[noreturn]] void throwCalibrationError(const std::string& origin, int line,
-                                        const std::string& key, const std::string& problem);
+[[noreturn]] void throwCalibrationError(const std::string& origin, int line, const std::string& key,
+                                        const std::string& problem);
 
 struct CameraIntrinsics {
     cv::Matx33d camera_matrix = cv::Matx33d::eye();
-    std::vector<double> distortion;      // OpenCV order: k1 k2 p1 p2 [k3 [k4 k5 k6 ...]]
+    std::vector<double> distortion; // OpenCV order: k1 k2 p1 p2 [k3 [k4 k5 k6 ...]]
 };
 
 struct ChessboardSpec {
-    int cols = 0;                         // inner corners per row, as OpenCV counts them
+    int cols = 0; // inner corners per row, as OpenCV counts them
     int rows = 0;
     double square_m = 0.0;
 };
@@ -45,10 +45,10 @@ struct ChessboardSpec {
 // The geometry of the rectified pair: all that triangulation needs.
 struct RectifiedGeometry {
     cv::Size image_size;
-    double focal_px = 0.0;                // rectified focal length, pixels
-    double cx_px = 0.0;                   // principal point of the rectified left camera
+    double focal_px = 0.0; // rectified focal length, pixels
+    double cx_px = 0.0;    // principal point of the rectified left camera
     double cy_px = 0.0;
-    double baseline_m = 0.0;              // distance between the optical centres
+    double baseline_m = 0.0; // distance between the optical centres
     // Principal point x of the right camera minus that of the left, in pixels
     // (Middlebury's "doffs"): a pixel with disparity d lies at Z = f*B / (d + doffs).
     double doffs_px = 0.0;
@@ -68,14 +68,14 @@ struct StereoCalibration {
     // Full form only.
     CameraIntrinsics left;
     CameraIntrinsics right;
-    cv::Matx33d R = cv::Matx33d::eye();   // rotation from the left to the right camera
-    cv::Vec3d T;                          // translation, metres
+    cv::Matx33d R = cv::Matx33d::eye(); // rotation from the left to the right camera
+    cv::Vec3d T;                        // translation, metres
     cv::Matx33d R1 = cv::Matx33d::eye(), R2 = cv::Matx33d::eye();
     cv::Matx34d P1, P2;
     cv::Matx44d Q;
-    cv::Rect valid_roi_left, valid_roi_right;   // rectified pixels valid in both
-    std::optional<double> rms_px;               // reprojection RMS of the stereo calibration
-    std::optional<double> epipolar_error_px;    // mean epipolar error after calibration
+    cv::Rect valid_roi_left, valid_roi_right; // rectified pixels valid in both
+    std::optional<double> rms_px;             // reprojection RMS of the stereo calibration
+    std::optional<double> epipolar_error_px;  // mean epipolar error after calibration
     std::optional<ChessboardSpec> board;
 };
 
@@ -107,8 +107,7 @@ RectifiedGeometry rectifiedFromProjections(const cv::Matx34d& P1, const cv::Matx
                                            cv::Size image_size);
 
 // A rectified-only calibration. cx/cy default to the image centre, (size - 1) / 2.
-StereoCalibration makeRectifiedCalibration(cv::Size image_size, double focal_px,
-                                           double baseline_m,
+StereoCalibration makeRectifiedCalibration(cv::Size image_size, double focal_px, double baseline_m,
                                            std::optional<double> cx_px = std::nullopt,
                                            std::optional<double> cy_px = std::nullopt,
                                            double doffs_px = 0.0);

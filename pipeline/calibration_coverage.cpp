@@ -35,11 +35,11 @@ std::string joined(const std::vector<std::string>& names)
 
 // How far apart two appearances of a board are, by each of the duplicate test's measures.
 struct Difference {
-    double position_frac = 0.0;   // of the image's diagonal
-    double size_ratio = 0.0;      // |a - b| / max(a, b)
+    double position_frac = 0.0; // of the image's diagonal
+    double size_ratio = 0.0;    // |a - b| / max(a, b)
     double yaw_deg = 0.0;
     double pitch_deg = 0.0;
-    double roll_deg = 0.0;        // the smaller way round, modulo 180
+    double roll_deg = 0.0; // the smaller way round, modulo 180
 };
 
 Difference difference(const BoardAppearance& a, const BoardAppearance& b, cv::Size image)
@@ -79,10 +79,9 @@ BoardAppearance describeBoard(const std::vector<cv::Point2f>& corners, cv::Size 
     a.centre_frac = {sum.x / n / image_size.width, sum.y / n / image_size.height};
 
     const int cols = inner_corners.width, rows = inner_corners.height;
-    const std::vector<cv::Point2f> outline = {
-        corners[0], corners[static_cast<size_t>(cols - 1)],
-        corners[static_cast<size_t>(rows * cols - 1)],
-        corners[static_cast<size_t>((rows - 1) * cols)]};
+    const std::vector<cv::Point2f> outline = {corners[0], corners[static_cast<size_t>(cols - 1)],
+                                              corners[static_cast<size_t>(rows * cols - 1)],
+                                              corners[static_cast<size_t>((rows - 1) * cols)]};
     a.size_frac = std::sqrt(std::abs(cv::contourArea(outline)) / image_size.area());
     const cv::Point2f row = outline[1] - outline[0];
     a.roll_deg = std::atan2(row.y, row.x) * kRadToDeg;
@@ -100,17 +99,16 @@ BoardAppearance describeBoard(const std::vector<cv::Point2f>& corners, cv::Size 
             board.emplace_back(static_cast<float>(x), static_cast<float>(y));
     const cv::Mat H = cv::findHomography(board, corners, 0);
     if (H.empty())
-        return a;   // degenerate corners (all on a line): no turn to measure
+        return a; // degenerate corners (all on a line): no turn to measure
     const double f = focal_px > 0.0 ? focal_px : image_size.width;
-    const cv::Matx33d K_inv(1.0 / f, 0.0, -0.5 * (image_size.width - 1) / f,
-                            0.0, 1.0 / f, -0.5 * (image_size.height - 1) / f,
-                            0.0, 0.0, 1.0);
+    const cv::Matx33d K_inv(1.0 / f, 0.0, -0.5 * (image_size.width - 1) / f, 0.0, 1.0 / f,
+                            -0.5 * (image_size.height - 1) / f, 0.0, 0.0, 1.0);
     const cv::Matx33d M = K_inv * cv::Matx33d(H);
     const cv::Vec3d r1 = cv::normalize(cv::Vec3d(M(0, 0), M(1, 0), M(2, 0)));
     const cv::Vec3d r2 = cv::normalize(cv::Vec3d(M(0, 1), M(1, 1), M(2, 1)));
     cv::Vec3d normal = cv::normalize(r1.cross(r2));
     if (normal[2] > 0.0)
-        normal = -normal;   // towards the camera, whichever way the detector ordered corners
+        normal = -normal; // towards the camera, whichever way the detector ordered corners
     // On the plane n.X = c, depth changes along x at dZ/dX = -n_x / n_z: a board whose right
     // side is farther has n_x > 0 (with n_z < 0).
     a.yaw_deg = std::atan2(normal[0], -normal[2]) * kRadToDeg;
@@ -198,10 +196,10 @@ void CalibrationCoverage::countCorners(const std::vector<cv::Point2f>& corners,
                                        std::array<int, kGridCols * kGridRows>& cells) const
 {
     for (const cv::Point2f& c : corners) {
-        const int col = std::clamp(static_cast<int>(c.x * kGridCols / image_size_.width), 0,
-                                   kGridCols - 1);
-        const int row = std::clamp(static_cast<int>(c.y * kGridRows / image_size_.height), 0,
-                                   kGridRows - 1);
+        const int col =
+            std::clamp(static_cast<int>(c.x * kGridCols / image_size_.width), 0, kGridCols - 1);
+        const int row =
+            std::clamp(static_cast<int>(c.y * kGridRows / image_size_.height), 0, kGridRows - 1);
         ++cells[static_cast<size_t>(row * kGridCols + col)];
     }
 }
@@ -244,8 +242,8 @@ CoverageGaps CalibrationCoverage::gaps() const
 const char* CalibrationCoverage::cellName(int index)
 {
     static const char* const kNames[kGridCols * kGridRows] = {
-        "top-left", "top",    "top-right",   "left",        "centre",
-        "right",    "bottom-left", "bottom", "bottom-right"};
+        "top-left", "top",         "top-right", "left",        "centre",
+        "right",    "bottom-left", "bottom",    "bottom-right"};
     return index >= 0 && index < kGridCols * kGridRows ? kNames[index] : "?";
 }
 

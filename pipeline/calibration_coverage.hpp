@@ -96,7 +96,7 @@ struct ViewJudgement {
 // The kinds of view the accepted ones lack. Names are for people ("top-left",
 // "left edge nearer", "near").
 struct CoverageGaps {
-    std::vector<std::string> left_cells;    // cells of the left image with too few corners
+    std::vector<std::string> left_cells; // cells of the left image with too few corners
     std::vector<std::string> right_cells;
     std::vector<std::string> tilts;
     std::vector<std::string> distances;
@@ -114,7 +114,7 @@ std::string formatGaps(const CoverageGaps& gaps);
 //
 // Thread-bound: one thread judges and adds views.
 class CalibrationCoverage {
-public:
+  public:
     static constexpr int kGridCols = 3;
     static constexpr int kGridRows = 3;
     // Tilt buckets, in this order: yaw < 0, yaw > 0, pitch < 0, pitch > 0.
@@ -160,7 +160,7 @@ public:
     static const char* tiltName(int bucket);
     static const char* distanceName(int bucket);
 
-private:
+  private:
     BoardView describe(const std::vector<cv::Point2f>& left_corners,
                        const std::vector<cv::Point2f>& right_corners) const;
     void countCorners(const std::vector<cv::Point2f>& corners,

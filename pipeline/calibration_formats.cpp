@@ -10,8 +10,8 @@
 #include <vector>
 
 #include <fmt/format.h>
-#include <spdlog/spdlog.h>
 #include <opencv2/core.hpp>
+#include <spdlog/spdlog.h>
 #include <yaml-cpp/yaml.h>
 
 #include "pipeline/chessboard_calibration.hpp"
@@ -38,11 +38,9 @@ std::string readText(const std::string& path)
 // The Q that cv::stereoRectify gives for projections P1, P2 of a horizontal rig.
 cv::Matx44d disparityToDepth(const cv::Matx34d& P1, const cv::Matx34d& P2)
 {
-    const double tx = P2(0, 3) / P2(0, 0);   // -baseline
-    return {1, 0, 0, -P1(0, 2),
-            0, 1, 0, -P1(1, 2),
-            0, 0, 0, P1(0, 0),
-            0, 0, -1.0 / tx, (P1(0, 2) - P2(0, 2)) / tx};
+    const double tx = P2(0, 3) / P2(0, 0); // -baseline
+    return {1, 0, 0, -P1(0, 2), 0, 1, 0,         -P1(1, 2),
+            0, 0, 0, P1(0, 0),  0, 0, -1.0 / tx, (P1(0, 2) - P2(0, 2)) / tx};
 }
 
 // Fills what follows from the cameras and the rectification, and checks the result.
@@ -68,7 +66,7 @@ struct RosCamera {
 };
 
 class RosReader {
-public:
+  public:
     explicit RosReader(const std::string& path) : path_(path) {}
 
     RosCamera read()
@@ -105,16 +103,17 @@ public:
                      "rational_polynomial takes 8 coefficients, got " + std::to_string(n));
         } else {
             fail(path_, line(model), "distortion_model",
-                 "'" + model_name + "' is not supported: stereod undistorts with OpenCV's "
-                 "pinhole models, plumb_bob and rational_polynomial (equidistant is the "
-                 "fisheye model)");
+                 "'" + model_name +
+                     "' is not supported: stereod undistorts with OpenCV's "
+                     "pinhole models, plumb_bob and rational_polynomial (equidistant is the "
+                     "fisheye model)");
         }
         camera.rectification = matrix<3, 3>(root, "rectification_matrix");
         camera.projection = matrix<3, 4>(root, "projection_matrix");
         return camera;
     }
 
-private:
+  private:
     static int line(const YAML::Node& node) { return node ? node.Mark().line + 1 : 0; }
 
     YAML::Node require(const YAML::Node& root, const char* key) const
@@ -172,16 +171,15 @@ std::string formatList(const double* values, int count, int per_line, int indent
     std::string out = "[";
     for (int i = 0; i < count; ++i) {
         if (i > 0)
-            out += (i % per_line == 0) ? ",\n" + std::string(static_cast<size_t>(indent), ' ')
-                                       : ", ";
+            out +=
+                (i % per_line == 0) ? ",\n" + std::string(static_cast<size_t>(indent), ' ') : ", ";
         // Shortest text that reads back to the same double.
         out += fmt::format("{}", values[i]);
     }
     return out + "]";
 }
 
-template <int R, int C>
-std::string rosMatrix(const char* key, const cv::Matx<double, R, C>& m)
+template <int R, int C> std::string rosMatrix(const char* key, const cv::Matx<double, R, C>& m)
 {
     return fmt::format("{}:\n  rows: {}\n  cols: {}\n  data: {}\n", key, R, C,
                        formatList(m.val, R * C, C, 9));
@@ -193,9 +191,9 @@ std::string rosCameraText(const std::string& name, const RosCameraInfo& info)
                                    info.image_size.width, info.image_size.height, name);
     text += rosMatrix("camera_matrix", info.k);
     text += "distortion_model: " + info.distortion_model + "\n";
-    text += fmt::format("distortion_coefficients:\n  rows: 1\n  cols: {}\n  data: {}\n",
-                        info.d.size(),
-                        formatList(info.d.data(), static_cast<int>(info.d.size()), 8, 9));
+    text +=
+        fmt::format("distortion_coefficients:\n  rows: 1\n  cols: {}\n  data: {}\n", info.d.size(),
+                    formatList(info.d.data(), static_cast<int>(info.d.size()), 8, 9));
     text += rosMatrix("rectification_matrix", info.r);
     text += rosMatrix("projection_matrix", info.p);
     return text;
@@ -237,7 +235,8 @@ cv::Matx33d nearestRotation(const cv::Matx33d& r, const std::string& origin, con
     double half_unit = 0.0;
     for (const double x : r.val) {
         if (x != 0.0)
-            half_unit = std::max(half_unit, 0.5 * std::pow(10.0, std::floor(std::log10(std::abs(x))) - digits + 1));
+            half_unit = std::max(
+                half_unit, 0.5 * std::pow(10.0, std::floor(std::log10(std::abs(x))) - digits + 1));
     }
     // Each element of R^T R sums three products of elements up to 1: six rounding errors.
     const double explained = 6.0 * half_unit;
@@ -268,7 +267,7 @@ RosCameraInfo rosCamera(cv::Size size, const CameraIntrinsics& camera,
     } else {
         fail(origin, 0, "distortion",
              std::to_string(info.d.size()) + " coefficients have no ROS distortion model "
-             "(plumb_bob takes 5, rational_polynomial 8)");
+                                             "(plumb_bob takes 5, rational_polynomial 8)");
     }
     info.k = camera.camera_matrix;
     info.r = rectification;
@@ -310,7 +309,7 @@ cv::Mat readMatrix(const cv::FileStorage& fs, const std::string& path, const cha
 
 cv::FileStorage openStorage(const std::string& path)
 {
-    readText(path);   // names the file and errno when it cannot be opened
+    readText(path); // names the file and errno when it cannot be opened
     try {
         cv::FileStorage fs(path, cv::FileStorage::READ);
         if (!fs.isOpened())
@@ -331,9 +330,9 @@ std::vector<double> distortionFrom(const cv::Mat& d, const std::string& path, co
 } // namespace
 
 StereoCalibration calibrationFromRosCameraInfo(const RosCameraInfo& left,
-                                              const RosCameraInfo& right,
-                                              const std::string& left_origin,
-                                              const std::string& right_origin)
+                                               const RosCameraInfo& right,
+                                               const std::string& left_origin,
+                                               const std::string& right_origin)
 {
     if (left.image_size != right.image_size)
         fail(right_origin, 0, "image_width",
@@ -350,8 +349,9 @@ StereoCalibration calibrationFromRosCameraInfo(const RosCameraInfo& left,
         if (camera->distortion_model != "plumb_bob" &&
             camera->distortion_model != "rational_polynomial")
             fail(camera == &left ? left_origin : right_origin, 0, "distortion_model",
-                 "'" + camera->distortion_model + "' is not supported: stereod undistorts with "
-                 "OpenCV's pinhole models, plumb_bob and rational_polynomial");
+                 "'" + camera->distortion_model +
+                     "' is not supported: stereod undistorts with "
+                     "OpenCV's pinhole models, plumb_bob and rational_polynomial");
     }
     StereoCalibration c;
     c.left.camera_matrix = left.k;
@@ -443,8 +443,8 @@ void exportRosCameraInfo(const StereoCalibration& calibration, const std::string
 }
 
 StereoCalibration importOpenCvStereoCalib(const std::string& intrinsics_path,
-                                          const std::string& extrinsics_path,
-                                          cv::Size image_size, double metres_per_unit)
+                                          const std::string& extrinsics_path, cv::Size image_size,
+                                          double metres_per_unit)
 {
     if (!(metres_per_unit > 0.0) || !std::isfinite(metres_per_unit))
         throw CalibrationError("metres per unit of T must be > 0, got " +
@@ -453,11 +453,11 @@ StereoCalibration importOpenCvStereoCalib(const std::string& intrinsics_path,
     const cv::FileStorage extrinsics = openStorage(extrinsics_path);
     StereoCalibration c;
     c.left.camera_matrix = cv::Matx33d(readMatrix(intrinsics, intrinsics_path, "M1", 3, 3));
-    c.left.distortion = distortionFrom(readMatrix(intrinsics, intrinsics_path, "D1", 0, 0),
-                                       intrinsics_path, "D1");
+    c.left.distortion =
+        distortionFrom(readMatrix(intrinsics, intrinsics_path, "D1", 0, 0), intrinsics_path, "D1");
     c.right.camera_matrix = cv::Matx33d(readMatrix(intrinsics, intrinsics_path, "M2", 3, 3));
-    c.right.distortion = distortionFrom(readMatrix(intrinsics, intrinsics_path, "D2", 0, 0),
-                                        intrinsics_path, "D2");
+    c.right.distortion =
+        distortionFrom(readMatrix(intrinsics, intrinsics_path, "D2", 0, 0), intrinsics_path, "D2");
     c.R = cv::Matx33d(readMatrix(extrinsics, extrinsics_path, "R", 3, 3));
     const cv::Mat t = readMatrix(extrinsics, extrinsics_path, "T", 0, 0);
     if (t.total() != 3)

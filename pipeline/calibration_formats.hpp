@@ -25,19 +25,20 @@ namespace stereod {
 // pixel-metres; negative for a right camera to the right of the left one), the left's 0.
 struct RosCameraInfo {
     cv::Size image_size;
-    std::string distortion_model = "plumb_bob";   // or "rational_polynomial"
-    std::vector<double> d;                          // OpenCV order, 5 or 8 coefficients
-    cv::Matx33d k = cv::Matx33d::eye();             // camera matrix
-    cv::Matx33d r = cv::Matx33d::eye();             // rectification rotation
-    cv::Matx34d p;                                  // projection after rectification
+    std::string distortion_model = "plumb_bob"; // or "rational_polynomial"
+    std::vector<double> d;                      // OpenCV order, 5 or 8 coefficients
+    cv::Matx33d k = cv::Matx33d::eye();         // camera matrix
+    cv::Matx33d r = cv::Matx33d::eye();         // rectification rotation
+    cv::Matx34d p;                              // projection after rectification
 };
 
 // The calibration as the two camera_info messages of a ROS stereo pair (what
 // exportRosCameraInfo writes to files, and the recorder to MCAP). Throws CalibrationError
 // for distortion with no ROS model, naming `left_origin` or `right_origin`.
-std::pair<RosCameraInfo, RosCameraInfo> rosCameraInfoPair(
-    const StereoCalibration& calibration, const std::string& left_origin = "left camera",
-    const std::string& right_origin = "right camera");
+std::pair<RosCameraInfo, RosCameraInfo>
+rosCameraInfoPair(const StereoCalibration& calibration,
+                  const std::string& left_origin = "left camera",
+                  const std::string& right_origin = "right camera");
 
 // The same as a sensor_msgs/msg/CameraInfo message (header left empty), and back.
 ros2::CameraInfo cameraInfoMessage(const RosCameraInfo& info);
@@ -48,9 +49,9 @@ RosCameraInfo rosCameraInfoFromMessage(const ros2::CameraInfo& message);
 // matrix that is a rotation only to the precision of its printed digits (ROS's writers keep
 // 5 or 6) is replaced by the nearest rotation, and the log says so. Throws CalibrationError.
 StereoCalibration calibrationFromRosCameraInfo(const RosCameraInfo& left,
-                                              const RosCameraInfo& right,
-                                              const std::string& left_origin,
-                                              const std::string& right_origin);
+                                               const RosCameraInfo& right,
+                                               const std::string& left_origin,
+                                               const std::string& right_origin);
 
 // Reads a ROS stereo pair of camera_info files into a full calibration. R and T are not in
 // camera_info: they follow from the rectification, R = R2^T R1 and
@@ -64,14 +65,13 @@ StereoCalibration importRosCameraInfo(const std::string& left_path, const std::s
 // plumb_bob, 8 as rational_polynomial; 12 or 14 have no ROS model and are refused),
 // R1/R2 and P1/P2. Rectified form: undistorted cameras with identity rectification.
 void exportRosCameraInfo(const StereoCalibration& calibration, const std::string& left_path,
-                         const std::string& right_path,
-                         const std::string& camera_name = "stereo");
+                         const std::string& right_path, const std::string& camera_name = "stereo");
 
 // Reads the files of OpenCV's stereo_calib sample. They do not hold the image size; and
 // T (hence P2's last column and Q) is in the unit of the square size given to the sample
 // (-s, 1 by default: squares): `metres_per_unit` converts it to metres.
 StereoCalibration importOpenCvStereoCalib(const std::string& intrinsics_path,
-                                          const std::string& extrinsics_path,
-                                          cv::Size image_size, double metres_per_unit = 1.0);
+                                          const std::string& extrinsics_path, cv::Size image_size,
+                                          double metres_per_unit = 1.0);
 
 } // namespace stereod

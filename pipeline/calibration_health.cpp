@@ -53,8 +53,10 @@ bool refine(const cv::Mat& left, const cv::Mat& right, RowMatch& match, cv::Mat&
         best.y == scores.rows - 1)
         return false;
     const auto at = [&](int x, int y) { return static_cast<double>(scores.at<float>(y, x)); };
-    const double dx = parabolaPeak(at(best.x - 1, best.y), at(best.x, best.y), at(best.x + 1, best.y));
-    const double dy = parabolaPeak(at(best.x, best.y - 1), at(best.x, best.y), at(best.x, best.y + 1));
+    const double dx =
+        parabolaPeak(at(best.x - 1, best.y), at(best.x, best.y), at(best.x + 1, best.y));
+    const double dy =
+        parabolaPeak(at(best.x, best.y - 1), at(best.x, best.y), at(best.x, best.y + 1));
     match.left = cv::Point2f(static_cast<float>(l.x), static_cast<float>(l.y));
     match.right = cv::Point2f(static_cast<float>(r.x - kSearchPx + best.x + dx),
                               static_cast<float>(r.y - kSearchPx + best.y + dy));
@@ -74,8 +76,9 @@ double percentile(std::vector<double> values, double p)
 {
     if (values.empty())
         return 0.0;
-    const size_t index =
-        std::min(values.size() - 1, static_cast<size_t>(std::floor(p / 100.0 * static_cast<double>(values.size() - 1))));
+    const size_t index = std::min(
+        values.size() - 1,
+        static_cast<size_t>(std::floor(p / 100.0 * static_cast<double>(values.size() - 1))));
     const auto nth = values.begin() + static_cast<std::ptrdiff_t>(index);
     std::nth_element(values.begin(), nth, values.end());
     return *nth;
@@ -92,7 +95,8 @@ HealthMeasurement figures(const std::vector<RowMatch>& candidates, const HealthS
     for (const RowMatch& match : candidates)
         negative += match.left.x - match.right.x < -0.5f;
     m.negative_disparity_fraction =
-        candidates.empty() ? 0.0 : static_cast<double>(negative) / static_cast<double>(candidates.size());
+        candidates.empty() ? 0.0
+                           : static_cast<double>(negative) / static_cast<double>(candidates.size());
     const bool swapped = m.negative_disparity_fraction >= settings.swapped_fraction;
     std::vector<const RowMatch*> sided;
     std::vector<double> offsets;
@@ -130,10 +134,14 @@ HealthMeasurement figures(const std::vector<RowMatch>& candidates, const HealthS
 const char* healthStateName(HealthState state) noexcept
 {
     switch (state) {
-    case HealthState::Unknown: return "unknown";
-    case HealthState::Ok: return "ok";
-    case HealthState::Degraded: return "degraded";
-    case HealthState::Failed: return "failed";
+    case HealthState::Unknown:
+        return "unknown";
+    case HealthState::Ok:
+        return "ok";
+    case HealthState::Degraded:
+        return "degraded";
+    case HealthState::Failed:
+        return "failed";
     }
     return "unknown";
 }
@@ -230,9 +238,9 @@ StereoCalibration correctRightRotation(const StereoCalibration& calibration,
         throw std::invalid_argument("a rectified-only calibration has no rotation to correct");
     constexpr size_t kMinMatches = 10;
     if (matches.size() < kMinMatches)
-        throw std::invalid_argument("too few matches to estimate a correction: " +
-                                    std::to_string(matches.size()) + ", at least " +
-                                    std::to_string(kMinMatches) + " needed");
+        throw std::invalid_argument(
+            "too few matches to estimate a correction: " + std::to_string(matches.size()) +
+            ", at least " + std::to_string(kMinMatches) + " needed");
     const double f = calibration.P2(0, 0);
     const double cx = calibration.P2(0, 2);
     const double cy = calibration.P2(1, 2);

@@ -20,9 +20,9 @@
 namespace stereod {
 
 struct HealthSettings {
-    int max_features = 2000;           // ORB keypoints per image
-    double max_row_offset_px = 24.0;   // matches further apart in rows are not the same point
-    int min_matches = 30;              // fewer: "unknown: not enough matches", no verdict
+    int max_features = 2000;         // ORB keypoints per image
+    double max_row_offset_px = 24.0; // matches further apart in rows are not the same point
+    int min_matches = 30;            // fewer: "unknown: not enough matches", no verdict
     // Verdict on the median and the 90th percentile of |row offset|, pixels.
     double ok_median_px = 0.5;
     double ok_p90_px = 1.5;
@@ -47,18 +47,18 @@ struct HealthMeasurement {
     // Machine code of the verdict: "not_enough_matches", "row_offset", "cameras_swapped",
     // or "" when ok.
     std::string reason;
-    int matches = 0;                   // matches used for the figures
-    double row_offset_px = 0.0;        // signed median of right row - left row
-    double row_offset_p90_px = 0.0;    // 90th percentile of |right row - left row|
+    int matches = 0;                // matches used for the figures
+    double row_offset_px = 0.0;     // signed median of right row - left row
+    double row_offset_p90_px = 0.0; // 90th percentile of |right row - left row|
     double negative_disparity_fraction = 0.0;
-    std::vector<RowMatch> used;        // the matches behind the figures
+    std::vector<RowMatch> used; // the matches behind the figures
 };
 
 // The verdict for the figures of a measurement (state and reason are set).
 void classifyHealth(HealthMeasurement& measurement, const HealthSettings& settings);
 
 class CalibrationHealthChecker {
-public:
+  public:
     explicit CalibrationHealthChecker(const HealthSettings& settings = {});
     ~CalibrationHealthChecker();
 
@@ -67,7 +67,7 @@ public:
 
     const HealthSettings& settings() const;
 
-private:
+  private:
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };

@@ -1,16 +1,16 @@
 #include "pipeline/census_sgm_matcher.hpp"
 
-#include <sched.h>
-
 #include <algorithm>
 #include <stdexcept>
 #include <string>
+
+#include <sched.h>
 
 namespace stereod {
 namespace {
 
 class CensusSgmMatcher final : public Matcher {
-public:
+  public:
     CensusSgmMatcher(const MatcherSettings& settings, const DisparityRange& range)
     {
         configure(settings, range);
@@ -41,13 +41,13 @@ public:
     {
         settings_ = censusSgmSettings(settings, range);
         sgm::validateCensusSgmSettings(settings_);
-        core_.reset();   // rebuilt, with its buffers, on the next pair
+        core_.reset(); // rebuilt, with its buffers, on the next pair
     }
 
     std::string name() const override { return "census-sgm"; }
     MatcherKind kind() const override { return MatcherKind::CensusSgm; }
 
-private:
+  private:
     sgm::CensusSgmSettings settings_;
     std::unique_ptr<sgm::CensusSgm> core_;
 };
@@ -65,7 +65,7 @@ int availableCores()
 
 sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& s, const DisparityRange& range)
 {
-    sgm::CensusSgmSettings c;   // its defaults are the tuned values
+    sgm::CensusSgmSettings c; // its defaults are the tuned values
     c.width = 0;
     c.height = 0;
     c.min_disparity = range.min_disparity;
@@ -106,10 +106,10 @@ void validateCensusSgm(const MatcherSettings& settings)
     // The range comes from the calibration later; any valid count checks the rest.
     range.num_disparities = settings.num_disparities > 0 ? settings.num_disparities : 16;
     if (range.num_disparities > 256 || settings.max_num_disparities > 256)
-        throw std::invalid_argument("matcher.max_num_disparities: census-sgm searches at most "
-                                    "256 disparities, got " +
-                                    std::to_string(std::max(range.num_disparities,
-                                                            settings.max_num_disparities)));
+        throw std::invalid_argument(
+            "matcher.max_num_disparities: census-sgm searches at most "
+            "256 disparities, got " +
+            std::to_string(std::max(range.num_disparities, settings.max_num_disparities)));
     sgm::validateCensusSgmSettings(censusSgmSettings(settings, range));
 }
 

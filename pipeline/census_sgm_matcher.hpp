@@ -13,7 +13,8 @@ namespace stereod {
 // The core's settings for these matcher settings and range (image size left 0x0):
 // automatic values (0) replaced by the tuned defaults, threads 0 by the cores this
 // process may run on.
-sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& settings, const DisparityRange& range);
+sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& settings,
+                                         const DisparityRange& range);
 
 // census-sgm's own values for the settings it shares with OpenCV's matchers (uniqueness,
 // left-right tolerance, speckle window and range), tuned on the real scenes of

@@ -1,7 +1,5 @@
 #include "pipeline/chessboard_calibration.hpp"
 
-#include <unistd.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
@@ -12,6 +10,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <unistd.h>
 
 #include "pipeline/rectifier.hpp"
 
@@ -22,8 +21,7 @@ namespace {
 // nearest board line that does not pass through it (measurements in the header).
 constexpr double kSubpixWindowFraction = 0.3;
 constexpr int kSubpixMinHalfWindow = 2;
-const cv::TermCriteria kSubpixCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100,
-                                       0.001);
+const cv::TermCriteria kSubpixCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100, 0.001);
 // k1 k2 p1 p2: k3 fixed at 0 (measurements in the header).
 constexpr int kDistortionFlags = cv::CALIB_FIX_K3;
 constexpr int kDistortionCoefficients = 4;
@@ -151,8 +149,7 @@ void alignCornerOrder(const std::vector<cv::Point2f>& left, std::vector<cv::Poin
 cv::Mat readGray(const std::string& path)
 {
     if (::access(path.c_str(), R_OK) != 0)
-        throw ChessboardCalibrationError("cannot read image " + path + ": " +
-                                         std::strerror(errno));
+        throw ChessboardCalibrationError("cannot read image " + path + ": " + std::strerror(errno));
     cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
     if (image.empty())
         throw ChessboardCalibrationError("cannot read image " + path +
@@ -163,7 +160,7 @@ cv::Mat readGray(const std::string& path)
 // One run of both cameras' calibration and the stereo calibration over `views`.
 struct StereoFit {
     cv::Mat K1, D1, K2, D2, R, T, E, F;
-    cv::Mat per_view_rms;              // views x 2 (left, right), pixels
+    cv::Mat per_view_rms; // views x 2 (left, right), pixels
     double rms_px = 0.0;
     double left_rms_px = 0.0;
     double right_rms_px = 0.0;
@@ -185,10 +182,10 @@ StereoFit fitStereo(const std::vector<const PairReport*>& views, cv::Size image_
                                               tvecs, kDistortionFlags);
         fit.right_rms_px = cv::calibrateCamera(objects, right, image_size, fit.K2, fit.D2, rvecs,
                                                tvecs, kDistortionFlags);
-        fit.rms_px = cv::stereoCalibrate(objects, left, right, fit.K1, fit.D1, fit.K2, fit.D2,
-                                         image_size, fit.R, fit.T, fit.E, fit.F, fit.per_view_rms,
-                                         kDistortionFlags | cv::CALIB_USE_INTRINSIC_GUESS,
-                                         kStereoCriteria);
+        fit.rms_px =
+            cv::stereoCalibrate(objects, left, right, fit.K1, fit.D1, fit.K2, fit.D2, image_size,
+                                fit.R, fit.T, fit.E, fit.F, fit.per_view_rms,
+                                kDistortionFlags | cv::CALIB_USE_INTRINSIC_GUESS, kStereoCriteria);
     } catch (const cv::Exception& error) {
         // Views that do not constrain the cameras (all boards parallel to the image, say).
         throw ChessboardCalibrationError("the calibration does not converge on these " +
@@ -201,11 +198,13 @@ StereoFit fitStereo(const std::vector<const PairReport*>& views, cv::Size image_
 double median(std::vector<double> values)
 {
     const size_t mid = values.size() / 2;
-    std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(mid), values.end());
+    std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(mid),
+                     values.end());
     const double upper = values[mid];
     if (values.size() % 2 == 1)
         return upper;
-    const double lower = *std::max_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(mid));
+    const double lower =
+        *std::max_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(mid));
     return 0.5 * (lower + upper);
 }
 
@@ -223,8 +222,8 @@ int rejectOutliers(const std::vector<PairReport*>& views, const ChessboardCalibr
 {
     std::vector<double> rms;
     for (const PairReport* v : views)
-        rms.push_back(std::sqrt(0.5 * (*v->left_rms_px * *v->left_rms_px +
-                                       *v->right_rms_px * *v->right_rms_px)));
+        rms.push_back(std::sqrt(
+            0.5 * (*v->left_rms_px * *v->left_rms_px + *v->right_rms_px * *v->right_rms_px)));
     const double mid = median(rms);
     std::vector<double> deviations;
     for (double r : rms)
@@ -262,7 +261,7 @@ void measureEpipolar(PairReport& pair, const StereoFit& fit, const cv::Mat& R1, 
                         kUndistortCriteria);
     cv::undistortPoints(pair.right_corners, right_px, fit.K2, fit.D2, cv::noArray(), fit.K2,
                         kUndistortCriteria);
-    std::vector<cv::Vec3f> lines;   // in the right image, a^2 + b^2 = 1
+    std::vector<cv::Vec3f> lines; // in the right image, a^2 + b^2 = 1
     cv::computeCorrespondEpilines(left_px, 1, fit.F, lines);
     double row = 0.0, line = 0.0;
     for (size_t i = 0; i < left_rect.size(); ++i) {
@@ -289,8 +288,8 @@ std::vector<double> distortionVector(const cv::Mat& d)
 std::string refuseTooFew(int usable, const ChessboardCalibrationOptions& o, size_t pairs,
                          const std::string& why)
 {
-    return "only " + std::to_string(usable) + " usable pair" + (usable == 1 ? "" : "s") +
-           " of " + std::to_string(pairs) + why + ", at least " + std::to_string(o.min_pairs) +
+    return "only " + std::to_string(usable) + " usable pair" + (usable == 1 ? "" : "s") + " of " +
+           std::to_string(pairs) + why + ", at least " + std::to_string(o.min_pairs) +
            " are needed: take more views of the board, whole in both images";
 }
 
@@ -305,8 +304,8 @@ cv::Rect validRectifiedRegion(const CameraIntrinsics& camera, const cv::Matx33d&
                               const cv::Matx34d& projection, cv::Size size)
 {
     cv::Mat map_x, map_y;
-    cv::initUndistortRectifyMap(camera.camera_matrix, camera.distortion, rectification,
-                                projection, size, CV_32FC1, map_x, map_y);
+    cv::initUndistortRectifyMap(camera.camera_matrix, camera.distortion, rectification, projection,
+                                size, CV_32FC1, map_x, map_y);
     const float max_x = static_cast<float>(size.width - 1);
     const float max_y = static_cast<float>(size.height - 1);
     cv::Mat valid(size, CV_8UC1);
@@ -318,9 +317,11 @@ cv::Rect validRectifiedRegion(const CameraIntrinsics& camera, const cv::Matx33d&
     cv::Rect r = cv::boundingRect(valid);
     while (r.width > 0 && r.height > 0) {
         const int top = r.width - cv::countNonZero(valid(cv::Rect(r.x, r.y, r.width, 1)));
-        const int bottom = r.width - cv::countNonZero(valid(cv::Rect(r.x, r.br().y - 1, r.width, 1)));
+        const int bottom =
+            r.width - cv::countNonZero(valid(cv::Rect(r.x, r.br().y - 1, r.width, 1)));
         const int left = r.height - cv::countNonZero(valid(cv::Rect(r.x, r.y, 1, r.height)));
-        const int right = r.height - cv::countNonZero(valid(cv::Rect(r.br().x - 1, r.y, 1, r.height)));
+        const int right =
+            r.height - cv::countNonZero(valid(cv::Rect(r.br().x - 1, r.y, 1, r.height)));
         const int worst = std::max({top, bottom, left, right});
         if (worst == 0)
             break;
@@ -413,8 +414,7 @@ bool findBoardCornersFast(const cv::Mat& gray, cv::Size inner_corners,
     return true;
 }
 
-ChessboardCalibrationResult calibrateFromCorners(std::vector<PairReport> pairs,
-                                                 cv::Size image_size,
+ChessboardCalibrationResult calibrateFromCorners(std::vector<PairReport> pairs, cv::Size image_size,
                                                  const ChessboardCalibrationOptions& options)
 {
     validateChessboardOptions(options);
@@ -466,10 +466,10 @@ ChessboardCalibrationResult calibrateFromCorners(std::vector<PairReport> pairs,
     if (result.outliers_dropped > 0) {
         std::erase_if(views, [](const PairReport* p) { return !p->used; });
         if (static_cast<int>(views.size()) < options.min_pairs)
-            throw ChessboardCalibrationError(refuseTooFew(
-                static_cast<int>(views.size()), options, result.pairs.size(),
-                " after dropping " + std::to_string(result.outliers_dropped) +
-                    " outlier pair(s) whose corners fit far worse than the others'"));
+            throw ChessboardCalibrationError(
+                refuseTooFew(static_cast<int>(views.size()), options, result.pairs.size(),
+                             " after dropping " + std::to_string(result.outliers_dropped) +
+                                 " outlier pair(s) whose corners fit far worse than the others'"));
         fit_views.assign(views.begin(), views.end());
         fit = fitStereo(fit_views, image_size, board);
         recordPerViewRms(views, fit);
@@ -551,8 +551,8 @@ ChessboardCalibrationResult calibrateChessboard(const std::vector<std::string>& 
         if (image.size() == image_size)
             return;
         throw ChessboardCalibrationError(
-            "image sizes differ in pair " + pair.left_path + " / " + pair.right_path + ": " +
-            path + " is " + describeSize(image.size()) + " but the first pair used (" +
+            "image sizes differ in pair " + pair.left_path + " / " + pair.right_path + ": " + path +
+            " is " + describeSize(image.size()) + " but the first pair used (" +
             first_used->left_path + " / " + first_used->right_path + ") is " +
             describeSize(image_size) +
             "; all the pairs used (the board found in both images) must come from the same "
@@ -565,7 +565,7 @@ ChessboardCalibrationResult calibrateChessboard(const std::vector<std::string>& 
         const cv::Mat left = readGray(p.left_path);
         const cv::Mat right = readGray(p.right_path);
         if (image_size.empty())
-            image_size = left.size();   // a fallback until a pair is used
+            image_size = left.size(); // a fallback until a pair is used
         p.left_found = findBoardCorners(left, grid, p.left_corners);
         p.right_found = findBoardCorners(right, grid, p.right_corners);
         if (progress)
@@ -628,7 +628,7 @@ void writeRectifiedPreview(const ChessboardCalibrationResult& result, const std:
                            int line_step_px)
 {
     const auto first = std::find_if(result.pairs.begin(), result.pairs.end(),
-                                     [](const PairReport& p) { return p.used; });
+                                    [](const PairReport& p) { return p.used; });
     if (first == result.pairs.end())
         throw ChessboardCalibrationError("preview " + png_path + ": no pair was used");
     const ChessboardSpec& board = *result.calibration.board;

@@ -36,12 +36,12 @@ namespace stereod {
 // images of differing sizes, too few usable pairs, a board size found nowhere, a rig the
 // service cannot use. what() names the files and numbers involved.
 class ChessboardCalibrationError : public CalibrationError {
-public:
+  public:
     using CalibrationError::CalibrationError;
 };
 
 struct ChessboardCalibrationOptions {
-    ChessboardSpec board;              // inner corners as OpenCV counts them; square side in metres
+    ChessboardSpec board; // inner corners as OpenCV counts them; square side in metres
     // cv::stereoRectify's free scaling, 0..1: 0 zooms the rectified images so that every
     // pixel has image data (the edges are cropped away); 1 keeps every raw pixel (black
     // borders where the undistorted image does not reach). Values between mix the two.
@@ -62,14 +62,14 @@ struct ChessboardCalibrationOptions {
 struct PairReport {
     std::string left_path;
     std::string right_path;
-    bool left_found = false;           // the whole board found in the left image
+    bool left_found = false; // the whole board found in the left image
     bool right_found = false;
     // Corner positions in the raw images (pixels), row by row as the board's object
     // points are laid out; empty where the board was not found.
     std::vector<cv::Point2f> left_corners;
     std::vector<cv::Point2f> right_corners;
-    bool used = false;                 // part of the final calibration
-    std::string rejection;             // why the pair was left out; empty when used
+    bool used = false;     // part of the final calibration
+    std::string rejection; // why the pair was left out; empty when used
     // Reprojection RMS of this pair in each camera, in the stereo fit it was last part of
     // (for an outlier, the fit that found it out).
     std::optional<double> left_rms_px;
@@ -85,12 +85,12 @@ struct PairReport {
 struct ChessboardCalibrationResult {
     // kind Full, board, rms_px and epipolar_error_px filled; validated.
     StereoCalibration calibration;
-    std::vector<PairReport> pairs;     // in the order given
+    std::vector<PairReport> pairs; // in the order given
     int pairs_used = 0;
     int outliers_dropped = 0;
-    double left_rms_px = 0.0;          // each camera calibrated alone (cv::calibrateCamera)
+    double left_rms_px = 0.0; // each camera calibrated alone (cv::calibrateCamera)
     double right_rms_px = 0.0;
-    double rms_px = 0.0;               // stereo reprojection RMS over the used pairs
+    double rms_px = 0.0; // stereo reprojection RMS over the used pairs
     // Mean over all corners of the used pairs of PairReport::epipolar_error_px: how far
     // apart the rows of matching points are after rectification, which is what the
     // matchers depend on. Written to the calibration file as epipolar_error_px.
@@ -98,7 +98,7 @@ struct ChessboardCalibrationResult {
     // Mean over the same corners of PairReport::epipolar_distance_px. (OpenCV's
     // stereo_calib sample adds the distances in both images, about twice this figure.)
     double epipolar_distance_px = 0.0;
-    double baseline_m = 0.0;           // |T|
+    double baseline_m = 0.0; // |T|
 };
 
 // Progress while corners are searched: called once per pair after both images were
@@ -146,8 +146,7 @@ cv::Rect validRectifiedRegion(const CameraIntrinsics& camera, const cv::Matx33d&
 // images are kept in the report, rejected with the reason. Drops outliers once and
 // calibrates again without them. Throws ChessboardCalibrationError (too few usable pairs,
 // a board found nowhere, a rig the service cannot use) and std::invalid_argument (options).
-ChessboardCalibrationResult calibrateFromCorners(std::vector<PairReport> pairs,
-                                                 cv::Size image_size,
+ChessboardCalibrationResult calibrateFromCorners(std::vector<PairReport> pairs, cv::Size image_size,
                                                  const ChessboardCalibrationOptions& options);
 
 // Reads the pairs (left_paths[i] with right_paths[i]), searches the corners and

@@ -156,8 +156,8 @@ cv::Mat readPfm(const std::string& path)
     if (magic != "Pf")
         ioError(path, "not a PFM file: starts with '" + magic + "', expected 'Pf'");
     if (width <= 0 || height <= 0 || width > (1 << 16) || height > (1 << 16))
-        ioError(path, "implausible PFM size " + std::to_string(width) + "x" +
-                          std::to_string(height));
+        ioError(path,
+                "implausible PFM size " + std::to_string(width) + "x" + std::to_string(height));
     if (scale == 0.0 || !std::isfinite(scale))
         ioError(path, "PFM scale must be non-zero (negative: little-endian)");
     // Exactly one whitespace character separates the header from the data.
@@ -212,8 +212,7 @@ cv::Mat readKittiPng(const std::string& path)
         const uint16_t* src = encoded.ptr<uint16_t>(y);
         float* dst = disparity.ptr<float>(y);
         for (int x = 0; x < encoded.cols; ++x)
-            dst[x] = src[x] == 0 ? kInvalidDisparity
-                                 : static_cast<float>(src[x] / kKittiScale);
+            dst[x] = src[x] == 0 ? kInvalidDisparity : static_cast<float>(src[x] / kKittiScale);
     }
     return disparity;
 }
@@ -356,8 +355,8 @@ cv::Mat colorizeDepth(const cv::Mat& depth_m, double min_depth_m, double max_dep
         for (int x = 0; x < depth_m.cols; ++x) {
             const bool ok = z[x] > 0.0f && std::isfinite(z[x]);
             bad[x] = ok ? 0 : 255;
-            const double t = ok ? std::clamp((1.0 / z[x] - inv_far) / (inv_near - inv_far), 0.0, 1.0)
-                                : 0.0;
+            const double t =
+                ok ? std::clamp((1.0 / z[x] - inv_far) / (inv_near - inv_far), 0.0, 1.0) : 0.0;
             lv[x] = static_cast<uint8_t>(std::lround(t * 255.0));
         }
     }

@@ -1,7 +1,5 @@
 #include "pipeline/matcher.hpp"
 
-#include "pipeline/census_sgm_matcher.hpp"
-
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -9,6 +7,8 @@
 #include <stdexcept>
 
 #include <opencv2/calib3d.hpp>
+
+#include "pipeline/census_sgm_matcher.hpp"
 
 namespace stereod {
 namespace {
@@ -24,17 +24,21 @@ constexpr int kDisparityScale = cv::StereoMatcher::DISP_SCALE;
 void inRange(const std::string& key, int value, int lo, int hi)
 {
     if (value < lo || value > hi)
-        invalid(key, "must be within " + std::to_string(lo) + ".." + std::to_string(hi) +
-                         ", got " + std::to_string(value));
+        invalid(key, "must be within " + std::to_string(lo) + ".." + std::to_string(hi) + ", got " +
+                         std::to_string(value));
 }
 
 int sgbmModeFlag(SgbmMode mode)
 {
     switch (mode) {
-    case SgbmMode::Sgbm: return cv::StereoSGBM::MODE_SGBM;
-    case SgbmMode::ThreeWay: return cv::StereoSGBM::MODE_SGBM_3WAY;
-    case SgbmMode::Hh: return cv::StereoSGBM::MODE_HH;
-    case SgbmMode::Hh4: return cv::StereoSGBM::MODE_HH4;
+    case SgbmMode::Sgbm:
+        return cv::StereoSGBM::MODE_SGBM;
+    case SgbmMode::ThreeWay:
+        return cv::StereoSGBM::MODE_SGBM_3WAY;
+    case SgbmMode::Hh:
+        return cv::StereoSGBM::MODE_HH;
+    case SgbmMode::Hh4:
+        return cv::StereoSGBM::MODE_HH4;
     }
     return cv::StereoSGBM::MODE_SGBM;
 }
@@ -65,11 +69,10 @@ void fullConfidenceWhereValid(const cv::Mat& disparity_px, cv::Mat& confidence)
 
 // Both OpenCV matchers share the fixed-point output and its conversion.
 class FixedPointMatcher : public Matcher {
-public:
+  public:
     void compute(const cv::Mat& left, const cv::Mat& right, MatchOutput& out) override
     {
-        CV_Assert(left.type() == CV_8UC1 && right.type() == CV_8UC1 &&
-                  left.size() == right.size());
+        CV_Assert(left.type() == CV_8UC1 && right.type() == CV_8UC1 && left.size() == right.size());
         out.range_limit.create(left.size(), CV_8UC1);
         out.range_limit.setTo(0);
         if (left.cols <= range_.min_disparity + range_.num_disparities - 1) {
@@ -86,7 +89,7 @@ public:
         fullConfidenceWhereValid(out.disparity_px, out.confidence);
     }
 
-protected:
+  protected:
     virtual cv::StereoMatcher* engine() = 0;
 
     void setCommon(cv::StereoMatcher& m, const MatcherSettings& s, const DisparityRange& range)
@@ -100,11 +103,11 @@ protected:
     }
 
     DisparityRange range_;
-    cv::Mat fixed_;   // CV_16SC1, 16 x disparity
+    cv::Mat fixed_; // CV_16SC1, 16 x disparity
 };
 
 class BmMatcher final : public FixedPointMatcher {
-public:
+  public:
     BmMatcher(const MatcherSettings& settings, const DisparityRange& range)
         : bm_(cv::StereoBM::create(range.num_disparities, settings.block_size))
     {
@@ -125,15 +128,15 @@ public:
     std::string name() const override { return "bm"; }
     MatcherKind kind() const override { return MatcherKind::Bm; }
 
-protected:
+  protected:
     cv::StereoMatcher* engine() override { return bm_.get(); }
 
-private:
+  private:
     cv::Ptr<cv::StereoBM> bm_;
 };
 
 class SgbmMatcher final : public FixedPointMatcher {
-public:
+  public:
     SgbmMatcher(const MatcherSettings& settings, const DisparityRange& range)
         : sgbm_(cv::StereoSGBM::create(range.min_disparity, range.num_disparities,
                                        settings.block_size))
@@ -144,7 +147,7 @@ public:
     void configure(const MatcherSettings& s, const DisparityRange& range) override
     {
         setCommon(*sgbm_, s, range);
-        sgbm_->setSpeckleRange(s.speckle_range_px);   // in pixels: SGBM scales it by 16
+        sgbm_->setSpeckleRange(s.speckle_range_px); // in pixels: SGBM scales it by 16
         sgbm_->setUniquenessRatio(s.uniqueness_ratio);
         sgbm_->setPreFilterCap(s.pre_filter_cap);
         sgbm_->setP1(effectiveP1(s));
@@ -156,10 +159,10 @@ public:
     std::string name() const override { return name_; }
     MatcherKind kind() const override { return MatcherKind::Sgbm; }
 
-protected:
+  protected:
     cv::StereoMatcher* engine() override { return sgbm_.get(); }
 
-private:
+  private:
     cv::Ptr<cv::StereoSGBM> sgbm_;
     std::string name_;
 };
@@ -175,10 +178,11 @@ void validateMatcherSettings(const MatcherSettings& s)
         invalid("min_depth_m", "must be a finite number > 0, got " + std::to_string(s.min_depth_m));
     if (s.num_disparities < 0 || s.num_disparities % 16 != 0)
         invalid("num_disparities", "must be 0 (derived from min_depth_m) or a positive "
-                                   "multiple of 16, got " + std::to_string(s.num_disparities));
+                                   "multiple of 16, got " +
+                                       std::to_string(s.num_disparities));
     if (s.max_num_disparities <= 0 || s.max_num_disparities % 16 != 0)
-        invalid("max_num_disparities", "must be a positive multiple of 16, got " +
-                                           std::to_string(s.max_num_disparities));
+        invalid("max_num_disparities",
+                "must be a positive multiple of 16, got " + std::to_string(s.max_num_disparities));
     if (s.num_disparities > s.max_num_disparities)
         invalid("num_disparities", std::to_string(s.num_disparities) +
                                        " exceeds max_num_disparities " +
@@ -200,8 +204,8 @@ void validateMatcherSettings(const MatcherSettings& s)
         inRange("block_size", s.block_size, 1, 31);
     inRange("uniqueness_ratio", s.uniqueness_ratio, 0, 100);
     if (s.speckle_window_px < 0)
-        invalid("speckle_window_px", "must be >= 0 (0 disables), got " +
-                                         std::to_string(s.speckle_window_px));
+        invalid("speckle_window_px",
+                "must be >= 0 (0 disables), got " + std::to_string(s.speckle_window_px));
     // StereoBM compares it in 1/16 px, so 16 x the range must fit its arithmetic.
     inRange("speckle_range_px", s.speckle_range_px, 0, 1024);
     if (s.speckle_window_px > 0 && s.speckle_range_px == 0)
@@ -238,10 +242,14 @@ std::string matcherName(const MatcherSettings& settings)
     if (settings.kind == MatcherKind::Bm)
         return "bm";
     switch (settings.sgbm_mode) {
-    case SgbmMode::Sgbm: return "sgbm";
-    case SgbmMode::ThreeWay: return "sgbm-3way";
-    case SgbmMode::Hh: return "sgbm-hh";
-    case SgbmMode::Hh4: return "sgbm-hh4";
+    case SgbmMode::Sgbm:
+        return "sgbm";
+    case SgbmMode::ThreeWay:
+        return "sgbm-3way";
+    case SgbmMode::Hh:
+        return "sgbm-hh";
+    case SgbmMode::Hh4:
+        return "sgbm-hh4";
     }
     return "sgbm";
 }

@@ -30,7 +30,7 @@ struct MatchOutput {
 };
 
 class Matcher {
-public:
+  public:
     virtual ~Matcher() = default;
 
     // left, right: rectified CV_8UC1 images of the same size. Columns whose whole search

@@ -4,9 +4,9 @@
 namespace stereod {
 
 enum class MatcherKind {
-    CensusSgm,  // ours: census transform + semi-global matching on SIMD (pipeline/sgm)
-    Bm,         // OpenCV StereoBM: area-based correlation (SAD over a block), a reference
-    Sgbm,       // OpenCV StereoSGBM: semi-global matching, a reference
+    CensusSgm, // ours: census transform + semi-global matching on SIMD (pipeline/sgm)
+    Bm,        // OpenCV StereoBM: area-based correlation (SAD over a block), a reference
+    Sgbm,      // OpenCV StereoSGBM: semi-global matching, a reference
 };
 
 enum class SgbmMode { Sgbm, ThreeWay, Hh, Hh4 };
@@ -26,24 +26,24 @@ struct MatcherSettings {
     // when the cap keeps the configured min_depth_m out of sight.
     int max_num_disparities = 256;
     int min_disparity = 0;
-    int block_size = 5;                // OpenCV's matchers: odd; BM needs >= 5
-    int uniqueness_ratio = 10;         // percent margin of the best cost over the second
-    int speckle_window_px = 100;       // largest speckle to remove, in pixels; 0 disables
-    int speckle_range_px = 2;          // disparity variation within a connected component
-    int lr_max_diff_px = 1;            // left-right consistency tolerance; < 0 disables
+    int block_size = 5;          // OpenCV's matchers: odd; BM needs >= 5
+    int uniqueness_ratio = 10;   // percent margin of the best cost over the second
+    int speckle_window_px = 100; // largest speckle to remove, in pixels; 0 disables
+    int speckle_range_px = 2;    // disparity variation within a connected component
+    int lr_max_diff_px = 1;      // left-right consistency tolerance; < 0 disables
     // Smoothness penalties, 0: automatic. census-sgm counts them in census bits
     // (automatic: its tuned values); OpenCV's SGBM in its own cost units (8*bs^2, 32*bs^2).
     int p1 = 0;
     int p2 = 0;
-    int pre_filter_cap = 31;           // OpenCV's matchers only
-    int texture_threshold = 10;        // BM only: minimum texture in the block
+    int pre_filter_cap = 31;    // OpenCV's matchers only
+    int texture_threshold = 10; // BM only: minimum texture in the block
 
     // census-sgm only.
-    int census_width = 0;              // census window in pixels, odd; 0: automatic
+    int census_width = 0; // census window in pixels, odd; 0: automatic
     int census_height = 0;
-    int paths = 0;                     // aggregation paths, 3 or 5; 0: automatic
-    int p2_gradient_scale = 0;         // P2 / (1 + |dI| / scale), grey levels; 0: automatic
-    int threads = 0;                   // threads inside matching; 0: the cores available
+    int paths = 0;             // aggregation paths, 3 or 5; 0: automatic
+    int p2_gradient_scale = 0; // P2 / (1 + |dI| / scale), grey levels; 0: automatic
+    int threads = 0;           // threads inside matching; 0: the cores available
 };
 
 } // namespace stereod

@@ -35,7 +35,8 @@ void validateNearestSettings(const NearestSettings& s)
     if (s.roi.y + s.roi.height > 1.0 + kSlack)
         invalid("roi", "y + height must be <= 1, got " + std::to_string(s.roi.y + s.roi.height));
     if (!(s.min_depth_m >= 0.0 && std::isfinite(s.min_depth_m)))
-        invalid("min_depth_m", "must be a finite number >= 0, got " + std::to_string(s.min_depth_m));
+        invalid("min_depth_m",
+                "must be a finite number >= 0, got " + std::to_string(s.min_depth_m));
     if (!(s.max_depth_m > s.min_depth_m && std::isfinite(s.max_depth_m)))
         invalid("max_depth_m", "must be finite and greater than min_depth_m, got " +
                                    std::to_string(s.max_depth_m));
@@ -62,8 +63,8 @@ cv::Rect regionPixels(const RegionOfInterest& roi, cv::Size image_size)
 
 size_t percentileIndex(double percentile, size_t count)
 {
-    const double position = std::clamp(percentile, 0.0, 100.0) / 100.0 *
-                            static_cast<double>(count - 1);
+    const double position =
+        std::clamp(percentile, 0.0, 100.0) / 100.0 * static_cast<double>(count - 1);
     return std::min(count - 1, static_cast<size_t>(std::floor(position)));
 }
 
@@ -77,8 +78,10 @@ Reading NearestObjectFinder::find(const cv::Mat& depth_m, const cv::Mat& confide
                                   double closest_depth_m, int64_t stamp_ns, uint64_t frame)
 {
     CV_Assert(depth_m.type() == CV_32FC1);
-    CV_Assert(confidence.empty() || (confidence.type() == CV_8UC1 && confidence.size() == depth_m.size()));
-    CV_Assert(range_limit.empty() || (range_limit.type() == CV_8UC1 && range_limit.size() == depth_m.size()));
+    CV_Assert(confidence.empty() ||
+              (confidence.type() == CV_8UC1 && confidence.size() == depth_m.size()));
+    CV_Assert(range_limit.empty() ||
+              (range_limit.type() == CV_8UC1 && range_limit.size() == depth_m.size()));
     Reading reading;
     reading.valid = false;
     reading.stamp_ns = stamp_ns;
@@ -100,7 +103,8 @@ Reading NearestObjectFinder::find(const cv::Mat& depth_m, const cv::Mat& confide
 
     const float lo = static_cast<float>(settings.min_depth_m);
     const float hi = static_cast<float>(settings.max_depth_m);
-    const uint8_t min_confidence = static_cast<uint8_t>(std::clamp(settings.min_confidence, 0, 255));
+    const uint8_t min_confidence =
+        static_cast<uint8_t>(std::clamp(settings.min_confidence, 0, 255));
     size_t valid = 0;
     size_t at_limit = 0;
     for (int y = region.y; y < region.y + region.height; ++y) {
@@ -143,9 +147,9 @@ Reading NearestObjectFinder::find(const cv::Mat& depth_m, const cv::Mat& confide
         reading.reason = NoReadingReason::NothingInRange;
         return reading;
     }
-    const auto nth = in_range_.begin() +
-                     static_cast<std::ptrdiff_t>(percentileIndex(settings.percentile,
-                                                                 in_range_.size()));
+    const auto nth =
+        in_range_.begin() +
+        static_cast<std::ptrdiff_t>(percentileIndex(settings.percentile, in_range_.size()));
     std::nth_element(in_range_.begin(), nth, in_range_.end());
     reading.valid = true;
     reading.reason = NoReadingReason::None;

@@ -30,7 +30,7 @@ size_t percentileIndex(double percentile, size_t count);
 // Reads the nearest object off depth maps, one after another.
 // Thread-bound: keeps a scratch buffer between calls.
 class NearestObjectFinder {
-public:
+  public:
     // Reserves the scratch buffer for a region of at most `max_region_pixels`, so that
     // find() does not allocate for images up to that size.
     explicit NearestObjectFinder(size_t max_region_pixels = 0);
@@ -56,8 +56,8 @@ public:
         return find(depth_m, cv::Mat(), cv::Mat(), settings, 0.0, stamp_ns, frame);
     }
 
-private:
-    std::vector<float> in_range_;   // the region's in-range depths, reused
+  private:
+    std::vector<float> in_range_; // the region's in-range depths, reused
 };
 
 } // namespace stereod

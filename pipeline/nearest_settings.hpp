@@ -14,7 +14,7 @@ struct RegionOfInterest {
 
 struct NearestSettings {
     RegionOfInterest roi;
-    double min_depth_m = 0.1;          // depths outside [min, max] are ignored
+    double min_depth_m = 0.1; // depths outside [min, max] are ignored
     double max_depth_m = 20.0;
     // The distance reported is this percentile of the in-range depths in the region:
     // a robust "nearest" that a few wrong pixels cannot move.

@@ -5,17 +5,28 @@ namespace stereod {
 const char* reasonCode(NoReadingReason reason) noexcept
 {
     switch (reason) {
-    case NoReadingReason::None: return "none";
-    case NoReadingReason::NoFrameYet: return "no_frame_yet";
-    case NoReadingReason::TooFewValidPixels: return "too_few_valid_pixels";
-    case NoReadingReason::NothingInRange: return "nothing_in_range";
-    case NoReadingReason::OutOfSync: return "out_of_sync";
-    case NoReadingReason::SourceDown: return "source_down";
-    case NoReadingReason::BadFrame: return "bad_frame";
-    case NoReadingReason::Stale: return "stale";
-    case NoReadingReason::Uncalibrated: return "uncalibrated";
-    case NoReadingReason::NearerThanRange: return "nearer_than_range";
-    case NoReadingReason::CalibrationSuspect: return "calibration_suspect";
+    case NoReadingReason::None:
+        return "none";
+    case NoReadingReason::NoFrameYet:
+        return "no_frame_yet";
+    case NoReadingReason::TooFewValidPixels:
+        return "too_few_valid_pixels";
+    case NoReadingReason::NothingInRange:
+        return "nothing_in_range";
+    case NoReadingReason::OutOfSync:
+        return "out_of_sync";
+    case NoReadingReason::SourceDown:
+        return "source_down";
+    case NoReadingReason::BadFrame:
+        return "bad_frame";
+    case NoReadingReason::Stale:
+        return "stale";
+    case NoReadingReason::Uncalibrated:
+        return "uncalibrated";
+    case NoReadingReason::NearerThanRange:
+        return "nearer_than_range";
+    case NoReadingReason::CalibrationSuspect:
+        return "calibration_suspect";
     }
     return "unknown";
 }
@@ -23,15 +34,24 @@ const char* reasonCode(NoReadingReason reason) noexcept
 const char* reasonText(NoReadingReason reason) noexcept
 {
     switch (reason) {
-    case NoReadingReason::None: return "valid reading";
-    case NoReadingReason::NoFrameYet: return "no frame processed yet";
-    case NoReadingReason::TooFewValidPixels: return "too few valid pixels in the region";
-    case NoReadingReason::NothingInRange: return "nothing within the depth range in the region";
-    case NoReadingReason::OutOfSync: return "cameras out of sync";
-    case NoReadingReason::SourceDown: return "frame source down";
-    case NoReadingReason::BadFrame: return "the frame pair could not be processed";
-    case NoReadingReason::Stale: return "the latest reading is too old";
-    case NoReadingReason::Uncalibrated: return "the service runs without a calibration";
+    case NoReadingReason::None:
+        return "valid reading";
+    case NoReadingReason::NoFrameYet:
+        return "no frame processed yet";
+    case NoReadingReason::TooFewValidPixels:
+        return "too few valid pixels in the region";
+    case NoReadingReason::NothingInRange:
+        return "nothing within the depth range in the region";
+    case NoReadingReason::OutOfSync:
+        return "cameras out of sync";
+    case NoReadingReason::SourceDown:
+        return "frame source down";
+    case NoReadingReason::BadFrame:
+        return "the frame pair could not be processed";
+    case NoReadingReason::Stale:
+        return "the latest reading is too old";
+    case NoReadingReason::Uncalibrated:
+        return "the service runs without a calibration";
     case NoReadingReason::NearerThanRange:
         return "something in the region is nearer than the disparity range can see";
     case NoReadingReason::CalibrationSuspect:

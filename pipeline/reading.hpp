@@ -32,7 +32,7 @@ bool meansNotProducing(NoReadingReason reason) noexcept;
 
 struct Reading {
     bool valid = false;
-    double distance_m = 0.0;           // meaningful only when valid
+    double distance_m = 0.0; // meaningful only when valid
     NoReadingReason reason = NoReadingReason::NoFrameYet;
     int64_t stamp_ns = 0;              // capture time of the pair, CLOCK_MONOTONIC
     uint64_t frame = 0;                // pair index from the source

@@ -73,7 +73,7 @@ Neighbours borderNeighbours(const cv::Mat& src, int sx, int sy)
 // stack for one call, and cv::parallel_for_ takes it by reference (no std::function, so
 // no capture that could need the heap).
 class RemapRows final : public cv::ParallelLoopBody {
-public:
+  public:
     RemapRows(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac, cv::Mat& out)
         : src_(src), map_xy_(map_xy), map_frac_(map_frac), out_(out)
     {
@@ -101,7 +101,7 @@ public:
         }
     }
 
-private:
+  private:
     void gather(const int16_t* xy, int n, uint16_t* top, uint16_t* bottom) const
     {
         const uint8_t* const src = src_.data;
@@ -163,8 +163,7 @@ bool overlaps(const cv::Mat& a, const cv::Mat& b)
 
 } // namespace
 
-void remapBilinear(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac,
-                   cv::Mat& out)
+void remapBilinear(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac, cv::Mat& out)
 {
     requireArgument(!src.empty() && src.type() == CV_8UC1,
                     "the source must be a non-empty CV_8UC1 image");

@@ -11,7 +11,7 @@
 namespace stereod {
 
 class Rectifier {
-public:
+  public:
     // Full calibration: computes both cameras' maps (cv::initUndistortRectifyMap, fixed
     // point CV_16SC2 + CV_16UC1). Rectified-only: no maps; the input is already rectified.
     explicit Rectifier(const StereoCalibration& calibration);
@@ -26,11 +26,11 @@ public:
     void rectifyLeft(const cv::Mat& raw, cv::Mat& out) const;
     void rectifyRight(const cv::Mat& raw, cv::Mat& out) const;
 
-private:
+  private:
     static void apply(const cv::Mat& raw, const cv::Mat& map_xy, const cv::Mat& map_frac,
                       cv::Mat& out);
 
-    cv::Mat left_map_xy_, left_map_frac_;     // CV_16SC2 integer coordinates, CV_16UC1 fractions
+    cv::Mat left_map_xy_, left_map_frac_; // CV_16SC2 integer coordinates, CV_16UC1 fractions
     cv::Mat right_map_xy_, right_map_frac_;
 };
 

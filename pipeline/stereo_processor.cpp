@@ -18,7 +18,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-constexpr int kDisparityStep = 16;   // OpenCV's matchers search multiples of 16
+constexpr int kDisparityStep = 16; // OpenCV's matchers search multiples of 16
 
 double msBetween(Clock::time_point a, Clock::time_point b)
 {
@@ -79,8 +79,8 @@ DisparityRange validateProcessorSettings(const ProcessorSettings& settings,
     if (last_disparity >= size.width) {
         // Name the key that set the range: the explicit count, or the cap it came from.
         const char* key = settings.matcher.num_disparities > 0 ? "matcher.num_disparities"
-                          : range.capped                     ? "matcher.max_num_disparities"
-                                                             : "matcher.min_depth_m";
+                          : range.capped                       ? "matcher.max_num_disparities"
+                                                               : "matcher.min_depth_m";
         throw std::invalid_argument(
             std::string(key) + ": a disparity range up to " + std::to_string(last_disparity) +
             " px (" + std::to_string(range.num_disparities) + " disparities from " +
@@ -88,26 +88,23 @@ DisparityRange validateProcessorSettings(const ProcessorSettings& settings,
             std::to_string(size.width) + " px wide");
     }
     if (settings.matcher.block_size >= std::min(size.width, size.height))
-        throw std::invalid_argument("matcher.block_size: " +
-                                    std::to_string(settings.matcher.block_size) +
-                                    " does not fit in a " + describeSize(size) + " image");
+        throw std::invalid_argument(
+            "matcher.block_size: " + std::to_string(settings.matcher.block_size) +
+            " does not fit in a " + describeSize(size) + " image");
     // A region that rounds to no pixel at all would read "0.0 % valid" on every frame.
     const cv::Rect region = regionPixels(settings.nearest.roi, size);
     if (region.area() == 0)
-        throw std::invalid_argument("nearest.roi: " + std::to_string(region.width) + "x" +
-                                    std::to_string(region.height) + " px in a " +
-                                    describeSize(size) +
-                                    " image: the region must hold at least one pixel");
+        throw std::invalid_argument(
+            "nearest.roi: " + std::to_string(region.width) + "x" + std::to_string(region.height) +
+            " px in a " + describeSize(size) + " image: the region must hold at least one pixel");
     return range;
 }
 
 struct StereoProcessor::Impl {
     Impl(const StereoCalibration& calibration_in, const ProcessorSettings& settings_in)
-        : calibration(calibration_in),
-          settings(settings_in),
+        : calibration(calibration_in), settings(settings_in),
           range(validateProcessorSettings(settings_in, calibration_in.rectified)),
-          rectifier(calibration_in),
-          matcher(makeMatcher(settings_in.matcher, range)),
+          rectifier(calibration_in), matcher(makeMatcher(settings_in.matcher, range)),
           nearest(static_cast<size_t>(calibration_in.rectified.image_size.area()))
     {
         if (rectifier.remaps())
@@ -131,8 +128,7 @@ struct StereoProcessor::Impl {
         }
         if (image.size() != calibration.rectified.image_size) {
             problem = std::string(side) + " image is " + describeSize(image.size()) +
-                      ", the calibration is for " +
-                      describeSize(calibration.rectified.image_size);
+                      ", the calibration is for " + describeSize(calibration.rectified.image_size);
             return {};
         }
         switch (image.channels()) {
@@ -145,8 +141,8 @@ struct StereoProcessor::Impl {
             cv::cvtColor(image, gray, cv::COLOR_BGRA2GRAY);
             return gray;
         default:
-            problem = std::string(side) + " image has " + std::to_string(image.channels()) +
-                      " channels";
+            problem =
+                std::string(side) + " image has " + std::to_string(image.channels()) + " channels";
             return {};
         }
     }
@@ -183,10 +179,10 @@ struct StereoProcessor::Impl {
     Rectifier rectifier;
     std::unique_ptr<Matcher> matcher;
     NearestObjectFinder nearest;
-    cv::Mat left_gray, right_gray;   // colour inputs converted, reused
-    cv::Mat right_rectified;         // full calibration only, reused
-    cv::Mat last_right;              // what the matcher saw last (see lastRightRectified())
-    bool last_frame_bad = false;     // log a run of bad frames once
+    cv::Mat left_gray, right_gray; // colour inputs converted, reused
+    cv::Mat right_rectified;       // full calibration only, reused
+    cv::Mat last_right;            // what the matcher saw last (see lastRightRectified())
+    bool last_frame_bad = false;   // log a run of bad frames once
 };
 
 StereoProcessor::StereoProcessor(const StereoCalibration& calibration,

@@ -24,7 +24,7 @@ namespace stereod {
 struct ProcessorSettings {
     MatcherSettings matcher;
     NearestSettings nearest;
-    bool compute_cloud = true;         // the point cloud is skipped when nobody needs it
+    bool compute_cloud = true; // the point cloud is skipped when nobody needs it
 };
 
 // Milliseconds spent in each stage of the last process() call.
@@ -47,24 +47,24 @@ struct CloudPoint {
 // Everything the chain produced for one pair. Reused frame after frame: buffers keep
 // their capacity.
 struct DepthResult {
-    cv::Mat left_rectified;            // CV_8UC1
-    cv::Mat disparity;                 // CV_32FC1, pixels; invalid = +inf (Middlebury)
-    cv::Mat confidence;                // CV_8UC1, 0 invalid, 1..255 (see MatchOutput)
-    cv::Mat range_limit;               // CV_8UC1, 1 where matched at the range's near end
-    cv::Mat depth_m;                   // CV_32FC1, metres; invalid = 0
-    std::vector<CloudPoint> cloud;     // valid depths only; capacity kept across frames
+    cv::Mat left_rectified;        // CV_8UC1
+    cv::Mat disparity;             // CV_32FC1, pixels; invalid = +inf (Middlebury)
+    cv::Mat confidence;            // CV_8UC1, 0 invalid, 1..255 (see MatchOutput)
+    cv::Mat range_limit;           // CV_8UC1, 1 where matched at the range's near end
+    cv::Mat depth_m;               // CV_32FC1, metres; invalid = 0
+    std::vector<CloudPoint> cloud; // valid depths only; capacity kept across frames
     Reading reading;
     StageTimings timings;
     uint64_t frame = 0;
-    int64_t stamp_ns = 0;              // capture time of the pair, CLOCK_MONOTONIC
+    int64_t stamp_ns = 0; // capture time of the pair, CLOCK_MONOTONIC
 };
 
 // How the disparity range was chosen, for logs and `status`.
 struct DisparityRange {
     int min_disparity = 0;
-    int num_disparities = 0;           // multiple of 16
-    double closest_depth_m = 0.0;      // the nearest depth this range can see
-    bool capped = false;               // true when max_num_disparities kept min_depth_m out of sight
+    int num_disparities = 0;      // multiple of 16
+    double closest_depth_m = 0.0; // the nearest depth this range can see
+    bool capped = false;          // true when max_num_disparities kept min_depth_m out of sight
 };
 
 // Works out the disparity range from the settings and the rectified geometry.
@@ -80,7 +80,7 @@ DisparityRange validateProcessorSettings(const ProcessorSettings& settings,
                                          const RectifiedGeometry& geometry);
 
 class StereoProcessor {
-public:
+  public:
     // Computes the rectification maps (fixed-point) once and sets up the matcher.
     // Throws CalibrationError / std::invalid_argument with the reason when the settings
     // and calibration cannot work together.
@@ -110,7 +110,7 @@ public:
     // A name for logs and status: "census-sgm", "sgbm", "sgbm-3way", "bm".
     std::string matcherName() const;
 
-private:
+  private:
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };

@@ -49,9 +49,12 @@ bool usableDepth(float z)
 const char* zoneStateName(ZoneState state) noexcept
 {
     switch (state) {
-    case ZoneState::Clear: return "clear";
-    case ZoneState::Occupied: return "occupied";
-    case ZoneState::Unknown: return "unknown";
+    case ZoneState::Clear:
+        return "clear";
+    case ZoneState::Occupied:
+        return "occupied";
+    case ZoneState::Unknown:
+        return "unknown";
     }
     return "unknown";
 }
@@ -59,7 +62,8 @@ const char* zoneStateName(ZoneState state) noexcept
 void validateZonesSettings(const ZonesSettings& s)
 {
     for (int i = 0; i < 3; ++i)
-        if (!std::isfinite(s.camera_pose.translation_m[i]) || !std::isfinite(s.camera_pose.rpy_deg[i]))
+        if (!std::isfinite(s.camera_pose.translation_m[i]) ||
+            !std::isfinite(s.camera_pose.rpy_deg[i]))
             invalid("robot.camera_pose", "must be finite numbers");
     if (!(s.min_visible_fraction >= 0.0 && s.min_visible_fraction <= 1.0))
         invalid("zones_min_visible_fraction", "must be within 0..1");
@@ -143,11 +147,11 @@ double ZoneMonitor::visibleFraction(const ZoneSettings& zone, const cv::Mat& dep
                     p_base[a] = zone.min_m[a] + fraction[a] * (zone.max_m[a] - zone.min_m[a]);
                 const cv::Vec3d p = base_to_optical * (p_base - t);
                 if (!(p[2] > closest_depth_m))
-                    continue;   // behind the camera, or nearer than the range sees
+                    continue; // behind the camera, or nearer than the range sees
                 const int u = static_cast<int>(std::lround(g.focal_px * p[0] / p[2] + g.cx_px));
                 const int v = static_cast<int>(std::lround(g.focal_px * p[1] / p[2] + g.cy_px));
                 if (u < 0 || v < 0 || u >= depth_m.cols || v >= depth_m.rows)
-                    continue;   // outside the field of view
+                    continue; // outside the field of view
                 const float z = depth_m.at<float>(v, u);
                 // No depth along that ray says nothing of what is there; a surface nearer
                 // than the sample hides it (a little slack for the depth's own error).
@@ -175,7 +179,8 @@ const std::vector<ZoneReading>& ZoneMonitor::markUnknown(const char* reason, int
     return readings_;
 }
 
-const std::vector<ZoneReading>& ZoneMonitor::update(const cv::Mat& depth_m, const RectifiedGeometry& g,
+const std::vector<ZoneReading>& ZoneMonitor::update(const cv::Mat& depth_m,
+                                                    const RectifiedGeometry& g,
                                                     double closest_depth_m, int64_t stamp_ns,
                                                     uint64_t frame)
 {
@@ -198,7 +203,8 @@ const std::vector<ZoneReading>& ZoneMonitor::update(const cv::Mat& depth_m, cons
             const float z = row[u];
             if (!usableDepth(z))
                 continue;
-            const cv::Vec3d optical((u - g.cx_px) * z / g.focal_px, (v - g.cy_px) * z / g.focal_px, z);
+            const cv::Vec3d optical((u - g.cx_px) * z / g.focal_px, (v - g.cy_px) * z / g.focal_px,
+                                    z);
             const cv::Vec3d p = rotation_ * optical + t;
             for (size_t i = 0; i < zones; ++i) {
                 if (!inside(p, settings_.zones[i]))
@@ -227,14 +233,14 @@ const std::vector<ZoneReading>& ZoneMonitor::update(const cv::Mat& depth_m, cons
         r.visible_fraction = visibleFraction(zone, depth_m, g, closest_depth_m);
         std::vector<Point>& points = inside_[i];
         if (!points.empty()) {
-            constexpr size_t kAtLeast = 4;   // the 5th nearest point, 0-based
+            constexpr size_t kAtLeast = 4; // the 5th nearest point, 0-based
             const size_t rank = std::min(
                 points.size() - 1,
                 std::max(kAtLeast, static_cast<size_t>(settings_.nearest_percentile / 100.0 *
                                                        static_cast<double>(points.size()))));
-            std::nth_element(points.begin(), points.begin() + static_cast<std::ptrdiff_t>(rank),
-                             points.end(),
-                             [](const Point& a, const Point& b) { return a.distance_m < b.distance_m; });
+            std::nth_element(
+                points.begin(), points.begin() + static_cast<std::ptrdiff_t>(rank), points.end(),
+                [](const Point& a, const Point& b) { return a.distance_m < b.distance_m; });
             r.nearest_m = points[rank].distance_m;
             r.nearest_point_m = points[rank].base_m;
         }

@@ -30,17 +30,17 @@ namespace stereod {
 
 // Where the camera sits on the robot.
 struct CameraPose {
-    cv::Vec3d translation_m{0.0, 0.0, 0.0};   // camera origin in the base frame
-    cv::Vec3d rpy_deg{0.0, 0.0, 0.0};         // roll, pitch, yaw of the camera body (x forward)
+    cv::Vec3d translation_m{0.0, 0.0, 0.0}; // camera origin in the base frame
+    cv::Vec3d rpy_deg{0.0, 0.0, 0.0};       // roll, pitch, yaw of the camera body (x forward)
 };
 
 struct ZoneSettings {
     std::string name;
-    cv::Vec3d min_m{0.0, 0.0, 0.0};           // box corners in the base frame, min < max
+    cv::Vec3d min_m{0.0, 0.0, 0.0}; // box corners in the base frame, min < max
     cv::Vec3d max_m{0.0, 0.0, 0.0};
-    int min_points = 50;                      // depth points inside that make it occupied
-    int enter_frames = 2;                     // consecutive occupied frames to turn occupied
-    int leave_frames = 3;                     // consecutive free frames to turn clear again
+    int min_points = 50;  // depth points inside that make it occupied
+    int enter_frames = 2; // consecutive occupied frames to turn occupied
+    int leave_frames = 3; // consecutive free frames to turn clear again
 };
 
 struct ZonesSettings {
@@ -67,12 +67,12 @@ const char* zoneStateName(ZoneState state) noexcept;
 
 struct ZoneReading {
     std::string name;
-    cv::Vec3d min_m{0.0, 0.0, 0.0};           // the zone's box, base frame (from its settings)
+    cv::Vec3d min_m{0.0, 0.0, 0.0}; // the zone's box, base frame (from its settings)
     cv::Vec3d max_m{0.0, 0.0, 0.0};
     ZoneState state = ZoneState::Unknown;
-    std::string reason;                       // for unknown: "not_visible", "no_frame"
-    int points = 0;                           // depth points inside this frame (pixel_step counted once)
-    double nearest_m = 0.0;                   // distance of the nearest point from the base origin
+    std::string reason;     // for unknown: "not_visible", "no_frame"
+    int points = 0;         // depth points inside this frame (pixel_step counted once)
+    double nearest_m = 0.0; // distance of the nearest point from the base origin
     cv::Vec3d nearest_point_m{0.0, 0.0, 0.0}; // where it is, base frame (see nearest_percentile)
     double visible_fraction = 0.0;            // share of the zone's volume in sight
     bool occupied_now = false;                // this frame alone, before hysteresis
@@ -85,12 +85,13 @@ struct ZoneReading {
 cv::Matx33d opticalToBaseRotation(const CameraPose& pose);
 
 class ZoneMonitor {
-public:
+  public:
     explicit ZoneMonitor(const ZonesSettings& settings);
 
     // depth_m: CV_32FC1, metres, invalid 0/NaN/inf; geometry: the rectified camera;
     // closest_depth_m: the nearest depth the disparity range can see (nearer is blind).
-    const std::vector<ZoneReading>& update(const cv::Mat& depth_m, const RectifiedGeometry& geometry,
+    const std::vector<ZoneReading>& update(const cv::Mat& depth_m,
+                                           const RectifiedGeometry& geometry,
                                            double closest_depth_m, int64_t stamp_ns,
                                            uint64_t frame);
 
@@ -105,7 +106,7 @@ public:
     const std::vector<ZoneReading>& readings() const { return readings_; }
     const ZonesSettings& settings() const { return settings_; }
 
-private:
+  private:
     struct Track {
         int occupied_run = 0;
         int free_run = 0;
@@ -119,9 +120,9 @@ private:
         cv::Vec3d base_m;
     };
     ZonesSettings settings_;
-    cv::Matx33d rotation_;                    // optical -> base
+    cv::Matx33d rotation_; // optical -> base
     std::vector<Track> tracks_;
-    std::vector<std::vector<Point>> inside_;  // per zone, this frame's points; capacity kept
+    std::vector<std::vector<Point>> inside_; // per zone, this frame's points; capacity kept
     std::vector<ZoneReading> readings_;
 };
 

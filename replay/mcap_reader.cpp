@@ -1,11 +1,11 @@
 #include "replay/mcap_reader.hpp"
 
+#include <algorithm>
+#include <cstring>
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
-
-#include <algorithm>
-#include <cstring>
 
 namespace stereod::mcap {
 
@@ -72,8 +72,8 @@ bool Reader::readAt(uint64_t offset, uint64_t size, std::string& out) const
     out.resize(size);
     uint64_t done = 0;
     while (done < size) {
-        const ssize_t n = ::pread(fd_, out.data() + done, size - done,
-                                  static_cast<off_t>(offset + done));
+        const ssize_t n =
+            ::pread(fd_, out.data() + done, size - done, static_cast<off_t>(offset + done));
         if (n < 0) {
             if (errno == EINTR) {
                 continue;
@@ -166,11 +166,12 @@ bool Reader::readSummary(uint64_t file_size)
                               has_statistics_ = true;
                               break;
                           default:
-                              break;   // attachment and metadata indexes: not used
+                              break; // attachment and metadata indexes: not used
                           }
                       });
     } catch (const McapError& e) {
-        problem_ = std::string("summary unreadable (") + e.what() + "); scanned the data section instead";
+        problem_ =
+            std::string("summary unreadable (") + e.what() + "); scanned the data section instead";
         has_statistics_ = false;
         return false;
     }
@@ -207,12 +208,13 @@ void Reader::scan(uint64_t file_size)
         const uint64_t length = pr.u64();
         if (length > file_size - pos - kRecordPrefixSize) {
             truncated_ = true;
-            problem_ = "record at byte " + std::to_string(pos) + " runs past the end of the file (" +
-                       std::to_string(file_size) + " bytes): cut short";
+            problem_ = "record at byte " + std::to_string(pos) +
+                       " runs past the end of the file (" + std::to_string(file_size) +
+                       " bytes): cut short";
             return;
         }
         if (first) {
-            first = false;   // the Header, already read
+            first = false; // the Header, already read
             pos += kRecordPrefixSize + length;
             continue;
         }
@@ -257,7 +259,7 @@ void Reader::scan(uint64_t file_size)
                 break;
             }
             default:
-                break;   // message indexes, attachments, metadata, private records
+                break; // message indexes, attachments, metadata, private records
             }
         } catch (const McapError& e) {
             truncated_ = true;

@@ -35,7 +35,7 @@ struct MessageRef {
 };
 
 class Reader {
-public:
+  public:
     // Opens and indexes `path`. Throws McapError: ENOENT/EACCES when it cannot be opened,
     // EINVAL when it is not MCAP (no magic, no Header) or nothing past the Header parses.
     explicit Reader(const std::string& path);
@@ -50,7 +50,10 @@ public:
     // Chunks in file order (from the summary, or found by the scan).
     const std::vector<ChunkIndex>& chunks() const noexcept { return chunks_; }
     // From the summary; absent when the file has none (then count with forEachMessage).
-    const Statistics* statistics() const noexcept { return has_statistics_ ? &statistics_ : nullptr; }
+    const Statistics* statistics() const noexcept
+    {
+        return has_statistics_ ? &statistics_ : nullptr;
+    }
 
     // True when the index came from the summary section.
     bool hasSummary() const noexcept { return from_summary_; }
@@ -71,7 +74,7 @@ public:
     // Throws McapError.
     MessageView message(const MessageRef& ref);
 
-private:
+  private:
     bool readSummary(uint64_t file_size);
     void scan(uint64_t file_size);
     // Reads [offset, offset + size) into `out`; false when the file is shorter.
@@ -83,12 +86,12 @@ private:
 
     std::string path_;
     int fd_ = -1;
-    uint64_t file_size_ = 0;       // as opened (a file still growing is read up to this)
+    uint64_t file_size_ = 0; // as opened (a file still growing is read up to this)
     Header header_;
     std::map<uint16_t, Schema> schemas_;
     std::map<uint16_t, Channel> channels_;
     std::vector<ChunkIndex> chunks_;
-    std::vector<uint64_t> loose_messages_;   // file offsets of Message records outside chunks
+    std::vector<uint64_t> loose_messages_; // file offsets of Message records outside chunks
     Statistics statistics_;
     bool has_statistics_ = false;
     bool from_summary_ = false;
@@ -96,8 +99,8 @@ private:
     std::string problem_;
 
     uint32_t loaded_chunk_ = MessageRef::kNoChunk;
-    std::string chunk_records_;    // uncompressed records of loaded_chunk_
-    std::string raw_;              // scratch: bytes read from the file
+    std::string chunk_records_; // uncompressed records of loaded_chunk_
+    std::string raw_;           // scratch: bytes read from the file
 };
 
 } // namespace stereod::mcap

@@ -1,13 +1,12 @@
 #include "replay/mcap_recording.hpp"
 
-#include <fcntl.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cstring>
 #include <map>
 
+#include <fcntl.h>
 #include <opencv2/imgproc.hpp>
+#include <unistd.h>
 
 namespace stereod {
 
@@ -15,22 +14,21 @@ namespace {
 
 // The QoS rosbag2 records for a sensor stream (reliable, volatile, keep last): the
 // `ros2` profile requires the key; `ros2 bag play` uses it to publish.
-constexpr const char* kOfferedQos =
-    "- history: 1\n"
-    "  depth: 10\n"
-    "  reliability: 1\n"
-    "  durability: 2\n"
-    "  deadline:\n"
-    "    sec: 9223372036\n"
-    "    nsec: 854775807\n"
-    "  lifespan:\n"
-    "    sec: 9223372036\n"
-    "    nsec: 854775807\n"
-    "  liveliness: 1\n"
-    "  liveliness_lease_duration:\n"
-    "    sec: 9223372036\n"
-    "    nsec: 854775807\n"
-    "  avoid_ros_namespace_conventions: false\n";
+constexpr const char* kOfferedQos = "- history: 1\n"
+                                    "  depth: 10\n"
+                                    "  reliability: 1\n"
+                                    "  durability: 2\n"
+                                    "  deadline:\n"
+                                    "    sec: 9223372036\n"
+                                    "    nsec: 854775807\n"
+                                    "  lifespan:\n"
+                                    "    sec: 9223372036\n"
+                                    "    nsec: 854775807\n"
+                                    "  liveliness: 1\n"
+                                    "  liveliness_lease_duration:\n"
+                                    "    sec: 9223372036\n"
+                                    "    nsec: 854775807\n"
+                                    "  avoid_ros_namespace_conventions: false\n";
 
 constexpr const char* kLeftFrame = "stereo_left_optical_frame";
 constexpr const char* kRightFrame = "stereo_right_optical_frame";
@@ -116,7 +114,8 @@ uint64_t McapRecordingWriter::write(const cv::Mat& left, const cv::Mat& right,
 {
     if (left.type() != CV_8UC1 || right.type() != CV_8UC1 || left.size() != right.size() ||
         left.empty()) {
-        throw mcap::McapError(writer_.path() + ": a pair must be two 8-bit grayscale images of one size");
+        throw mcap::McapError(writer_.path() +
+                              ": a pair must be two 8-bit grayscale images of one size");
     }
     if (size_.empty()) {
         size_ = left.size();
@@ -132,10 +131,12 @@ uint64_t McapRecordingWriter::write(const cv::Mat& left, const cv::Mat& right,
         camera_info_->second.header.stamp = ros2::Time::fromNs(right_stamp_ns);
         ros2::serializeCameraInfo(camera_info_->first, message_);
         writer_.write(left_info_channel_, static_cast<uint64_t>(left_stamp_ns),
-                      static_cast<uint64_t>(left_stamp_ns), message_, static_cast<uint32_t>(pairs_));
+                      static_cast<uint64_t>(left_stamp_ns), message_,
+                      static_cast<uint32_t>(pairs_));
         ros2::serializeCameraInfo(camera_info_->second, message_);
         writer_.write(right_info_channel_, static_cast<uint64_t>(right_stamp_ns),
-                      static_cast<uint64_t>(right_stamp_ns), message_, static_cast<uint32_t>(pairs_));
+                      static_cast<uint64_t>(right_stamp_ns), message_,
+                      static_cast<uint32_t>(pairs_));
     }
     return pairs_++;
 }
@@ -167,8 +168,8 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
         listed = "none";
     }
     auto refuse = [&](const std::string& why) {
-        throw mcap::McapError(reader.path() + ": " + why + " (its sensor_msgs/msg/Image topics in CDR: " +
-                              listed + ")");
+        throw mcap::McapError(reader.path() + ": " + why +
+                              " (its sensor_msgs/msg/Image topics in CDR: " + listed + ")");
     };
 
     if (!left_topic.empty() || !right_topic.empty()) {
@@ -179,7 +180,8 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
                 refuse("no sensor_msgs/msg/Image topic '" + *t + "'");
             }
         }
-    } else if (image_topics.count(kMcapLeftImageTopic) && image_topics.count(kMcapRightImageTopic)) {
+    } else if (image_topics.count(kMcapLeftImageTopic) &&
+               image_topics.count(kMcapRightImageTopic)) {
         index.left_topic = kMcapLeftImageTopic;
         index.right_topic = kMcapRightImageTopic;
     } else {
@@ -200,8 +202,8 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
         }
         index.left_topic = lefts.front();
         index.right_topic = rights.front();
-        index.notes.push_back("image topics chosen by name: left " + index.left_topic +
-                              ", right " + index.right_topic);
+        index.notes.push_back("image topics chosen by name: left " + index.left_topic + ", right " +
+                              index.right_topic);
     }
     const uint16_t left_id = image_topics.at(index.left_topic);
     const uint16_t right_id = image_topics.at(index.right_topic);
@@ -213,7 +215,7 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
     struct Stamped {
         int64_t stamp_ns;
         mcap::MessageRef ref;
-        std::size_t order;   // position in the file among its topic's messages
+        std::size_t order; // position in the file among its topic's messages
     };
     std::vector<Stamped> lefts, rights;
     std::optional<ros2::CameraInfo> info[2];
@@ -250,7 +252,8 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
         for (std::size_t i = 1; i < lefts.size(); ++i) {
             gaps.push_back(lefts[i].stamp_ns - lefts[i - 1].stamp_ns);
         }
-        std::nth_element(gaps.begin(), gaps.begin() + static_cast<std::ptrdiff_t>(gaps.size() / 2), gaps.end());
+        std::nth_element(gaps.begin(), gaps.begin() + static_cast<std::ptrdiff_t>(gaps.size() / 2),
+                         gaps.end());
         if (gaps[gaps.size() / 2] > 0) {
             tolerance_ns = gaps[gaps.size() / 2] / 2;
         }
@@ -270,7 +273,8 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
                 break;
             }
         }
-        if (j < rights.size() && !used[j] && std::llabs(rights[j].stamp_ns - l.stamp_ns) <= tolerance_ns) {
+        if (j < rights.size() && !used[j] &&
+            std::llabs(rights[j].stamp_ns - l.stamp_ns) <= tolerance_ns) {
             used[j] = true;
             index.pairs.push_back({l.ref, rights[j].ref, l.stamp_ns, rights[j].stamp_ns});
             pair_order.push_back(l.order);
@@ -294,9 +298,10 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
     }
     index.pairs = std::move(ordered);
     if (index.pairs.empty()) {
-        refuse("no stereo pair: " + std::to_string(lefts.size()) + " images on " + index.left_topic +
-               " and " + std::to_string(rights.size()) + " on " + index.right_topic +
-               " have no stamps within " + std::to_string(tolerance_ns / 1000) + " us of each other");
+        refuse("no stereo pair: " + std::to_string(lefts.size()) + " images on " +
+               index.left_topic + " and " + std::to_string(rights.size()) + " on " +
+               index.right_topic + " have no stamps within " + std::to_string(tolerance_ns / 1000) +
+               " us of each other");
     }
     return index;
 }
@@ -313,7 +318,7 @@ bool decodeMcapImage(mcap::Reader& reader, const mcap::MessageRef& ref, cv::Mat&
     }
     const int rows = static_cast<int>(image.height);
     const int cols = static_cast<int>(image.width);
-    auto* data = const_cast<char*>(image.data.data());   // wrapped read-only, then copied
+    auto* data = const_cast<char*>(image.data.data()); // wrapped read-only, then copied
     int type = -1;
     int conversion = -1;
     if (image.encoding == "mono8" || image.encoding == "8UC1") {

@@ -45,9 +45,10 @@ bool isMcapFile(const std::string& path);
 //
 // Thread-bound: one thread writes.
 class McapRecordingWriter {
-public:
+  public:
     // Creates `path` (never overwrites an existing file).
-    explicit McapRecordingWriter(const std::string& path, mcap::WriterOptions options = defaultOptions());
+    explicit McapRecordingWriter(const std::string& path,
+                                 mcap::WriterOptions options = defaultOptions());
 
     static mcap::WriterOptions defaultOptions();
 
@@ -66,9 +67,8 @@ public:
     uint64_t pairsWritten() const noexcept { return pairs_; }
     const mcap::Writer& file() const noexcept { return writer_; }
 
-private:
-    void writeImage(uint16_t channel, const cv::Mat& image, int64_t stamp_ns,
-                    const char* frame_id);
+  private:
+    void writeImage(uint16_t channel, const cv::Mat& image, int64_t stamp_ns, const char* frame_id);
 
     mcap::Writer writer_;
     uint16_t left_channel_ = 0;
@@ -78,7 +78,7 @@ private:
     std::optional<std::pair<ros2::CameraInfo, ros2::CameraInfo>> camera_info_;
     cv::Size size_;
     uint64_t pairs_ = 0;
-    std::string message_;          // scratch: one serialized message, reused
+    std::string message_; // scratch: one serialized message, reused
 };
 
 // One pair of a bag: where its two Image messages are, and their header stamps.
@@ -92,13 +92,13 @@ struct McapPair {
 struct McapStereoIndex {
     std::string left_topic;
     std::string right_topic;
-    std::vector<McapPair> pairs;              // in the order of the left images in the file
-    uint64_t unpaired_left = 0;               // images with no partner within the tolerance
+    std::vector<McapPair> pairs; // in the order of the left images in the file
+    uint64_t unpaired_left = 0;  // images with no partner within the tolerance
     uint64_t unpaired_right = 0;
     // The first camera_info of each side's sibling topic (`.../camera_info` beside the
     // image topic), when both exist.
     std::optional<std::pair<ros2::CameraInfo, ros2::CameraInfo>> camera_info;
-    std::vector<std::string> notes;           // what was chosen and why, for the log
+    std::vector<std::string> notes; // what was chosen and why, for the log
 };
 
 // Indexes the stereo pairs of a bag. Topics: the given ones; when both are empty, the

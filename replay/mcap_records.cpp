@@ -1,9 +1,9 @@
 #include "replay/mcap_records.hpp"
 
+#include <limits>
+
 #include <zlib.h>
 #include <zstd.h>
-
-#include <limits>
 
 namespace stereod::mcap {
 
@@ -89,10 +89,22 @@ uint64_t ByteReader::le(int n)
     return v;
 }
 
-uint8_t ByteReader::u8() { return static_cast<uint8_t>(le(1)); }
-uint16_t ByteReader::u16() { return static_cast<uint16_t>(le(2)); }
-uint32_t ByteReader::u32() { return static_cast<uint32_t>(le(4)); }
-uint64_t ByteReader::u64() { return le(8); }
+uint8_t ByteReader::u8()
+{
+    return static_cast<uint8_t>(le(1));
+}
+uint16_t ByteReader::u16()
+{
+    return static_cast<uint16_t>(le(2));
+}
+uint32_t ByteReader::u32()
+{
+    return static_cast<uint32_t>(le(4));
+}
+uint64_t ByteReader::u64()
+{
+    return le(8);
+}
 
 std::string_view ByteReader::bytes(std::size_t n)
 {
@@ -329,25 +341,25 @@ void decompressChunk(const ChunkView& chunk, std::string& out)
         }
         if (frame_size == ZSTD_CONTENTSIZE_UNKNOWN ? chunk.uncompressed_size > kMaxUncompressedChunk
                                                    : frame_size != chunk.uncompressed_size) {
-            throw McapError("zstd chunk: uncompressed size " + std::to_string(chunk.uncompressed_size) +
-                            " does not match its frame");
+            throw McapError("zstd chunk: uncompressed size " +
+                            std::to_string(chunk.uncompressed_size) + " does not match its frame");
         }
         out.resize(chunk.uncompressed_size);
-        const std::size_t n = ZSTD_decompress(out.data(), out.size(), chunk.records.data(),
-                                              chunk.records.size());
+        const std::size_t n =
+            ZSTD_decompress(out.data(), out.size(), chunk.records.data(), chunk.records.size());
         if (ZSTD_isError(n)) {
             throw McapError(std::string("zstd chunk: ") + ZSTD_getErrorName(n));
         }
         if (n != chunk.uncompressed_size) {
-            throw McapError("zstd chunk: " + std::to_string(n) + " bytes uncompressed, header says " +
+            throw McapError("zstd chunk: " + std::to_string(n) +
+                            " bytes uncompressed, header says " +
                             std::to_string(chunk.uncompressed_size));
         }
     } else {
         throw McapError("chunk compressed with '" + chunk.compression +
                         "', which this reader does not support (only zstd and none)");
     }
-    if (chunk.uncompressed_crc != 0 &&
-        crc32(0, out.data(), out.size()) != chunk.uncompressed_crc) {
+    if (chunk.uncompressed_crc != 0 && crc32(0, out.data(), out.size()) != chunk.uncompressed_crc) {
         throw McapError("chunk CRC mismatch: the chunk is corrupt");
     }
 }

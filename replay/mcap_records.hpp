@@ -60,32 +60,34 @@ enum class Op : uint8_t {
 // says which record or file; code() is the matching positive errno (EINVAL for malformed
 // content, EIO/ENOSPC/... from the system).
 class McapError : public std::runtime_error {
-public:
+  public:
     explicit McapError(const std::string& message, int code = EINVAL)
-        : std::runtime_error(message), code_(code) {}
+        : std::runtime_error(message), code_(code)
+    {
+    }
     int code() const noexcept { return code_; }
 
-private:
+  private:
     int code_;
 };
 
 struct Header {
-    std::string profile;   // "ros2" for ROS 2 bags
-    std::string library;   // the writer's name and version
+    std::string profile; // "ros2" for ROS 2 bags
+    std::string library; // the writer's name and version
 };
 
 struct Schema {
-    uint16_t id = 0;       // never 0 in a valid file
-    std::string name;      // e.g. "sensor_msgs/msg/Image"
-    std::string encoding;  // e.g. "ros2msg"
-    std::string data;      // the definition text (bytes)
+    uint16_t id = 0;      // never 0 in a valid file
+    std::string name;     // e.g. "sensor_msgs/msg/Image"
+    std::string encoding; // e.g. "ros2msg"
+    std::string data;     // the definition text (bytes)
 };
 
 struct Channel {
     uint16_t id = 0;
-    uint16_t schema_id = 0;         // 0: no schema
+    uint16_t schema_id = 0; // 0: no schema
     std::string topic;
-    std::string message_encoding;   // e.g. "cdr"
+    std::string message_encoding; // e.g. "cdr"
     std::map<std::string, std::string> metadata;
 };
 
@@ -102,11 +104,11 @@ struct MessageView {
 struct ChunkIndex {
     uint64_t message_start_time = 0;
     uint64_t message_end_time = 0;
-    uint64_t chunk_start_offset = 0;   // from the start of the file, to the opcode
-    uint64_t chunk_length = 0;         // the whole record, prefix included
+    uint64_t chunk_start_offset = 0; // from the start of the file, to the opcode
+    uint64_t chunk_length = 0;       // the whole record, prefix included
     std::map<uint16_t, uint64_t> message_index_offsets;
     uint64_t message_index_length = 0;
-    std::string compression;           // "" or "zstd"
+    std::string compression; // "" or "zstd"
     uint64_t compressed_size = 0;
     uint64_t uncompressed_size = 0;
 };
@@ -124,9 +126,9 @@ struct Statistics {
 };
 
 struct Footer {
-    uint64_t summary_start = 0;          // 0: no summary
-    uint64_t summary_offset_start = 0;   // 0: no summary offsets
-    uint32_t summary_crc = 0;            // 0: not available
+    uint64_t summary_start = 0;        // 0: no summary
+    uint64_t summary_offset_start = 0; // 0: no summary offsets
+    uint32_t summary_crc = 0;          // 0: not available
 };
 
 // CRC-32 (zlib's) of `size` bytes, continuing from `crc` (0 to start).
@@ -134,7 +136,7 @@ uint32_t crc32(uint32_t crc, const void* data, std::size_t size) noexcept;
 
 // Appends little-endian fields and records to a byte buffer.
 class ByteWriter {
-public:
+  public:
     explicit ByteWriter(std::string& out) : out_(out) {}
 
     void u8(uint8_t v) { out_.push_back(static_cast<char>(v)); }
@@ -153,7 +155,7 @@ public:
 
     std::string& buffer() noexcept { return out_; }
 
-private:
+  private:
     void le(uint64_t v, int n)
     {
         for (int i = 0; i < n; ++i) {
@@ -166,7 +168,7 @@ private:
 // Reads little-endian fields from a record's content; every read is bounds-checked and
 // throws McapError naming `what` when the content is too short.
 class ByteReader {
-public:
+  public:
     ByteReader(std::string_view data, const char* what) : data_(data), what_(what) {}
 
     uint8_t u8();
@@ -182,7 +184,7 @@ public:
     std::size_t remaining() const noexcept { return data_.size() - pos_; }
     std::size_t position() const noexcept { return pos_; }
 
-private:
+  private:
     void need(std::size_t n) const;
     uint64_t le(int n);
     std::string_view data_;
@@ -214,7 +216,7 @@ struct ChunkView {
     uint64_t message_start_time = 0;
     uint64_t message_end_time = 0;
     uint64_t uncompressed_size = 0;
-    uint32_t uncompressed_crc = 0;   // 0: not available
+    uint32_t uncompressed_crc = 0; // 0: not available
     std::string compression;
     std::string_view records;
 };
@@ -230,8 +232,7 @@ void zstdCompress(std::string_view in, std::string& out, int level);
 
 // Calls f(Op, content, offset_in_buffer) for every complete record of a record sequence
 // (a chunk's records). Throws McapError when the sequence ends inside a record.
-template <typename F>
-void forEachRecord(std::string_view records, F&& f)
+template <typename F> void forEachRecord(std::string_view records, F&& f)
 {
     std::size_t pos = 0;
     while (pos < records.size()) {

@@ -1,10 +1,10 @@
 #include "replay/mcap_writer.hpp"
 
-#include <fcntl.h>
-#include <unistd.h>
-
 #include <cstdio>
 #include <cstring>
+
+#include <fcntl.h>
+#include <unistd.h>
 
 namespace stereod::mcap {
 

@@ -31,7 +31,7 @@ namespace stereod::mcap {
 struct WriterOptions {
     enum class Compression { None, Zstd };
 
-    std::string profile;                 // "ros2" for ROS 2 bags, or empty
+    std::string profile; // "ros2" for ROS 2 bags, or empty
     std::string library = "stereod";
     Compression compression = Compression::Zstd;
     // zstd level: 1 is the fastest (about 300 MB/s of camera images per core) and already
@@ -45,7 +45,7 @@ struct WriterOptions {
 };
 
 class Writer {
-public:
+  public:
     // Creates `path` (never overwrites: EEXIST when it exists) and writes the magic and
     // the Header. Throws McapError.
     Writer(const std::string& path, WriterOptions options);
@@ -82,7 +82,7 @@ public:
     uint64_t uncompressedBytes() const noexcept { return uncompressed_bytes_; }
     const std::string& path() const noexcept { return path_; }
 
-private:
+  private:
     // Writes `bytes` at the end of the file; counts them into the data-section CRC while
     // the data section is open.
     void append(std::string_view bytes);
@@ -93,8 +93,8 @@ private:
     int fd_ = -1;
     bool failed_ = false;
     bool closed_ = false;
-    uint64_t position_ = 0;        // bytes in the file
-    uint32_t data_crc_ = 0;        // CRC of the data section so far
+    uint64_t position_ = 0; // bytes in the file
+    uint32_t data_crc_ = 0; // CRC of the data section so far
     bool data_section_open_ = true;
 
     std::vector<Schema> schemas_;
@@ -111,8 +111,8 @@ private:
     uint64_t chunk_start_time_ = 0;
     uint64_t chunk_end_time_ = 0;
     std::map<uint16_t, std::vector<std::pair<uint64_t, uint64_t>>> chunk_message_index_;
-    std::string compressed_;       // scratch: compressed records
-    std::string out_;              // scratch: chunk + message index records as written
+    std::string compressed_; // scratch: compressed records
+    std::string out_;        // scratch: chunk + message index records as written
 };
 
 } // namespace stereod::mcap

@@ -7,10 +7,9 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <string_view>
 #include <system_error>
-
-#include <fstream>
 
 #include <fcntl.h>
 #include <opencv2/core.hpp>
@@ -38,8 +37,7 @@ std::string_view trim(std::string_view text)
     return text;
 }
 
-template <typename Int>
-bool parseInteger(std::string_view text, Int& out)
+template <typename Int> bool parseInteger(std::string_view text, Int& out)
 {
     if (text.empty())
         return false;
@@ -57,9 +55,8 @@ bool parseRow(std::string_view line, const fs::path& dir, RecordingEntry& entry,
     std::size_t start = 0;
     for (;;) {
         const std::size_t comma = line.find(',', start);
-        const std::string_view field =
-            trim(line.substr(start, comma == std::string_view::npos ? std::string_view::npos
-                                                                    : comma - start));
+        const std::string_view field = trim(line.substr(
+            start, comma == std::string_view::npos ? std::string_view::npos : comma - start));
         if (count < 5)
             fields[count] = field;
         ++count;
@@ -118,7 +115,7 @@ Recording readFramesCsv(const fs::path& dir, const fs::path& csv_path)
         throw RecordingError(EINVAL, csv_name + ":1: empty file, expected the header '" +
                                          std::string(kFramesCsvHeader) + "'");
     std::string_view header = trim(line);
-    if (header.substr(0, 3) == "\xEF\xBB\xBF")   // a UTF-8 byte-order mark from an editor
+    if (header.substr(0, 3) == "\xEF\xBB\xBF") // a UTF-8 byte-order mark from an editor
         header.remove_prefix(3);
     if (header != kFramesCsvHeader)
         throw RecordingError(EINVAL, csv_name + ":1: header is '" + std::string(header) +
@@ -216,7 +213,7 @@ bool naturalLess(const std::string& a, const std::string& b)
     }
     if ((a.size() - i) != (b.size() - j))
         return (a.size() - i) < (b.size() - j);
-    return a < b;   // equal as numbers (left1 / left01): any fixed order will do
+    return a < b; // equal as numbers (left1 / left01): any fixed order will do
 }
 
 Recording scanPairFolder(const fs::path& dir, double nominal_fps)
@@ -243,8 +240,8 @@ Recording scanPairFolder(const fs::path& dir, double nominal_fps)
     if (ec)
         throw RecordingError(ec.value(), dir_name + ": cannot list: " + ec.message());
     if (lefts.empty() && rights.empty())
-        throw RecordingError(ENOENT, dir_name + ": neither " + kFramesCsvName +
-                                         " nor left*/right* images");
+        throw RecordingError(ENOENT,
+                             dir_name + ": neither " + kFramesCsvName + " nor left*/right* images");
     if (lefts.size() != rights.size())
         throw RecordingError(EINVAL, dir_name + ": " + std::to_string(lefts.size()) +
                                          " left* images but " + std::to_string(rights.size()) +
@@ -324,12 +321,12 @@ Recording openRecording(const std::string& path, double nominal_fps)
         throw RecordingError(code, path + ": " + errnoText(code));
     }
     if (!fs::is_directory(status))
-        throw RecordingError(ENOTDIR, path + ": " + errnoText(ENOTDIR) +
-                                          " (a recording is a directory)");
+        throw RecordingError(ENOTDIR,
+                             path + ": " + errnoText(ENOTDIR) + " (a recording is a directory)");
 
     const fs::path csv_path = dir / kFramesCsvName;
-    Recording recording = fs::exists(csv_path, ec) ? readFramesCsv(dir, csv_path)
-                                                   : scanPairFolder(dir, nominal_fps);
+    Recording recording =
+        fs::exists(csv_path, ec) ? readFramesCsv(dir, csv_path) : scanPairFolder(dir, nominal_fps);
     const fs::path calibration = dir / kCalibrationName;
     if (fs::is_regular_file(calibration, ec))
         recording.calibration_path = calibration.string();
@@ -337,8 +334,10 @@ Recording openRecording(const std::string& path, double nominal_fps)
 }
 
 RecordingWriter::RecordingWriter(const std::string& dir, const std::string& calibration_path)
-    : dir_(dir), csv_path_((fs::path(dir) / kFramesCsvName).string()),
-      png_params_{cv::IMWRITE_PNG_COMPRESSION, 1}   // fast: recording runs live
+    // PNG compression level 1: fast, because recording runs live.
+    : dir_(dir),
+      csv_path_((fs::path(dir) / kFramesCsvName).string()), png_params_{cv::IMWRITE_PNG_COMPRESSION,
+                                                                        1}
 {
     const fs::path root(dir);
     std::error_code ec;
@@ -399,15 +398,15 @@ void RecordingWriter::writeImage(const std::string& relative_name, const cv::Mat
     writeNewFile(path, png_buffer_.data(), png_buffer_.size());
 }
 
-uint64_t RecordingWriter::write(const cv::Mat& left, const cv::Mat& right,
-                                int64_t left_stamp_ns, int64_t right_stamp_ns)
+uint64_t RecordingWriter::write(const cv::Mat& left, const cv::Mat& right, int64_t left_stamp_ns,
+                                int64_t right_stamp_ns)
 {
     if (left.empty() || right.empty() || left.type() != CV_8UC1 || right.type() != CV_8UC1)
         throw RecordingError(EINVAL, dir_ + ": pair " + std::to_string(next_index_) +
                                          ": images must be non-empty 8-bit grayscale (CV_8UC1)");
     if (left.size() != right.size())
-        throw RecordingError(EINVAL, dir_ + ": pair " + std::to_string(next_index_) +
-                                         ": left " + std::to_string(left.cols) + "x" +
+        throw RecordingError(EINVAL, dir_ + ": pair " + std::to_string(next_index_) + ": left " +
+                                         std::to_string(left.cols) + "x" +
                                          std::to_string(left.rows) + " and right " +
                                          std::to_string(right.cols) + "x" +
                                          std::to_string(right.rows) + " differ in size");

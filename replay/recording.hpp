@@ -25,29 +25,30 @@ namespace stereod {
 // A recording that cannot be read or written. what() names the file (and line) and the
 // problem; code() is the matching positive errno (ENOENT, EINVAL, EEXIST, EIO, ...).
 class RecordingError : public std::runtime_error {
-public:
-    RecordingError(int code, const std::string& message)
-        : std::runtime_error(message), code_(code) {}
+  public:
+    RecordingError(int code, const std::string& message) : std::runtime_error(message), code_(code)
+    {
+    }
     int code() const noexcept { return code_; }
 
-private:
+  private:
     int code_;
 };
 
 // One pair of a recording.
 struct RecordingEntry {
-    uint64_t index = 0;            // `index` column, or the position in a plain folder
-    int64_t left_stamp_ns = 0;     // recorded capture times
+    uint64_t index = 0;        // `index` column, or the position in a plain folder
+    int64_t left_stamp_ns = 0; // recorded capture times
     int64_t right_stamp_ns = 0;
-    std::string left_path;         // full paths (DIR joined with the row's names)
+    std::string left_path; // full paths (DIR joined with the row's names)
     std::string right_path;
 };
 
 struct Recording {
     std::string dir;
-    bool has_index = false;        // true: read from frames.csv; false: a plain folder
-    std::vector<RecordingEntry> entries;   // in file (or name) order, never empty
-    std::string calibration_path;  // DIR/calibration.yaml when it exists, else empty
+    bool has_index = false;              // true: read from frames.csv; false: a plain folder
+    std::vector<RecordingEntry> entries; // in file (or name) order, never empty
+    std::string calibration_path;        // DIR/calibration.yaml when it exists, else empty
     // Rows of frames.csv that were skipped, and why ("DIR/frames.csv:7: ..."). Only the
     // first kMaxProblems messages are kept; bad_rows counts them all.
     uint64_t bad_rows = 0;
@@ -80,7 +81,7 @@ Recording openRecording(const std::string& path, double nominal_fps);
 //
 // Thread-bound: one thread writes; the writer is not shared.
 class RecordingWriter {
-public:
+  public:
     // Creates `dir` (and left/, right/) and frames.csv with its header; copies
     // `calibration_path` in as calibration.yaml unless it is empty. Refuses a directory
     // that already holds a frames.csv (EEXIST). Throws RecordingError.
@@ -105,17 +106,17 @@ public:
     uint64_t pairsWritten() const noexcept { return next_index_; }
     const std::string& directory() const noexcept { return dir_; }
 
-private:
+  private:
     void writeImage(const std::string& relative_name, const cv::Mat& image);
 
     std::string dir_;
     std::string csv_path_;
-    int csv_fd_ = -1;                   // frames.csv, O_APPEND
-    uint64_t csv_bytes_ = 0;            // its length after the last complete row
-    cv::Size size_;                     // size of the first pair; every pair must match
+    int csv_fd_ = -1;        // frames.csv, O_APPEND
+    uint64_t csv_bytes_ = 0; // its length after the last complete row
+    cv::Size size_;          // size of the first pair; every pair must match
     uint64_t next_index_ = 0;
     std::vector<int> png_params_;
-    std::vector<uchar> png_buffer_;     // encoded image, reused from pair to pair
+    std::vector<uchar> png_buffer_; // encoded image, reused from pair to pair
 };
 
 } // namespace stereod

@@ -12,12 +12,11 @@
 #include <utility>
 
 #include <fcntl.h>
-#include <unistd.h>
-
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <spdlog/details/console_globals.h>
 #include <spdlog/spdlog.h>
+#include <unistd.h>
 
 #include "replay/image_file.hpp"
 
@@ -212,11 +211,10 @@ ReplaySource::ReplaySource(ReplayOptions options) : options_(std::move(options))
              " pairs is readable (first: " + first_problem + ")");
         return;
     }
-    pool_ = std::make_unique<FramePool>(2 * std::max<std::size_t>(options_.pool_pairs, 1),
-                                        frame_size_);
-    spdlog::info("replay: {}: {} pairs of {}{}, {}{}", recording_.dir,
-                 recording_.entries.size(), sizeText(frame_size_),
-                 recording_.has_index ? "" : " (plain folder)",
+    pool_ =
+        std::make_unique<FramePool>(2 * std::max<std::size_t>(options_.pool_pairs, 1), frame_size_);
+    spdlog::info("replay: {}: {} pairs of {}{}, {}{}", recording_.dir, recording_.entries.size(),
+                 sizeText(frame_size_), recording_.has_index ? "" : " (plain folder)",
                  options_.pacing == ReplayOptions::Pacing::Paced ? "paced" : "lockstep",
                  options_.loop ? ", looping" : "");
 }
@@ -239,7 +237,7 @@ int ReplaySource::start(PairRing& ring)
     if (thread_.joinable()) {
         if (state_.load(std::memory_order_acquire) == SourceState::Running)
             return -EBUSY;
-        thread_.join();   // a replay that finished or failed on its own
+        thread_.join(); // a replay that finished or failed on its own
     }
     if (open_error_ != 0) {
         state_.store(SourceState::Failed, std::memory_order_release);
@@ -307,16 +305,15 @@ void ReplaySource::planSchedule()
     std::size_t steps_back = 0;
     std::size_t first_back = 0;
     for (std::size_t i = 1; i < count; ++i) {
-        int64_t step_ns =
-            saturatingSubNs(entries[i].left_stamp_ns, entries[i - 1].left_stamp_ns);
+        int64_t step_ns = saturatingSubNs(entries[i].left_stamp_ns, entries[i - 1].left_stamp_ns);
         if (step_ns < 0) {
             if (steps_back++ == 0)
                 first_back = i;
             step_ns = period_ns_;
         }
-        schedule_ns_[i] = schedule_ns_[i - 1] +
-                          std::min(step_ns, std::numeric_limits<int64_t>::max() / 4 -
-                                                schedule_ns_[i - 1]);
+        schedule_ns_[i] =
+            schedule_ns_[i - 1] +
+            std::min(step_ns, std::numeric_limits<int64_t>::max() / 4 - schedule_ns_[i - 1]);
     }
     if (steps_back > 0)
         spdlog::warn("replay: {}: the stamps step back {} time{}, first at pair {} ({} ns "
@@ -350,8 +347,10 @@ void ReplaySource::openBag()
         entry.left_stamp_ns = index.pairs[i].left_stamp_ns;
         entry.right_stamp_ns = index.pairs[i].right_stamp_ns;
         // For messages: which message of the bag.
-        entry.left_path = options_.path + " " + index.left_topic + " @" + std::to_string(entry.left_stamp_ns);
-        entry.right_path = options_.path + " " + index.right_topic + " @" + std::to_string(entry.right_stamp_ns);
+        entry.left_path =
+            options_.path + " " + index.left_topic + " @" + std::to_string(entry.left_stamp_ns);
+        entry.right_path =
+            options_.path + " " + index.right_topic + " @" + std::to_string(entry.right_stamp_ns);
         recording_.entries.push_back(std::move(entry));
     }
     bag_pairs_ = std::move(index.pairs);
@@ -386,8 +385,9 @@ bool ReplaySource::decodePair(std::size_t i, BadPair& bad)
         // replay's frame size once known, else the left image's for the right one. So the
         // file blamed is the one at fault, and a decompression bomb is never decoded.
         const std::string replay_size =
-            frame_size_.empty() ? std::string()
-                                : "the replay is " + sizeText(frame_size_) + " (its first readable pair)";
+            frame_size_.empty()
+                ? std::string()
+                : "the replay is " + sizeText(frame_size_) + " (its first readable pair)";
         if (!decodeImage(entry.left_path, frame_size_, replay_size, file_bytes_, left_image_,
                          bad.reason, bad.code)) {
             bad.side = kLeft;
@@ -449,7 +449,8 @@ bool ReplaySource::sleepUntil(int64_t deadline_ns)
         const int64_t now_ns = monotonicNowNs();
         if (now_ns >= deadline_ns)
             return true;
-        wake_cv_.wait_for(lock, std::chrono::nanoseconds(std::min(deadline_ns - now_ns, kMaxPieceNs)));
+        wake_cv_.wait_for(lock,
+                          std::chrono::nanoseconds(std::min(deadline_ns - now_ns, kMaxPieceNs)));
     }
 }
 
@@ -499,7 +500,7 @@ void ReplaySource::run() noexcept
     // A loop goes on one period after the last pair, as the recording would have.
     const int64_t loop_ns = saturatingAddNs(schedule_ns_.back(), period_ns);
 
-    int64_t base_ns = monotonicNowNs();   // when the first pair of this pass is due
+    int64_t base_ns = monotonicNowNs(); // when the first pair of this pass is due
     for (;;) {
         const uint64_t pass = next_pass_++;
         uint64_t delivered = 0;
@@ -522,7 +523,7 @@ void ReplaySource::run() noexcept
             if (!pair.right) {
                 if (stop_requested_.load(std::memory_order_acquire))
                     return;
-                dropped_.fetch_add(1, std::memory_order_relaxed);   // as a camera would
+                dropped_.fetch_add(1, std::memory_order_relaxed); // as a camera would
                 continue;
             }
             // Same size and type: copyTo() writes into the pooled buffers, no allocation.
@@ -554,7 +555,7 @@ void ReplaySource::run() noexcept
             pair.left->stamp_ns = now_ns;
             pair.right->stamp_ns = saturatingAddNs(now_ns, skew_ns);
             if (paced) {
-                ring_->push(std::move(pair));   // drop-oldest; the ring counts the drop
+                ring_->push(std::move(pair)); // drop-oldest; the ring counts the drop
             } else if (!ring_->pushWait(std::move(pair))) {
                 // The ring was stopped under us: the consumer is gone. Nothing more can
                 // be delivered; wait for stop().
@@ -595,8 +596,8 @@ SourceStatus ReplaySource::status() const
         camera_error[kLeft] = camera_error_[kLeft];
         camera_error[kRight] = camera_error_[kRight];
     }
-    const double fps = out.state == SourceState::Running ? fps_.load(std::memory_order_relaxed)
-                                                         : 0.0;
+    const double fps =
+        out.state == SourceState::Running ? fps_.load(std::memory_order_relaxed) : 0.0;
     for (int side : {kLeft, kRight}) {
         CameraStatus camera;
         camera.name = kSideName[side];
@@ -621,7 +622,8 @@ SourceStatus ReplaySource::status() const
             recent[k] = recent_skew_abs_ns_[k].load(std::memory_order_relaxed);
         // p99 of the recent pairs: the value below which 99 % of them lie.
         const std::size_t rank =
-            std::min(window - 1, static_cast<std::size_t>(std::ceil(0.99 * static_cast<double>(window))) - 1);
+            std::min(window - 1,
+                     static_cast<std::size_t>(std::ceil(0.99 * static_cast<double>(window))) - 1);
         std::nth_element(recent.begin(), recent.begin() + static_cast<std::ptrdiff_t>(rank),
                          recent.end());
         out.skew_p99_ms = static_cast<double>(recent[rank]) / 1e6;

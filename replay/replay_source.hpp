@@ -62,19 +62,19 @@ namespace stereod {
 
 struct ReplayOptions {
     enum class Pacing {
-        Paced,      // at the recorded time spacing
-        Lockstep,   // as fast as the consumer takes pairs; nothing dropped
+        Paced,    // at the recorded time spacing
+        Lockstep, // as fast as the consumer takes pairs; nothing dropped
     };
 
-    std::string path;             // a recording directory, a folder of left*/right*, or an
-                                  // MCAP file (recognised by its magic bytes)
+    std::string path; // a recording directory, a folder of left*/right*, or an
+                      // MCAP file (recognised by its magic bytes)
     // The image topics of an MCAP bag; empty: /stereo/{left,right}/image_raw, or the one
     // pair of image topics whose names say left and right (indexMcapStereo()).
     std::string left_topic;
     std::string right_topic;
     Pacing pacing = Pacing::Paced;
-    bool loop = true;             // start over at the end instead of finishing
-    double fps = 10.0;            // nominal rate of a plain folder (no frames.csv)
+    bool loop = true;  // start over at the end instead of finishing
+    double fps = 10.0; // nominal rate of a plain folder (no frames.csv)
     // Pairs that can be in flight at once (filled by the source, queued in the ring,
     // held by the worker). At least ring capacity + 2, or paced replay drops pairs for
     // want of buffers (lockstep waits for them instead).
@@ -82,7 +82,7 @@ struct ReplayOptions {
 };
 
 class ReplaySource final : public FrameSource {
-public:
+  public:
     // Reads the recording's index and decodes pairs up to the first readable one to learn
     // the frame size; allocates the pool. Never throws for a bad recording: the source is
     // then in state Failed, status().last_error says why and start() returns the error.
@@ -111,7 +111,8 @@ public:
     // when no calibration is given).
     const std::string& calibrationPath() const noexcept { return recording_.calibration_path; }
     // A bag's camera_info pair (the first message of each side), when it has one.
-    const std::optional<std::pair<ros2::CameraInfo, ros2::CameraInfo>>& bagCameraInfo() const noexcept
+    const std::optional<std::pair<ros2::CameraInfo, ros2::CameraInfo>>&
+    bagCameraInfo() const noexcept
     {
         return bag_camera_info_;
     }
@@ -119,13 +120,13 @@ public:
     std::size_t pairCount() const noexcept { return recording_.entries.size(); }
     const ReplayOptions& options() const noexcept { return options_; }
 
-private:
+  private:
     // Why a pair was skipped, for the count and the once-per-file warning.
     struct BadPair {
-        int side = 0;                // 0 left, 1 right
-        std::string path;            // the file at fault
+        int side = 0;     // 0 left, 1 right
+        std::string path; // the file at fault
         std::string reason;
-        int code = 0;                // errno: ENOENT missing, EINVAL undecodable or wrong size
+        int code = 0; // errno: ENOENT missing, EINVAL undecodable or wrong size
     };
 
     void run() noexcept;
@@ -161,19 +162,19 @@ private:
     // except that a stamp stepping back counts as one period (planSchedule()).
     std::vector<int64_t> schedule_ns_;
     int64_t period_ns_ = 0; // the mean recorded step forward (or the nominal rate's)
-    int open_error_ = 0;                       // negative errno when nothing is readable
+    int open_error_ = 0;    // negative errno when nothing is readable
     std::unique_ptr<FramePool> pool_;
 
     // Replay thread only (the controlling thread touches them only while it is not running).
-    std::vector<uint8_t> warned_;              // per entry and side: already logged
-    cv::Mat left_image_;                       // last decoded images (imdecode's buffers)
+    std::vector<uint8_t> warned_; // per entry and side: already logged
+    cv::Mat left_image_;          // last decoded images (imdecode's buffers)
     cv::Mat right_image_;
-    std::vector<uint8_t> file_bytes_;          // the image file being decoded, capacity kept
-    uint64_t next_pass_ = 0;                   // loops continue the numbering after a restart
-    std::array<int64_t, 32> recent_stamps_ns_{};   // delivery times, for the measured fps
+    std::vector<uint8_t> file_bytes_;            // the image file being decoded, capacity kept
+    uint64_t next_pass_ = 0;                     // loops continue the numbering after a restart
+    std::array<int64_t, 32> recent_stamps_ns_{}; // delivery times, for the measured fps
     std::size_t recent_count_ = 0;
 
-    PairRing* ring_ = nullptr;                 // borrowed between start() and stop()
+    PairRing* ring_ = nullptr; // borrowed between start() and stop()
     std::thread thread_;
 
     // stop() sets stop_requested_ under wake_mutex_ and notifies wake_cv_, so the replay
@@ -190,15 +191,15 @@ private:
     std::atomic<uint64_t> pairs_{0};
     std::atomic<uint64_t> frames_[2]{};
     std::atomic<uint64_t> bad_frames_[2]{};
-    std::atomic<uint64_t> dropped_{0};          // pairs skipped for want of pool buffers
+    std::atomic<uint64_t> dropped_{0}; // pairs skipped for want of pool buffers
     std::atomic<double> fps_{0.0};
     std::atomic<int64_t> skew_abs_sum_ns_{0};
     std::atomic<int64_t> skew_abs_max_ns_{0};
-    static constexpr std::size_t kSkewWindow = 128;   // recent pairs for the p99 skew
+    static constexpr std::size_t kSkewWindow = 128; // recent pairs for the p99 skew
     std::array<std::atomic<int64_t>, kSkewWindow> recent_skew_abs_ns_{};
     mutable std::mutex status_mutex_;
-    std::string last_error_;                   // guarded by status_mutex_
-    std::string camera_error_[2];              // guarded by status_mutex_
+    std::string last_error_;      // guarded by status_mutex_
+    std::string camera_error_[2]; // guarded by status_mutex_
 };
 
 } // namespace stereod

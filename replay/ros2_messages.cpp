@@ -1,8 +1,8 @@
 #include "replay/ros2_messages.hpp"
 
 #include <cstring>
-#include <type_traits>
 #include <limits>
+#include <type_traits>
 
 namespace stereod::ros2 {
 
@@ -15,20 +15,19 @@ const std::string kSeparator =
 // Appends CDR fields to a buffer that starts with the encapsulation header; alignment is
 // counted from the end of that header.
 class CdrWriter {
-public:
+  public:
     explicit CdrWriter(std::string& out) : out_(out)
     {
         out_.clear();
-        out_.append("\x00\x01\x00\x00", kEncapsulationSize);   // CDR_LE, options 0
+        out_.append("\x00\x01\x00\x00", kEncapsulationSize); // CDR_LE, options 0
     }
 
-    template <typename T>
-    void put(T value)
+    template <typename T> void put(T value)
     {
         static_assert(std::is_arithmetic_v<T>);
         align(sizeof(T));
         char bytes[sizeof(T)];
-        std::memcpy(bytes, &value, sizeof(T));   // little-endian hosts only (static_assert below)
+        std::memcpy(bytes, &value, sizeof(T)); // little-endian hosts only (static_assert below)
         out_.append(bytes, sizeof(T));
     }
     void str(std::string_view s)
@@ -45,8 +44,7 @@ public:
         put(static_cast<uint32_t>(size));
         out_.append(static_cast<const char*>(data), size);
     }
-    template <typename T, std::size_t N>
-    void array(const std::array<T, N>& values)
+    template <typename T, std::size_t N> void array(const std::array<T, N>& values)
     {
         for (const T& v : values) {
             put(v);
@@ -59,7 +57,7 @@ public:
         str(h.frame_id);
     }
 
-private:
+  private:
     void align(std::size_t n)
     {
         const std::size_t misalign = (out_.size() - kEncapsulationSize) % n;
@@ -71,7 +69,7 @@ private:
 };
 
 class CdrReader {
-public:
+  public:
     CdrReader(std::string_view message, const char* type) : data_(message), type_(type)
     {
         if (data_.size() < kEncapsulationSize) {
@@ -80,16 +78,15 @@ public:
         const auto kind = static_cast<uint8_t>(data_[1]);
         if (data_[0] != 0 || kind != 0x01) {
             const char* what = (data_[0] == 0 && kind == 0x00) ? "big-endian CDR"
-                             : (data_[0] == 0 && (kind == 0x07 || kind == 0x09 || kind == 0x0b))
-                                 ? "XCDR2"
-                                 : "an unknown encapsulation";
+                               : (data_[0] == 0 && (kind == 0x07 || kind == 0x09 || kind == 0x0b))
+                                   ? "XCDR2"
+                                   : "an unknown encapsulation";
             fail(std::string("payload is ") + what + ", only little-endian XCDR1 (00 01) is read");
         }
         pos_ = kEncapsulationSize;
     }
 
-    template <typename T>
-    T get()
+    template <typename T> T get()
     {
         align(sizeof(T));
         need(sizeof(T));
@@ -118,8 +115,7 @@ public:
         pos_ += n;
         return s;
     }
-    template <typename T, std::size_t N>
-    void array(std::array<T, N>& values)
+    template <typename T, std::size_t N> void array(std::array<T, N>& values)
     {
         for (T& v : values) {
             v = get<T>();
@@ -145,7 +141,7 @@ public:
         throw CdrError(std::string(type_) + ": " + problem);
     }
 
-private:
+  private:
     void align(std::size_t n)
     {
         const std::size_t misalign = (pos_ - kEncapsulationSize) % n;
@@ -163,10 +159,9 @@ static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__,
               "the CDR code writes and reads host-order values as little-endian");
 
 const std::string kTimeText = "int32 sec\nuint32 nanosec\n";
-const std::string kHeaderText =
-    "# Standard metadata for higher-level stamped data types.\n"
-    "builtin_interfaces/Time stamp\n"
-    "string frame_id\n";
+const std::string kHeaderText = "# Standard metadata for higher-level stamped data types.\n"
+                                "builtin_interfaces/Time stamp\n"
+                                "string frame_id\n";
 
 std::string withHeader(const std::string& body, const std::string& extra = {})
 {
@@ -189,78 +184,75 @@ Time Time::fromNs(int64_t ns)
 
 const std::string& imageSchemaText()
 {
-    static const std::string text = withHeader(
-        "std_msgs/Header header\n"
-        "uint32 height\n"
-        "uint32 width\n"
-        "string encoding\n"
-        "uint8 is_bigendian\n"
-        "uint32 step\n"
-        "uint8[] data\n");
+    static const std::string text = withHeader("std_msgs/Header header\n"
+                                               "uint32 height\n"
+                                               "uint32 width\n"
+                                               "string encoding\n"
+                                               "uint8 is_bigendian\n"
+                                               "uint32 step\n"
+                                               "uint8[] data\n");
     return text;
 }
 
 const std::string& cameraInfoSchemaText()
 {
-    static const std::string text = withHeader(
-        "std_msgs/Header header\n"
-        "uint32 height\n"
-        "uint32 width\n"
-        "string distortion_model\n"
-        "float64[] d\n"
-        "float64[9] k\n"
-        "float64[9] r\n"
-        "float64[12] p\n"
-        "uint32 binning_x\n"
-        "uint32 binning_y\n"
-        "RegionOfInterest roi\n",
-        kSeparator + "MSG: sensor_msgs/RegionOfInterest\n"
-                     "uint32 x_offset\n"
-                     "uint32 y_offset\n"
-                     "uint32 height\n"
-                     "uint32 width\n"
-                     "bool do_rectify\n");
+    static const std::string text = withHeader("std_msgs/Header header\n"
+                                               "uint32 height\n"
+                                               "uint32 width\n"
+                                               "string distortion_model\n"
+                                               "float64[] d\n"
+                                               "float64[9] k\n"
+                                               "float64[9] r\n"
+                                               "float64[12] p\n"
+                                               "uint32 binning_x\n"
+                                               "uint32 binning_y\n"
+                                               "RegionOfInterest roi\n",
+                                               kSeparator + "MSG: sensor_msgs/RegionOfInterest\n"
+                                                            "uint32 x_offset\n"
+                                                            "uint32 y_offset\n"
+                                                            "uint32 height\n"
+                                                            "uint32 width\n"
+                                                            "bool do_rectify\n");
     return text;
 }
 
 const std::string& pointCloud2SchemaText()
 {
-    static const std::string text = withHeader(
-        "std_msgs/Header header\n"
-        "uint32 height\n"
-        "uint32 width\n"
-        "PointField[] fields\n"
-        "bool is_bigendian\n"
-        "uint32 point_step\n"
-        "uint32 row_step\n"
-        "uint8[] data\n"
-        "bool is_dense\n",
-        kSeparator + "MSG: sensor_msgs/PointField\n"
-                     "uint8 INT8    = 1\n"
-                     "uint8 UINT8   = 2\n"
-                     "uint8 INT16   = 3\n"
-                     "uint8 UINT16  = 4\n"
-                     "uint8 INT32   = 5\n"
-                     "uint8 UINT32  = 6\n"
-                     "uint8 FLOAT32 = 7\n"
-                     "uint8 FLOAT64 = 8\n"
-                     "string name\n"
-                     "uint32 offset\n"
-                     "uint8 datatype\n"
-                     "uint32 count\n");
+    static const std::string text = withHeader("std_msgs/Header header\n"
+                                               "uint32 height\n"
+                                               "uint32 width\n"
+                                               "PointField[] fields\n"
+                                               "bool is_bigendian\n"
+                                               "uint32 point_step\n"
+                                               "uint32 row_step\n"
+                                               "uint8[] data\n"
+                                               "bool is_dense\n",
+                                               kSeparator + "MSG: sensor_msgs/PointField\n"
+                                                            "uint8 INT8    = 1\n"
+                                                            "uint8 UINT8   = 2\n"
+                                                            "uint8 INT16   = 3\n"
+                                                            "uint8 UINT16  = 4\n"
+                                                            "uint8 INT32   = 5\n"
+                                                            "uint8 UINT32  = 6\n"
+                                                            "uint8 FLOAT32 = 7\n"
+                                                            "uint8 FLOAT64 = 8\n"
+                                                            "string name\n"
+                                                            "uint32 offset\n"
+                                                            "uint8 datatype\n"
+                                                            "uint32 count\n");
     return text;
 }
 
 void serializeImage(const Header& header, uint32_t height, uint32_t width,
-                    std::string_view encoding, uint32_t step, const void* data,
-                    std::size_t size, std::string& out)
+                    std::string_view encoding, uint32_t step, const void* data, std::size_t size,
+                    std::string& out)
 {
     CdrWriter w(out);
     w.header(header);
     w.put(height);
     w.put(width);
     w.str(encoding);
-    w.put(uint8_t{0});   // is_bigendian
+    w.put(uint8_t{0}); // is_bigendian
     w.put(step);
     w.octets(data, size);
 }
@@ -304,7 +296,7 @@ void serializePointCloud2(const Header& header, uint32_t height, uint32_t width,
         w.put(f.datatype);
         w.put(f.count);
     }
-    w.put(uint8_t{0});   // is_bigendian
+    w.put(uint8_t{0}); // is_bigendian
     w.put(point_step);
     w.put(row_step);
     w.octets(data, size);
@@ -338,7 +330,7 @@ CameraInfo parseCameraInfo(std::string_view message)
     info.width = r.get<uint32_t>();
     info.distortion_model = r.str();
     const uint32_t n = r.get<uint32_t>();
-    r.need(std::size_t{n} * sizeof(double));   // a count past the end fails before resize()
+    r.need(std::size_t{n} * sizeof(double)); // a count past the end fails before resize()
     info.d.resize(n);
     for (double& v : info.d) {
         v = r.get<double>();
@@ -364,7 +356,7 @@ PointCloud2View parsePointCloud2(std::string_view message)
     cloud.height = r.get<uint32_t>();
     cloud.width = r.get<uint32_t>();
     const uint32_t n = r.get<uint32_t>();
-    r.need(std::size_t{n} * 13);   // each field takes 13 bytes at least
+    r.need(std::size_t{n} * 13); // each field takes 13 bytes at least
     cloud.fields.resize(n);
     for (PointField& f : cloud.fields) {
         f.name = r.str();

@@ -27,7 +27,7 @@
 namespace stereod::ros2 {
 
 class CdrError : public std::runtime_error {
-public:
+  public:
     using std::runtime_error::runtime_error;
 };
 
@@ -50,10 +50,10 @@ struct ImageView {
     Header header;
     uint32_t height = 0;
     uint32_t width = 0;
-    std::string encoding;          // "mono8", "rgb8", "32FC1", ...
+    std::string encoding; // "mono8", "rgb8", "32FC1", ...
     uint8_t is_bigendian = 0;
-    uint32_t step = 0;             // bytes per row
-    std::string_view data;         // borrowed from the serialized message
+    uint32_t step = 0;     // bytes per row
+    std::string_view data; // borrowed from the serialized message
 };
 
 struct RegionOfInterest {
@@ -70,17 +70,25 @@ struct CameraInfo {
     uint32_t width = 0;
     std::string distortion_model;
     std::vector<double> d;
-    std::array<double, 9> k{};     // row-major
+    std::array<double, 9> k{}; // row-major
     std::array<double, 9> r{};
-    std::array<double, 12> p{};    // right camera: p[3] = -fx' * baseline_m
+    std::array<double, 12> p{}; // right camera: p[3] = -fx' * baseline_m
     uint32_t binning_x = 0;
     uint32_t binning_y = 0;
     RegionOfInterest roi;
 };
 
 struct PointField {
-    enum DataType : uint8_t { INT8 = 1, UINT8 = 2, INT16 = 3, UINT16 = 4, INT32 = 5, UINT32 = 6,
-                              FLOAT32 = 7, FLOAT64 = 8 };
+    enum DataType : uint8_t {
+        INT8 = 1,
+        UINT8 = 2,
+        INT16 = 3,
+        UINT16 = 4,
+        INT32 = 5,
+        UINT32 = 6,
+        FLOAT32 = 7,
+        FLOAT64 = 8
+    };
     std::string name;
     uint32_t offset = 0;
     uint8_t datatype = 0;
@@ -95,7 +103,7 @@ struct PointCloud2View {
     bool is_bigendian = false;
     uint32_t point_step = 0;
     uint32_t row_step = 0;
-    std::string_view data;         // borrowed from the serialized message
+    std::string_view data; // borrowed from the serialized message
     bool is_dense = false;
 };
 
@@ -111,8 +119,8 @@ const std::string& pointCloud2SchemaText();
 // Serializers: replace `out` with the whole message, encapsulation header included. `out`
 // keeps its capacity, so a reused buffer does not allocate per frame.
 void serializeImage(const Header& header, uint32_t height, uint32_t width,
-                    std::string_view encoding, uint32_t step, const void* data,
-                    std::size_t size, std::string& out);
+                    std::string_view encoding, uint32_t step, const void* data, std::size_t size,
+                    std::string& out);
 void serializeCameraInfo(const CameraInfo& info, std::string& out);
 void serializePointCloud2(const Header& header, uint32_t height, uint32_t width,
                           const std::vector<PointField>& fields, uint32_t point_step,

@@ -15,7 +15,7 @@
 namespace stereod::sgm {
 
 class BandPool {
-public:
+  public:
     // threads: how many bands run at once, the caller's thread included (>= 1).
     explicit BandPool(int threads);
     ~BandPool();
@@ -25,28 +25,27 @@ public:
 
     // Calls work(band) for band = 0 .. bands-1 (bands <= threads), one band per thread,
     // and returns when all have returned. `work` must not throw.
-    template <typename Work>
-    void run(int bands, Work&& work)
+    template <typename Work> void run(int bands, Work&& work)
     {
         runErased(bands, &work, [](void* context, int band) {
             (*static_cast<std::remove_reference_t<Work>*>(context))(band);
         });
     }
 
-private:
+  private:
     using Trampoline = void (*)(void*, int);
     void runErased(int bands, void* context, Trampoline call);
     void workerLoop(int band);
 
     std::mutex mutex_;
-    std::condition_variable wake_;        // a new generation of work, or stop
-    std::condition_variable done_;        // the last band of a generation finished
-    uint64_t generation_ = 0;             // guarded by mutex_
-    int bands_ = 0;                       // guarded by mutex_
-    int pending_ = 0;                     // guarded by mutex_
-    bool stop_ = false;                   // guarded by mutex_
-    void* context_ = nullptr;             // guarded by mutex_
-    Trampoline call_ = nullptr;           // guarded by mutex_
+    std::condition_variable wake_; // a new generation of work, or stop
+    std::condition_variable done_; // the last band of a generation finished
+    uint64_t generation_ = 0;      // guarded by mutex_
+    int bands_ = 0;                // guarded by mutex_
+    int pending_ = 0;              // guarded by mutex_
+    bool stop_ = false;            // guarded by mutex_
+    void* context_ = nullptr;      // guarded by mutex_
+    Trampoline call_ = nullptr;    // guarded by mutex_
     std::vector<std::thread> threads_;
 };
 

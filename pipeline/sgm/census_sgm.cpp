@@ -41,12 +41,12 @@ int censusBits(const CensusSgmSettings& s)
 
 // The work of one band: its rows' costs and paths. Sized once for the widest row.
 struct BandScratch {
-    std::vector<uint8_t> cost;                 // width * lanes
-    std::vector<uint8_t> forward;              // width path blocks: the left->right path
-    std::vector<uint8_t> row_scratch;          // two path blocks: the right->left path
-    std::vector<uint16_t> sum_scratch;         // summed paths of a few pixels
-    std::vector<uint8_t> above[3][2];          // per path from above: previous, current row
-    std::vector<uint8_t> p2_above[3];          // width, per path from above
+    std::vector<uint8_t> cost;         // width * lanes
+    std::vector<uint8_t> forward;      // width path blocks: the left->right path
+    std::vector<uint8_t> row_scratch;  // two path blocks: the right->left path
+    std::vector<uint16_t> sum_scratch; // summed paths of a few pixels
+    std::vector<uint8_t> above[3][2];  // per path from above: previous, current row
+    std::vector<uint8_t> p2_above[3];  // width, per path from above
     // width + 1: P2 onto x from x - 1 at [x], so onto x from x + 1 at [x + 1].
     std::vector<uint8_t> p2_along;
     std::vector<Winner> winners;
@@ -58,16 +58,16 @@ struct BandScratch {
 
 void validateCensusSgmSettings(const CensusSgmSettings& s)
 {
-    const bool sized = s.width != 0 || s.height != 0;   // 0x0: the size is not known yet
+    const bool sized = s.width != 0 || s.height != 0; // 0x0: the size is not known yet
     if (sized && (s.width < 1 || s.height < 1))
-        invalid("size", "the image must be at least 1x1, got " + std::to_string(s.width) +
-                            "x" + std::to_string(s.height));
+        invalid("size", "the image must be at least 1x1, got " + std::to_string(s.width) + "x" +
+                            std::to_string(s.height));
     if (s.num_disparities < 16 || s.num_disparities > 256 || s.num_disparities % 16 != 0)
         invalid("num_disparities", "must be a multiple of 16 within 16..256 for census-sgm, got " +
                                        std::to_string(s.num_disparities));
     if (s.min_disparity < -1024 || s.min_disparity > 1024)
-        invalid("min_disparity", "must be within -1024..1024, got " +
-                                     std::to_string(s.min_disparity));
+        invalid("min_disparity",
+                "must be within -1024..1024, got " + std::to_string(s.min_disparity));
     if (s.census_width < 3 || s.census_width % 2 == 0 || s.census_height < 1 ||
         s.census_height % 2 == 0)
         invalid("census", "window sides must be odd, at least 3x1, got " +
@@ -79,18 +79,18 @@ void validateCensusSgmSettings(const CensusSgmSettings& s)
     if (s.paths != 3 && s.paths != 5)
         invalid("paths", "must be 3 or 5, got " + std::to_string(s.paths));
     if (s.p1 < 1 || s.p2 <= s.p1)
-        invalid("p2", "must be greater than p1 >= 1, got p1 " + std::to_string(s.p1) +
-                          ", p2 " + std::to_string(s.p2));
+        invalid("p2", "must be greater than p1 >= 1, got p1 " + std::to_string(s.p1) + ", p2 " +
+                          std::to_string(s.p2));
     // 8-bit path costs: the largest census cost plus P2 must stay within 255.
     if (censusBits(s) + s.p2 > 255)
         invalid("p2", "census cost " + std::to_string(censusBits(s)) + " + p2 " +
                           std::to_string(s.p2) + " must be <= 255");
     if (s.p2_gradient_scale < 0)
-        invalid("p2_gradient_scale", "must be >= 0 (0: no adaptation), got " +
-                                         std::to_string(s.p2_gradient_scale));
+        invalid("p2_gradient_scale",
+                "must be >= 0 (0: no adaptation), got " + std::to_string(s.p2_gradient_scale));
     if (s.uniqueness_percent < 0 || s.uniqueness_percent > 100)
-        invalid("uniqueness_ratio", "must be within 0..100, got " +
-                                        std::to_string(s.uniqueness_percent));
+        invalid("uniqueness_ratio",
+                "must be within 0..100, got " + std::to_string(s.uniqueness_percent));
     if (s.speckle_window_px < 0 || s.speckle_range_px < 0)
         invalid("speckle_window_px", "speckle window and range must be >= 0");
     if (s.edge_margin_px < 0)
@@ -107,30 +107,27 @@ size_t censusSgmMemoryBytes(const CensusSgmSettings& s)
     const size_t h = static_cast<size_t>(s.height);
     const size_t lanes = static_cast<size_t>(roundUp(s.num_disparities, kLaneAlign));
     const size_t planes = static_cast<size_t>((censusBits(s) + 7) / 8);
-    const size_t padded = (w + static_cast<size_t>(s.census_width)) *
-                          (h + static_cast<size_t>(s.census_height));
-    const size_t image = 2 * padded + 3 * planes * w * h;           // padded inputs, census
-    const size_t output = w * h * (2 * sizeof(int16_t) + 2) +       // fixed point x2, conf, flags
+    const size_t padded =
+        (w + static_cast<size_t>(s.census_width)) * (h + static_cast<size_t>(s.census_height));
+    const size_t image = 2 * padded + 3 * planes * w * h;     // padded inputs, census
+    const size_t output = w * h * (2 * sizeof(int16_t) + 2) + // fixed point x2, conf, flags
                           speckleFilterBytes(s.width, s.height);
     const size_t above = s.paths == 5 ? 3 : 1;
-    const size_t band = w * lanes + 2 * pathBlockBytes(static_cast<int>(lanes)) +
-                        winnersSumScratch(static_cast<int>(lanes)) * sizeof(uint16_t) +
-                        (above * 2 + 1) * w * pathBlockBytes(static_cast<int>(lanes)) +
-                        w * (above + 1) + 1 + w * (sizeof(Winner) + sizeof(uint16_t)) +
-                        winnersScratch(s.width, s.min_disparity, static_cast<int>(lanes)) * sizeof(uint16_t);
+    const size_t band =
+        w * lanes + 2 * pathBlockBytes(static_cast<int>(lanes)) +
+        winnersSumScratch(static_cast<int>(lanes)) * sizeof(uint16_t) +
+        (above * 2 + 1) * w * pathBlockBytes(static_cast<int>(lanes)) + w * (above + 1) + 1 +
+        w * (sizeof(Winner) + sizeof(uint16_t)) +
+        winnersScratch(s.width, s.min_disparity, static_cast<int>(lanes)) * sizeof(uint16_t);
     return image + output + band * static_cast<size_t>(s.threads);
 }
 
 struct CensusSgm::Impl {
     explicit Impl(const CensusSgmSettings& s)
-        : settings(s),
-          kernels(s.use_simd ? &simdKernels() : &scalarKernels()),
-          lanes(roundUp(s.num_disparities, kLaneAlign)),
-          planes((censusBits(s) + 7) / 8),
-          rx(s.census_width / 2),
-          ry(s.census_height / 2),
-          padded_stride(static_cast<size_t>(s.width + 2 * rx)),
-          pool(s.threads),
+        : settings(s), kernels(s.use_simd ? &simdKernels() : &scalarKernels()),
+          lanes(roundUp(s.num_disparities, kLaneAlign)), planes((censusBits(s) + 7) / 8),
+          rx(s.census_width / 2), ry(s.census_height / 2),
+          padded_stride(static_cast<size_t>(s.width + 2 * rx)), pool(s.threads),
           speckle(s.width, s.height)
     {
         const size_t area = static_cast<size_t>(s.width) * static_cast<size_t>(s.height);
@@ -172,8 +169,8 @@ struct CensusSgm::Impl {
             double p2 = s.p2;
             if (s.p2_gradient_scale > 0)
                 p2 = s.p2 / (1.0 + static_cast<double>(g) / s.p2_gradient_scale);
-            p2_by_step[g] = static_cast<uint8_t>(
-                std::clamp(static_cast<int>(std::lround(p2)), s.p1 + 1, s.p2));
+            p2_by_step[g] =
+                static_cast<uint8_t>(std::clamp(static_cast<int>(std::lround(p2)), s.p1 + 1, s.p2));
         }
     }
 
@@ -207,8 +204,7 @@ struct CensusSgm::Impl {
         for (int y = y0; y < y1; ++y) {
             for (int p = 0; p < planes; ++p)
                 plane_rows[p] = planeRow(census, p, y);
-            const uint8_t* center = padded.data() +
-                                    static_cast<size_t>(y + ry) * padded_stride +
+            const uint8_t* center = padded.data() + static_cast<size_t>(y + ry) * padded_stride +
                                     static_cast<size_t>(rx);
             kernels->census_row(center, padded_stride, settings.width, settings.census_width,
                                 settings.census_height, plane_rows);
@@ -318,12 +314,11 @@ struct CensusSgm::Impl {
             kernels->paths_forward(b.cost.data(), static_cast<uint8_t>(s.p1), s.width, lanes,
                                    above_paths, b.p2_along.data(), b.forward.data());
             others[above] = b.forward.data();
-            kernels->winners_backward(b.cost.data(), b.p2_along.data() + 1,
-                                      static_cast<uint8_t>(s.p1), s.width, lanes,
-                                      PathRows{others, above + 1}, s.min_disparity,
-                                      s.num_disparities, b.row_scratch.data(),
-                                      b.sum_scratch.data(), b.winners.data(),
-                                      b.right_lane.data(), b.winners_scratch.data());
+            kernels->winners_backward(
+                b.cost.data(), b.p2_along.data() + 1, static_cast<uint8_t>(s.p1), s.width, lanes,
+                PathRows{others, above + 1}, s.min_disparity, s.num_disparities,
+                b.row_scratch.data(), b.sum_scratch.data(), b.winners.data(), b.right_lane.data(),
+                b.winners_scratch.data());
             decideRow(b, y, out);
         }
     }
@@ -354,7 +349,7 @@ struct CensusSgm::Impl {
                 continue;
             }
             if (searchable < n - 1 && k > searchable - s.edge_margin_px)
-                continue;   // its true match may lie beyond the left edge of the right image
+                continue; // its true match may lie beyond the left edge of the right image
             const uint32_t best = w.best_sum;
             const uint32_t second = w.second_sum;
             if (second * 100u <= best * static_cast<uint32_t>(100 + s.uniqueness_percent))
@@ -379,9 +374,9 @@ struct CensusSgm::Impl {
                 if (curvature > 0) {
                     // Rounded to the nearest 1/16 px: (below - above) / (2 curvature) * 16.
                     const int numerator = (below - above) * kSubpixel;
-                    const int half = curvature;   // half of the denominator 2 * curvature
-                    offset16 = (numerator >= 0 ? numerator + half : numerator - half) /
-                               (2 * curvature);
+                    const int half = curvature; // half of the denominator 2 * curvature
+                    offset16 =
+                        (numerator >= 0 ? numerator + half : numerator - half) / (2 * curvature);
                 }
             }
             disparity[x] = static_cast<int16_t>((s.min_disparity + k) * kSubpixel + offset16);
@@ -392,8 +387,8 @@ struct CensusSgm::Impl {
     // 1..255 from the three signs of a trustworthy match: how much better the best sum is
     // than the best non-adjacent one, how sharp the minimum is, and whether the right
     // view agrees exactly; scaled down where the left edge cut the search.
-    uint8_t confidenceOf(uint32_t best, uint32_t second, int curvature, int lr_diff,
-                         int searchable, int n) const
+    uint8_t confidenceOf(uint32_t best, uint32_t second, int curvature, int lr_diff, int searchable,
+                         int n) const
     {
         // uniqueness = min(1, margin / 0.5), margin = (second - best) / max(1, best): a
         // division only when it is below 1.
@@ -404,9 +399,9 @@ struct CensusSgm::Impl {
         const double sharpness = std::min(1.0, static_cast<double>(curvature) * inv_sharp_scale);
         const double agreement = lr_diff == 0 ? 1.0 : lr_diff == 1 ? 0.7 : 0.4;
         double c = 255.0 * uniqueness * (0.5 + 0.5 * sharpness) * agreement;
-        if (searchable < n - 1)   // the left edge cut the search
+        if (searchable < n - 1) // the left edge cut the search
             c = c * (searchable + 1) / n;
-        return static_cast<uint8_t>(std::clamp(static_cast<int>(c + 0.5), 1, 255));   // c >= 0
+        return static_cast<uint8_t>(std::clamp(static_cast<int>(c + 0.5), 1, 255)); // c >= 0
     }
 
     // 3x3 median around each valid pixel, rows y0..y1-1; a missing neighbour counts as
@@ -451,12 +446,12 @@ struct CensusSgm::Impl {
     int rx, ry;
     size_t padded_stride;
     uint8_t p2_by_step[256] = {};
-    double inv_sharp_scale = 0;                       // 1 / (2 p1 paths): full sharpness
+    double inv_sharp_scale = 0; // 1 / (2 p1 paths): full sharpness
     std::vector<uint8_t> padded_left, padded_right;
     size_t plane_margin = 0, plane_stride = 0;
-    std::vector<uint8_t> census_left, census_right;   // planes x (margin, height x width, margin)
-    std::vector<uint8_t> census_right_reversed;       // each row backwards
-    std::vector<int16_t> fixed, filtered;             // 16 x disparity, kInvalid = none
+    std::vector<uint8_t> census_left, census_right; // planes x (margin, height x width, margin)
+    std::vector<uint8_t> census_right_reversed;     // each row backwards
+    std::vector<int16_t> fixed, filtered;           // 16 x disparity, kInvalid = none
     std::vector<BandScratch> bands;
     BandPool pool;
     SpeckleFilter speckle;
@@ -506,15 +501,15 @@ void CensusSgm::compute(const uint8_t* left, const uint8_t* right, size_t stride
                                 band_start(band + 1));
     });
     if (s.speckle_window_px > 0) {
-        int starts[64];   // threads <= 64 (validated)
+        int starts[64]; // threads <= 64 (validated)
         for (int band = 0; band < bands; ++band)
             starts[band] = band_start(band);
         m.speckle.joinBands(result->data(), kInvalid, max_step, starts, bands);
     }
     m.pool.run(bands, [&](int band) {
         if (s.speckle_window_px > 0)
-            m.speckle.removeBand(result->data(), kInvalid, s.speckle_window_px,
-                                 band_start(band), band_start(band + 1));
+            m.speckle.removeBand(result->data(), kInvalid, s.speckle_window_px, band_start(band),
+                                 band_start(band + 1));
         m.finishRows(*result, band_start(band), band_start(band + 1), out);
     });
 }

@@ -35,32 +35,32 @@
 namespace stereod::sgm {
 
 struct CensusSgmSettings {
-    int width = 0;                  // image size in pixels
+    int width = 0; // image size in pixels
     int height = 0;
-    int min_disparity = 0;          // disparities min_disparity .. + num_disparities - 1
-    int num_disparities = 64;       // a multiple of 16, 16..256
+    int min_disparity = 0;    // disparities min_disparity .. + num_disparities - 1
+    int num_disparities = 64; // a multiple of 16, 16..256
     // The defaults below were chosen on 17 real scenes with ground truth (Middlebury 2001,
     // 2005, 2014, KITTI 2012, ETH3D): fewest wrong and too-far pixels for a density close
     // to OpenCV SGBM's. An 11x3 census (32 bits: four byte planes) resists repetitive
     // texture better than 7x5 (34 bits, five planes) and costs less.
-    int census_width = 11;          // odd; census_width * census_height - 1 <= 64 bits
-    int census_height = 3;          // odd
-    int paths = 3;                  // 3 or 5 (see above); 5 measured no better
-    int p1 = 16;                    // penalty for a 1 px disparity step, census bits
-    int p2 = 160;                   // penalty for a larger step, before adaptation
+    int census_width = 11; // odd; census_width * census_height - 1 <= 64 bits
+    int census_height = 3; // odd
+    int paths = 3;         // 3 or 5 (see above); 5 measured no better
+    int p1 = 16;           // penalty for a 1 px disparity step, census bits
+    int p2 = 160;          // penalty for a larger step, before adaptation
     // P2 is lowered where the image changes along the path (a likely depth edge):
     // P2 / (1 + |dI| / p2_gradient_scale), never below p1 + 1. 0 turns adaptation off.
     int p2_gradient_scale = 3;
-    int uniqueness_percent = 9;     // best non-adjacent sum must exceed best by this much
-    int lr_max_diff_px = 2;         // left-right check tolerance; < 0 turns it off
-    bool median = true;             // 3x3 median of the disparities
-    int speckle_window_px = 200;    // smaller connected regions are removed; 0: off
-    int speckle_range_px = 1;       // disparity step allowed inside a region
+    int uniqueness_percent = 9;  // best non-adjacent sum must exceed best by this much
+    int lr_max_diff_px = 2;      // left-right check tolerance; < 0 turns it off
+    bool median = true;          // 3x3 median of the disparities
+    int speckle_window_px = 200; // smaller connected regions are removed; 0: off
+    int speckle_range_px = 1;    // disparity step allowed inside a region
     // Pixels whose search range is cut by the left image edge (x < min_disparity +
     // num_disparities - 1) keep a disparity only when it lies this far below the cut.
     int edge_margin_px = 4;
-    int threads = 1;                // worker threads inside compute()
-    bool use_simd = true;           // false: the scalar reference kernels
+    int threads = 1;      // worker threads inside compute()
+    bool use_simd = true; // false: the scalar reference kernels
 };
 
 // Throws std::invalid_argument naming the setting when the settings cannot work. A size
@@ -69,16 +69,16 @@ void validateCensusSgmSettings(const CensusSgmSettings& settings);
 
 // Where compute() writes; every array is width * height, row-major, caller-owned.
 struct CensusSgmOutput {
-    float* disparity_px;            // pixels; +inf where nothing trustworthy was found
-    uint8_t* confidence;            // 0 where invalid, else 1..255 (see docs/protocol.md)
-    uint8_t* range_limit;           // 1 where the best match is at the near end of the range
+    float* disparity_px;  // pixels; +inf where nothing trustworthy was found
+    uint8_t* confidence;  // 0 where invalid, else 1..255 (see docs/protocol.md)
+    uint8_t* range_limit; // 1 where the best match is at the near end of the range
 };
 
 // Bytes of working memory a matcher with these settings allocates.
 size_t censusSgmMemoryBytes(const CensusSgmSettings& settings);
 
 class CensusSgm {
-public:
+  public:
     // Validates (std::invalid_argument), allocates every buffer and starts the threads.
     explicit CensusSgm(const CensusSgmSettings& settings);
     ~CensusSgm();
@@ -95,7 +95,7 @@ public:
     // The kernels' target: "AVX2", "SSE4", "NEON", ..., or "scalar".
     const char* target() const;
 
-private:
+  private:
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };

@@ -30,8 +30,8 @@
 
 namespace stereod::sgm {
 
-inline constexpr int kLaneAlign = 32;   // one AVX2 vector of bytes
-inline constexpr int kPathPad = 32;     // keeps each path block's L values aligned
+inline constexpr int kLaneAlign = 32; // one AVX2 vector of bytes
+inline constexpr int kPathPad = 32;   // keeps each path block's L values aligned
 
 inline constexpr size_t pathBlockBytes(int lanes)
 {
@@ -41,7 +41,7 @@ inline constexpr size_t pathBlockBytes(int lanes)
 // One row of the census images of both views: `planes` byte planes, plane p holding
 // bits 8p .. 8p+7 of every pixel's census.
 struct CensusRows {
-    const uint8_t* const* left;    // [planes] pointers to `width` bytes
+    const uint8_t* const* left; // [planes] pointers to `width` bytes
     const uint8_t* const* right;
     // The right row backwards: right_reversed[p][j] = right[p][width - 1 - j]. Bytes from
     // min_disparity - 1 to width + min_disparity + lanes around it must be readable
@@ -54,7 +54,9 @@ struct CensusRows {
 // and lane per right pixel, with margins for the lanes that fall outside the row.
 inline constexpr size_t winnersScratch(int width, int min_disparity, int lanes)
 {
-    return 2 * (static_cast<size_t>(width) + 2 * static_cast<size_t>(lanes + (min_disparity < 0 ? -min_disparity : min_disparity) + kLaneAlign));
+    return 2 * (static_cast<size_t>(width) +
+                2 * static_cast<size_t>(
+                        lanes + (min_disparity < 0 ? -min_disparity : min_disparity) + kLaneAlign));
 }
 
 // Entries of sum_scratch that winners_backward() needs: the summed paths of 16 pixels,
@@ -67,11 +69,11 @@ inline constexpr size_t winnersSumScratch(int lanes)
 
 // The best and second-best disparity lane of one pixel over the summed paths.
 struct Winner {
-    uint16_t best_lane;            // smallest k with the smallest sum (ties: smallest k)
+    uint16_t best_lane; // smallest k with the smallest sum (ties: smallest k)
     uint16_t best_sum;
-    uint16_t second_sum;           // smallest sum with |k - best_lane| > 1 (0xFFFF if none)
-    uint16_t below_sum;            // the sums at best_lane - 1 and + 1, for sub-pixel
-    uint16_t above_sum;            // interpolation (0 outside 0 .. num_disparities - 1)
+    uint16_t second_sum; // smallest sum with |k - best_lane| > 1 (0xFFFF if none)
+    uint16_t below_sum;  // the sums at best_lane - 1 and + 1, for sub-pixel
+    uint16_t above_sum;  // interpolation (0 outside 0 .. num_disparities - 1)
 };
 
 // The paths from the previous row onto row y: path i steps from (x + dx[i], y - 1) onto
@@ -79,10 +81,10 @@ struct Winner {
 struct AbovePaths {
     int count = 0;
     const int* dx;
-    const uint8_t* const* p2;      // [count] rows: P2 of the step onto x
-    const uint8_t* const* prev;    // [count] row y-1's path blocks, or nullptr on the path's
-                                   // first row (then L = C)
-    uint8_t* const* cur;           // [count] row y's path blocks, written
+    const uint8_t* const* p2;   // [count] rows: P2 of the step onto x
+    const uint8_t* const* prev; // [count] row y-1's path blocks, or nullptr on the path's
+                                // first row (then L = C)
+    uint8_t* const* cur;        // [count] row y's path blocks, written
 };
 
 // The rows that winners_backward() sums with its own path: `count` rows of `width` path
@@ -94,7 +96,7 @@ struct PathRows {
 };
 
 struct SgmKernels {
-    const char* target;            // "scalar", "AVX2", "SSE4", "NEON", ...
+    const char* target; // "scalar", "AVX2", "SSE4", "NEON", ...
 
     // The census of one row: for each pixel x, bit i of its census is set when the i-th
     // neighbour of the window (raster order, the centre skipped) is darker than the
@@ -106,8 +108,8 @@ struct SgmKernels {
     // cost[x * lanes + k] for x in 0..width-1: Hamming distance of the censuses; lanes
     // whose right pixel x - (min_disparity + k) lies outside 0..width-1, and lanes at or
     // past num_disparities, get cost_invalid.
-    void (*cost_row)(const CensusRows& census, int width, int min_disparity,
-                     int num_disparities, int lanes, uint8_t cost_invalid, uint8_t* cost);
+    void (*cost_row)(const CensusRows& census, int width, int min_disparity, int num_disparities,
+                     int lanes, uint8_t cost_invalid, uint8_t* cost);
 
     // The paths that come from the previous row, and the left->right path along the row,
     // in one pass over the row (the path along the row waits on each pixel's min L; the
@@ -126,9 +128,8 @@ struct SgmKernels {
     // winnersScratch() entries.
     void (*winners_backward)(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width,
                              int lanes, const PathRows& others, int min_disparity,
-                             int num_disparities, uint8_t* path_scratch,
-                             uint16_t* sum_scratch, Winner* winners, uint16_t* right_lane,
-                             uint16_t* scratch);
+                             int num_disparities, uint8_t* path_scratch, uint16_t* sum_scratch,
+                             Winner* winners, uint16_t* right_lane, uint16_t* scratch);
 
     // One row of the 3x3 median of 16-bit disparities (up, row, down: rows y-1, y, y+1),
     // for x in 1 .. width-2: `invalid` stays invalid, and an invalid neighbour counts as

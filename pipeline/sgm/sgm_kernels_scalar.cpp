@@ -15,8 +15,8 @@ uint8_t addSaturated(uint8_t a, uint8_t b)
     return static_cast<uint8_t>(std::min(255, a + b));
 }
 
-void censusRow(const uint8_t* center, size_t stride, int width, int census_width,
-               int census_height, uint8_t* const* planes)
+void censusRow(const uint8_t* center, size_t stride, int width, int census_width, int census_height,
+               uint8_t* const* planes)
 {
     const int rx = census_width / 2;
     const int ry = census_height / 2;
@@ -28,8 +28,8 @@ void censusRow(const uint8_t* center, size_t stride, int width, int census_width
         for (int dx = -rx; dx <= rx; ++dx) {
             if (dy == 0 && dx == 0)
                 continue;
-            const uint8_t* neighbour = center + static_cast<std::ptrdiff_t>(dy) *
-                                                    static_cast<std::ptrdiff_t>(stride) + dx;
+            const uint8_t* neighbour =
+                center + static_cast<std::ptrdiff_t>(dy) * static_cast<std::ptrdiff_t>(stride) + dx;
             uint8_t* plane = planes[bit / 8];
             const int shift = bit % 8;
             for (int x = 0; x < width; ++x)
@@ -39,8 +39,8 @@ void censusRow(const uint8_t* center, size_t stride, int width, int census_width
         }
 }
 
-void costRow(const CensusRows& census, int width, int min_disparity, int num_disparities,
-             int lanes, uint8_t cost_invalid, uint8_t* cost)
+void costRow(const CensusRows& census, int width, int min_disparity, int num_disparities, int lanes,
+             uint8_t cost_invalid, uint8_t* cost)
 {
     for (int x = 0; x < width; ++x) {
         uint8_t* c = cost + static_cast<size_t>(x) * lanes;
@@ -52,8 +52,8 @@ void costRow(const CensusRows& census, int width, int min_disparity, int num_dis
             }
             int distance = 0;
             for (int p = 0; p < census.planes; ++p)
-                distance += std::popcount(
-                    static_cast<unsigned>(census.left[p][x] ^ census.right[p][xr]));
+                distance +=
+                    std::popcount(static_cast<unsigned>(census.left[p][x] ^ census.right[p][xr]));
             c[k] = static_cast<uint8_t>(distance);
         }
     }
@@ -62,8 +62,7 @@ void costRow(const CensusRows& census, int width, int min_disparity, int num_dis
 // One step of a path: L(k) = C(k) + min(Lp(k), Lp(k±1) + P1, min Lp + P2) - min Lp.
 // prev and out are path blocks (L at kPathPad, 255 around it); prev == nullptr starts
 // the path (L = C).
-void step(const uint8_t* cost, const uint8_t* prev, uint8_t p1, uint8_t p2, int lanes,
-          uint8_t* out)
+void step(const uint8_t* cost, const uint8_t* prev, uint8_t p1, uint8_t p2, int lanes, uint8_t* out)
 {
     uint8_t* l = out + kPathPad;
     if (prev == nullptr) {
@@ -76,8 +75,8 @@ void step(const uint8_t* cost, const uint8_t* prev, uint8_t p1, uint8_t p2, int 
         min_prev = std::min(min_prev, lp[k]);
     const uint8_t jump = addSaturated(min_prev, p2);
     for (int k = 0; k < lanes; ++k) {
-        const uint8_t best = std::min({lp[k], addSaturated(lp[k - 1], p1),
-                                       addSaturated(lp[k + 1], p1), jump});
+        const uint8_t best =
+            std::min({lp[k], addSaturated(lp[k - 1], p1), addSaturated(lp[k + 1], p1), jump});
         l[k] = addSaturated(cost[k], static_cast<uint8_t>(best - min_prev));
     }
 }
@@ -94,15 +93,15 @@ void pathForward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, 
     }
 }
 
-void pathFromAbove(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
-                   int dx, const uint8_t* prev, uint8_t* cur)
+void pathFromAbove(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes, int dx,
+                   const uint8_t* prev, uint8_t* cur)
 {
     const size_t block = pathBlockBytes(lanes);
     for (int x = 0; x < width; ++x) {
         const int xp = x + dx;
-        const uint8_t* from =
-            (prev != nullptr && xp >= 0 && xp < width) ? prev + static_cast<size_t>(xp) * block
-                                                       : nullptr;
+        const uint8_t* from = (prev != nullptr && xp >= 0 && xp < width)
+                                  ? prev + static_cast<size_t>(xp) * block
+                                  : nullptr;
         step(cost + static_cast<size_t>(x) * static_cast<size_t>(lanes), from, p1, p2[x], lanes,
              cur + static_cast<size_t>(x) * block);
     }
@@ -137,7 +136,8 @@ void winnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int wid
         for (int k = 0; k < num_disparities; ++k) {
             int total = a[kPathPad + k];
             for (int i = 0; i < others.count; ++i)
-                total += others.rows[i][static_cast<size_t>(x) * block + kPathPad + static_cast<size_t>(k)];
+                total += others.rows[i][static_cast<size_t>(x) * block + kPathPad +
+                                        static_cast<size_t>(k)];
             s[k] = static_cast<uint16_t>(total);
         }
         prev = a;
@@ -181,16 +181,27 @@ void medianRow(const int16_t* up, const int16_t* row, const int16_t* down, int w
             continue;
         }
         const auto pick = [c, invalid](int16_t v) { return v == invalid ? c : v; };
-        int16_t p[9] = {pick(up[x - 1]),   pick(up[x]),   pick(up[x + 1]),
-                        pick(row[x - 1]),  c,             pick(row[x + 1]),
-                        pick(down[x - 1]), pick(down[x]), pick(down[x + 1])};
+        int16_t p[9] = {pick(up[x - 1]),  pick(up[x]),       pick(up[x + 1]), pick(row[x - 1]), c,
+                        pick(row[x + 1]), pick(down[x - 1]), pick(down[x]),   pick(down[x + 1])};
         // Paeth's median-of-9 network: 19 compare-exchanges.
-        sort2(p[1], p[2]); sort2(p[4], p[5]); sort2(p[7], p[8]);
-        sort2(p[0], p[1]); sort2(p[3], p[4]); sort2(p[6], p[7]);
-        sort2(p[1], p[2]); sort2(p[4], p[5]); sort2(p[7], p[8]);
-        sort2(p[0], p[3]); sort2(p[5], p[8]); sort2(p[4], p[7]);
-        sort2(p[3], p[6]); sort2(p[1], p[4]); sort2(p[2], p[5]);
-        sort2(p[4], p[7]); sort2(p[4], p[2]); sort2(p[6], p[4]);
+        sort2(p[1], p[2]);
+        sort2(p[4], p[5]);
+        sort2(p[7], p[8]);
+        sort2(p[0], p[1]);
+        sort2(p[3], p[4]);
+        sort2(p[6], p[7]);
+        sort2(p[1], p[2]);
+        sort2(p[4], p[5]);
+        sort2(p[7], p[8]);
+        sort2(p[0], p[3]);
+        sort2(p[5], p[8]);
+        sort2(p[4], p[7]);
+        sort2(p[3], p[6]);
+        sort2(p[1], p[4]);
+        sort2(p[2], p[5]);
+        sort2(p[4], p[7]);
+        sort2(p[4], p[2]);
+        sort2(p[6], p[4]);
         sort2(p[4], p[2]);
         dst[x] = p[4];
     }
@@ -200,8 +211,8 @@ void medianRow(const int16_t* up, const int16_t* row, const int16_t* down, int w
 
 const SgmKernels& scalarKernels()
 {
-    static const SgmKernels kernels{"scalar", censusRow, costRow, pathsForward, winnersBackward,
-                                    medianRow};
+    static const SgmKernels kernels{"scalar",     censusRow,       costRow,
+                                    pathsForward, winnersBackward, medianRow};
     return kernels;
 }
 

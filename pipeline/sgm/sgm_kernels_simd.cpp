@@ -11,13 +11,12 @@
 
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "pipeline/sgm/sgm_kernels_simd.cpp"
-#include <hwy/foreach_target.h>   // IWYU pragma: keep
-
-#include <hwy/highway.h>
-
 #include <algorithm>
 #include <bit>
 #include <cstring>
+
+#include <hwy/foreach_target.h> // IWYU pragma: keep
+#include <hwy/highway.h>
 
 #include "pipeline/sgm/sgm_kernels.hpp"
 
@@ -28,13 +27,13 @@ namespace hn = hwy::HWY_NAMESPACE;
 
 #if HWY_TARGET == HWY_SCALAR
 // Highway's one-lane fallback, for a processor with no SIMD target: the scalar reference.
-void CensusRow(const uint8_t* center, size_t stride, int width, int census_width,
-               int census_height, uint8_t* const* planes)
+void CensusRow(const uint8_t* center, size_t stride, int width, int census_width, int census_height,
+               uint8_t* const* planes)
 {
     scalarKernels().census_row(center, stride, width, census_width, census_height, planes);
 }
-void CostRow(const CensusRows& census, int width, int min_disparity, int num_disparities,
-             int lanes, uint8_t cost_invalid, uint8_t* cost)
+void CostRow(const CensusRows& census, int width, int min_disparity, int num_disparities, int lanes,
+             uint8_t cost_invalid, uint8_t* cost)
 {
     scalarKernels().cost_row(census, width, min_disparity, num_disparities, lanes, cost_invalid,
                              cost);
@@ -61,7 +60,7 @@ void MedianRow(const int16_t* up, const int16_t* row, const int16_t* down, int w
 #else
 
 using D8 = hn::CappedTag<uint8_t, kLaneAlign>;
-using D16 = hn::Repartition<uint16_t, D8>;        // same bytes, half the lanes
+using D16 = hn::Repartition<uint16_t, D8>; // same bytes, half the lanes
 using D32 = hn::Repartition<uint32_t, D8>;
 
 // Smallest byte of a vector, in every byte.
@@ -72,12 +71,12 @@ HWY_INLINE hn::Vec<D8> MinOfBytes(hn::Vec<D8> v)
     const auto wide = hn::BitCast(d16, v);
     const auto low = hn::And(wide, hn::Set(d16, uint16_t{0xFF}));
     const auto high = hn::ShiftRight<8>(wide);
-    const auto m = hn::MinOfLanes(d16, hn::Min(low, high));   // in every u16 lane
+    const auto m = hn::MinOfLanes(d16, hn::Min(low, high)); // in every u16 lane
     return hn::BitCast(d, hn::Or(m, hn::ShiftLeft<8>(m)));
 }
 
-void CensusRow(const uint8_t* center, size_t stride, int width, int census_width,
-               int census_height, uint8_t* const* planes)
+void CensusRow(const uint8_t* center, size_t stride, int width, int census_width, int census_height,
+               uint8_t* const* planes)
 {
     const D8 d;
     const int n = static_cast<int>(hn::Lanes(d));
@@ -107,22 +106,23 @@ void CensusRow(const uint8_t* center, size_t stride, int width, int census_width
             auto acc = hn::Zero(d);
             for (int i = 0; i < count; ++i) {
                 const auto darker = hn::Lt(hn::LoadU(d, center + offsets[i] + x), c);
-                acc = hn::Or(acc, hn::IfThenElseZero(
-                                      darker, hn::Set(d, static_cast<uint8_t>(1u << i))));
+                acc = hn::Or(acc,
+                             hn::IfThenElseZero(darker, hn::Set(d, static_cast<uint8_t>(1u << i))));
             }
             hn::StoreU(acc, d, planes[p] + x);
         }
     }
     int x = vector_end;
-    for (; x < width; ++x) {   // the tail, one pixel at a time
+    for (; x < width; ++x) { // the tail, one pixel at a time
         uint8_t bytes[8] = {};
         int bit = 0;
         for (int dy = -ry; dy <= ry; ++dy)
             for (int dx = -rx; dx <= rx; ++dx) {
                 if (dy == 0 && dx == 0)
                     continue;
-                const uint8_t neighbour = center[static_cast<std::ptrdiff_t>(dy) *
-                                                     static_cast<std::ptrdiff_t>(stride) + dx + x];
+                const uint8_t neighbour =
+                    center[static_cast<std::ptrdiff_t>(dy) * static_cast<std::ptrdiff_t>(stride) +
+                           dx + x];
                 if (neighbour < center[x])
                     bytes[bit / 8] = static_cast<uint8_t>(bytes[bit / 8] | (1u << (bit % 8)));
                 ++bit;
@@ -132,8 +132,8 @@ void CensusRow(const uint8_t* center, size_t stride, int width, int census_width
     }
 }
 
-void CostRow(const CensusRows& census, int width, int min_disparity, int num_disparities,
-             int lanes, uint8_t cost_invalid, uint8_t* cost)
+void CostRow(const CensusRows& census, int width, int min_disparity, int num_disparities, int lanes,
+             uint8_t cost_invalid, uint8_t* cost)
 {
     const D8 d;
     const int n = static_cast<int>(hn::Lanes(d));
@@ -159,12 +159,12 @@ void CostRow(const CensusRows& census, int width, int min_disparity, int num_dis
             }
             return sum;
         };
-        if (k_lo == 0 && k_hi == lanes - 1) {   // every lane valid: most pixels
+        if (k_lo == 0 && k_hi == lanes - 1) { // every lane valid: most pixels
             for (int k0 = 0; k0 < lanes; k0 += n)
                 hn::StoreU(distance(k0), d, c + k0);
             continue;
         }
-        const auto lo = hn::Set(d, static_cast<uint8_t>(k_lo));   // k_lo <= k_hi <= 255
+        const auto lo = hn::Set(d, static_cast<uint8_t>(k_lo)); // k_lo <= k_hi <= 255
         const auto hi = hn::Set(d, static_cast<uint8_t>(k_hi));
         for (int k0 = 0; k0 < lanes; k0 += n) {
             if (k0 > k_hi || k0 + n <= k_lo) {
@@ -221,7 +221,7 @@ void PathsForward(const uint8_t* cost, uint8_t p1, int width, int lanes, const A
     const size_t block = pathBlockBytes(lanes);
     const auto v_p1 = hn::Set(d, p1);
     const auto none = [](int, hn::Vec<D8>) {};
-    auto v_min = hn::Zero(d);     // min L of the along path's previous block, every byte
+    auto v_min = hn::Zero(d); // min L of the along path's previous block, every byte
     for (int x = 0; x < width; ++x) {
         const uint8_t* c = cost + static_cast<size_t>(x) * static_cast<size_t>(lanes);
         for (int i = 0; i < above.count; ++i) {
@@ -231,13 +231,12 @@ void PathsForward(const uint8_t* cost, uint8_t p1, int width, int lanes, const A
                                       : nullptr;
             const auto v_min_prev = hn::Set(d, from != nullptr ? from[0] : uint8_t{0});
             uint8_t* out = above.cur[i] + static_cast<size_t>(x) * block;
-            out[0] = hn::GetLane(
-                Step(c, from, v_min_prev, v_p1, above.p2[i][x], lanes, out, none));
+            out[0] = hn::GetLane(Step(c, from, v_min_prev, v_p1, above.p2[i][x], lanes, out, none));
         }
         if (along != nullptr) {
             const uint8_t* prev = x == 0 ? nullptr : along + static_cast<size_t>(x - 1) * block;
             v_min = Step(c, prev, v_min, v_p1, p2_along[x], lanes,
-                               along + static_cast<size_t>(x) * block, none);
+                         along + static_cast<size_t>(x) * block, none);
         }
     }
 }
@@ -301,19 +300,18 @@ void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int wid
             // (at another k, not near), and every other lane its smallest.
             // k - (best - 1) < 3 (unsigned) is near.
             const auto k_first = hn::Add(hn::Mul(hn::And(v_first, tag_mask), v_n16), iota16);
-            const auto near = hn::Lt(hn::Sub(k_first, hn::Set(d16, static_cast<uint16_t>(best - 1))),
-                                     three16);
+            const auto near =
+                hn::Lt(hn::Sub(k_first, hn::Set(d16, static_cast<uint16_t>(best - 1))), three16);
             const uint16_t second =
                 hn::GetLane(hn::MinOfLanes(d16, hn::IfThenElse(near, v_next, v_first)));
             const auto sum_at = [&](int k) {
                 return k >= 0 && k < num_disparities ? static_cast<uint16_t>(key[k] >> kTagBits)
                                                      : uint16_t{0};
             };
-            out[x_first - g] = Winner{static_cast<uint16_t>(best),
-                                      static_cast<uint16_t>(best_key >> kTagBits),
-                                      second == 0xFFFF ? second
-                                                       : static_cast<uint16_t>(second >> kTagBits),
-                                      sum_at(best - 1), sum_at(best + 1)};
+            out[x_first - g] =
+                Winner{static_cast<uint16_t>(best), static_cast<uint16_t>(best_key >> kTagBits),
+                       second == 0xFFFF ? second : static_cast<uint16_t>(second >> kTagBits),
+                       sum_at(best - 1), sum_at(best + 1)};
         }
         // The right view: pixel g of the group has j = j0 + g, so its lane for position
         // p0 is p0 - g. Keys of pixels past the row's ends, and margins, are 0xFFFF.
@@ -346,8 +344,8 @@ void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int wid
         const int g = (width - 1 - x) % kWinnerGroup;
         uint16_t* key = sum_scratch + static_cast<size_t>(g) * group_stride + 16;
         const auto right_tag = hn::Set(d16, static_cast<uint16_t>(kWinnerGroup - 1 - g));
-        auto best = none16;    // per lane: smallest sum << kTagBits | k / n16
-        auto next = none16;    // per lane: the second smallest
+        auto best = none16; // per lane: smallest sum << kTagBits | k / n16
+        auto next = none16; // per lane: the second smallest
         // Sums the paths for the lanes of this vector.
         const auto visit = [&](int k0, hn::Vec<D8> v) {
             if (k0 >= num_disparities)
@@ -410,16 +408,28 @@ void MedianRow(const int16_t* up, const int16_t* row, const int16_t* down, int w
         auto p3 = pick(row + x - 1), p4 = c, p5 = pick(row + x + 1);
         auto p6 = pick(down + x - 1), p7 = pick(down + x), p8 = pick(down + x + 1);
         // Paeth's median-of-9 network, as in the scalar reference.
-        sort2(p1, p2); sort2(p4, p5); sort2(p7, p8);
-        sort2(p0, p1); sort2(p3, p4); sort2(p6, p7);
-        sort2(p1, p2); sort2(p4, p5); sort2(p7, p8);
-        sort2(p0, p3); sort2(p5, p8); sort2(p4, p7);
-        sort2(p3, p6); sort2(p1, p4); sort2(p2, p5);
-        sort2(p4, p7); sort2(p4, p2); sort2(p6, p4);
+        sort2(p1, p2);
+        sort2(p4, p5);
+        sort2(p7, p8);
+        sort2(p0, p1);
+        sort2(p3, p4);
+        sort2(p6, p7);
+        sort2(p1, p2);
+        sort2(p4, p5);
+        sort2(p7, p8);
+        sort2(p0, p3);
+        sort2(p5, p8);
+        sort2(p4, p7);
+        sort2(p3, p6);
+        sort2(p1, p4);
+        sort2(p2, p5);
+        sort2(p4, p7);
+        sort2(p4, p2);
+        sort2(p6, p4);
         sort2(p4, p2);
         hn::StoreU(hn::IfThenElse(hn::Eq(c, v_invalid), c, p4), d, dst + x);
     }
-    if (x < width - 1) {   // the tail: the reference on the last pixels
+    if (x < width - 1) { // the tail: the reference on the last pixels
         scalarKernels().median_row(up + x - 1, row + x - 1, down + x - 1, width - x + 1, invalid,
                                    dst + x - 1);
     }
@@ -453,10 +463,9 @@ const SgmKernels& simdKernels()
         // Choose the target now, so that the table holds the chosen functions rather
         // than the first-call trampolines.
         hwy::GetChosenTarget().Update(hwy::SupportedTargets());
-        return SgmKernels{HWY_DYNAMIC_DISPATCH(TargetName)(),  HWY_DYNAMIC_DISPATCH(CensusRow),
-                          HWY_DYNAMIC_DISPATCH(CostRow),      HWY_DYNAMIC_DISPATCH(PathsForward),
-                          HWY_DYNAMIC_DISPATCH(WinnersBackward),
-                          HWY_DYNAMIC_DISPATCH(MedianRow)};
+        return SgmKernels{HWY_DYNAMIC_DISPATCH(TargetName)(),    HWY_DYNAMIC_DISPATCH(CensusRow),
+                          HWY_DYNAMIC_DISPATCH(CostRow),         HWY_DYNAMIC_DISPATCH(PathsForward),
+                          HWY_DYNAMIC_DISPATCH(WinnersBackward), HWY_DYNAMIC_DISPATCH(MedianRow)};
     }();
     return kernels;
 }

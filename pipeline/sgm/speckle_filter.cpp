@@ -12,13 +12,9 @@ size_t speckleFilterBytes(int width, int height)
 }
 
 SpeckleFilter::SpeckleFilter(int width, int height)
-    : width_(width),
-      height_(height),
-      label_(static_cast<size_t>(width) * static_cast<size_t>(height)),
-      stack_(label_.size()),
-      stack_x_(label_.size()),
-      parent_(label_.size()),
-      size_(label_.size())
+    : width_(width), height_(height),
+      label_(static_cast<size_t>(width) * static_cast<size_t>(height)), stack_(label_.size()),
+      stack_x_(label_.size()), parent_(label_.size()), size_(label_.size())
 {
 }
 
@@ -66,10 +62,14 @@ void SpeckleFilter::labelBand(const int16_t* disparity, int16_t invalid, int max
                     stack_x[top++] = static_cast<uint32_t>(qx);
                 }
             };
-            if (x > 0) visit(p - 1, x - 1);
-            if (x + 1 < w) visit(p + 1, x + 1);
-            if (p >= begin + w) visit(p - w, x);
-            if (p + w < end) visit(p + w, x);
+            if (x > 0)
+                visit(p - 1, x - 1);
+            if (x + 1 < w)
+                visit(p + 1, x + 1);
+            if (p >= begin + w)
+                visit(p - w, x);
+            if (p + w < end)
+                visit(p + w, x);
         }
         parent_[region] = region;
         size_[region] = static_cast<uint32_t>(count);

@@ -21,7 +21,7 @@ namespace stereod::sgm {
 size_t speckleFilterBytes(int width, int height);
 
 class SpeckleFilter {
-public:
+  public:
     SpeckleFilter(int width, int height);
 
     // All three phases on one thread. disparity: width * height values, row-major;
@@ -32,12 +32,12 @@ public:
     void labelBand(const int16_t* disparity, int16_t invalid, int max_step, int y0, int y1);
     // After every band is labelled: joins regions across the borders between bands, which
     // start at rows band_starts[1..bands-1].
-    void joinBands(const int16_t* disparity, int16_t invalid, int max_step,
-                   const int* band_starts, int bands);
+    void joinBands(const int16_t* disparity, int16_t invalid, int max_step, const int* band_starts,
+                   int bands);
     // After joinBands(): rows y0..y1-1 lose the pixels of regions of fewer than max_size.
     void removeBand(int16_t* disparity, int16_t invalid, int max_size, int y0, int y1) const;
 
-private:
+  private:
     uint32_t root(uint32_t region) const;
 
     int width_;
@@ -45,8 +45,8 @@ private:
     // Region of each pixel: 1 + the index of the pixel its band's flood started from;
     // 0 = not yet visited.
     std::vector<uint32_t> label_;
-    std::vector<uint32_t> stack_;     // pixels waiting to be visited, each band its rows' part
-    std::vector<uint32_t> stack_x_;   // their columns (saves a division per pixel)
+    std::vector<uint32_t> stack_;   // pixels waiting to be visited, each band its rows' part
+    std::vector<uint32_t> stack_x_; // their columns (saves a division per pixel)
     // Per region (by its start pixel): the region it was joined into (itself when none),
     // and its pixel count, whole once it is a root.
     std::vector<uint32_t> parent_;

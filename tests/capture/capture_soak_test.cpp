@@ -14,9 +14,8 @@
 #include <thread>
 #include <vector>
 
-#include <unistd.h>
-
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include "capture/stereo_camera_source.hpp"
 #include "tests/fake_v4l2/fake_v4l2.hpp"
@@ -42,7 +41,8 @@ long residentKiB()
 int openFds()
 {
     int count = 0;
-    for ([[maybe_unused]] const fs::directory_entry& entry : fs::directory_iterator("/proc/self/fd"))
+    for ([[maybe_unused]] const fs::directory_entry& entry :
+         fs::directory_iterator("/proc/self/fd"))
         ++count;
     return count;
 }
@@ -64,7 +64,8 @@ TEST(CaptureSoakTest, SixtySecondsAt30FpsWithReplugsGrowNeitherMemoryNorFds)
                 << "      - fourcc: YUYV\n"
                 << "        sizes: [640x480]\n";
     }
-    ASSERT_EQ(stereod_fake_v4l2_load((dir / "devices.yaml").c_str()), 0) << stereod_fake_v4l2_last_error();
+    ASSERT_EQ(stereod_fake_v4l2_load((dir / "devices.yaml").c_str()), 0)
+        << stereod_fake_v4l2_last_error();
 
     StereoCameraOptions options;
     const std::size_t ring_capacity = 2;
@@ -73,7 +74,8 @@ TEST(CaptureSoakTest, SixtySecondsAt30FpsWithReplugsGrowNeitherMemoryNorFds)
         camera->width = 640;
         camera->height = 480;
         camera->fps = kFps;
-        camera->buffer_count = cameraBufferCount(ring_capacity, options.sync, options.inbox_capacity);
+        camera->buffer_count =
+            cameraBufferCount(ring_capacity, options.sync, options.inbox_capacity);
     }
     options.left.device = "/dev/video-soak-L";
     options.right.device = "/dev/video-soak-R";
@@ -88,7 +90,7 @@ TEST(CaptureSoakTest, SixtySecondsAt30FpsWithReplugsGrowNeitherMemoryNorFds)
         uint64_t pairs = 0;
         std::thread consumer([&] {
             while (ring.pop())
-                ++pairs;   // the pair is released at once, as a fast worker would
+                ++pairs; // the pair is released at once, as a fast worker would
         });
         uint64_t pairs_before = 0;
         for (int cycle = 0; cycle < kCycles; ++cycle) {
@@ -122,7 +124,8 @@ TEST(CaptureSoakTest, SixtySecondsAt30FpsWithReplugsGrowNeitherMemoryNorFds)
     fs::remove_all(dir);
 
     for (int cycle = 0; cycle < kCycles; ++cycle)
-        EXPECT_GT(pairs_per_cycle[static_cast<size_t>(cycle)], static_cast<uint64_t>(kFps * kCycleSeconds / 3))
+        EXPECT_GT(pairs_per_cycle[static_cast<size_t>(cycle)],
+                  static_cast<uint64_t>(kFps * kCycleSeconds / 3))
             << "pairs keep coming in cycle " << cycle;
     for (int cycle = 2; cycle < kCycles; ++cycle) {
         EXPECT_EQ(fds[static_cast<size_t>(cycle)], fds[1]) << "open fds after cycle " << cycle;

@@ -15,26 +15,31 @@ namespace stereod {
 namespace {
 
 class DevicesCommandTest : public test::FakeCameraTest {
-protected:
+  protected:
     // Writes the description for the child processes (this process loads it too, which
     // the fixture's TearDown unloads).
     std::vector<std::string> fakeEnvironment()
     {
         loadFake("      - { fourcc: YUYV, sizes: [320x240, 640x480@15] }\n"
                  "      - { fourcc: MJPG, sizes: [1280x720@30] }\n");
-        return fake_v4l2::childEnvironment(STEREOD_FAKE_V4L2_LIBRARY, (dir_ / "devices.yaml").string());
+        return fake_v4l2::childEnvironment(STEREOD_FAKE_V4L2_LIBRARY,
+                                           (dir_ / "devices.yaml").string());
     }
 };
 
 TEST_F(DevicesCommandTest, StereoctlListsTheCameraAsText)
 {
-    const test::ProcessResult result = test::runProcess({test::stereoctlPath(), "devices"}, fakeEnvironment());
+    const test::ProcessResult result =
+        test::runProcess({test::stereoctlPath(), "devices"}, fakeEnvironment());
     EXPECT_EQ(result.exit_code, 0) << result.err;
-    EXPECT_NE(result.out.find("/dev/video-fake-left: Fake Stereo Left (driver uvcvideo"), std::string::npos)
+    EXPECT_NE(result.out.find("/dev/video-fake-left: Fake Stereo Left (driver uvcvideo"),
+              std::string::npos)
         << result.out;
-    EXPECT_NE(result.out.find(std::string("by-id: /dev/v4l/by-id/") + test::kFakeLeftById), std::string::npos)
+    EXPECT_NE(result.out.find(std::string("by-id: /dev/v4l/by-id/") + test::kFakeLeftById),
+              std::string::npos)
         << result.out;
-    EXPECT_NE(result.out.find("YUYV 320x240 @ 100/30 fps, 640x480 @ 15 fps"), std::string::npos) << result.out;
+    EXPECT_NE(result.out.find("YUYV 320x240 @ 100/30 fps, 640x480 @ 15 fps"), std::string::npos)
+        << result.out;
     EXPECT_NE(result.out.find("MJPG 1280x720 @ 30 fps"), std::string::npos) << result.out;
 }
 
@@ -59,7 +64,8 @@ TEST_F(DevicesCommandTest, StereoctlListsTheCameraAsJson)
 TEST_F(DevicesCommandTest, StereodListDevicesPrintsTheSameList)
 {
     const std::vector<std::string> env = fakeEnvironment();
-    const test::ProcessResult daemon = test::runProcess({test::stereodPath(), "--list-devices"}, env);
+    const test::ProcessResult daemon =
+        test::runProcess({test::stereodPath(), "--list-devices"}, env);
     const test::ProcessResult ctl = test::runProcess({test::stereoctlPath(), "devices"}, env);
     EXPECT_EQ(daemon.exit_code, 0) << daemon.err;
     EXPECT_EQ(daemon.out, ctl.out);

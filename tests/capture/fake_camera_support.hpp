@@ -8,11 +8,11 @@
 #include <optional>
 #include <string>
 #include <thread>
-#include <unistd.h>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <unistd.h>
 
 #include "capture/v4l2_camera.hpp"
 #include "tests/fake_v4l2/fake_v4l2.hpp"
@@ -28,15 +28,15 @@ inline constexpr int kHeight = 240;
 // A fixture with a scratch directory holding `scene.png`: 320x240 grayscale, cut from
 // OpenCV's Aloe photograph, so that every format the fake serves is a real image.
 class FakeCameraTest : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override
     {
         dir_ = std::filesystem::temp_directory_path() /
                ("stereod_capture_" + std::to_string(::getpid()) + "_" +
                 ::testing::UnitTest::GetInstance()->current_test_info()->name());
         std::filesystem::create_directories(dir_);
-        const cv::Mat aloe =
-            cv::imread(std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/aloeL.jpg", cv::IMREAD_GRAYSCALE);
+        const cv::Mat aloe = cv::imread(std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/aloeL.jpg",
+                                        cv::IMREAD_GRAYSCALE);
         ASSERT_FALSE(aloe.empty()) << "OpenCV sample aloeL.jpg missing";
         cv::resize(aloe, scene_, cv::Size(kWidth, kHeight), 0, 0, cv::INTER_AREA);
         ASSERT_TRUE(cv::imwrite((dir_ / "scene.png").string(), scene_));
@@ -78,13 +78,13 @@ protected:
     }
 
     std::filesystem::path dir_;
-    cv::Mat scene_;   // what every frame shows, CV_8UC1
+    cv::Mat scene_; // what every frame shows, CV_8UC1
 };
 
 // The next frame from `ring`, or nothing after `timeout` (a guard against hangs, not a
 // timing assertion).
-inline std::optional<CapturedFrame> nextFrame(CapturedRing& ring,
-                                              std::chrono::milliseconds timeout = std::chrono::seconds(5))
+inline std::optional<CapturedFrame>
+nextFrame(CapturedRing& ring, std::chrono::milliseconds timeout = std::chrono::seconds(5))
 {
     const auto deadline = std::chrono::steady_clock::now() + timeout;
     while (std::chrono::steady_clock::now() < deadline) {

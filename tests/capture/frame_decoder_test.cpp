@@ -21,7 +21,7 @@ constexpr int kWidth = 320;
 constexpr int kHeight = 240;
 
 class FrameDecoderTest : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override
     {
         const cv::Mat aloe = cv::imread(std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/aloeL.jpg");
@@ -39,7 +39,7 @@ protected:
             uint8_t* row = data.data() + static_cast<std::size_t>(y) * bytes_per_line;
             for (int x = 0; x < kWidth; ++x) {
                 row[2 * x] = gray_.at<uint8_t>(y, x);
-                row[2 * x + 1] = static_cast<uint8_t>(x * 7 + y);   // U or V
+                row[2 * x + 1] = static_cast<uint8_t>(x * 7 + y); // U or V
             }
         }
         return data;
@@ -63,7 +63,8 @@ TEST_F(FrameDecoderTest, GreyIsUsedInPlaceWhenComplete)
     EXPECT_TRUE(padded.inPlace());
     // The last row need not carry its padding.
     EXPECT_EQ(padded.checkInPlace((kWidth + 64) * (kHeight - 1) + kWidth), DecodeStatus::Ok);
-    EXPECT_EQ(padded.checkInPlace((kWidth + 64) * (kHeight - 1) + kWidth - 1), DecodeStatus::ShortBuffer);
+    EXPECT_EQ(padded.checkInPlace((kWidth + 64) * (kHeight - 1) + kWidth - 1),
+              DecodeStatus::ShortBuffer);
     EXPECT_EQ(padded.checkInPlace(0), DecodeStatus::ShortBuffer);
 }
 
@@ -92,7 +93,8 @@ TEST_F(FrameDecoderTest, MjpegDecodesCloseToTheSource)
     // A colour JPEG (what UVC cameras send) and a grayscale one.
     for (const cv::Mat& source : {bgr_, gray_}) {
         const std::vector<uint8_t> data = jpeg(source);
-        ASSERT_EQ(decoder.decode(data.data(), data.size(), out_), DecodeStatus::Ok) << decoder.lastError();
+        ASSERT_EQ(decoder.decode(data.data(), data.size(), out_), DecodeStatus::Ok)
+            << decoder.lastError();
         // What JPEG itself loses at quality 90 on this textured scene, through OpenCV's
         // accurate decoder: the fast integer IDCT adds little to it.
         const cv::Mat reference = cv::imdecode(data, cv::IMREAD_GRAYSCALE);
@@ -128,7 +130,8 @@ TEST_F(FrameDecoderTest, TruncatedOrDamagedMjpegIsABadFrame)
     EXPECT_EQ(decoder.decode(other.data(), other.size(), out_), DecodeStatus::Corrupt);
 
     // The decoder is still good for the next frame.
-    ASSERT_EQ(decoder.decode(data.data(), data.size(), out_), DecodeStatus::Ok) << decoder.lastError();
+    ASSERT_EQ(decoder.decode(data.data(), data.size(), out_), DecodeStatus::Ok)
+        << decoder.lastError();
 }
 
 } // namespace

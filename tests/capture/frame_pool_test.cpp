@@ -57,7 +57,7 @@ TEST(FramePool, BufferComesBackWhenItsHandleDies)
 
     FrameHandle again = pool.acquire();
     ASSERT_TRUE(again);
-    EXPECT_EQ(again->image.data, a_pixels);   // the same buffer, no new allocation
+    EXPECT_EQ(again->image.data, a_pixels); // the same buffer, no new allocation
     EXPECT_EQ(pool.inUse(), 2u);
 }
 

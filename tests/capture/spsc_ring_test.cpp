@@ -67,8 +67,8 @@ TEST(SpscRing, FullRingDropsTheOldestAndCountsIt)
     SpscRing<int> ring(4);
     for (int i = 0; i < 4; ++i)
         EXPECT_TRUE(ring.push(int{i}));
-    EXPECT_FALSE(ring.push(4));   // drops 0
-    EXPECT_FALSE(ring.push(5));   // drops 1
+    EXPECT_FALSE(ring.push(4)); // drops 0
+    EXPECT_FALSE(ring.push(5)); // drops 1
     EXPECT_EQ(ring.dropped(), 2u);
     EXPECT_EQ(ring.pushed(), 6u);
     EXPECT_EQ(ring.size(), 4u);
@@ -143,9 +143,9 @@ TEST(SpscRing, PushWaitOnAStoppedFullRingGivesUpAndDropsItsItem)
     ring.push(pool.acquire());
     ring.stop();
     EXPECT_FALSE(ring.pushWait(pool.acquire()));
-    EXPECT_EQ(pool.inUse(), 2u);     // the refused frame went back to the pool
+    EXPECT_EQ(pool.inUse(), 2u); // the refused frame went back to the pool
     EXPECT_EQ(ring.pushed(), 2u);
-    EXPECT_EQ(ring.dropped(), 0u);   // a refused pushWait is not a ring drop
+    EXPECT_EQ(ring.dropped(), 0u); // a refused pushWait is not a ring drop
 }
 
 TEST(SpscRing, PushWaitWithRoomDoesNotWait)

@@ -39,7 +39,7 @@ TEST(SpscRingThreaded, StopWakesAConsumerBlockedInPop)
         returned.store(true);
     });
     giveOtherThreadTime();
-    EXPECT_FALSE(returned.load());   // nothing queued: pop() must still be waiting
+    EXPECT_FALSE(returned.load()); // nothing queued: pop() must still be waiting
     ring.stop();
     consumer.join();
     EXPECT_TRUE(returned.load());
@@ -70,7 +70,7 @@ TEST(SpscRingThreaded, PushWaitWaitsForRoom)
         returned.store(true);
     });
     giveOtherThreadTime();
-    EXPECT_FALSE(returned.load());   // full ring: still waiting, nothing dropped
+    EXPECT_FALSE(returned.load()); // full ring: still waiting, nothing dropped
     EXPECT_EQ(ring.dropped(), 0u);
 
     std::optional<int> first = ring.tryPop();
@@ -168,7 +168,7 @@ struct Ledger {
 };
 
 class TrackedItem {
-public:
+  public:
     TrackedItem(uint64_t seq, Ledger* ledger) : seq_(seq), ledger_(ledger) {}
     TrackedItem(TrackedItem&& other) noexcept : seq_(other.seq_), ledger_(other.ledger_)
     {
@@ -189,7 +189,7 @@ public:
         return seq_;
     }
 
-private:
+  private:
     uint64_t seq_;
     Ledger* ledger_;
 };
@@ -241,7 +241,7 @@ TEST(SpscRingThreaded, StressDropOldestLosesAndDuplicatesNothing)
     }
     EXPECT_EQ(lost, 0u);
     EXPECT_EQ(duplicated, 0u);
-    EXPECT_EQ(dropped, ring.dropped());   // every counted drop destroyed its item, once
+    EXPECT_EQ(dropped, ring.dropped()); // every counted drop destroyed its item, once
 }
 
 TEST(SpscRingThreaded, StressPushWaitDeliversEverythingInOrder)

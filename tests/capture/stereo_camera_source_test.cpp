@@ -38,7 +38,7 @@ constexpr int kHeight = 240;
 constexpr int64_t kMs = 1'000'000;
 
 class CameraSourceTest : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override
     {
         dir_ = fs::temp_directory_path() /
@@ -177,10 +177,9 @@ TEST_F(CameraSourceTest, EachPixelFormatGivesPairsOfTheRightImages)
         EXPECT_FALSE(status.clock_offset_detected);
         EXPECT_TRUE(status.warnings.empty()) << status.warnings.front();
         const V4l2CameraStatus left = source.cameraStatus(StereoSide::Left);
-        EXPECT_EQ(left.format.format_name,
-                  c.format == PixelFormatChoice::Grey   ? "GREY"
-                  : c.format == PixelFormatChoice::Yuyv ? "YUYV"
-                                                        : "MJPG");
+        EXPECT_EQ(left.format.format_name, c.format == PixelFormatChoice::Grey   ? "GREY"
+                                           : c.format == PixelFormatChoice::Yuyv ? "YUYV"
+                                                                                 : "MJPG");
         source.stop();
         drain(ring);
         stereod_fake_v4l2_unload();
@@ -235,8 +234,8 @@ TEST_F(CameraSourceTest, OffsetBeyondMaxSkewIsReportedNotAbsorbed)
     PairRing ring(4);
     StereoCameraSource source(options(PixelFormatChoice::Grey));
     ASSERT_EQ(source.start(ring), 0) << source.status().last_error;
-    ASSERT_TRUE(waitFor([&] { return source.status().clock_offset_detected; },
-                        std::chrono::seconds(10)))
+    ASSERT_TRUE(
+        waitFor([&] { return source.status().clock_offset_detected; }, std::chrono::seconds(10)))
         << "unpaired " << source.status().unpaired_dropped;
     const SourceStatus status = source.status();
     EXPECT_EQ(status.pairs, 0u);

@@ -20,7 +20,7 @@ constexpr int64_t kPeriodNs = 33'333'333; // 30 fps
 // Frames with chosen stamps from a small pool; the pool checks that every dropped frame
 // went back.
 class SyncTest : public ::testing::Test {
-protected:
+  protected:
     FrameHandle frame(int64_t stamp_ns, uint64_t sequence = 0)
     {
         FrameHandle handle = pool_.acquire();

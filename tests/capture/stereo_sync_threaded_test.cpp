@@ -44,8 +44,8 @@ TEST(StereoSyncThread, PairsFramesFromTwoCaptureThreads)
                 std::this_thread::yield();
                 frame = pool.acquire();
             }
-            frame->stamp_ns = 1000 * kMs + i * kPeriodNs + offset_ns +
-                              static_cast<int64_t>(jitter_ms(rng) * 1e6);
+            frame->stamp_ns =
+                1000 * kMs + i * kPeriodNs + offset_ns + static_cast<int64_t>(jitter_ms(rng) * 1e6);
             frame->sequence = static_cast<uint64_t>(i);
             frame->image.at<uint8_t>(0, 0) = static_cast<uint8_t>(side);
             sync.offer(static_cast<StereoSide>(side), std::move(frame));

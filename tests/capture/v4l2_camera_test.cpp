@@ -8,8 +8,8 @@
 #include <cmath>
 #include <deque>
 #include <memory>
-#include <thread>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -32,7 +32,7 @@ const char* const kAllFormats = "      - { fourcc: GREY, sizes: [320x240] }\n"
                                 "      - { fourcc: MJPG, sizes: [320x240] }\n";
 
 class V4l2CameraTest : public FakeCameraTest {
-protected:
+  protected:
     // Takes `count` frames, checks each against the scene within `max_mean_error` grey
     // levels, and checks stamps and sequence numbers.
     void expectFrames(V4l2Camera& camera, int count, double max_mean_error)
@@ -100,13 +100,13 @@ TEST_F(V4l2CameraTest, EachFormatDeliversTheSourceImage)
     struct Case {
         PixelFormatChoice format;
         const char* name;
-        double max_mean_error;   // grey levels
+        double max_mean_error; // grey levels
     };
     // GREY (the kernel buffer itself) and YUYV's luma are exact; JPEG at quality 90
     // loses about 3 grey levels on average on this textured scene.
-    for (const Case& c : {Case{PixelFormatChoice::Grey, "GREY", 0.0},
-                          Case{PixelFormatChoice::Yuyv, "YUYV", 0.0},
-                          Case{PixelFormatChoice::Mjpeg, "MJPG", 4.0}}) {
+    for (const Case& c :
+         {Case{PixelFormatChoice::Grey, "GREY", 0.0}, Case{PixelFormatChoice::Yuyv, "YUYV", 0.0},
+          Case{PixelFormatChoice::Mjpeg, "MJPG", 4.0}}) {
         SCOPED_TRACE(c.name);
         stopCamera();
         loadFake(kAllFormats);
@@ -136,7 +136,8 @@ TEST_F(V4l2CameraTest, StartRefusesWhatTheDeviceCannotDeliver)
     absent.device = "/dev/video-fake-nothing";
     V4l2Camera missing(absent, 0, "right");
     EXPECT_EQ(missing.start(ring_), -ENOENT);
-    EXPECT_NE(missing.status().camera.last_error.find("/dev/video-fake-nothing"), std::string::npos);
+    EXPECT_NE(missing.status().camera.last_error.find("/dev/video-fake-nothing"),
+              std::string::npos);
 }
 
 TEST_F(V4l2CameraTest, UnknownTimestampsAreStampedAtDequeue)
@@ -182,17 +183,17 @@ TEST_F(V4l2CameraTest, CorruptFramesAreCountedAndSkipped)
         PixelFormatChoice format;
         const char* kind;
     };
-    for (const Case& c : {Case{PixelFormatChoice::Mjpeg, "truncated"},
-                          Case{PixelFormatChoice::Yuyv, "bytesused"},
-                          Case{PixelFormatChoice::Grey, "bytesused"},
-                          Case{PixelFormatChoice::Grey, "error"}}) {
+    for (const Case& c :
+         {Case{PixelFormatChoice::Mjpeg, "truncated"}, Case{PixelFormatChoice::Yuyv, "bytesused"},
+          Case{PixelFormatChoice::Grey, "bytesused"}, Case{PixelFormatChoice::Grey, "error"}}) {
         SCOPED_TRACE(std::string(toString(c.format)) + " " + c.kind);
         stopCamera();
         loadFake(kAllFormats);
         V4l2Camera& camera = start(settings(c.format));
         ASSERT_EQ(start_rc_, 0);
         ASSERT_TRUE(nextFrame(ring_));
-        ASSERT_EQ(stereod_fake_v4l2_corrupt(kFakeLeft, 3, c.kind), 0) << stereod_fake_v4l2_last_error();
+        ASSERT_EQ(stereod_fake_v4l2_corrupt(kFakeLeft, 3, c.kind), 0)
+            << stereod_fake_v4l2_last_error();
         ASSERT_TRUE(waitFor([&] { return camera.status().camera.bad_frames >= 3; }));
         // Good frames follow, and every delivered frame is whole.
         for (int i = 0; i < 5; ++i) {
@@ -254,7 +255,7 @@ TEST_F(V4l2CameraTest, StallIsReportedAndClearsWhenFramesReturn)
     EXPECT_NE(camera.status().camera.last_error.find("no frame for"), std::string::npos)
         << camera.status().camera.last_error;
     ASSERT_TRUE(waitFor([&] { return camera.status().camera.state == SourceState::Running; }));
-    EXPECT_EQ(camera.status().reopens, 0u);   // shorter than the reopen threshold (1 s)
+    EXPECT_EQ(camera.status().reopens, 0u); // shorter than the reopen threshold (1 s)
 }
 
 TEST_F(V4l2CameraTest, HeldBuffersGoBackWhenTheLastHolderLetsGo)
@@ -285,7 +286,8 @@ TEST_F(V4l2CameraTest, HeldBuffersGoBackWhenTheLastHolderLetsGo)
     ASSERT_TRUE(waitFor([&] { return camera.status().camera.state == SourceState::Stalled; }));
     V4l2CameraStatus status = camera.status();
     EXPECT_GE(status.pool_exhausted, 1u);
-    EXPECT_NE(status.camera.last_error.find("pool exhausted"), std::string::npos) << status.camera.last_error;
+    EXPECT_NE(status.camera.last_error.find("pool exhausted"), std::string::npos)
+        << status.camera.last_error;
     // Frames held are still the images they were.
     for (const CapturedFrame& frame : held)
         EXPECT_EQ(cv::norm(frame.frame->image, scene_, cv::NORM_INF), 0.0);

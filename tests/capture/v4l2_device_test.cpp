@@ -22,7 +22,8 @@ using test::kFakeLeft;
 using test::kHeight;
 using test::kWidth;
 
-const ControlReading* findControl(const std::vector<ControlReading>& readings, const std::string& name)
+const ControlReading* findControl(const std::vector<ControlReading>& readings,
+                                  const std::string& name)
 {
     const auto it = std::find_if(readings.begin(), readings.end(),
                                  [&](const ControlReading& r) { return r.name == name; });
@@ -30,7 +31,7 @@ const ControlReading* findControl(const std::vector<ControlReading>& readings, c
 }
 
 class V4l2DeviceTest : public FakeCameraTest {
-protected:
+  protected:
     NegotiatedFormat negotiate(const CameraSettings& s, int expected_rc = 0)
     {
         V4l2Device device;
@@ -50,7 +51,8 @@ TEST_F(V4l2DeviceTest, OpenRefusesMissingDevice)
     loadFake("      - { fourcc: YUYV, sizes: [320x240] }\n");
     V4l2Device device;
     EXPECT_EQ(device.open("/dev/video-fake-absent"), -ENOENT);
-    EXPECT_NE(device.errorText().find("/dev/video-fake-absent"), std::string::npos) << device.errorText();
+    EXPECT_NE(device.errorText().find("/dev/video-fake-absent"), std::string::npos)
+        << device.errorText();
     EXPECT_FALSE(device.isOpen());
 }
 
@@ -86,7 +88,8 @@ TEST_F(V4l2DeviceTest, AutoPrefersGreyThenYuyvThenMjpeg)
     loadFake("      - { fourcc: MJPG, sizes: [320x240] }\n");
     format = negotiate(settings(PixelFormatChoice::Auto));
     EXPECT_EQ(format.fourcc, V4L2_PIX_FMT_MJPEG);
-    EXPECT_NE(format.reason.find("GREY not offered; YUYV not offered"), std::string::npos) << format.reason;
+    EXPECT_NE(format.reason.find("GREY not offered; YUYV not offered"), std::string::npos)
+        << format.reason;
     EXPECT_EQ(format.width, kWidth);
     EXPECT_EQ(format.height, kHeight);
 }
@@ -99,9 +102,13 @@ TEST_F(V4l2DeviceTest, RefusalNamesWhatTheDeviceOffers)
     s.width = 1920;
     s.height = 1080;
     negotiate(s, -EINVAL);
-    EXPECT_NE(error_.find("cannot deliver GREY, YUYV or MJPG 1920x1080 @ 100 fps"), std::string::npos) << error_;
-    EXPECT_NE(error_.find("YUYV 320x240 @ 100/30 fps, 640x480 @ 15 fps"), std::string::npos) << error_;
-    EXPECT_NE(error_.find("MJPG 320x240 @ 100/30 fps, 1280x720 @ 10 fps"), std::string::npos) << error_;
+    EXPECT_NE(error_.find("cannot deliver GREY, YUYV or MJPG 1920x1080 @ 100 fps"),
+              std::string::npos)
+        << error_;
+    EXPECT_NE(error_.find("YUYV 320x240 @ 100/30 fps, 640x480 @ 15 fps"), std::string::npos)
+        << error_;
+    EXPECT_NE(error_.find("MJPG 320x240 @ 100/30 fps, 1280x720 @ 10 fps"), std::string::npos)
+        << error_;
 
     // A format the device lacks, asked for by name.
     negotiate(settings(PixelFormatChoice::Grey), -EINVAL);
@@ -139,9 +146,9 @@ TEST_F(V4l2DeviceTest, ControlsAreAppliedAndReadBack)
 
     CameraControls controls;
     controls.auto_exposure = false;
-    controls.exposure_us = 10'000;                      // 100 device units of 100 us
-    controls.gain = 50;                                 // not on the step grid: 48
-    controls.white_balance_k = 4500;                    // the device has no white balance
+    controls.exposure_us = 10'000;   // 100 device units of 100 us
+    controls.gain = 50;              // not on the step grid: 48
+    controls.white_balance_k = 4500; // the device has no white balance
     controls.power_line = PowerLineFrequency::Hz60;
     const std::vector<ControlReading> readings = device.applyControls(controls, false);
 
@@ -186,7 +193,7 @@ TEST_F(V4l2DeviceTest, LockExposureFreezesTheCurrentExposure)
     V4l2Device device;
     ASSERT_EQ(device.open(kFakeLeft), 0) << device.errorText();
     CameraControls controls;
-    controls.auto_exposure = true;   // lock_exposure wins over it
+    controls.auto_exposure = true; // lock_exposure wins over it
     const std::vector<ControlReading> readings = device.applyControls(controls, true);
     EXPECT_EQ(findControl(readings, "auto_exposure")->actual_value, V4L2_EXPOSURE_MANUAL);
     EXPECT_EQ(findControl(readings, "exposure_us")->actual_value, 25'000);
@@ -200,10 +207,12 @@ TEST_F(V4l2DeviceTest, ListingShowsFormatsRatesAndById)
              "",
              "  - path: /dev/video-fake-right\n"
              "    card: Fake Stereo Right\n"
-             "    images: " + (dir_ / "scene.png").string() + "\n"
-             "    fps: [30]\n"
-             "    formats:\n"
-             "      - { fourcc: YUYV, sizes: [320x240] }\n");
+             "    images: " +
+                 (dir_ / "scene.png").string() +
+                 "\n"
+                 "    fps: [30]\n"
+                 "    formats:\n"
+                 "      - { fourcc: YUYV, sizes: [320x240] }\n");
     const DeviceList list = listCaptureDevices();
     const auto left = std::find_if(list.devices.begin(), list.devices.end(),
                                    [](const DeviceInfo& d) { return d.path == kFakeLeft; });
@@ -222,7 +231,9 @@ TEST_F(V4l2DeviceTest, ListingShowsFormatsRatesAndById)
     EXPECT_TRUE(right->by_id_paths.empty());
 
     const std::string text = formatDeviceList(list);
-    EXPECT_NE(text.find("/dev/video-fake-left: Fake Stereo Left (driver uvcvideo"), std::string::npos) << text;
+    EXPECT_NE(text.find("/dev/video-fake-left: Fake Stereo Left (driver uvcvideo"),
+              std::string::npos)
+        << text;
     EXPECT_NE(text.find("GREY 320x240 @ 100/30 fps, 640x480 @ 15 fps"), std::string::npos) << text;
     EXPECT_NE(text.find("by-id: /dev/v4l/by-id/usb-Fake_Stereo_Left"), std::string::npos) << text;
 

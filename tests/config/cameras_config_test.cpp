@@ -79,9 +79,9 @@ TEST(CamerasConfig, TwoCameraRigIsRead)
     // Every camera key needs a restart, and `keep` is the default of a control.
     const ConfigChange change = diffConfig(defaultConfig(), config);
     EXPECT_EQ(change.changed, change.restart_needed);
-    EXPECT_NE(std::find(change.changed.begin(), change.changed.end(),
-                        "source.cameras.controls.gain"),
-              change.changed.end());
+    EXPECT_NE(
+        std::find(change.changed.begin(), change.changed.end(), "source.cameras.controls.gain"),
+        change.changed.end());
     const ServiceConfig kept =
         parseConfig("source:\n  cameras:\n    controls:\n      gain: keep\n", "k.yaml");
     EXPECT_FALSE(kept.source.cameras.controls.gain.has_value());
@@ -172,10 +172,10 @@ TEST(CamerasConfig, MaxSkewMustStayBelowHalfTheFramePeriod)
     EXPECT_TRUE(has(problems, "rig.yaml:3: source.max_skew_ms: not below half the frame period "
                               "(got 9, expected < 8.333333333333334 ms at source.cameras.fps 60)"))
         << joined(problems);
-    EXPECT_NO_THROW(parseConfig(
-        "source:\n  type: v4l2\n  max_skew_ms: 8\n  cameras:\n    left: /dev/video0\n"
-        "    right: /dev/video2\n    fps: 60\n",
-        "ok.yaml"));
+    EXPECT_NO_THROW(
+        parseConfig("source:\n  type: v4l2\n  max_skew_ms: 8\n  cameras:\n    left: /dev/video0\n"
+                    "    right: /dev/video2\n    fps: 60\n",
+                    "ok.yaml"));
 }
 
 TEST(CamerasConfig, LockedExposureContradictsAutoExposure)

@@ -267,7 +267,8 @@ INSTANTIATE_TEST_SUITE_P(
         RejectedCase{"matcher:\n  max_num_disparities: 0\n", "matcher.max_num_disparities", 2,
                      "out of range"},
         RejectedCase{"matcher:\n  min_disparity: 2000\n", "matcher.min_disparity", 2, "got 2000"},
-        RejectedCase{"matcher:\n  algorithm: sgbm\n  block_size: 4\n", "matcher.block_size", 3, "not odd"},
+        RejectedCase{"matcher:\n  algorithm: sgbm\n  block_size: 4\n", "matcher.block_size", 3,
+                     "not odd"},
         RejectedCase{"matcher:\n  algorithm: sgbm\n  block_size: 33\n", "matcher.block_size", 3,
                      "1 to 31 px for sgbm"},
         RejectedCase{"matcher:\n  block_size: 5.5\n", "matcher.block_size", 2, "not an integer"},
@@ -285,11 +286,14 @@ INSTANTIATE_TEST_SUITE_P(
         RejectedCase{"matcher:\n  algorithm: sgbm\n  p2: 40000\n", "matcher.p2", 3, "got 40000"},
         RejectedCase{"matcher:\n  algorithm: sgbm\n  p2: 100\n", "matcher.p2", 3,
                      "not above matcher.p1 (got 100, expected > 200"},
-        RejectedCase{"matcher:\n  algorithm: sgbm\n  p1: 300\n  p2: 200\n", "matcher.p2", 4, "expected > 300"},
-        RejectedCase{"matcher:\n  algorithm: sgbm\n  p1: 900\n", "matcher.p1", 3, "not below the automatic p2"},
-        RejectedCase{"matcher:\n  algorithm: sgbm\n  pre_filter_cap: 64\n", "matcher.pre_filter_cap", 3, "1 to 63"},
-        RejectedCase{"matcher:\n  algorithm: sgbm\n  texture_threshold: -1\n", "matcher.texture_threshold", 3,
-                     "got -1"},
+        RejectedCase{"matcher:\n  algorithm: sgbm\n  p1: 300\n  p2: 200\n", "matcher.p2", 4,
+                     "expected > 300"},
+        RejectedCase{"matcher:\n  algorithm: sgbm\n  p1: 900\n", "matcher.p1", 3,
+                     "not below the automatic p2"},
+        RejectedCase{"matcher:\n  algorithm: sgbm\n  pre_filter_cap: 64\n",
+                     "matcher.pre_filter_cap", 3, "1 to 63"},
+        RejectedCase{"matcher:\n  algorithm: sgbm\n  texture_threshold: -1\n",
+                     "matcher.texture_threshold", 3, "got -1"},
         RejectedCase{"matcher:\n  blok_size: 5\n", "matcher.blok_size", 2,
                      "unknown key (did you mean block_size?)"},
         RejectedCase{"matcher:\n  min_pixels: 5\n", "matcher.min_pixels", 2,
@@ -524,7 +528,8 @@ TEST(ConfigPaths, ARecordingWithoutCalibrationRunsUncalibrated)
         FAIL();
     } catch (const ConfigError& error) {
         ASSERT_EQ(error.problems().size(), 1u) << error.what();
-        EXPECT_NE(error.problems()[0].find(":3: source.replay.path: is neither a directory nor an MCAP file"),
+        EXPECT_NE(error.problems()[0].find(
+                      ":3: source.replay.path: is neither a directory nor an MCAP file"),
                   std::string::npos)
             << error.problems()[0];
     }
@@ -650,8 +655,8 @@ TEST(ConfigMatcher, CensusSgmTakesItsOwnSharedDefaultsUnlessSet)
     EXPECT_EQ(census.processing.matcher.lr_max_diff_px, 2);
     EXPECT_EQ(census.processing.matcher.speckle_window_px, 200);
     EXPECT_EQ(census.processing.matcher.speckle_range_px, 1);
-    const ServiceConfig set = parseConfig(
-        "matcher:\n  uniqueness_ratio: 12\n  algorithm: census-sgm\n", "t.yaml");
+    const ServiceConfig set =
+        parseConfig("matcher:\n  uniqueness_ratio: 12\n  algorithm: census-sgm\n", "t.yaml");
     EXPECT_EQ(set.processing.matcher.uniqueness_ratio, 12);
     EXPECT_EQ(set.processing.matcher.lr_max_diff_px, 2);
     // OpenCV's SGBM keeps the generic defaults.
@@ -671,8 +676,8 @@ TEST(ConfigDiff, EveryKeyIsClassified)
 
 TEST(ConfigSocket, AllowListsAreListsOfNumericIds)
 {
-    const ServiceConfig config = parseConfig(
-        "socket:\n  allow_uids: [1000, 0]\n  allow_gids:\n    - 27\n", "t.yaml");
+    const ServiceConfig config =
+        parseConfig("socket:\n  allow_uids: [1000, 0]\n  allow_gids:\n    - 27\n", "t.yaml");
     EXPECT_EQ(config.socket.allow_uids, (std::vector<uint32_t>{1000, 0}));
     EXPECT_EQ(config.socket.allow_gids, (std::vector<uint32_t>{27}));
     const ConfigChange change = diffConfig(defaultConfig(), config);

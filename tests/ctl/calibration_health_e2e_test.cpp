@@ -51,18 +51,19 @@ void makeRecording(const std::string& dir, const std::string& left_prefix,
         const std::string name = two(i) + ".png";
         fs::create_symlink(left_prefix + two(i + 1) + ".png", dir + "/left/" + name);
         fs::create_symlink(right_prefix + two(i + 1) + ".png", dir + "/right/" + name);
-        const long long stamp = 200'000'000LL * i;   // 5 pairs a second
+        const long long stamp = 200'000'000LL * i; // 5 pairs a second
         csv << i << "," << stamp << "," << stamp << ",left/" << name << ",right/" << name << "\n";
     }
-    const ProcessResult imported = runProcess(
-        {stereoctlPath(), "calibrate", "--from-opencv", kBaumer + "Checkerboard_Baumer/intrinsics.yml",
-         kBaumer + "Checkerboard_Baumer/extrinsics.yml", "--size", "696x524", "--out",
-         dir + "/calibration.yaml"});
+    const ProcessResult imported =
+        runProcess({stereoctlPath(), "calibrate", "--from-opencv",
+                    kBaumer + "Checkerboard_Baumer/intrinsics.yml",
+                    kBaumer + "Checkerboard_Baumer/extrinsics.yml", "--size", "696x524", "--out",
+                    dir + "/calibration.yaml"});
     ASSERT_EQ(imported.exit_code, 0) << imported.err;
 }
 
 class ServiceHealth {
-public:
+  public:
     ServiceHealth(test::TempDir& dir, const std::string& recording, bool withhold = false)
         : socket_(dir.file("s.sock"))
     {
@@ -104,7 +105,7 @@ public:
 
     const std::string& socket() const { return socket_; }
 
-private:
+  private:
     std::string socket_;
     std::unique_ptr<ChildProcess> service_;
 };

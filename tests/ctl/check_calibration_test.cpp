@@ -26,10 +26,10 @@ const std::string kBaumer = std::string(STEREOD_SHARED_DATA_DIR) + "/real-rig/ba
 std::string importBaumer(test::TempDir& dir)
 {
     const std::string out = dir.file("baumer.yaml");
-    const ProcessResult run = runProcess(
-        {stereoctlPath(), "calibrate", "--from-opencv",
-         kBaumer + "Checkerboard_Baumer/intrinsics.yml",
-         kBaumer + "Checkerboard_Baumer/extrinsics.yml", "--size", "696x524", "--out", out});
+    const ProcessResult run = runProcess({stereoctlPath(), "calibrate", "--from-opencv",
+                                          kBaumer + "Checkerboard_Baumer/intrinsics.yml",
+                                          kBaumer + "Checkerboard_Baumer/extrinsics.yml", "--size",
+                                          "696x524", "--out", out});
     EXPECT_EQ(run.exit_code, 0) << run.err;
     return out;
 }
@@ -37,18 +37,20 @@ std::string importBaumer(test::TempDir& dir)
 // The scenes' files named "right" come from the calibration's left camera.
 std::vector<std::string> checkSamples(const std::string& calib, const std::string& which)
 {
-    return {stereoctlPath(), "check-calibration", "--left",
-            kBaumer + "samples_baumer/right0" + which + ".png", "--right",
-            kBaumer + "samples_baumer/left0" + which + ".png", "--calib", calib};
+    return {stereoctlPath(), "check-calibration",
+            "--left",        kBaumer + "samples_baumer/right0" + which + ".png",
+            "--right",       kBaumer + "samples_baumer/left0" + which + ".png",
+            "--calib",       calib};
 }
 
 TEST(StereoctlCheckCalibration, CalibrationViewsAreOk)
 {
     test::TempDir dir;
     const std::string calib = importBaumer(dir);
-    const ProcessResult run = runProcess(
-        {stereoctlPath(), "check-calibration", "--left", kBaumer + "Checkerboard_Baumer/left0[1-5].png",
-         "--right", kBaumer + "Checkerboard_Baumer/right0[1-5].png", "--calib", calib});
+    const ProcessResult run =
+        runProcess({stereoctlPath(), "check-calibration", "--left",
+                    kBaumer + "Checkerboard_Baumer/left0[1-5].png", "--right",
+                    kBaumer + "Checkerboard_Baumer/right0[1-5].png", "--calib", calib});
     EXPECT_EQ(run.exit_code, 0) << run.out << run.err;
     EXPECT_NE(run.out.find("overall, 5 pairs: ok"), std::string::npos) << run.out;
 }
@@ -79,7 +81,7 @@ TEST(StereoctlCheckCalibration, FixWritesACorrectionThatHoldsOnOtherScenes)
     std::vector<std::string> argv = checkSamples(calib, "[1-3]");
     argv.insert(argv.end(), {"--fix", "--out", fixed, "--json"});
     const ProcessResult run = runProcess(argv);
-    EXPECT_EQ(run.exit_code, 1) << run.err;   // the verdict is about the checked calibration
+    EXPECT_EQ(run.exit_code, 1) << run.err; // the verdict is about the checked calibration
     const auto out = nlohmann::json::parse(run.out);
     EXPECT_LT(std::abs(out["fix"]["after"]["row_offset_px"].get<double>()), 0.2);
     EXPECT_GT(std::abs(out["fix"]["before"]["row_offset_px"].get<double>()), 0.8);
@@ -98,9 +100,9 @@ TEST(StereoctlCheckCalibration, FixWritesACorrectionThatHoldsOnOtherScenes)
 TEST(StereoctlCheckCalibration, PatternMatchingNothingIsABadArgument)
 {
     test::TempDir dir;
-    const ProcessResult run = runProcess({stereoctlPath(), "check-calibration", "--left",
-                                          dir.file("none*.png"), "--right", dir.file("none*.png"),
-                                          "--calib", importBaumer(dir)});
+    const ProcessResult run =
+        runProcess({stereoctlPath(), "check-calibration", "--left", dir.file("none*.png"),
+                    "--right", dir.file("none*.png"), "--calib", importBaumer(dir)});
     EXPECT_EQ(run.exit_code, 2);
     EXPECT_NE(run.err.find("matches no file"), std::string::npos) << run.err;
 }

@@ -2,11 +2,6 @@
 // across writes, payloads right behind their line), error replies, and every way the
 // connection can fail, each named with the socket path.
 
-#include <sys/eventfd.h>
-#include <sys/socket.h>
-#include <sys/un.h>
-#include <unistd.h>
-
 #include <cerrno>
 #include <cstring>
 #include <functional>
@@ -15,6 +10,10 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <sys/eventfd.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
 
 #include "ctl/client.hpp"
 #include "tests/ctl/process.hpp"
@@ -27,7 +26,7 @@ using Json = nlohmann::ordered_json;
 
 // A listening socket whose one connection is served by `script` on its own thread.
 class ScriptedPeer {
-public:
+  public:
     ScriptedPeer(const std::string& path, std::function<void(int fd)> script)
     {
         listen_fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
@@ -51,7 +50,7 @@ public:
         ::close(listen_fd_);
     }
 
-private:
+  private:
     int listen_fd_ = -1;
     std::thread thread_;
 };
@@ -78,8 +77,7 @@ std::string readRequestLine(int fd)
 }
 
 // The message of the E that `call` must throw; a test failure (and "") if it throws none.
-template <typename E, typename Call>
-std::string messageOf(Call&& call)
+template <typename E, typename Call> std::string messageOf(Call&& call)
 {
     try {
         call();
@@ -184,8 +182,9 @@ TEST(ProtocolClient, PeerClosingMidReplyIsAClientError)
         writeAll(fd, "{\"ok\":true,");
     });
     ProtocolClient client(path, 2000ms);
-    const std::string message =
-        messageOf<ClientError>([&] { client.request({{"cmd", "status"}}); });
+    const std::string message = messageOf<ClientError>([&] {
+        client.request({{"cmd", "status"}});
+    });
     EXPECT_NE(message.find("closed the connection"), std::string::npos) << message;
 }
 
@@ -223,8 +222,9 @@ TEST(ProtocolClient, SilentPeerTimesOut)
         });
         {
             ProtocolClient client(path, 100ms);
-            const std::string message =
-                messageOf<ClientError>([&] { client.request({{"cmd", "status"}}); });
+            const std::string message = messageOf<ClientError>([&] {
+                client.request({{"cmd", "status"}});
+            });
             EXPECT_NE(message.find("timed out"), std::string::npos) << message;
             EXPECT_NE(message.find(path), std::string::npos) << message;
         }

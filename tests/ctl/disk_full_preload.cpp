@@ -6,15 +6,15 @@
 // Used by the recorder's disk-full test: it needs no privileges (no tmpfs mount, no user
 // namespace), so it runs the same on a developer machine and in a CI container.
 
-#include <dlfcn.h>
-#include <unistd.h>
-
 #include <atomic>
 #include <cerrno>
 #include <climits>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+
+#include <dlfcn.h>
+#include <unistd.h>
 
 namespace {
 

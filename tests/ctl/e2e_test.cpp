@@ -3,9 +3,6 @@
 // service's robustness (junk requests, many clients, a subscriber that never reads) and
 // its shutdown.
 
-#include <signal.h>
-#include <sys/wait.h>
-
 #include <atomic>
 #include <cctype>
 #include <cstdio>
@@ -19,6 +16,8 @@
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
+#include <signal.h>
+#include <sys/wait.h>
 
 #include "ctl/client.hpp"
 #include "pipeline/calibration.hpp"
@@ -55,8 +54,7 @@ std::optional<double> parseDistance(const std::string& line)
 {
     const std::size_t point = line.find('.');
     const std::size_t unit = line.find(" m\n");
-    if (point == std::string::npos || point == 0 || unit != point + 4 ||
-        unit + 3 != line.size()) {
+    if (point == std::string::npos || point == 0 || unit != point + 4 || unit + 3 != line.size()) {
         return std::nullopt;
     }
     for (std::size_t i = 0; i < unit; ++i) {
@@ -68,7 +66,7 @@ std::optional<double> parseDistance(const std::string& line)
 }
 
 class StereodE2e : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override
     {
         // A plain folder of left*/right* pairs, replayed in a loop at the nominal rate.
@@ -81,13 +79,12 @@ protected:
                                        recording_ + "/right" + std::to_string(i) + ".png");
         }
         calibration_ = dir_.file("calib.yaml");
-        saveCalibration(makeRectifiedCalibration(kTsukubaSize, kFocalPx, kBaselineM),
-                        calibration_);
+        saveCalibration(makeRectifiedCalibration(kTsukubaSize, kFocalPx, kBaselineM), calibration_);
         socket_ = dir_.file("s.sock");
         log_ = dir_.file("stereod.log");
         service_ = std::make_unique<ChildProcess>(
-            std::vector<std::string>{stereodPath(), "--replay", recording_, "--calib",
-                                     calibration_, "--socket", socket_},
+            std::vector<std::string>{stereodPath(), "--replay", recording_, "--calib", calibration_,
+                                     "--socket", socket_},
             log_);
         waitUntilProducing();
     }
@@ -117,8 +114,7 @@ protected:
         const auto deadline = std::chrono::steady_clock::now() + kStartLimit;
         std::string last_problem;
         while (std::chrono::steady_clock::now() < deadline) {
-            ASSERT_TRUE(service_->running()) << "stereod exited during start-up:\n"
-                                             << serviceLog();
+            ASSERT_TRUE(service_->running()) << "stereod exited during start-up:\n" << serviceLog();
             try {
                 ProtocolClient client(socket_, 2000ms);
                 Json reply = client.request({{"cmd", "distance"}});
@@ -185,8 +181,8 @@ TEST_F(StereodE2e, DistanceIsTheOfflineReadingOfTheSamePair)
 
     // The service and `stereoctl depth` run the same processor with the same defaults.
     const ProcessResult offline =
-        runProcess({stereoctlPath(), "depth", recording_ + "/left0.png",
-                    recording_ + "/right0.png", "--calib", calibration_, "--json"});
+        runProcess({stereoctlPath(), "depth", recording_ + "/left0.png", recording_ + "/right0.png",
+                    "--calib", calibration_, "--json"});
     ASSERT_EQ(offline.exit_code, 0) << offline.err;
     const double offline_m = Json::parse(offline.out)["reading"]["distance_m"].get<double>();
     EXPECT_NEAR(distance_m, offline_m, 0.0015);
@@ -197,8 +193,8 @@ TEST_F(StereodE2e, DistanceJsonIsTheReadingObject)
     const ProcessResult run = ctl({"distance", "--json"});
     ASSERT_EQ(run.exit_code, 0) << run.err;
     Json reading = Json::parse(run.out);
-    for (const char* key : {"valid", "distance_m", "stamp_ns", "age_ms", "frame",
-                            "valid_fraction"}) {
+    for (const char* key :
+         {"valid", "distance_m", "stamp_ns", "age_ms", "frame", "valid_fraction"}) {
         EXPECT_TRUE(reading.contains(key)) << key << " missing from " << run.out;
     }
     EXPECT_TRUE(reading["valid"].get<bool>());
@@ -369,7 +365,7 @@ TEST_F(StereodE2e, ThirtyTwoClientsAtOnce)
     constexpr int kClients = 32;
     std::vector<ProtocolClient> clients;
     for (int i = 0; i < kClients; ++i) {
-        clients.emplace_back(socket_, 10000ms);   // all connected before any asks
+        clients.emplace_back(socket_, 10000ms); // all connected before any asks
     }
     std::atomic<int> answered{0};
     std::vector<std::string> failures(kClients);
@@ -377,10 +373,9 @@ TEST_F(StereodE2e, ThirtyTwoClientsAtOnce)
     for (int i = 0; i < kClients; ++i) {
         threads.emplace_back([&, i] {
             try {
-                Json distance = clients[static_cast<std::size_t>(i)].request(
-                    {{"cmd", "distance"}, {"id", i}});
-                Json status =
-                    clients[static_cast<std::size_t>(i)].request({{"cmd", "status"}});
+                Json distance =
+                    clients[static_cast<std::size_t>(i)].request({{"cmd", "distance"}, {"id", i}});
+                Json status = clients[static_cast<std::size_t>(i)].request({{"cmd", "status"}});
                 if (distance["id"] == i && distance["reading"]["valid"].get<bool>() &&
                     status["status"].is_object()) {
                     answered.fetch_add(1);

@@ -5,8 +5,6 @@
 // calibration must meet the calibration issue's targets and load; the saved pairs must be
 // the raw frames, bit for bit, and calibrating offline from them must give the same result.
 
-#include <signal.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -24,6 +22,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <signal.h>
 
 #include "ctl/client.hpp"
 #include "pipeline/calibration.hpp"
@@ -64,7 +63,7 @@ std::vector<std::string> listFiles(const std::string& dir)
 }
 
 class LiveCalibrationE2e : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override
     {
         // The 13 pairs as a recording, 100 ms apart, without a calibration.
@@ -121,9 +120,9 @@ protected:
 
     std::vector<std::string> liveCommand(const std::string& count, const std::string& out) const
     {
-        return {stereoctlPath(), "calibrate", "--live",   "--count",  count,   "--board",
-                "9x6",           "--square-m", "0.025",   "--out",    out,     "--socket",
-                socket_,         "--max-hz",   "10",      "--timeout-s", "120"};
+        return {stereoctlPath(), "calibrate",  "--live", "--count",     count, "--board",
+                "9x6",           "--square-m", "0.025",  "--out",       out,   "--socket",
+                socket_,         "--max-hz",   "10",     "--timeout-s", "120"};
     }
 
     test::TempDir dir_;
@@ -162,7 +161,7 @@ TEST_F(LiveCalibrationE2e, CollectsEightDistinctViewsAndCalibratesWithinTheTarge
     EXPECT_EQ(live["accepted"], 8);
     EXPECT_EQ(live["pairs_dir"], pairs);
     // The replay loops over 13 views: whatever came twice was refused, never accepted.
-    EXPECT_EQ(live["board_in_both"], live["pairs_seen"]);   // every sample shows the board
+    EXPECT_EQ(live["board_in_both"], live["pairs_seen"]); // every sample shows the board
     EXPECT_EQ(live["board_in_both"].get<int>(), 8 + live["refused_duplicates"].get<int>());
     // The person is told after each verdict what is still missing.
     EXPECT_NE(run.err.find("accepted pair 8/8"), std::string::npos) << run.err;
@@ -212,8 +211,8 @@ TEST_F(LiveCalibrationE2e, CollectsEightDistinctViewsAndCalibratesWithinTheTarge
     const std::string again = dir_.file("again.yaml");
     const ProcessResult offline =
         runProcess({stereoctlPath(), "calibrate", "--left", pairs + "/left_*.png", "--right",
-                    pairs + "/right_*.png", "--board", "9x6", "--square-m", "0.025", "--out",
-                    again, "--json"});
+                    pairs + "/right_*.png", "--board", "9x6", "--square-m", "0.025", "--out", again,
+                    "--json"});
     ASSERT_EQ(offline.exit_code, 0) << offline.err;
     Json offline_report = Json::parse(offline.out);
     EXPECT_NEAR(offline_report["rms_px"].get<double>(), rms_px, 1e-9);
@@ -226,7 +225,7 @@ TEST_F(LiveCalibrationE2e, RefusesAfterTheTimeoutWithTooFewDistinctViews)
     // calibration refuses as the file-based one does, after the pairs were saved.
     const std::string out = dir_.file("rig.yaml");
     std::vector<std::string> argv = liveCommand("20", out);
-    argv.back() = "4";   // --timeout-s
+    argv.back() = "4"; // --timeout-s
     argv.insert(argv.end(), {"--min-pairs", "20"});
     const ProcessResult run = runProcess(argv);
     EXPECT_EQ(run.exit_code, 2) << run.out << run.err;
@@ -250,7 +249,8 @@ TEST(StereoctlCalibrateLive, RefusesBadArgumentsAndAnUnreachableService)
     const std::string out = dir.file("rig.yaml");
     const std::string socket = dir.file("none.sock");
     const std::vector<std::string> base = {stereoctlPath(), "calibrate", "--live", "--square-m",
-                                           "0.025", "--out", out, "--socket", socket};
+                                           "0.025",         "--out",     out,      "--socket",
+                                           socket};
     struct Case {
         std::vector<std::string> extra;
         int exit_code;
@@ -259,7 +259,8 @@ TEST(StereoctlCalibrateLive, RefusesBadArgumentsAndAnUnreachableService)
     const std::vector<Case> cases = {
         {{"--board", "9x6"}, 2, "--live requires --count"},
         {{"--board", "9x6", "--count", "4"}, 2, "--count 4 is below --min-pairs 6"},
-        {{"--board", "9x6", "--count", "8", "--left", "l*.png", "--right", "r*.png"}, 2,
+        {{"--board", "9x6", "--count", "8", "--left", "l*.png", "--right", "r*.png"},
+         2,
          "excludes"},
         {{"--board", "9x9", "--count", "8"}, 2, "a square grid reads the same"},
         {{"--board", "9x6", "--count", "8"}, 3, "cannot connect to "},
@@ -273,9 +274,9 @@ TEST(StereoctlCalibrateLive, RefusesBadArgumentsAndAnUnreachableService)
         EXPECT_EQ(test::lineCount(run.err), 1u) << run.err;
     }
     // The options of the live form need it.
-    const ProcessResult stray = runProcess({stereoctlPath(), "calibrate", "--left", "l*.png",
-                                            "--right", "r*.png", "--board", "9x6", "--square-m",
-                                            "0.025", "--out", out, "--count", "8"});
+    const ProcessResult stray =
+        runProcess({stereoctlPath(), "calibrate", "--left", "l*.png", "--right", "r*.png",
+                    "--board", "9x6", "--square-m", "0.025", "--out", out, "--count", "8"});
     EXPECT_EQ(stray.exit_code, 2);
     EXPECT_NE(stray.err.find("--count requires --live"), std::string::npos) << stray.err;
     // Nothing was created by runs that could not start.

@@ -103,8 +103,8 @@ pid_t spawn(const std::vector<std::string>& argv, const std::vector<std::string>
     std::vector<char*> arg_pointers = pointers(args);
     std::vector<char*> env_pointers = pointers(env);
     pid_t pid = -1;
-    const int error = ::posix_spawn(&pid, args.at(0).c_str(), actions, nullptr,
-                                    arg_pointers.data(), env_pointers.data());
+    const int error = ::posix_spawn(&pid, args.at(0).c_str(), actions, nullptr, arg_pointers.data(),
+                                    env_pointers.data());
     if (error != 0) {
         throw std::system_error(error, std::system_category(), "posix_spawn " + argv.at(0));
     }
@@ -282,8 +282,8 @@ bool ChildProcess::running()
 TempDir::TempDir()
 {
     const char* base = std::getenv("TMPDIR");
-    std::string pattern = std::string(base != nullptr && *base != '\0' ? base : "/tmp") +
-                          "/stereoctl-XXXXXX";
+    std::string pattern =
+        std::string(base != nullptr && *base != '\0' ? base : "/tmp") + "/stereoctl-XXXXXX";
     if (::mkdtemp(pattern.data()) == nullptr) {
         throwErrno("mkdtemp " + pattern);
     }

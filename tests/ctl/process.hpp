@@ -5,21 +5,21 @@
 //
 // Thread-bound: each object belongs to the thread that made it. runProcess() is reentrant.
 
-#include <sys/types.h>
-
 #include <chrono>
 #include <cstddef>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include <sys/types.h>
+
 namespace stereod::test {
 
 struct ProcessResult {
-    int exit_code = -1;               // -1 when the process did not exit normally
-    int signal = 0;                   // the signal that ended it, if one did
-    std::string out;                  // everything written to stdout
-    std::string err;                  // everything written to stderr
+    int exit_code = -1; // -1 when the process did not exit normally
+    int signal = 0;     // the signal that ended it, if one did
+    std::string out;    // everything written to stdout
+    std::string err;    // everything written to stderr
 };
 
 // Runs `argv` (argv[0] a path) with the environment of this process plus `extra_env`
@@ -34,7 +34,7 @@ std::size_t lineCount(const std::string& text);
 // its stderr goes to `log_path` (appended) so that a chatty child never blocks on a full
 // pipe. Killed with SIGKILL and reaped on destruction if still running.
 class ChildProcess {
-public:
+  public:
     ChildProcess(const std::vector<std::string>& argv, const std::string& log_path);
     ~ChildProcess();
     ChildProcess(const ChildProcess&) = delete;
@@ -54,7 +54,7 @@ public:
 
     bool running();
 
-private:
+  private:
     pid_t pid_ = -1;
     int stdout_fd_ = -1;
     std::string buffer_;
@@ -64,7 +64,7 @@ private:
 // A fresh directory under $TMPDIR (or /tmp) that is removed with its contents on
 // destruction. Kept short: Unix socket paths are limited to 107 bytes.
 class TempDir {
-public:
+  public:
     TempDir();
     ~TempDir();
     TempDir(const TempDir&) = delete;
@@ -73,7 +73,7 @@ public:
     const std::string& path() const noexcept { return path_; }
     std::string file(const std::string& name) const { return path_ + "/" + name; }
 
-private:
+  private:
     std::string path_;
 };
 

@@ -13,17 +13,21 @@ using Json = nlohmann::ordered_json;
 
 Json noReading(const char* code, const char* message)
 {
-    return {{"valid", false},          {"distance_m", nullptr},
-            {"stamp_ns", 81263511234}, {"age_ms", 37.2},
-            {"frame", 118},            {"valid_fraction", 0.02},
-            {"in_range_fraction", 0.0}, {"region_pixels", 355680},
+    return {{"valid", false},
+            {"distance_m", nullptr},
+            {"stamp_ns", 81263511234},
+            {"age_ms", 37.2},
+            {"frame", 118},
+            {"valid_fraction", 0.02},
+            {"in_range_fraction", 0.0},
+            {"region_pixels", 355680},
             {"reason", {{"code", code}, {"message", message}}}};
 }
 
 TEST(ReadingFormat, EveryReasonCodeOfTheProtocolIsKnown)
 {
-    for (const char* code : {"too_few_valid_pixels", "nothing_in_range", "bad_frame",
-                             "out_of_sync", "source_down", "stale", "no_frame_yet"}) {
+    for (const char* code : {"too_few_valid_pixels", "nothing_in_range", "bad_frame", "out_of_sync",
+                             "source_down", "stale", "no_frame_yet"}) {
         const auto reason = reasonFromCode(code);
         ASSERT_TRUE(reason.has_value()) << code;
         EXPECT_STREQ(reasonCode(*reason), code);
@@ -67,8 +71,8 @@ TEST(ReadingFormat, DistanceLine)
 
 TEST(ReadingFormat, WatchLine)
 {
-    const Json valid = {{"valid", true},  {"distance_m", 1.412},    {"stamp_ns", 5},
-                        {"age_ms", 37.2}, {"frame", 118},          {"valid_fraction", 0.83}};
+    const Json valid = {{"valid", true},  {"distance_m", 1.412}, {"stamp_ns", 5},
+                        {"age_ms", 37.2}, {"frame", 118},        {"valid_fraction", 0.83}};
     EXPECT_EQ(formatWatchLine(valid), "frame 118  1.412 m  age 37 ms  valid 83 %");
     EXPECT_EQ(formatWatchLine(noReading("source_down", "frame source down")),
               "frame 118  no reading: frame source down  age 37 ms  valid 2 %");

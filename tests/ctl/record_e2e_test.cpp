@@ -3,8 +3,6 @@
 // different brightness, so that pairs can be told apart by their pixels, and stamps that
 // identify them), and the tests check what comes out against what went in.
 
-#include <signal.h>
-
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -18,6 +16,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <signal.h>
 
 #include "capture/frame_source.hpp"
 #include "ctl/client.hpp"
@@ -62,7 +61,7 @@ bool sameImage(const cv::Mat& a, const cv::Mat& b)
 }
 
 class RecordE2e : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override
     {
         const cv::Mat left = cv::imread(kTsukuba + "/im3.png", cv::IMREAD_GRAYSCALE);
@@ -160,9 +159,9 @@ protected:
         EXPECT_GE(recording.entries.size(), expected_at_least);
         for (const RecordingEntry& entry : recording.entries) {
             const SourcePair* source = pairWithStamps(entry.left_stamp_ns, entry.right_stamp_ns);
-            ASSERT_NE(source, nullptr) << "row " << entry.index << ": stamps "
-                                       << entry.left_stamp_ns << "/" << entry.right_stamp_ns
-                                       << " are no recorded pair's";
+            ASSERT_NE(source, nullptr)
+                << "row " << entry.index << ": stamps " << entry.left_stamp_ns << "/"
+                << entry.right_stamp_ns << " are no recorded pair's";
             EXPECT_TRUE(sameImage(cv::imread(entry.left_path, cv::IMREAD_UNCHANGED), source->left))
                 << entry.left_path;
             EXPECT_TRUE(
@@ -171,8 +170,7 @@ protected:
         }
     }
 
-    ProcessResult ctl(std::vector<std::string> args,
-                      const std::vector<std::string>& env = {}) const
+    ProcessResult ctl(std::vector<std::string> args, const std::vector<std::string>& env = {}) const
     {
         args.insert(args.begin(), stereoctlPath());
         args.push_back("--socket");
@@ -354,8 +352,7 @@ TEST_F(RecordE2e, KilledRecorderLeavesARecordingThatReplays)
 }
 
 // Every pair of the bag is a source pair (stamps and pixels); returns how many there are.
-std::size_t expectBagOfSourcePairs(const std::string& path,
-                                   const std::vector<SourcePair>& source)
+std::size_t expectBagOfSourcePairs(const std::string& path, const std::vector<SourcePair>& source)
 {
     mcap::Reader reader(path);
     const McapStereoIndex index = indexMcapStereo(reader, "", "");
@@ -391,7 +388,8 @@ Json firstReading(const std::string& socket, ChildProcess& service, const std::s
         }
         std::this_thread::sleep_for(20ms);
     }
-    ADD_FAILURE() << "no reading from " << socket << "\n" << "see " << log;
+    ADD_FAILURE() << "no reading from " << socket << "\n"
+                  << "see " << log;
     return Json::object();
 }
 
@@ -492,21 +490,22 @@ TEST_F(RecordE2e, BagFromAnIndependentWriterGivesTheDistanceOfTheCsvRecording)
     const auto [left_info, right_info] = rosCameraInfoPair(loadCalibration(calibration_));
     auto info_json = [](const RosCameraInfo& i) {
         const ros2::CameraInfo m = cameraInfoMessage(i);
-        return Json{{"width", m.width}, {"height", m.height}, {"distortion_model", m.distortion_model},
-                    {"d", m.d}, {"k", m.k}, {"r", m.r}, {"p", m.p}};
+        return Json{
+            {"width", m.width}, {"height", m.height}, {"distortion_model", m.distortion_model},
+            {"d", m.d},         {"k", m.k},           {"r", m.r},
+            {"p", m.p}};
     };
-    Json spec = {{"left_topic", "/rig/cam_left/image_mono"},
-                 {"right_topic", "/rig/cam_right/image_mono"},
-                 {"other_topic", "/rig/front/image_color"},
-                 {"left_info", info_json(left_info)},
-                 {"right_info", info_json(right_info)},
-                 {"pairs", Json::array()}};
+    Json spec = {
+        {"left_topic", "/rig/cam_left/image_mono"}, {"right_topic", "/rig/cam_right/image_mono"},
+        {"other_topic", "/rig/front/image_color"},  {"left_info", info_json(left_info)},
+        {"right_info", info_json(right_info)},      {"pairs", Json::array()}};
     for (std::size_t k = 0; k < source_.size(); ++k) {
         const std::string l = dir_.file("l" + std::to_string(k) + ".pgm");
         const std::string r = dir_.file("r" + std::to_string(k) + ".pgm");
         ASSERT_TRUE(cv::imwrite(l, source_[k].left));
         ASSERT_TRUE(cv::imwrite(r, source_[k].right));
-        spec["pairs"].push_back({{"left", l}, {"right", r},
+        spec["pairs"].push_back({{"left", l},
+                                 {"right", r},
                                  {"left_stamp_ns", source_[k].left_stamp_ns},
                                  {"right_stamp_ns", source_[k].right_stamp_ns}});
     }
@@ -522,7 +521,8 @@ TEST_F(RecordE2e, BagFromAnIndependentWriterGivesTheDistanceOfTheCsvRecording)
     ChildProcess replay({stereodPath(), "--replay", bag, "--socket", socket}, log);
     const Json bag_reading = firstReading(socket, replay, log);
     ASSERT_EQ(bag_reading.value("valid", false), true) << bag_reading.dump() << readFile(log);
-    EXPECT_NE(readFile(log).find("image topics chosen by name"), std::string::npos) << readFile(log);
+    EXPECT_NE(readFile(log).find("image topics chosen by name"), std::string::npos)
+        << readFile(log);
     // The pairs differ only in brightness: any two readings agree within 1 %.
     const double csv_m = csv_reading["distance_m"].get<double>();
     const double bag_m = bag_reading["distance_m"].get<double>();

@@ -30,8 +30,8 @@ const std::string kRightGlob = kSamples + "right[0-9][0-9].jpg";
 std::vector<std::string> calibrateCommand(const std::string& left, const std::string& right,
                                           const std::string& board, const std::string& out)
 {
-    return {stereoctlPath(), "calibrate", "--left", left,    "--right", right,
-            "--board",       board,       "--square-m", "0.025", "--out",  out};
+    return {stereoctlPath(), "calibrate", "--left",     left,    "--right", right,
+            "--board",       board,       "--square-m", "0.025", "--out",   out};
 }
 
 int countOf(const std::string& text, const std::string& part)
@@ -124,8 +124,8 @@ TEST(StereoctlCalibrateChessboard, RefusesABoardSizeFoundNowhere)
 {
     test::TempDir dir;
     const std::string out = dir.file("rig.yaml");
-    const ProcessResult run = runProcess(calibrateCommand(
-        kSamples + "left0[1-2].jpg", kSamples + "right0[1-2].jpg", "10x7", out));
+    const ProcessResult run = runProcess(
+        calibrateCommand(kSamples + "left0[1-2].jpg", kSamples + "right0[1-2].jpg", "10x7", out));
     EXPECT_EQ(run.exit_code, 2);
     EXPECT_NE(run.err.find("the 10x7 board was found in none of the 4 images"), std::string::npos)
         << run.err;
@@ -173,8 +173,8 @@ TEST(StereoctlCalibrationFiles, ExportsARosPairAndImportsItBack)
     EXPECT_NE(exported.out.find("wrote ROS camera_info " + left), std::string::npos);
 
     const std::string back = dir.file("back.yaml");
-    const ProcessResult imported = runProcess(
-        {stereoctlPath(), "calibrate", "--from-ros", left, right, "--out", back});
+    const ProcessResult imported =
+        runProcess({stereoctlPath(), "calibrate", "--from-ros", left, right, "--out", back});
     ASSERT_EQ(imported.exit_code, 0) << imported.err;
     const StereoCalibration c = loadCalibration(back);
     EXPECT_EQ(c.kind, StereoCalibration::Kind::Full);
@@ -198,8 +198,8 @@ TEST(StereoctlCalibrationFiles, ImportsOpenCvStereoCalibFilesInMetres)
     const std::string extrinsics = dir.file("extrinsics.yml");
     const cv::Matx33d k(500, 0, 319.5, 0, 500, 239.5, 0, 0, 1);
     cv::FileStorage fs(intrinsics, cv::FileStorage::WRITE);
-    fs << "M1" << cv::Mat(k) << "D1" << cv::Mat::zeros(1, 5, CV_64F) << "M2" << cv::Mat(k)
-       << "D2" << cv::Mat::zeros(1, 5, CV_64F);
+    fs << "M1" << cv::Mat(k) << "D1" << cv::Mat::zeros(1, 5, CV_64F) << "M2" << cv::Mat(k) << "D2"
+       << cv::Mat::zeros(1, 5, CV_64F);
     fs.release();
     fs.open(extrinsics, cv::FileStorage::WRITE);
     fs << "R" << cv::Mat(cv::Matx33d::eye()) << "T" << cv::Mat(cv::Vec3d(-4, 0, 0)) << "R1"
@@ -211,8 +211,8 @@ TEST(StereoctlCalibrationFiles, ImportsOpenCvStereoCalibFilesInMetres)
 
     const std::string out = dir.file("rig.yaml");
     const ProcessResult run =
-        runProcess({stereoctlPath(), "calibrate", "--from-opencv", intrinsics, extrinsics,
-                    "--size", "640x480", "--unit-m", "0.025", "--out", out});
+        runProcess({stereoctlPath(), "calibrate", "--from-opencv", intrinsics, extrinsics, "--size",
+                    "640x480", "--unit-m", "0.025", "--out", out});
     ASSERT_EQ(run.exit_code, 0) << run.err;
     const StereoCalibration c = loadCalibration(out);
     EXPECT_DOUBLE_EQ(c.rectified.baseline_m, 0.1);
@@ -221,8 +221,7 @@ TEST(StereoctlCalibrationFiles, ImportsOpenCvStereoCalibFilesInMetres)
     const ProcessResult unsized = runProcess(
         {stereoctlPath(), "calibrate", "--from-opencv", intrinsics, extrinsics, "--out", out});
     EXPECT_EQ(unsized.exit_code, 2);
-    EXPECT_NE(unsized.err.find("--from-opencv requires --size"), std::string::npos)
-        << unsized.err;
+    EXPECT_NE(unsized.err.find("--from-opencv requires --size"), std::string::npos) << unsized.err;
 }
 
 } // namespace

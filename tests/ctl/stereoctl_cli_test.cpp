@@ -62,13 +62,13 @@ TEST(StereoctlCalibrate, BadArgumentsExitTwo)
     const std::vector<std::vector<std::string>> cases = {
         {stereoctlPath(), "calibrate", "--out", out},
         {stereoctlPath(), "calibrate", "--rectified", "--focal-px", "615", "--baseline-m", "0.1",
-         "--out", out},                                                   // no --size
+         "--out", out}, // no --size
         {stereoctlPath(), "calibrate", "--rectified", "--focal-px", "615", "--baseline-m", "0.1",
          "--size", "384by288", "--out", out},
         {stereoctlPath(), "calibrate", "--rectified", "--focal-px", "0", "--baseline-m", "0.1",
          "--size", "384x288", "--out", out},
         {stereoctlPath(), "calibrate", "--rectified", "--focal-px", "615", "--baseline-m", "0.1",
-         "--size", "384x288"},                                            // no --out
+         "--size", "384x288"}, // no --out
         {stereoctlPath(), "calibrate", "--rectified", "--focal-px", "615", "--baseline-m", "0.1",
          "--size", "384x288", "--board", "9x6", "--out", out},
     };
@@ -91,7 +91,7 @@ TEST(StereoctlHelp, NoSubcommandPrintsHelpAndExitsTwo)
 TEST(StereoctlHelp, EveryCommandHasHelp)
 {
     const std::vector<std::pair<std::string, std::string>> commands = {
-        {"distance", "--max-age-ms"}, {"status", "--json"},       {"watch", "--socket"},
+        {"distance", "--max-age-ms"}, {"status", "--json"},         {"watch", "--socket"},
         {"snapshot", "--colormap"},   {"depth", "--max-disparity"}, {"calibrate", "--rectified"}};
     for (const auto& [command, option] : commands) {
         const ProcessResult run = runProcess({stereoctlPath(), command, "--help"});
@@ -113,7 +113,10 @@ TEST(StereoctlUnreachable, EveryClientCommandExitsThreeNamingSocketAndReason)
     test::TempDir dir;
     const std::string socket = dir.file("absent.sock");
     const std::vector<std::vector<std::string>> cases = {
-        {"distance"}, {"distance", "--json"}, {"status"}, {"watch"},
+        {"distance"},
+        {"distance", "--json"},
+        {"status"},
+        {"watch"},
         {"snapshot", "--depth", dir.file("d.png")}};
     for (const auto& command : cases) {
         std::vector<std::string> argv = {stereoctlPath()};
@@ -132,8 +135,7 @@ TEST(StereoctlUnreachable, SocketComesFromTheEnvironmentWhenNotGiven)
     test::TempDir dir;
     const std::string from_env = dir.file("env.sock");
     const std::string from_option = dir.file("option.sock");
-    ProcessResult run =
-        runProcess({stereoctlPath(), "distance"}, {"STEREOD_SOCKET=" + from_env});
+    ProcessResult run = runProcess({stereoctlPath(), "distance"}, {"STEREOD_SOCKET=" + from_env});
     EXPECT_EQ(run.exit_code, 3);
     EXPECT_NE(run.err.find(from_env), std::string::npos) << run.err;
 
@@ -149,15 +151,15 @@ TEST(StereoctlUnreachable, SocketBeforeTheCommandIsTakenByEveryClientCommand)
 {
     test::TempDir dir;
     const std::string socket = dir.file("before.sock");
-    const std::vector<std::vector<std::string>> cases = {
-        {"distance"},
-        {"distance", "--json"},
-        {"status"},
-        {"watch"},
-        {"snapshot", "--depth", dir.file("d.png")},
-        {"record", "--out", dir.file("recording")},
-        {"calibrate", "--live", "--count", "6", "--board", "9x6", "--square-m", "0.025", "--out",
-         dir.file("rig.yaml")}};
+    const std::vector<std::vector<std::string>> cases = {{"distance"},
+                                                         {"distance", "--json"},
+                                                         {"status"},
+                                                         {"watch"},
+                                                         {"snapshot", "--depth", dir.file("d.png")},
+                                                         {"record", "--out", dir.file("recording")},
+                                                         {"calibrate", "--live", "--count", "6",
+                                                          "--board", "9x6", "--square-m", "0.025",
+                                                          "--out", dir.file("rig.yaml")}};
     for (const auto& command : cases) {
         std::vector<std::string> argv = {stereoctlPath(), "--socket", socket};
         argv.insert(argv.end(), command.begin(), command.end());
@@ -199,10 +201,10 @@ TEST(StereoctlUnreachable, OfflineCommandsIgnoreTheSocketBeforeThem)
 {
     test::TempDir dir;
     const std::string out = dir.file("rig.yaml");
-    const ProcessResult run = runProcess(
-        {stereoctlPath(), "--socket", dir.file("absent.sock"), "calibrate", "--rectified",
-         "--focal-px", "615", "--baseline-m", "0.1", "--size", "384x288", "--out", out},
-        {"STEREOD_SOCKET=" + dir.file("env.sock")});
+    const ProcessResult run = runProcess({stereoctlPath(), "--socket", dir.file("absent.sock"),
+                                          "calibrate", "--rectified", "--focal-px", "615",
+                                          "--baseline-m", "0.1", "--size", "384x288", "--out", out},
+                                         {"STEREOD_SOCKET=" + dir.file("env.sock")});
     EXPECT_EQ(run.exit_code, 0) << run.err;
     EXPECT_TRUE(std::filesystem::exists(out));
 }

@@ -23,20 +23,20 @@ using test::stereoctlPath;
 const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba";
 const std::string kLeft = kTsukuba + "/im3.png";
 const std::string kRight = kTsukuba + "/im4.png";
-constexpr double kGroundTruthScale = 16.0;   // disp3.pgm holds disparity * 16
+constexpr double kGroundTruthScale = 16.0; // disp3.pgm holds disparity * 16
 
 std::vector<std::string> depthCommand(std::vector<std::string> extra)
 {
-    std::vector<std::string> argv = {stereoctlPath(), "depth",        kLeft,         kRight,
-                                     "--rectified",   "--focal-px",   "615",         "--baseline-m",
+    std::vector<std::string> argv = {stereoctlPath(), "depth",           kLeft, kRight,
+                                     "--rectified",   "--focal-px",      "615", "--baseline-m",
                                      "0.1",           "--max-disparity", "16"};
     argv.insert(argv.end(), extra.begin(), extra.end());
     return argv;
 }
 
 struct Scores {
-    double bad2_percent = 0.0;        // of pixels with ground truth and a reported disparity
-    double density_percent = 0.0;     // of pixels with ground truth
+    double bad2_percent = 0.0;    // of pixels with ground truth and a reported disparity
+    double density_percent = 0.0; // of pixels with ground truth
 };
 
 Scores score(const cv::Mat& disparity, const cv::Mat& truth_raw)
@@ -46,7 +46,7 @@ Scores score(const cv::Mat& disparity, const cv::Mat& truth_raw)
         for (int x = 0; x < truth_raw.cols; ++x) {
             const int raw = truth_raw.at<uint8_t>(y, x);
             if (raw == 0) {
-                continue;             // unknown
+                continue; // unknown
             }
             ++with_truth;
             const float d = disparity.at<float>(y, x);
@@ -58,8 +58,8 @@ Scores score(const cv::Mat& disparity, const cv::Mat& truth_raw)
         }
     }
     Scores s;
-    s.bad2_percent = reported > 0 ? 100.0 * static_cast<double>(bad) / static_cast<double>(reported)
-                                  : 100.0;
+    s.bad2_percent =
+        reported > 0 ? 100.0 * static_cast<double>(bad) / static_cast<double>(reported) : 100.0;
     s.density_percent = 100.0 * static_cast<double>(reported) / static_cast<double>(with_truth);
     return s;
 }
@@ -88,9 +88,9 @@ TEST(StereoctlDepth, TsukubaDisparityMeetsTheAccuracyBar)
 TEST(StereoctlDepth, WritesEveryRequestedFile)
 {
     test::TempDir dir;
-    const ProcessResult run = runProcess(depthCommand(
-        {"--depth", dir.file("d.png"), "--cloud", dir.file("c.ply"), "--colormap",
-         dir.file("c.png"), "--disparity", dir.file("d.png.pfm")}));
+    const ProcessResult run = runProcess(
+        depthCommand({"--depth", dir.file("d.png"), "--cloud", dir.file("c.ply"), "--colormap",
+                      dir.file("c.png"), "--disparity", dir.file("d.png.pfm")}));
     ASSERT_EQ(run.exit_code, 0) << run.err;
 
     const cv::Mat depth_mm = cv::imread(dir.file("d.png"), cv::IMREAD_UNCHANGED);
@@ -116,7 +116,7 @@ TEST(StereoctlDepth, JsonCarriesReadingTimingsRangeAndMatcher)
 {
     const ProcessResult run = runProcess(depthCommand({"--json", "--matcher", "sgbm-3way"}));
     ASSERT_EQ(run.exit_code, 0) << run.err;
-    nlohmann::json out = nlohmann::json::parse(run.out);   // missing keys read as null
+    nlohmann::json out = nlohmann::json::parse(run.out); // missing keys read as null
     for (const char* key : {"valid", "distance_m", "stamp_ns", "frame", "valid_fraction",
                             "in_range_fraction", "region_pixels"}) {
         EXPECT_TRUE(out["reading"].contains(key)) << key;
@@ -147,9 +147,9 @@ TEST(StereoctlDepth, RegionWithoutEnoughPixelsIsNoReadingWithExitOne)
 TEST(StereoctlDepth, BadArgumentsExitTwoWithOneLine)
 {
     const std::vector<std::vector<std::string>> cases = {
-        {stereoctlPath(), "depth", kLeft, kRight},                       // no geometry
-        {stereoctlPath(), "depth", kLeft, kRight, "--rectified"},        // no focal length
-        {stereoctlPath(), "depth", kLeft},                               // no RIGHT
+        {stereoctlPath(), "depth", kLeft, kRight},                // no geometry
+        {stereoctlPath(), "depth", kLeft, kRight, "--rectified"}, // no focal length
+        {stereoctlPath(), "depth", kLeft},                        // no RIGHT
         depthCommand({"--matcher", "magic"}),
         depthCommand({"--max-disparity", "-16"}),
         depthCommand({"--roi", "0.5,0.5,0.9,0.9"}),

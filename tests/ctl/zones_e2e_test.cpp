@@ -44,7 +44,7 @@ zones:
 )";
 
 class ZonesService : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override
     {
         namespace fs = std::filesystem;
@@ -105,7 +105,7 @@ protected:
 TEST_F(ZonesService, OccupiedClearAndUnknownWithTheirExitCode)
 {
     const ProcessResult run = ctl({"zones", "--json"});
-    EXPECT_EQ(run.exit_code, 1) << run.out << run.err;   // one is occupied
+    EXPECT_EQ(run.exit_code, 1) << run.out << run.err; // one is occupied
     const Json reply = Json::parse(run.out);
     ASSERT_EQ(reply["zones"].size(), 3u);
     const Json& chair = reply["zones"][0];
@@ -139,8 +139,8 @@ TEST_F(ZonesService, PictureDrawsTheZonesOnTheDepth)
             red += c == cv::Vec3b(40, 40, 230);
             green += c == cv::Vec3b(60, 200, 60);
         }
-    EXPECT_GT(red, 1000);     // the occupied chair box
-    EXPECT_GT(green, 1000);   // the clear box in front
+    EXPECT_GT(red, 1000);   // the occupied chair box
+    EXPECT_GT(green, 1000); // the clear box in front
 }
 
 TEST_F(ZonesService, TheStreamGivesOneEventPerFrame)
@@ -177,7 +177,7 @@ zones:
     }
     ASSERT_EQ(zones.size(), 1u) << zones.dump();
     EXPECT_EQ(zones[0]["name"], "front");
-    EXPECT_EQ(ctl({"zones"}).exit_code, 0);   // all clear
+    EXPECT_EQ(ctl({"zones"}).exit_code, 0); // all clear
 }
 
 } // namespace

@@ -5,10 +5,6 @@
 // the running service turns readings into source_down with the reason while the service
 // keeps answering, and depth comes back after the replug.
 
-#include <fcntl.h>
-#include <signal.h>
-#include <unistd.h>
-
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -19,9 +15,12 @@
 #include <thread>
 #include <vector>
 
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <signal.h>
+#include <unistd.h>
 
 #include "ctl/client.hpp"
 #include "pipeline/calibration.hpp"
@@ -49,7 +48,7 @@ constexpr auto kStartLimit = 60s;
 constexpr auto kEventLimit = 30s;
 
 class StereodCamerasE2e : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override
     {
         left_ = dir_.file("left.png");
@@ -109,8 +108,8 @@ protected:
              fake_v4l2::childEnvironment(STEREOD_FAKE_V4L2_LIBRARY, description)) {
             const std::string name = entry.substr(0, entry.find('='));
             const char* old = std::getenv(name.c_str());
-            saved.emplace_back(name, old != nullptr ? std::optional<std::string>(old)
-                                                    : std::nullopt);
+            saved.emplace_back(name,
+                               old != nullptr ? std::optional<std::string>(old) : std::nullopt);
             ::setenv(name.c_str(), entry.substr(name.size() + 1).c_str(), 1);
         }
         service_ = std::make_unique<ChildProcess>(
@@ -124,8 +123,7 @@ protected:
     }
 
     // `right_extra`: more keys of the right camera's description (phase_ms, ...).
-    static std::string cameraDevices(const std::string& fourcc,
-                                     const std::string& right_extra = {})
+    static std::string cameraDevices(const std::string& fourcc, const std::string& right_extra = {})
     {
         std::ostringstream out;
         for (const char* path : {kLeft, kRight}) {
@@ -201,8 +199,7 @@ protected:
 
     Json waitForDistance()
     {
-        return waitForReading([](Json& r) { return r.value("valid", false); },
-                              "a valid distance");
+        return waitForReading([](Json& r) { return r.value("valid", false); }, "a valid distance");
     }
 
     // The offline reading of the same pair through `stereoctl depth`.
@@ -278,9 +275,8 @@ TEST_F(StereodCamerasE2e, SideBySideCameraGivesTheOfflineDistance)
                            "\n    fps: [15]\n    formats:\n      - { fourcc: YUYV, sizes: "
                            "[SBSIZE] }\n"),
                  "source:\n  type: side_by_side\n  cameras:\n    device: " +
-                     std::string(kSideBySide) + "\n    width: " +
-                     std::to_string(2 * size_.width) + "\n    height: " +
-                     std::to_string(size_.height) + "\n    fps: 15\n");
+                     std::string(kSideBySide) + "\n    width: " + std::to_string(2 * size_.width) +
+                     "\n    height: " + std::to_string(size_.height) + "\n    fps: 15\n");
     Json reading = waitForDistance();
     ASSERT_TRUE(reading.is_object());
     EXPECT_NEAR(reading["distance_m"].get<double>(), offline_m, 0.0015);
@@ -315,8 +311,7 @@ TEST_F(StereodCamerasE2e, UnpluggedCameraGivesSourceDownUntilReplugged)
     EXPECT_NE(source["last_error"].get<std::string>().find(kRight), std::string::npos)
         << source.dump();
     // The CLI tells the robot the same, with the exit code of "not producing".
-    const ProcessResult ctl =
-        runProcess({test::stereoctlPath(), "distance", "--socket", socket_});
+    const ProcessResult ctl = runProcess({test::stereoctlPath(), "distance", "--socket", socket_});
     EXPECT_EQ(ctl.exit_code, 2) << ctl.out << ctl.err;
 
     fakeCommand(std::string("replug ") + kRight);
@@ -358,8 +353,8 @@ TEST_F(StereodCamerasE2e, CorruptFramesAreCountedAndLoggedOncePerInterval)
     EXPECT_EQ(camera.value("bad_frames", uint64_t{0}), 90u) << camera.dump();
     EXPECT_FALSE(camera.value("last_bad_frame", std::string()).empty()) << camera.dump();
     EXPECT_TRUE(said_no_good_frame) << serviceLog();
-    const Json after = waitForReading(
-        [](Json& r) { return r.value("valid", false); }, "a valid distance after the bad frames");
+    const Json after = waitForReading([](Json& r) { return r.value("valid", false); },
+                                      "a valid distance after the bad frames");
     EXPECT_TRUE(after.is_object());
 
     // Every bad frame is in some line, and the lines are no more than one per 5 s.
@@ -404,8 +399,7 @@ TEST_F(StereodCamerasE2e, ClockOffsetBetweenTheCamerasIsShownNotAbsorbed)
     EXPECT_NEAR(source["clock_offset"]["estimate_ms"].get<double>(), 12.0, 1.5);
     EXPECT_EQ(source["pairs"], 0u);
 
-    const ProcessResult status =
-        runProcess({test::stereoctlPath(), "status", "--socket", socket_});
+    const ProcessResult status = runProcess({test::stereoctlPath(), "status", "--socket", socket_});
     EXPECT_EQ(status.exit_code, 0) << status.err;
     EXPECT_NE(status.out.find("clock offset between the cameras: right - left = 1"),
               std::string::npos)

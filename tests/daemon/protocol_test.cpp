@@ -77,8 +77,7 @@ TEST(ProtocolParse, RawFramesAndCalibration)
     const std::vector<SnapshotItem> expected = {SnapshotItem::RawRight, SnapshotItem::RawLeft};
     EXPECT_EQ(std::get<SnapshotRequest>(snapshot.command).items, expected);
     // The default stays the processed result's four items.
-    EXPECT_EQ(std::get<SnapshotRequest>(parseOk(R"({"cmd":"snapshot"})").command).items.size(),
-              4u);
+    EXPECT_EQ(std::get<SnapshotRequest>(parseOk(R"({"cmd":"snapshot"})").command).items.size(), 4u);
 }
 
 TEST(ProtocolParse, SnapshotItemsKeepTheirOrderWithoutRepeats)
@@ -307,8 +306,9 @@ TEST(ProtocolReplies, HelloListsCommandsStreamsAndItems)
     EXPECT_EQ(reply["protocol"], kProtocolVersion);
     EXPECT_EQ(reply["commands"].size(), 8u);
     EXPECT_EQ(reply["streams"], Json::parse(R"(["readings","depth","raw","zones"])"));
-    EXPECT_EQ(reply["snapshot_items"],
-              Json::parse(R"(["left","disparity","depth","cloud","raw_left","raw_right","confidence"])"));
+    EXPECT_EQ(
+        reply["snapshot_items"],
+        Json::parse(R"(["left","disparity","depth","cloud","raw_left","raw_right","confidence"])"));
 }
 
 TEST(ProtocolReplies, ErrorCodeNamesAreTheDocumentedOnes)

@@ -28,7 +28,7 @@ constexpr int kWarmUpFrames = 6; // every slot of the triple buffer filled twice
 constexpr int kFrames = 20;
 
 class RawCopy : public ::testing::Test {
-protected:
+  protected:
     static void SetUpTestSuite() { bench::installCountingMatAllocator(); }
 
     void SetUp() override

@@ -4,9 +4,6 @@
 // correctness (every request answered, with the right reply, nothing dropped, memory
 // bounded); how fast the service answers is measured by bench/socket_load.cpp.
 
-#include <signal.h>
-#include <sys/wait.h>
-
 #include <algorithm>
 #include <atomic>
 #include <filesystem>
@@ -20,6 +17,8 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
 
 #include "pipeline/calibration.hpp"
 #include "tests/ctl/process.hpp"
@@ -173,10 +172,9 @@ class DistanceLoad {
                     last_frame[i] = frame;
                 } catch (const std::exception& e) {
                     closed[i] = true;
-                    const bool clean_close = std::string(e.what()).find("closed") !=
-                                                 std::string::npos ||
-                                             std::string(e.what()).find("recv") !=
-                                                 std::string::npos;
+                    const bool clean_close =
+                        std::string(e.what()).find("closed") != std::string::npos ||
+                        std::string(e.what()).find("recv") != std::string::npos;
                     if (!until_closed_ || !clean_close)
                         report.problem("client " + std::to_string(i) + ": " + e.what());
                 }
@@ -255,8 +253,7 @@ class Reliability : public ::testing::Test {
             const std::string left = "left/" + std::to_string(i) + ".png";
             const std::string right = "right/" + std::to_string(i) + ".png";
             const int64_t stamp_ns = 1'000'000'000 + int64_t{i} * 100'000'000;
-            index << i << ',' << stamp_ns << ',' << stamp_ns << ',' << left << ',' << right
-                  << '\n';
+            index << i << ',' << stamp_ns << ',' << stamp_ns << ',' << left << ',' << right << '\n';
             if (i == kCorruptPair)
                 std::ofstream(recording_ + "/" + left) << "\x89PNG\r\n\x1a\n truncated";
             else
@@ -307,8 +304,8 @@ class Reliability : public ::testing::Test {
                     return true;
                 try {
                     TestClient client(socket_);
-                    reading = client.request({{"cmd", "distance"}, {"max_age_ms", 600000}})
-                                  ["reading"];
+                    reading =
+                        client.request({{"cmd", "distance"}, {"max_age_ms", 600000}})["reading"];
                     return reading["valid"] == true;
                 } catch (const std::exception&) {
                     return false;

@@ -14,9 +14,9 @@
 #include <thread>
 #include <vector>
 
+#include <grp.h>
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
-#include <grp.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
@@ -283,9 +283,9 @@ TEST_F(ServiceTest, PeerNotInTheAllowListsIsRefusedWithTheReason)
         const Json reply = client.readJson();
         EXPECT_EQ(reply["ok"], false);
         EXPECT_EQ(reply["error"]["code"], "not_allowed");
-        EXPECT_NE(reply["error"]["message"].get<std::string>().find(
-                      "uid " + std::to_string(::geteuid())),
-                  std::string::npos)
+        EXPECT_NE(
+            reply["error"]["message"].get<std::string>().find("uid " + std::to_string(::geteuid())),
+            std::string::npos)
             << reply.dump();
         EXPECT_TRUE(client.waitForClose());
     }
@@ -838,7 +838,8 @@ TEST_F(ServiceTest, TruncatedAndBinaryRequestsGetOneErrorPerLine)
         TestClient client(socket_path_);
         client.send(R"({"cmd":"hel)");
         std::this_thread::sleep_for(50ms);
-        client.send(R"(lo","id":9})" "\n");
+        client.send(R"(lo","id":9})"
+                    "\n");
         const Json reply = client.readJson();
         EXPECT_EQ(reply["ok"], true);
         EXPECT_EQ(reply["id"], 9);
@@ -1047,8 +1048,8 @@ TEST_F(ServiceTest, ClientsFloodingRequestsDelayNeitherAPoliteClientNorTheWatchd
 
     std::sort(latencies_ms.begin(), latencies_ms.end());
     const double p99_ms = latencies_ms[latencies_ms.size() * 99 / 100];
-    EXPECT_LT(p99_ms, 50.0) << latencies_ms.size() << " requests, max "
-                            << latencies_ms.back() << " ms";
+    EXPECT_LT(p99_ms, 50.0) << latencies_ms.size() << " requests, max " << latencies_ms.back()
+                            << " ms";
 
     std::vector<std::chrono::steady_clock::time_point> pings;
     for (const auto& message : messages)
@@ -1057,10 +1058,11 @@ TEST_F(ServiceTest, ClientsFloodingRequestsDelayNeitherAPoliteClientNorTheWatchd
     ASSERT_GE(pings.size(), 2u) << notify.all();
     double longest_gap_ms = 0.0;
     for (std::size_t i = 1; i < pings.size(); ++i)
-        longest_gap_ms = std::max(
-            longest_gap_ms,
-            std::chrono::duration<double, std::milli>(pings[i] - pings[i - 1]).count());
-    const double half_interval_ms = std::chrono::duration<double, std::milli>(kWatchdog / 2).count();
+        longest_gap_ms =
+            std::max(longest_gap_ms,
+                     std::chrono::duration<double, std::milli>(pings[i] - pings[i - 1]).count());
+    const double half_interval_ms =
+        std::chrono::duration<double, std::milli>(kWatchdog / 2).count();
     EXPECT_LT(longest_gap_ms, half_interval_ms) << pings.size() << " pings";
     std::cout << "flood of " << kFlooders << " x " << requests
               << " status requests: polite distance p99 " << p99_ms << " ms, max "

@@ -6,8 +6,8 @@
 #include <fstream>
 #include <memory>
 #include <sstream>
-#include <thread>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -267,8 +267,8 @@ TEST_F(StereodCli, SigtermStopsAStartUpBlockedInItsSourceWithinOneSecond)
         ChildProcess service(
             {stereodPath(), "--replay", recording, "--calib", calibration_, "--socket", socket_},
             dir_.file("stereod.log"));
-        ASSERT_TRUE(waitUntil([&] { return blocksSigterm(service.pid()) || !service.running(); },
-                              10s));
+        ASSERT_TRUE(
+            waitUntil([&] { return blocksSigterm(service.pid()) || !service.running(); }, 10s));
         std::this_thread::sleep_for(delay);
         ASSERT_TRUE(service.running()) << log();
         const auto signalled = std::chrono::steady_clock::now();
@@ -276,11 +276,11 @@ TEST_F(StereodCli, SigtermStopsAStartUpBlockedInItsSourceWithinOneSecond)
         const std::optional<int> status = service.waitFor(5s);
         const double stop_s =
             std::chrono::duration<double>(std::chrono::steady_clock::now() - signalled).count();
-        ASSERT_TRUE(status.has_value()) << "still running 5 s after SIGTERM, " << delay.count()
-                                        << " ms after start:\n"
-                                        << log();
-        ASSERT_TRUE(WIFEXITED(*status))
-            << "killed by signal " << WTERMSIG(*status) << " " << delay.count() << " ms after start";
+        ASSERT_TRUE(status.has_value())
+            << "still running 5 s after SIGTERM, " << delay.count() << " ms after start:\n"
+            << log();
+        ASSERT_TRUE(WIFEXITED(*status)) << "killed by signal " << WTERMSIG(*status) << " "
+                                        << delay.count() << " ms after start";
         EXPECT_EQ(WEXITSTATUS(*status), 0) << log();
         EXPECT_LT(stop_s, 1.0) << delay.count() << " ms after start";
         EXPECT_FALSE(std::filesystem::exists(socket_));

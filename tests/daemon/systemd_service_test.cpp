@@ -12,15 +12,6 @@
 //  - Socket activation: the service serves on the socket it was handed and leaves the
 //    file (systemd's) in place.
 
-#include <fcntl.h>
-#include <poll.h>
-#include <signal.h>
-#include <sys/socket.h>
-#include <sys/stat.h>
-#include <sys/un.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <chrono>
 #include <cstdlib>
 #include <cstring>
@@ -32,10 +23,17 @@
 #include <string>
 #include <vector>
 
+#include <fcntl.h>
 #include <gtest/gtest.h>
-
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <poll.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include "pipeline/calibration.hpp"
 #include "tests/ctl/process.hpp"
@@ -45,9 +43,9 @@ namespace stereod {
 namespace {
 
 using test::ChildProcess;
+using test::Json;
 using test::NotifySocket;
 using test::ScopedEnv;
-using test::Json;
 using test::stereodPath;
 using test::TempDir;
 using test::TestClient;
@@ -299,9 +297,9 @@ TEST_F(StereodUnderSystemd, SocketActivationServesOnTheHandedSocketAndLeavesItsF
     struct stat before {};
     ASSERT_EQ(::lstat(socket_.c_str(), &before), 0);
 
-    const pid_t pid = spawnActivated({stereodPath(), "--replay", replay, "--calib", calibration,
-                                      "--socket", socket_},
-                                     listen_fd, log_);
+    const pid_t pid = spawnActivated(
+        {stereodPath(), "--replay", replay, "--calib", calibration, "--socket", socket_}, listen_fd,
+        log_);
     ASSERT_GT(pid, 0);
     {
         // Served on the handed socket (the log says so), the same file as before.

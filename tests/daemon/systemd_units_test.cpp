@@ -8,9 +8,6 @@
 // a scratch root with --root. What cannot be checked here: that the sandbox holds at run
 // time (seccomp filter, device policy, namespaces) - docs/service.md says how it was.
 
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -19,6 +16,8 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "config/service_config.hpp"
 #include "tests/ctl/process.hpp"
@@ -65,8 +64,8 @@ class SystemdUnits : public ::testing::Test {
   protected:
     static void SetUpTestSuite()
     {
-        for (const char* dir : {STEREOD_SYSTEMD_UNIT_DIR, STEREOD_SYSUSERS_DIR,
-                                STEREOD_TMPFILES_DIR}) {
+        for (const char* dir :
+             {STEREOD_SYSTEMD_UNIT_DIR, STEREOD_SYSUSERS_DIR, STEREOD_TMPFILES_DIR}) {
             if (std::filesystem::path(dir).is_absolute())
                 return; // SetUp() skips: an absolute directory cannot go into a temporary prefix
         }
@@ -124,12 +123,11 @@ std::string SystemdUnits::install_log_;
 
 TEST_F(SystemdUnits, InstallPutsEverythingWhereTheDistributionExpectsIt)
 {
-    for (const std::string& file :
-         {unitPath("stereod.service"), unitPath("stereod.socket"),
-          installed(std::string(STEREOD_SYSUSERS_DIR) + "/stereod.conf"),
-          installed(std::string(STEREOD_TMPFILES_DIR) + "/stereod.conf"),
-          installed("share/stereod/stereod.yaml"), installed("bin/stereod"),
-          installed("bin/stereoctl")})
+    for (const std::string& file : {unitPath("stereod.service"), unitPath("stereod.socket"),
+                                    installed(std::string(STEREOD_SYSUSERS_DIR) + "/stereod.conf"),
+                                    installed(std::string(STEREOD_TMPFILES_DIR) + "/stereod.conf"),
+                                    installed("share/stereod/stereod.yaml"),
+                                    installed("bin/stereod"), installed("bin/stereoctl")})
         EXPECT_TRUE(std::filesystem::is_regular_file(file)) << file << "\n" << install_log_;
 }
 
@@ -150,8 +148,8 @@ TEST_F(SystemdUnits, SandboxRatesAsLowExposure)
     const std::string analyze = tool("systemd-analyze");
     ASSERT_FALSE(analyze.empty());
     // Exposure on systemd's 0..10 scale, times ten: at most 2.0 ("OK" is below 3.0).
-    const ProcessResult review = runProcess({analyze, "security", "--offline=yes",
-                                             "--threshold=20", unitPath("stereod.service")});
+    const ProcessResult review = runProcess(
+        {analyze, "security", "--offline=yes", "--threshold=20", unitPath("stereod.service")});
     EXPECT_EQ(review.exit_code, 0) << review.out << review.err;
     EXPECT_NE(review.out.find("Overall exposure level for stereod.service"), std::string::npos)
         << review.out << review.err;

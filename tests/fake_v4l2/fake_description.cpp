@@ -2,9 +2,9 @@
 
 #include <algorithm>
 #include <cstdio>
-#include <glob.h>
 #include <stdexcept>
 
+#include <glob.h>
 #include <yaml-cpp/yaml.h>
 
 #include "tests/fake_v4l2/fake_internal.hpp"
@@ -67,7 +67,8 @@ SizeSpec parseSize(const std::string& file, const YAML::Node& node,
         size_t pos = 0;
         while (pos < rest.size()) {
             const size_t comma = rest.find(',', pos);
-            const std::string item = rest.substr(pos, comma == std::string::npos ? comma : comma - pos);
+            const std::string item =
+                rest.substr(pos, comma == std::string::npos ? comma : comma - pos);
             char* end = nullptr;
             const double fps = std::strtod(item.c_str(), &end);
             if (end == item.c_str() || *end != '\0' || fps <= 0.0)
@@ -97,15 +98,54 @@ const std::vector<KnownControl>& knownControls()
         {"brightness", V4L2_CID_BRIGHTNESS, ControlType::Integer, -64, 64, 1, 0, {}},
         {"contrast", V4L2_CID_CONTRAST, ControlType::Integer, 0, 64, 1, 32, {}},
         {"gain", V4L2_CID_GAIN, ControlType::Integer, 0, 255, 1, 32, {}},
-        {"white_balance_automatic", V4L2_CID_AUTO_WHITE_BALANCE, ControlType::Boolean, 0, 1, 1, 1, {}},
-        {"white_balance_temperature", V4L2_CID_WHITE_BALANCE_TEMPERATURE, ControlType::Integer,
-         2800, 6500, 10, 4600, {}},
-        {"power_line_frequency", V4L2_CID_POWER_LINE_FREQUENCY, ControlType::Menu, 0, 2, 1, 1,
+        {"white_balance_automatic",
+         V4L2_CID_AUTO_WHITE_BALANCE,
+         ControlType::Boolean,
+         0,
+         1,
+         1,
+         1,
+         {}},
+        {"white_balance_temperature",
+         V4L2_CID_WHITE_BALANCE_TEMPERATURE,
+         ControlType::Integer,
+         2800,
+         6500,
+         10,
+         4600,
+         {}},
+        {"power_line_frequency",
+         V4L2_CID_POWER_LINE_FREQUENCY,
+         ControlType::Menu,
+         0,
+         2,
+         1,
+         1,
          {"Disabled", "50 Hz", "60 Hz"}},
-        {"exposure_auto", V4L2_CID_EXPOSURE_AUTO, ControlType::Menu, 0, 3, 1, 3,
+        {"exposure_auto",
+         V4L2_CID_EXPOSURE_AUTO,
+         ControlType::Menu,
+         0,
+         3,
+         1,
+         3,
          {"Auto Mode", "Manual Mode", "Shutter Priority Mode", "Aperture Priority Mode"}},
-        {"exposure_absolute", V4L2_CID_EXPOSURE_ABSOLUTE, ControlType::Integer, 3, 2047, 1, 250, {}},
-        {"exposure_auto_priority", V4L2_CID_EXPOSURE_AUTO_PRIORITY, ControlType::Boolean, 0, 1, 1, 0, {}},
+        {"exposure_absolute",
+         V4L2_CID_EXPOSURE_ABSOLUTE,
+         ControlType::Integer,
+         3,
+         2047,
+         1,
+         250,
+         {}},
+        {"exposure_auto_priority",
+         V4L2_CID_EXPOSURE_AUTO_PRIORITY,
+         ControlType::Boolean,
+         0,
+         1,
+         1,
+         0,
+         {}},
     };
     return controls;
 }
@@ -160,7 +200,8 @@ ControlSpec parseControl(const std::string& file, const YAML::Node& node)
     }
     if (control.minimum > control.maximum || control.step <= 0 ||
         control.default_value < control.minimum || control.default_value > control.maximum)
-        fail(file, node, "control '" + control.name + "': needs min <= default <= max and step > 0");
+        fail(file, node,
+             "control '" + control.name + "': needs min <= default <= max and step > 0");
     return control;
 }
 
@@ -193,8 +234,8 @@ DeviceSpec parseDevice(const std::string& file, const YAML::Node& node, size_t i
         device.by_id_path = by_id[0] == '/' ? by_id : "/dev/v4l/by-id/" + by_id;
     device.driver = get<std::string>(file, node, "driver", device.driver);
     device.card = get<std::string>(file, node, "card", device.path);
-    device.bus_info = get<std::string>(file, node, "bus_info",
-                                       "usb-fake-" + std::to_string(index + 1));
+    device.bus_info =
+        get<std::string>(file, node, "bus_info", "usb-fake-" + std::to_string(index + 1));
     device.images_glob = get<std::string>(file, node, "images", "");
     if (device.images_glob.empty())
         fail(file, node, "device '" + device.path + "' needs 'images' (a glob)");

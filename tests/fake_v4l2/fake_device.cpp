@@ -9,8 +9,8 @@
 #include <stdexcept>
 
 #include <fcntl.h>
-#include <pthread.h>
 #include <poll.h>
+#include <pthread.h>
 #include <sys/mman.h>
 #include <time.h>
 #include <unistd.h>
@@ -21,8 +21,9 @@ namespace stereod::fake {
 namespace {
 
 constexpr uint32_t kMinBuffers = 2;
-constexpr uint32_t kMaxBuffers = 32;   // VIDEO_MAX_FRAME
-constexpr uint32_t kTimestampFlags = V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC | V4L2_BUF_FLAG_TSTAMP_SRC_EOF;
+constexpr uint32_t kMaxBuffers = 32; // VIDEO_MAX_FRAME
+constexpr uint32_t kTimestampFlags =
+    V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC | V4L2_BUF_FLAG_TSTAMP_SRC_EOF;
 
 int64_t clockNs(clockid_t clock)
 {
@@ -31,15 +32,13 @@ int64_t clockNs(clockid_t clock)
     return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
-template <size_t N>
-void copyName(uint8_t (&dst)[N], const std::string& src)
+template <size_t N> void copyName(uint8_t (&dst)[N], const std::string& src)
 {
     std::memset(dst, 0, N);
     std::memcpy(dst, src.data(), std::min(src.size(), N - 1));
 }
 
-template <size_t N>
-void copyName(char (&dst)[N], const std::string& src)
+template <size_t N> void copyName(char (&dst)[N], const std::string& src)
 {
     std::memset(dst, 0, N);
     std::memcpy(dst, src.data(), std::min(src.size(), N - 1));
@@ -189,7 +188,8 @@ void Device::adjustFormat(v4l2_pix_format& pix) const
     pix.field = V4L2_FIELD_NONE;
     pix.bytesperline = bytesPerLine(format->fourcc, best->width);
     pix.sizeimage = imageBufferSize(format->fourcc, best->width, best->height);
-    pix.colorspace = format->fourcc == V4L2_PIX_FMT_MJPEG ? V4L2_COLORSPACE_JPEG : V4L2_COLORSPACE_SRGB;
+    pix.colorspace =
+        format->fourcc == V4L2_PIX_FMT_MJPEG ? V4L2_COLORSPACE_JPEG : V4L2_COLORSPACE_SRGB;
     pix.priv = priv == V4L2_PIX_FMT_PRIV_MAGIC ? V4L2_PIX_FMT_PRIV_MAGIC : 0;
 }
 
@@ -212,11 +212,13 @@ uint32_t Device::controlFlags(const ControlSpec& control) const
         const auto it = control_values_.find(id);
         return it == control_values_.end() ? fallback : it->second;
     };
-    if (control.id == V4L2_CID_EXPOSURE_ABSOLUTE && findControl(V4L2_CID_EXPOSURE_AUTO) != nullptr &&
+    if (control.id == V4L2_CID_EXPOSURE_ABSOLUTE &&
+        findControl(V4L2_CID_EXPOSURE_AUTO) != nullptr &&
         value(V4L2_CID_EXPOSURE_AUTO, V4L2_EXPOSURE_MANUAL) != V4L2_EXPOSURE_MANUAL)
         return V4L2_CTRL_FLAG_INACTIVE;
     if (control.id == V4L2_CID_WHITE_BALANCE_TEMPERATURE &&
-        findControl(V4L2_CID_AUTO_WHITE_BALANCE) != nullptr && value(V4L2_CID_AUTO_WHITE_BALANCE, 0) != 0)
+        findControl(V4L2_CID_AUTO_WHITE_BALANCE) != nullptr &&
+        value(V4L2_CID_AUTO_WHITE_BALANCE, 0) != 0)
         return V4L2_CTRL_FLAG_INACTIVE;
     return 0;
 }
@@ -362,7 +364,8 @@ int Device::reqbufs(OpenFile& file, v4l2_requestbuffers& req)
         freeBuffersLocked();
         return -error;
     }
-    void* memory = real::mmap(nullptr, memory_bytes_, PROT_READ | PROT_WRITE, MAP_SHARED, memfd_, 0);
+    void* memory =
+        real::mmap(nullptr, memory_bytes_, PROT_READ | PROT_WRITE, MAP_SHARED, memfd_, 0);
     if (memory == MAP_FAILED) {
         const int error = errno;
         freeBuffersLocked();
@@ -396,9 +399,11 @@ void Device::fillBuffer(uint32_t index, v4l2_buffer& buf) const
     buf.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
     buf.memory = V4L2_MEMORY_MMAP;
     buf.field = V4L2_FIELD_NONE;
-    buf.bytesused = b.state == BufferState::Done || b.state == BufferState::Dequeued ? b.bytesused : 0;
-    buf.flags = (spec_.monotonic_stamps ? kTimestampFlags
-                                        : V4L2_BUF_FLAG_TIMESTAMP_UNKNOWN | V4L2_BUF_FLAG_TSTAMP_SRC_EOF);
+    buf.bytesused =
+        b.state == BufferState::Done || b.state == BufferState::Dequeued ? b.bytesused : 0;
+    buf.flags =
+        (spec_.monotonic_stamps ? kTimestampFlags
+                                : V4L2_BUF_FLAG_TIMESTAMP_UNKNOWN | V4L2_BUF_FLAG_TSTAMP_SRC_EOF);
     if (b.mapped > 0)
         buf.flags |= V4L2_BUF_FLAG_MAPPED;
     if (b.state == BufferState::Queued || b.state == BufferState::Active)
@@ -524,8 +529,9 @@ void Device::produce()
     int64_t k = nextIndex(clockNs(CLOCK_MONOTONIC));
     std::uniform_real_distribution<double> jitter(-spec_.jitter_ms, spec_.jitter_ms);
     while (!stop_producer_ && plugged_) {
-        const int64_t due_ns = k * period_ns + phase_ns +
-                               (spec_.jitter_ms > 0.0 ? static_cast<int64_t>(jitter(rng_) * 1e6) : 0);
+        const int64_t due_ns =
+            k * period_ns + phase_ns +
+            (spec_.jitter_ms > 0.0 ? static_cast<int64_t>(jitter(rng_) * 1e6) : 0);
         const std::chrono::steady_clock::time_point due{std::chrono::nanoseconds(due_ns)};
         cv_.wait_until(lock, due, [&] { return stop_producer_ || !plugged_; });
         if (stop_producer_ || !plugged_)
@@ -534,7 +540,8 @@ void Device::produce()
         if (now_ns < stall_until_ns_) {
             // stall() notifies, so a new (or ended) stall takes effect at once.
             while (!stop_producer_ && plugged_ && clockNs(CLOCK_MONOTONIC) < stall_until_ns_)
-                cv_.wait_until(lock, std::chrono::steady_clock::time_point{std::chrono::nanoseconds(stall_until_ns_)});
+                cv_.wait_until(lock, std::chrono::steady_clock::time_point{
+                                         std::chrono::nanoseconds(stall_until_ns_)});
             k = nextIndex(clockNs(CLOCK_MONOTONIC));
             continue;
         }
@@ -797,8 +804,9 @@ void* Device::mmap(OpenFile& file, void* addr, size_t length, int prot, int flag
     }
     // vb2_mmap: shared mappings only, of one whole buffer at its offset.
     if ((flags & MAP_SHARED) == 0 || (prot & PROT_READ) == 0 || buffer_stride_ == 0 || offset < 0 ||
-        offset % buffer_stride_ != 0 || static_cast<size_t>(offset / buffer_stride_) >= buffers_.size() ||
-        length == 0 || length > buffer_stride_) {
+        offset % buffer_stride_ != 0 ||
+        static_cast<size_t>(offset / buffer_stride_) >= buffers_.size() || length == 0 ||
+        length > buffer_stride_) {
         *error = EINVAL;
         return nullptr;
     }

@@ -22,7 +22,7 @@ uint32_t bytesPerLine(uint32_t fourcc, uint32_t width)
     case V4L2_PIX_FMT_YUYV:
         return 2 * width;
     default:
-        return 0;   // compressed
+        return 0; // compressed
     }
 }
 
@@ -53,8 +53,8 @@ std::vector<uint8_t> packYuyv(const cv::Mat& bgr)
 } // namespace
 
 std::vector<std::vector<uint8_t>> renderFrames(const std::vector<std::string>& image_files,
-                                               uint32_t fourcc, uint32_t width,
-                                               uint32_t height, int jpeg_quality)
+                                               uint32_t fourcc, uint32_t width, uint32_t height,
+                                               int jpeg_quality)
 {
     std::vector<std::vector<uint8_t>> frames;
     frames.reserve(image_files.size());

@@ -13,9 +13,8 @@
 #include <vector>
 
 #include <linux/videodev2.h>
-#include <sys/types.h>
-
 #include <opencv2/core/mat.hpp>
+#include <sys/types.h>
 
 #include "tests/fake_v4l2/fake_v4l2.hpp"
 
@@ -26,11 +25,11 @@ namespace stereod::fake {
 struct SizeSpec {
     uint32_t width = 0;
     uint32_t height = 0;
-    std::vector<double> fps;           // offered rates, first is the default
+    std::vector<double> fps; // offered rates, first is the default
 };
 
 struct FormatSpec {
-    uint32_t fourcc = 0;               // V4L2_PIX_FMT_GREY / YUYV / MJPEG
+    uint32_t fourcc = 0; // V4L2_PIX_FMT_GREY / YUYV / MJPEG
     std::vector<SizeSpec> sizes;
 };
 
@@ -44,12 +43,12 @@ struct ControlSpec {
     int32_t maximum = 0;
     int32_t step = 1;
     int32_t default_value = 0;
-    std::vector<std::string> menu;     // menu item names, index = value
+    std::vector<std::string> menu; // menu item names, index = value
 };
 
 struct DeviceSpec {
-    std::string path;                  // absolute device path
-    std::string by_id_path;            // /dev/v4l/by-id/NAME or empty
+    std::string path;       // absolute device path
+    std::string by_id_path; // /dev/v4l/by-id/NAME or empty
     std::string driver = "uvcvideo";
     std::string card;
     std::string bus_info;
@@ -67,7 +66,7 @@ struct DeviceSpec {
 };
 
 struct Description {
-    std::string source_path;           // the YAML file
+    std::string source_path; // the YAML file
     std::string control_fifo;
     uint32_t seed = 1;
     std::vector<DeviceSpec> devices;
@@ -88,8 +87,8 @@ uint32_t bytesPerLine(uint32_t fourcc, uint32_t width);
 // (MJPG: a JPEG of quality `jpeg_quality`). Throws std::runtime_error if an image does
 // not load.
 std::vector<std::vector<uint8_t>> renderFrames(const std::vector<std::string>& image_files,
-                                               uint32_t fourcc, uint32_t width,
-                                               uint32_t height, int jpeg_quality);
+                                               uint32_t fourcc, uint32_t width, uint32_t height,
+                                               int jpeg_quality);
 
 // ---- the real libc functions (next definition after ours) ---------------------------
 
@@ -110,8 +109,8 @@ class Device;
 struct OpenFile {
     int fd = -1;
     std::shared_ptr<Device> device;
-    uint64_t generation = 0;           // device generation at open; differs after unplug
-    bool signalled = false;            // eventfd counter > 0 (guarded by device mutex)
+    uint64_t generation = 0; // device generation at open; differs after unplug
+    bool signalled = false;  // eventfd counter > 0 (guarded by device mutex)
 };
 
 enum class CorruptKind { Truncated, BytesUsed, Error };
@@ -119,7 +118,7 @@ enum class CorruptKind { Truncated, BytesUsed, Error };
 // Thread-safe: every member function locks the device mutex; one producer thread per
 // streaming device.
 class Device {
-public:
+  public:
     Device(DeviceSpec spec, uint32_t seed, int64_t epoch_ns);
     ~Device();
 
@@ -142,11 +141,11 @@ public:
     void stall(int64_t ms);
     void drop(uint32_t frames);
     void corrupt(uint32_t frames, CorruptKind kind);
-    void shutdown();                    // stop streaming for good (unload)
+    void shutdown(); // stop streaming for good (unload)
 
     StereodFakeV4l2Stats stats();
 
-private:
+  private:
     enum class BufferState { Dequeued, Queued, Active, Done };
     struct Buffer {
         BufferState state = BufferState::Dequeued;
@@ -186,12 +185,12 @@ private:
     int64_t reportedStampNs(int64_t monotonic_ns) const;
 
     const DeviceSpec spec_;
-    const int64_t epoch_ns_;            // CLOCK_MONOTONIC at load: the skew's origin
+    const int64_t epoch_ns_; // CLOCK_MONOTONIC at load: the skew's origin
 
     mutable std::mutex mutex_;
-    std::condition_variable cv_;        // frame done, stream stopped, unplug, stop request
+    std::condition_variable cv_; // frame done, stream stopped, unplug, stop request
     std::vector<OpenFile*> files_;
-    uint64_t generation_ = 1;           // bumped at unplug: older OpenFiles are dead
+    uint64_t generation_ = 1; // bumped at unplug: older OpenFiles are dead
     bool plugged_ = true;
 
     uint32_t pixelformat_ = 0;
@@ -200,12 +199,12 @@ private:
     double fps_ = 0.0;
     std::map<uint32_t, int32_t> control_values_;
 
-    const OpenFile* owner_ = nullptr;   // the open file that owns the buffer queue
+    const OpenFile* owner_ = nullptr; // the open file that owns the buffer queue
     std::vector<Buffer> buffers_;
-    uint32_t buffer_stride_ = 0;        // bytes between buffer offsets (page multiple)
+    uint32_t buffer_stride_ = 0; // bytes between buffer offsets (page multiple)
     uint32_t size_image_ = 0;
     int memfd_ = -1;
-    uint8_t* memory_ = nullptr;         // the producer's mapping of all buffers
+    uint8_t* memory_ = nullptr; // the producer's mapping of all buffers
     size_t memory_bytes_ = 0;
     std::vector<Mapping> mappings_;
     std::deque<uint32_t> queued_;
@@ -264,7 +263,7 @@ std::string emptyDirectory();
 // RAII guard: while alive on a thread, the interposed functions forward everything (so
 // the fake's own use of libc, e.g. loading images, never re-enters it).
 class Passthrough {
-public:
+  public:
     Passthrough() noexcept;
     ~Passthrough();
     Passthrough(const Passthrough&) = delete;

@@ -5,6 +5,7 @@
 #include <cerrno>
 #include <cstdarg>
 #include <cstring>
+#include <filesystem>
 #include <mutex>
 #include <unordered_map>
 
@@ -22,15 +23,12 @@
 #include <sys/sysmacros.h>
 #include <unistd.h>
 
-#include <filesystem>
-
 #include "tests/fake_v4l2/fake_internal.hpp"
 
 namespace stereod::fake {
 namespace {
 
-template <typename F>
-F next(const char* name)
+template <typename F> F next(const char* name)
 {
     void* symbol = dlsym(RTLD_NEXT, name);
     if (symbol == nullptr)
@@ -41,8 +39,7 @@ F next(const char* name)
 // The real function behind an interposed one, looked up once. An atomic, not a function
 // static: the guard of a function static lives in libstdc++, which ThreadSanitizer does
 // not see in every build, and two capture threads reach the first poll() together.
-template <typename F>
-F cachedNext(std::atomic<F>& cache, const char* name)
+template <typename F> F cachedNext(std::atomic<F>& cache, const char* name)
 {
     F function = cache.load(std::memory_order_acquire);
     if (function == nullptr) {
@@ -52,8 +49,8 @@ F cachedNext(std::atomic<F>& cache, const char* name)
     return function;
 }
 
-#define STEREOD_REAL(name, type)                                                       \
-    static std::atomic<type> real_##name##_cache{nullptr};                             \
+#define STEREOD_REAL(name, type)                                                                   \
+    static std::atomic<type> real_##name##_cache{nullptr};                                         \
     const type real_##name = cachedNext(real_##name##_cache, #name)
 
 using OpenFn = int (*)(const char*, int, ...);
@@ -215,7 +212,7 @@ void fillCharDevice(struct stat* st, const std::shared_ptr<Device>& device)
     std::memset(st, 0, sizeof *st);
     st->st_mode = S_IFCHR | 0660;
     st->st_nlink = 1;
-    st->st_gid = 44;   // the "video" group
+    st->st_gid = 44; // the "video" group
     // Major 81 is V4L; minors far above any real node so no sysfs entry matches.
     st->st_rdev = makedev(81, 200 + (std::hash<std::string>{}(device->spec().path) % 50));
     st->st_blksize = 4096;
@@ -236,10 +233,11 @@ int statPath(const char* path, struct stat* st, bool follow)
         }
         return 0;
     }
-    return 1;   // not fake
+    return 1; // not fake
 }
 
-int pollFds(pollfd* fds, nfds_t count, int timeout_ms, const timespec* timeout, const sigset_t* mask)
+int pollFds(pollfd* fds, nfds_t count, int timeout_ms, const timespec* timeout,
+            const sigset_t* mask)
 {
     STEREOD_REAL(poll, PollFn);
     STEREOD_REAL(ppoll, PpollFn);
@@ -253,7 +251,7 @@ int pollFds(pollfd* fds, nfds_t count, int timeout_ms, const timespec* timeout, 
     for (nfds_t i = 0; i < count; ++i) {
         asked[i] = fds[i].events;
         if (isFakeFd(fds[i].fd))
-            fds[i].events = POLLIN;   // the eventfd is readable whenever events are pending
+            fds[i].events = POLLIN; // the eventfd is readable whenever events are pending
     }
     const int rc = timeout_ms == INT_MIN ? real_ppoll(fds, count, timeout, mask)
                                          : real_poll(fds, count, timeout_ms);
@@ -263,7 +261,8 @@ int pollFds(pollfd* fds, nfds_t count, int timeout_ms, const timespec* timeout, 
         if (rc < 0)
             continue;
         if (isFakeFd(fds[i].fd))
-            fds[i].revents = static_cast<short>(publishedEvents(fds[i].fd) & (asked[i] | POLLERR | POLLHUP));
+            fds[i].revents =
+                static_cast<short>(publishedEvents(fds[i].fd) & (asked[i] | POLLERR | POLLHUP));
         if (fds[i].revents != 0)
             ++ready;
     }
@@ -340,7 +339,8 @@ STEREOD_EXPORT int openat(int dirfd, const char* path, int flags, ...)
 
 // On LP64, open64/openat64 are open/openat.
 STEREOD_EXPORT int open64(const char* path, int flags, ...) __attribute__((alias("open")));
-STEREOD_EXPORT int openat64(int dirfd, const char* path, int flags, ...) __attribute__((alias("openat")));
+STEREOD_EXPORT int openat64(int dirfd, const char* path, int flags, ...)
+    __attribute__((alias("openat")));
 
 STEREOD_EXPORT int __open_2(const char* path, int flags)
 {
@@ -379,14 +379,16 @@ STEREOD_EXPORT int ioctl(int fd, unsigned long request, ...) noexcept
     return real_ioctl(fd, request, arg);
 }
 
-STEREOD_EXPORT void* mmap(void* addr, size_t length, int prot, int flags, int fd, off_t offset) noexcept
+STEREOD_EXPORT void* mmap(void* addr, size_t length, int prot, int flags, int fd,
+                          off_t offset) noexcept
 {
     if (isFakeFd(fd))
         return mmapFd(addr, length, prot, flags, fd, offset);
     return real::mmap(addr, length, prot, flags, fd, offset);
 }
 
-STEREOD_EXPORT void* mmap64(void* addr, size_t length, int prot, int flags, int fd, off64_t offset) noexcept
+STEREOD_EXPORT void* mmap64(void* addr, size_t length, int prot, int flags, int fd,
+                            off64_t offset) noexcept
 {
     return mmap(addr, length, prot, flags, fd, offset);
 }
@@ -402,7 +404,7 @@ STEREOD_EXPORT int munmap(void* addr, size_t length) noexcept
 STEREOD_EXPORT ssize_t read(int fd, void* buf, size_t count)
 {
     if (isFakeFd(fd))
-        return fail(EINVAL);   // no V4L2_CAP_READWRITE
+        return fail(EINVAL); // no V4L2_CAP_READWRITE
     return real::read(fd, buf, count);
 }
 
@@ -440,8 +442,8 @@ STEREOD_EXPORT __attribute__((no_sanitize("address"))) long syscall(long number,
     va_end(args);
     switch (number) {
     case SYS_openat:
-        return openPath(static_cast<int>(a[0]), reinterpret_cast<const char*>(a[1]), static_cast<int>(a[2]),
-                        static_cast<mode_t>(a[3]));
+        return openPath(static_cast<int>(a[0]), reinterpret_cast<const char*>(a[1]),
+                        static_cast<int>(a[2]), static_cast<mode_t>(a[3]));
     case SYS_open:
         return openPath(AT_FDCWD, reinterpret_cast<const char*>(a[0]), static_cast<int>(a[1]),
                         static_cast<mode_t>(a[2]));
@@ -449,7 +451,8 @@ STEREOD_EXPORT __attribute__((no_sanitize("address"))) long syscall(long number,
         return closeFd(static_cast<int>(a[0]));
     case SYS_ioctl:
         if (isFakeFd(static_cast<int>(a[0])))
-            return ioctlFd(static_cast<int>(a[0]), static_cast<unsigned long>(a[1]), reinterpret_cast<void*>(a[2]));
+            return ioctlFd(static_cast<int>(a[0]), static_cast<unsigned long>(a[1]),
+                           reinterpret_cast<void*>(a[2]));
         break;
     case SYS_read:
     case SYS_write:
@@ -457,8 +460,9 @@ STEREOD_EXPORT __attribute__((no_sanitize("address"))) long syscall(long number,
             return fail(EINVAL);
         break;
     case SYS_mmap: {
-        void* mapped = mmap(reinterpret_cast<void*>(a[0]), static_cast<size_t>(a[1]), static_cast<int>(a[2]),
-                            static_cast<int>(a[3]), static_cast<int>(a[4]), static_cast<off_t>(a[5]));
+        void* mapped =
+            mmap(reinterpret_cast<void*>(a[0]), static_cast<size_t>(a[1]), static_cast<int>(a[2]),
+                 static_cast<int>(a[3]), static_cast<int>(a[4]), static_cast<off_t>(a[5]));
         return reinterpret_cast<long>(mapped);
     }
     case SYS_munmap:
@@ -561,8 +565,9 @@ STEREOD_EXPORT ssize_t readlink(const char* path, char* buf, size_t size) noexce
             if (!is_link)
                 return fail(EINVAL);
             const std::filesystem::path link(device->spec().by_id_path);
-            const std::string target =
-                std::filesystem::path(device->spec().path).lexically_relative(link.parent_path()).string();
+            const std::string target = std::filesystem::path(device->spec().path)
+                                           .lexically_relative(link.parent_path())
+                                           .string();
             const size_t n = std::min(size, target.size());
             std::memcpy(buf, target.data(), n);
             return static_cast<ssize_t>(n);

@@ -358,7 +358,8 @@ bool isFakeDirectory(const std::string& raw)
     for (const auto& device : r.devices)
         if (!device->spec().by_id_path.empty()) {
             // Every ancestor of a by-id link (e.g. /dev/v4l and /dev/v4l/by-id).
-            for (std::filesystem::path p = std::filesystem::path(device->spec().by_id_path).parent_path();
+            for (std::filesystem::path p =
+                     std::filesystem::path(device->spec().by_id_path).parent_path();
                  p.has_relative_path(); p = p.parent_path())
                 if (p == directory)
                     return true;
@@ -393,8 +394,8 @@ __attribute__((visibility("default"))) int stereod_fake_v4l2_load(const char* de
     std::unique_lock lock(r.mutex);
     const int64_t epoch = monotonicNs();
     for (size_t i = 0; i < description.devices.size(); ++i)
-        r.devices.push_back(std::make_shared<Device>(description.devices[i],
-                                                     description.seed + static_cast<uint32_t>(i), epoch));
+        r.devices.push_back(std::make_shared<Device>(
+            description.devices[i], description.seed + static_cast<uint32_t>(i), epoch));
     if (r.empty_dir.empty()) {
         char dir[] = "/tmp/stereod-fake-v4l2-XXXXXX";
         if (mkdtemp(dir) != nullptr)
@@ -474,7 +475,8 @@ __attribute__((visibility("default"))) int stereod_fake_v4l2_command(const char*
         else if (kind == "error")
             device->corrupt(static_cast<uint32_t>(frames), CorruptKind::Error);
         else
-            return setError(-EINVAL, "corrupt kind '" + kind + "' is not truncated, bytesused or error");
+            return setError(-EINVAL,
+                            "corrupt kind '" + kind + "' is not truncated, bytesused or error");
     } else {
         return setError(-EINVAL, "unknown command '" + verb + "'");
     }
@@ -491,20 +493,23 @@ __attribute__((visibility("default"))) int stereod_fake_v4l2_replug(const char* 
     return stereod_fake_v4l2_command((std::string("replug ") + (device ? device : "")).c_str());
 }
 
-__attribute__((visibility("default"))) int stereod_fake_v4l2_stall(const char* device, int32_t milliseconds)
+__attribute__((visibility("default"))) int stereod_fake_v4l2_stall(const char* device,
+                                                                   int32_t milliseconds)
 {
     return stereod_fake_v4l2_command(
-        (std::string("stall ") + (device ? device : "") + " " + std::to_string(milliseconds)).c_str());
+        (std::string("stall ") + (device ? device : "") + " " + std::to_string(milliseconds))
+            .c_str());
 }
 
-__attribute__((visibility("default"))) int stereod_fake_v4l2_drop(const char* device, int32_t frames)
+__attribute__((visibility("default"))) int stereod_fake_v4l2_drop(const char* device,
+                                                                  int32_t frames)
 {
     return stereod_fake_v4l2_command(
         (std::string("drop ") + (device ? device : "") + " " + std::to_string(frames)).c_str());
 }
 
-__attribute__((visibility("default"))) int stereod_fake_v4l2_corrupt(const char* device, int32_t frames,
-                                                                     const char* kind)
+__attribute__((visibility("default"))) int
+stereod_fake_v4l2_corrupt(const char* device, int32_t frames, const char* kind)
 {
     return stereod_fake_v4l2_command((std::string("corrupt ") + (device ? device : "") + " " +
                                       std::to_string(frames) + " " + (kind ? kind : ""))

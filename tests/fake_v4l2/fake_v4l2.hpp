@@ -124,19 +124,19 @@ extern "C" {
 
 // Counters of one device, for tests (e.g. all buffers back after close, fd leaks).
 struct StereodFakeV4l2Stats {
-    uint64_t frames_done;      // frames completed into a buffer since load
-    uint64_t frames_lost;      // frame periods without a delivered frame since load
-    uint64_t next_sequence;    // sequence number the next frame will carry
-    int32_t open_fds;          // open file descriptions of this device
-    int32_t buffers;           // buffers allocated by REQBUFS
-    int32_t buffers_mapped;    // live mmap()s of those buffers
-    int32_t buffers_queued;    // buffers with the driver (queued or done)
-    int32_t streaming;         // 1 while streaming
-    int32_t plugged;           // 0 after unplug
-    uint32_t width;            // current format
+    uint64_t frames_done;   // frames completed into a buffer since load
+    uint64_t frames_lost;   // frame periods without a delivered frame since load
+    uint64_t next_sequence; // sequence number the next frame will carry
+    int32_t open_fds;       // open file descriptions of this device
+    int32_t buffers;        // buffers allocated by REQBUFS
+    int32_t buffers_mapped; // live mmap()s of those buffers
+    int32_t buffers_queued; // buffers with the driver (queued or done)
+    int32_t streaming;      // 1 while streaming
+    int32_t plugged;        // 0 after unplug
+    uint32_t width;         // current format
     uint32_t height;
-    uint32_t pixelformat;      // V4L2 fourcc
-    double fps;                // current frame rate
+    uint32_t pixelformat; // V4L2 fourcc
+    double fps;           // current frame rate
 };
 
 // Loads a description (replacing any loaded one; open fake fds become dead). Returns 0,

@@ -15,18 +15,17 @@
 #include <vector>
 
 #include <fcntl.h>
+#include <gtest/gtest.h>
 #include <libv4l2.h>
 #include <linux/videodev2.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <poll.h>
 #include <sys/ioctl.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
-
-#include <gtest/gtest.h>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include "tests/fake_v4l2/fake_v4l2.hpp"
 
@@ -56,7 +55,7 @@ cv::Mat expectedGray(const std::string& file, int width, int height)
 }
 
 class FakeV4l2Test : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override
     {
         dir_ = fs::temp_directory_path() /
@@ -75,25 +74,26 @@ protected:
     void load(const std::string& extra = "", const std::string& top = "")
     {
         const fs::path file = dir_ / "devices.yaml";
-        std::ofstream(file) << top << "devices:\n"
-                            << "  - path: " << kLeft << "\n"
-                            << "    by_id: " << fs::path(kById).filename().string() << "\n"
-                            << "    card: Fake Stereo Left\n"
-                            << "    images: " << kSamples << "/left0[1-3].jpg\n"
-                            << "    fps: [100, 30]\n"
-                            << "    formats:\n"
-                            << "      - fourcc: GREY\n"
-                            << "        sizes: [320x240, 640x480@30]\n"
-                            << "      - fourcc: YUYV\n"
-                            << "        sizes: [320x240]\n"
-                            << "      - fourcc: MJPG\n"
-                            << "        sizes: [320x240, 1280x720@10]\n"
-                            << "    controls:\n"
-                            << "      - { name: exposure_auto, default: 3 }\n"
-                            << "      - { name: exposure_absolute, min: 3, max: 2047, step: 1, default: 250 }\n"
-                            << "      - { name: gain, min: 0, max: 100, step: 4, default: 32 }\n"
-                            << "      - { name: power_line_frequency, default: 1 }\n"
-                            << extra;
+        std::ofstream(file)
+            << top << "devices:\n"
+            << "  - path: " << kLeft << "\n"
+            << "    by_id: " << fs::path(kById).filename().string() << "\n"
+            << "    card: Fake Stereo Left\n"
+            << "    images: " << kSamples << "/left0[1-3].jpg\n"
+            << "    fps: [100, 30]\n"
+            << "    formats:\n"
+            << "      - fourcc: GREY\n"
+            << "        sizes: [320x240, 640x480@30]\n"
+            << "      - fourcc: YUYV\n"
+            << "        sizes: [320x240]\n"
+            << "      - fourcc: MJPG\n"
+            << "        sizes: [320x240, 1280x720@10]\n"
+            << "    controls:\n"
+            << "      - { name: exposure_auto, default: 3 }\n"
+            << "      - { name: exposure_absolute, min: 3, max: 2047, step: 1, default: 250 }\n"
+            << "      - { name: gain, min: 0, max: 100, step: 4, default: 32 }\n"
+            << "      - { name: power_line_frequency, default: 1 }\n"
+            << extra;
         ASSERT_EQ(stereod_fake_v4l2_load(file.c_str()), 0) << stereod_fake_v4l2_last_error();
     }
 
@@ -108,7 +108,7 @@ protected:
 // Streams through libv4l2 as a capture loop does; buffers are unmapped and freed in the
 // destructor.
 class Session {
-public:
+  public:
     Session(const char* path, uint32_t fourcc, uint32_t width, uint32_t height, int flags = 0)
     {
         fd_ = v4l2_open(path, O_RDWR | flags);
@@ -156,7 +156,8 @@ public:
             buf.memory = V4L2_MEMORY_MMAP;
             buf.index = i;
             EXPECT_EQ(v4l2_ioctl(fd_, VIDIOC_QUERYBUF, &buf), 0);
-            void* map = v4l2_mmap(nullptr, buf.length, PROT_READ | PROT_WRITE, MAP_SHARED, fd_, buf.m.offset);
+            void* map = v4l2_mmap(nullptr, buf.length, PROT_READ | PROT_WRITE, MAP_SHARED, fd_,
+                                  buf.m.offset);
             EXPECT_NE(map, MAP_FAILED) << std::strerror(errno);
             maps_.push_back(static_cast<uint8_t*>(map));
             lengths_.push_back(buf.length);
@@ -200,7 +201,7 @@ public:
 
     const uint8_t* data(uint32_t index) const { return maps_[index]; }
 
-private:
+  private:
     int fd_ = -1;
     int format_rc_ = -1;
     v4l2_pix_format format_{};
@@ -228,7 +229,8 @@ TEST_F(FakeV4l2Test, QuerycapAndEnumerationDescribeTheDevice)
     for (desc.index = 0; v4l2_ioctl(fd, VIDIOC_ENUM_FMT, &desc) == 0; ++desc.index)
         if (!(desc.flags & V4L2_FMT_FLAG_EMULATED))
             native.push_back(desc.pixelformat);
-    EXPECT_EQ(native, (std::vector<uint32_t>{V4L2_PIX_FMT_GREY, V4L2_PIX_FMT_YUYV, V4L2_PIX_FMT_MJPEG}));
+    EXPECT_EQ(native,
+              (std::vector<uint32_t>{V4L2_PIX_FMT_GREY, V4L2_PIX_FMT_YUYV, V4L2_PIX_FMT_MJPEG}));
 
     std::vector<std::pair<uint32_t, uint32_t>> sizes;
     v4l2_frmsizeenum size{};
@@ -244,7 +246,8 @@ TEST_F(FakeV4l2Test, QuerycapAndEnumerationDescribeTheDevice)
     interval.pixel_format = V4L2_PIX_FMT_GREY;
     interval.width = 320;
     interval.height = 240;
-    for (interval.index = 0; v4l2_ioctl(fd, VIDIOC_ENUM_FRAMEINTERVALS, &interval) == 0; ++interval.index)
+    for (interval.index = 0; v4l2_ioctl(fd, VIDIOC_ENUM_FRAMEINTERVALS, &interval) == 0;
+         ++interval.index)
         rates.push_back(interval.discrete.denominator / interval.discrete.numerator);
     EXPECT_EQ(rates, (std::vector<uint32_t>{100, 30}));
     interval = v4l2_frmivalenum{};
@@ -286,7 +289,8 @@ TEST_F(FakeV4l2Test, FormatAndRateAdjustToWhatIsOffered)
     parm.parm.capture.timeperframe = {1, 60};
     ASSERT_EQ(v4l2_ioctl(fd, VIDIOC_S_PARM, &parm), 0);
     EXPECT_TRUE(parm.parm.capture.capability & V4L2_CAP_TIMEPERFRAME);
-    EXPECT_EQ(parm.parm.capture.timeperframe.denominator / parm.parm.capture.timeperframe.numerator, 30u)
+    EXPECT_EQ(parm.parm.capture.timeperframe.denominator / parm.parm.capture.timeperframe.numerator,
+              30u)
         << "640x480 GREY offers 30 fps only";
 
     v4l2_format current{};
@@ -393,7 +397,8 @@ TEST_P(FakeV4l2StreamTest, FramesDecodeToTheSourceImages)
         EXPECT_TRUE(buf.flags & V4L2_BUF_FLAG_MAPPED);
         EXPECT_FALSE(buf.flags & V4L2_BUF_FLAG_QUEUED);
         EXPECT_EQ(buf.field, V4L2_FIELD_NONE);
-        const int64_t stamp = buf.timestamp.tv_sec * 1'000'000'000LL + buf.timestamp.tv_usec * 1000LL;
+        const int64_t stamp =
+            buf.timestamp.tv_sec * 1'000'000'000LL + buf.timestamp.tv_usec * 1000LL;
         EXPECT_LE(stamp, now);
         EXPECT_GT(stamp, now - 2'000'000'000LL);
         EXPECT_GT(stamp, previous_stamp);
@@ -420,7 +425,8 @@ TEST_P(FakeV4l2StreamTest, FramesDecodeToTheSourceImages)
             EXPECT_EQ(data[1], 0xD8) << "JPEG SOI";
             EXPECT_EQ(data[buf.bytesused - 2], 0xFF);
             EXPECT_EQ(data[buf.bytesused - 1], 0xD9) << "JPEG EOI";
-            const cv::Mat jpeg(1, static_cast<int>(buf.bytesused), CV_8UC1, const_cast<uint8_t*>(data));
+            const cv::Mat jpeg(1, static_cast<int>(buf.bytesused), CV_8UC1,
+                               const_cast<uint8_t*>(data));
             gray = cv::imdecode(jpeg, cv::IMREAD_GRAYSCALE);
             ASSERT_EQ(gray.size(), expected.size());
             cv::Mat diff;
@@ -441,7 +447,9 @@ INSTANTIATE_TEST_SUITE_P(Formats, FakeV4l2StreamTest,
                          ::testing::Values(FormatCase{V4L2_PIX_FMT_GREY, "GREY"},
                                            FormatCase{V4L2_PIX_FMT_YUYV, "YUYV"},
                                            FormatCase{V4L2_PIX_FMT_MJPEG, "MJPG"}),
-                         [](const ::testing::TestParamInfo<FormatCase>& param) { return param.param.name; });
+                         [](const ::testing::TestParamInfo<FormatCase>& param) {
+                             return param.param.name;
+                         });
 
 TEST_F(FakeV4l2Test, BufferQueueErrorsFollowVideobuf2)
 {
@@ -482,10 +490,12 @@ TEST_F(FakeV4l2Test, BufferQueueErrorsFollowVideobuf2)
     query.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
     query.index = 1;
     ASSERT_EQ(v4l2_ioctl(s.fd(), VIDIOC_QUERYBUF, &query), 0);
-    EXPECT_EQ(mmap(nullptr, query.length, PROT_READ, MAP_PRIVATE, s.fd(), query.m.offset), MAP_FAILED)
+    EXPECT_EQ(mmap(nullptr, query.length, PROT_READ, MAP_PRIVATE, s.fd(), query.m.offset),
+              MAP_FAILED)
         << "vb2 maps MAP_SHARED only";
     EXPECT_EQ(errno, EINVAL);
-    EXPECT_EQ(mmap(nullptr, query.length, PROT_READ, MAP_SHARED, s.fd(), query.m.offset + 4096), MAP_FAILED);
+    EXPECT_EQ(mmap(nullptr, query.length, PROT_READ, MAP_SHARED, s.fd(), query.m.offset + 4096),
+              MAP_FAILED);
 
     // A stalled device completes nothing: DQBUF on an O_NONBLOCK fd says EAGAIN.
     ASSERT_EQ(stereod_fake_v4l2_stall(kLeft, 60'000), 0);

@@ -32,9 +32,9 @@ struct Metrics {
 };
 
 struct Scene {
-    cv::Mat left;        // CV_8UC1
+    cv::Mat left; // CV_8UC1
     cv::Mat right;
-    cv::Mat gt_px;       // CV_32FC1, pixels, 0 = unknown
+    cv::Mat gt_px; // CV_32FC1, pixels, 0 = unknown
 };
 
 Scene loadScene(const std::string& left, const std::string& right, const std::string& gt,
@@ -122,8 +122,8 @@ DepthResult runOurs(const Scene& s, const ProcessorSettings& settings,
 // 100 %) and StereoBM's speckle range given in pixels instead of 1/16 px (density -4.1
 // points); the uniqueness and left-right settings move these scenes by tenths only, so
 // that they reach OpenCV is checked in processor_test instead.
-constexpr double kBad2Slack = 0.5;      // percentage points worse than OpenCV at most
-constexpr double kDensitySlack = 2.0;   // percentage points lower than OpenCV at most
+constexpr double kBad2Slack = 0.5;    // percentage points worse than OpenCV at most
+constexpr double kDensitySlack = 2.0; // percentage points lower than OpenCV at most
 
 void compareSgbm(const char* name, const Scene& s, double min_depth_m, int num_disparities,
                  double max_bad2, double min_density)
@@ -138,7 +138,8 @@ void compareSgbm(const char* name, const Scene& s, double min_depth_m, int num_d
     const DepthResult out = runOurs(s, settings, calibration, num_disparities);
 
     const Metrics ours = evaluate(out.disparity, s.gt_px);
-    const Metrics ref = evaluate(openCvSgbm(s, num_disparities, cv::StereoSGBM::MODE_SGBM), s.gt_px);
+    const Metrics ref =
+        evaluate(openCvSgbm(s, num_disparities, cv::StereoSGBM::MODE_SGBM), s.gt_px);
     printRow(name, "sgbm", ours, ref);
     EXPECT_LE(ours.bad2_percent, ref.bad2_percent + kBad2Slack) << name;
     EXPECT_GE(ours.density_percent, ref.density_percent - kDensitySlack) << name;
@@ -202,7 +203,8 @@ constexpr double kAloeDoffsPx = 270.0;
 
 // The same statistic as NearestObjectFinder, over the ground truth: the percentile (by
 // sorting, independently of nth_element) of the in-range GT depths in the region.
-double groundTruthNearest(const cv::Mat& gt_px, const NearestSettings& n, const RectifiedGeometry& g)
+double groundTruthNearest(const cv::Mat& gt_px, const NearestSettings& n,
+                          const RectifiedGeometry& g)
 {
     const cv::Rect r = regionPixels(n.roi, gt_px.size());
     std::vector<double> depths;
@@ -225,15 +227,14 @@ double groundTruthNearest(const cv::Mat& gt_px, const NearestSettings& n, const 
 // and every check on it lives in this one test (ctest runs each test in its own process).
 TEST(Accuracy, AloeFullSizeSgbm3WayAndNearestDistance)
 {
-    const Scene s = loadScene(kSamples + "aloeL.jpg", kSamples + "aloeR.jpg",
-                              kSamples + "aloeGT.png", 1.0);
+    const Scene s =
+        loadScene(kSamples + "aloeL.jpg", kSamples + "aloeR.jpg", kSamples + "aloeGT.png", 1.0);
     ASSERT_FALSE(s.left.empty() || s.right.empty() || s.gt_px.empty())
         << "Aloe not found under " << kSamples << " (Debian package opencv-doc)";
     ASSERT_EQ(s.left.size(), cv::Size(1282, 1110));
 
-    const StereoCalibration calibration =
-        makeRectifiedCalibration(s.left.size(), kAloeFocalPx, kAloeBaselineM, std::nullopt,
-                                 std::nullopt, kAloeDoffsPx);
+    const StereoCalibration calibration = makeRectifiedCalibration(
+        s.left.size(), kAloeFocalPx, kAloeBaselineM, std::nullopt, std::nullopt, kAloeDoffsPx);
     ProcessorSettings settings;
     settings.matcher.kind = MatcherKind::Sgbm;
     settings.matcher.sgbm_mode = SgbmMode::ThreeWay;

@@ -145,7 +145,7 @@ TEST(DescribeBoard, MeasuresPositionSizeAndRollOfAMovedImage)
     const BoardAppearance b =
         describeBoard(corners(moved(image, -64.0, 48.0, 20.0)), kBoard, kImage);
     // The board's centre is rotated about the image centre, then moved.
-    const double angle = -20.0 * CV_PI / 180.0;   // warpAffine turns counter-clockwise
+    const double angle = -20.0 * CV_PI / 180.0; // warpAffine turns counter-clockwise
     const cv::Point2d from(a.centre_frac.x * kImage.width - 320.0,
                            a.centre_frac.y * kImage.height - 240.0);
     const cv::Point2d expected(320.0 + std::cos(angle) * from.x - std::sin(angle) * from.y - 64.0,
@@ -153,7 +153,7 @@ TEST(DescribeBoard, MeasuresPositionSizeAndRollOfAMovedImage)
     EXPECT_NEAR(b.centre_frac.x * kImage.width, expected.x, 1.0);
     EXPECT_NEAR(b.centre_frac.y * kImage.height, expected.y, 1.0);
     EXPECT_NEAR(b.size_frac, a.size_frac, 0.01 * a.size_frac);
-    double roll = a.roll_deg - b.roll_deg;   // counter-clockwise in the image: roll falls
+    double roll = a.roll_deg - b.roll_deg; // counter-clockwise in the image: roll falls
     roll -= 180.0 * std::round(roll / 180.0);
     EXPECT_NEAR(roll, 20.0, 1.0);
     EXPECT_THROW(describeBoard(std::vector<cv::Point2f>(53), kBoard, kImage),
@@ -170,8 +170,7 @@ TEST(CalibrationCoverage, RefusesTheSameViewTwiceAndANearlyUnmovedOne)
     const ViewJudgement again = coverage.judge(first.left, first.right);
     ASSERT_TRUE(again.duplicate_of);
     EXPECT_EQ(*again.duplicate_of, 0);
-    EXPECT_EQ(again.reason.rfind("the same view as accepted view 1 (the board has not moved)",
-                                 0),
+    EXPECT_EQ(again.reason.rfind("the same view as accepted view 1 (the board has not moved)", 0),
               0u)
         << again.reason;
 
@@ -240,20 +239,20 @@ TEST(CalibrationCoverage, ATiltedViewFillsItsTiltBucket)
     // looks shorter); view 02: its bottom farther.
     CalibrationCoverage coverage(kImage, kBoard);
     coverage.accept(view(11).left, view(11).right);
-    EXPECT_EQ(coverage.tiltViews()[1], 1);   // left edge nearer
+    EXPECT_EQ(coverage.tiltViews()[1], 1); // left edge nearer
     EXPECT_EQ(coverage.tiltViews()[0] + coverage.tiltViews()[2] + coverage.tiltViews()[3], 0);
-    EXPECT_EQ(coverage.gaps().tilts,
-              (std::vector<std::string>{"right edge nearer", "bottom edge nearer",
-                                        "top edge nearer"}));
+    EXPECT_EQ(
+        coverage.gaps().tilts,
+        (std::vector<std::string>{"right edge nearer", "bottom edge nearer", "top edge nearer"}));
     coverage.accept(view(2).left, view(2).right);
-    EXPECT_EQ(coverage.tiltViews()[3], 1);   // top edge nearer
+    EXPECT_EQ(coverage.tiltViews()[3], 1); // top edge nearer
     // View 13 is turned about the horizontal axis only (its sides are as long as each
     // other): it fills no bucket of a turn about the vertical axis.
     CalibrationCoverage pitched(kImage, kBoard);
     pitched.accept(view(13).left, view(13).right);
-    EXPECT_EQ(pitched.gaps().tilts,
-              (std::vector<std::string>{"right edge nearer", "left edge nearer",
-                                        "bottom edge nearer"}));
+    EXPECT_EQ(
+        pitched.gaps().tilts,
+        (std::vector<std::string>{"right edge nearer", "left edge nearer", "bottom edge nearer"}));
 }
 
 TEST(CalibrationCoverage, RefusesBadArguments)

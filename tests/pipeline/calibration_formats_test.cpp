@@ -4,16 +4,16 @@
 
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <regex>
 #include <sstream>
-#include <unistd.h>
-#include <functional>
 #include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <unistd.h>
 
 #include "pipeline/calibration.hpp"
 #include "pipeline/calibration_formats.hpp"
@@ -47,7 +47,7 @@ double maxDifference(const cv::Matx<double, R, C>& a, const cv::Matx<double, R, 
 }
 
 class CalibrationFormatsTest : public ::testing::Test {
-protected:
+  protected:
     // A real full calibration: six of OpenCV's chessboard pairs.
     static void SetUpTestSuite()
     {
@@ -85,7 +85,7 @@ protected:
         EXPECT_EQ(cv::norm(rra, rrb, cv::NORM_INF), 0.0);
     }
 
-private:
+  private:
     static StereoCalibration* calibration_;
 };
 
@@ -104,7 +104,7 @@ TEST_F(CalibrationFormatsTest, RosCameraInfoPairRoundTrips)
     // Written in full: the same numbers back.
     EXPECT_EQ(back.left.camera_matrix, c.left.camera_matrix);
     EXPECT_EQ(back.right.camera_matrix, c.right.camera_matrix);
-    ASSERT_EQ(back.left.distortion.size(), 5u);   // plumb_bob: k3 = 0 added
+    ASSERT_EQ(back.left.distortion.size(), 5u); // plumb_bob: k3 = 0 added
     for (size_t i = 0; i < 4; ++i) {
         EXPECT_EQ(back.left.distortion[i], c.left.distortion[i]);
         EXPECT_EQ(back.right.distortion[i], c.right.distortion[i]);
@@ -234,7 +234,8 @@ TEST_F(CalibrationFormatsTest, RosOwnToolsReadOurExportAndRewriteItImportably)
         ASSERT_EQ(test::runProcess({kRosConvert, yaml, ini}).exit_code, 0);
         ASSERT_EQ(test::runProcess({kRosConvert, ini, again}).exit_code, 0);
     }
-    const StereoCalibration back = importRosCameraInfo(dir.file("left2.yaml"), dir.file("right2.yaml"));
+    const StereoCalibration back =
+        importRosCameraInfo(dir.file("left2.yaml"), dir.file("right2.yaml"));
     expectSameDepths(c, back, 1e-3);
 }
 
@@ -361,8 +362,8 @@ void writeStereoCalibFiles(const StereoCalibration& c, const std::string& intrin
                            const std::string& extrinsics)
 {
     cv::FileStorage fs(intrinsics, cv::FileStorage::WRITE);
-    fs << "M1" << cv::Mat(c.left.camera_matrix) << "D1" << cv::Mat(c.left.distortion).t()
-       << "M2" << cv::Mat(c.right.camera_matrix) << "D2" << cv::Mat(c.right.distortion).t();
+    fs << "M1" << cv::Mat(c.left.camera_matrix) << "D1" << cv::Mat(c.left.distortion).t() << "M2"
+       << cv::Mat(c.right.camera_matrix) << "D2" << cv::Mat(c.right.distortion).t();
     fs.release();
     cv::Matx34d p2 = c.P2;
     p2(0, 3) /= kSquareM;
@@ -370,9 +371,8 @@ void writeStereoCalibFiles(const StereoCalibration& c, const std::string& intrin
     q(3, 2) *= kSquareM;
     q(3, 3) *= kSquareM;
     fs.open(extrinsics, cv::FileStorage::WRITE);
-    fs << "R" << cv::Mat(c.R) << "T" << cv::Mat(c.T / kSquareM) << "R1" << cv::Mat(c.R1)
-       << "R2" << cv::Mat(c.R2) << "P1" << cv::Mat(c.P1) << "P2" << cv::Mat(p2) << "Q"
-       << cv::Mat(q);
+    fs << "R" << cv::Mat(c.R) << "T" << cv::Mat(c.T / kSquareM) << "R1" << cv::Mat(c.R1) << "R2"
+       << cv::Mat(c.R2) << "P1" << cv::Mat(c.P1) << "P2" << cv::Mat(p2) << "Q" << cv::Mat(q);
     fs.release();
 }
 
@@ -380,7 +380,8 @@ TEST_F(CalibrationFormatsTest, ReadsOpenCvStereoCalibFilesInMetres)
 {
     const StereoCalibration& c = calibration();
     test::ScratchDir dir("stereod_formats");
-    const std::string intrinsics = dir.file("intrinsics.yml"), extrinsics = dir.file("extrinsics.yml");
+    const std::string intrinsics = dir.file("intrinsics.yml"),
+                      extrinsics = dir.file("extrinsics.yml");
     writeStereoCalibFiles(c, intrinsics, extrinsics);
     const StereoCalibration back =
         importOpenCvStereoCalib(intrinsics, extrinsics, c.rectified.image_size, kSquareM);
@@ -403,15 +404,16 @@ TEST_F(CalibrationFormatsTest, RefusesOpenCvFilesItCannotUse)
 {
     const StereoCalibration& c = calibration();
     test::ScratchDir dir("stereod_formats");
-    const std::string intrinsics = dir.file("intrinsics.yml"), extrinsics = dir.file("extrinsics.yml");
+    const std::string intrinsics = dir.file("intrinsics.yml"),
+                      extrinsics = dir.file("extrinsics.yml");
     writeStereoCalibFiles(c, intrinsics, extrinsics);
     const std::string partial = dir.file("partial.yml");
     cv::FileStorage fs(partial, cv::FileStorage::WRITE);
     fs << "R" << cv::Mat(c.R);
     fs.release();
 
-    std::string message = refusal(
-        [&] { importOpenCvStereoCalib(intrinsics, partial, c.rectified.image_size); });
+    std::string message =
+        refusal([&] { importOpenCvStereoCalib(intrinsics, partial, c.rectified.image_size); });
     EXPECT_TRUE(contains(message, partial + ": T: missing key")) << message;
 
     message = refusal([&] { importOpenCvStereoCalib(intrinsics, dir.file("no.yml"), {640, 480}); });

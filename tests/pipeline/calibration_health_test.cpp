@@ -151,7 +151,7 @@ TEST(CalibrationHealth, CorrectionFromSomeBaumerScenesBringsTheOthersBelowAThird
     const StereoCalibration corrected = correctRightRotation(calibration, pooled.used, &degrees);
     std::printf("[health] correction from samples 01-03: pitch %.4f deg, roll %.4f deg\n",
                 degrees[0], degrees[1]);
-    EXPECT_EQ(corrected.P2, calibration.P2);   // depth stays as it was
+    EXPECT_EQ(corrected.P2, calibration.P2); // depth stays as it was
     EXPECT_EQ(corrected.Q, calibration.Q);
     const Rectifier fixed(corrected);
     for (int i = 4; i <= 8; ++i) {
@@ -170,8 +170,10 @@ TEST(CalibrationHealth, CorrectionFromSomeBaumerScenesBringsTheOthersBelowAThird
 // apart in proportion to the distance from the centre.
 TEST(CalibrationHealth, TurnedRightImageIsDetectedAtTheRightLevel)
 {
-    const cv::Mat left = cv::imread(kData + "middlebury2014/Adirondack/im0.png", cv::IMREAD_GRAYSCALE);
-    const cv::Mat right = cv::imread(kData + "middlebury2014/Adirondack/im1.png", cv::IMREAD_GRAYSCALE);
+    const cv::Mat left =
+        cv::imread(kData + "middlebury2014/Adirondack/im0.png", cv::IMREAD_GRAYSCALE);
+    const cv::Mat right =
+        cv::imread(kData + "middlebury2014/Adirondack/im1.png", cv::IMREAD_GRAYSCALE);
     ASSERT_FALSE(left.empty() || right.empty());
     CalibrationHealthChecker checker;
     const HealthMeasurement straight = checker.measure(left, right);
@@ -184,8 +186,8 @@ TEST(CalibrationHealth, TurnedRightImageIsDetectedAtTheRightLevel)
     for (const auto& c : cases) {
         const cv::Point2f centre(right.cols / 2.0f, right.rows / 2.0f);
         cv::Mat turned;
-        cv::warpAffine(right, turned, cv::getRotationMatrix2D(centre, c.degrees, 1.0),
-                       right.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+        cv::warpAffine(right, turned, cv::getRotationMatrix2D(centre, c.degrees, 1.0), right.size(),
+                       cv::INTER_LINEAR, cv::BORDER_REPLICATE);
         const HealthMeasurement m = checker.measure(left, turned);
         print("Adirondack, right turned " + std::to_string(c.degrees) + " deg", m);
         EXPECT_EQ(m.state, c.expected) << c.degrees << " degrees";

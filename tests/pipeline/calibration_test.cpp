@@ -1,8 +1,6 @@
 // The calibration file: both forms round-trip exactly, and every rejected file says
 // which file, which key, on which line, and what is wrong with it.
 
-#include <unistd.h>
-
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -12,6 +10,7 @@
 
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
+#include <unistd.h>
 
 #include "pipeline/calibration.hpp"
 
@@ -258,11 +257,13 @@ const Rejection kRectifiedRejections[] = {
     {"width: 1282", "width: 0",
      "calib.yaml:3: image_size: width and height must be > 0, got 0x1110"},
     {"width: 1282", "width: 12.5", "calib.yaml:3: image_size.width: not an integer: '12.5'"},
-    {"cx_px: 640.5", "cx_px: 1282", "calib.yaml:5: cx_px: 1282 lies outside the image (width 1282)"},
+    {"cx_px: 640.5", "cx_px: 1282",
+     "calib.yaml:5: cx_px: 1282 lies outside the image (width 1282)"},
     {"cy_px: 554.5", "cy_px: -1", "calib.yaml:6: cy_px: -1 lies outside the image (height 1110)"},
     // A misspelt optional key must not be ignored silently.
     {"doffs_px: 270", "doffs: 270", "calib.yaml:8: doffs: unknown key"},
-    {"kind: rectified", "kind: mono", "calib.yaml:2: kind: expected 'full' or 'rectified', got 'mono'"},
+    {"kind: rectified", "kind: mono",
+     "calib.yaml:2: kind: expected 'full' or 'rectified', got 'mono'"},
     {"stereod_calibration: 1", "stereod_calibration: 2",
      "calib.yaml:1: stereod_calibration: unsupported format version 2 (this build reads 1)"},
     {"stereod_calibration: 1\n", "", "calib.yaml: stereod_calibration: missing key"},
@@ -291,7 +292,7 @@ TEST(Calibration, RejectsOpenCvFileStorageWithAHint)
 }
 
 class FullCalibrationText : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override
     {
         const std::string path = tempPath("full-text.yaml");
@@ -311,7 +312,8 @@ TEST_F(FullCalibrationText, RejectsWrongMatrixSizeAtTheKey)
 {
     // P1 declared 3x3 with its 12 values.
     const int line = lineStarting(text_, "P1:");
-    const std::string bad = replaceOnce(text_, "P1:\n  rows: 3\n  cols: 4", "P1:\n  rows: 3\n  cols: 3");
+    const std::string bad =
+        replaceOnce(text_, "P1:\n  rows: 3\n  cols: 4", "P1:\n  rows: 3\n  cols: 3");
     EXPECT_EQ(rejection(bad), "calib.yaml:" + std::to_string(line) +
                                   ": P1: expected a 3x4 matrix, got rows 3 cols 3");
 }
@@ -345,10 +347,11 @@ TEST_F(FullCalibrationText, RejectsRotationThatIsNotOne)
     ASSERT_NE(at, std::string::npos);
     const auto data = text_.find("data: [", at) + 7;
     std::string bad = text_;
-    bad.insert(data, "2");   // 0.99... becomes 20.99...
+    bad.insert(data, "2"); // 0.99... becomes 20.99...
     const int line = lineStarting(text_, "R:");
     const std::string what = rejection(bad);
-    EXPECT_EQ(what.rfind("calib.yaml:" + std::to_string(line) + ": R: not a rotation matrix", 0), 0u)
+    EXPECT_EQ(what.rfind("calib.yaml:" + std::to_string(line) + ": R: not a rotation matrix", 0),
+              0u)
         << what;
 }
 
@@ -367,7 +370,8 @@ TEST_F(FullCalibrationText, RejectsBaselineThatDisagreesWithT)
 {
     // T in millimetres while P2 stays in metres.
     const int line = lineStarting(text_, "P2:");
-    const std::string bad = replaceOnce(text_, "T: [-0.1197, 0.0012, -0.0008]", "T: [-119.7, 1.2, -0.8]");
+    const std::string bad =
+        replaceOnce(text_, "T: [-0.1197, 0.0012, -0.0008]", "T: [-119.7, 1.2, -0.8]");
     const std::string what = rejection(bad);
     EXPECT_EQ(what.rfind("calib.yaml:" + std::to_string(line) + ": P2: baseline", 0), 0u) << what;
     EXPECT_NE(what.find("disagrees with |T|"), std::string::npos) << what;

@@ -34,7 +34,7 @@ const std::string kData = std::string(STEREOD_SHARED_DATA_DIR) + "/";
 struct Scene {
     std::string name;
     std::string left, right, truth;
-    double divisor = 1.0;   // ground truth value / divisor = disparity; 0 or inf unknown
+    double divisor = 1.0; // ground truth value / divisor = disparity; 0 or inf unknown
 };
 
 std::vector<Scene> scenes()
@@ -127,7 +127,7 @@ cv::Mat censusSgm(const cv::Mat& left, const cv::Mat& right, int num_disparities
 {
     ProcessorSettings settings;
     settings.matcher.kind = MatcherKind::CensusSgm;
-    applyCensusSgmDefaults(settings.matcher);   // as `matcher.algorithm: census-sgm` gives
+    applyCensusSgmDefaults(settings.matcher); // as `matcher.algorithm: census-sgm` gives
     settings.matcher.num_disparities = num_disparities;
     settings.matcher.threads = threads;
     settings.compute_cloud = false;
@@ -175,9 +175,8 @@ TEST(CensusSgmAccuracy, EveryRealSceneAgainstOpenCvThreeWay)
     std::printf("[accuracy] mean over %zu scenes: census-sgm bad-2 %.2f %% too far %.2f %% | "
                 "sgbm-3way bad-2 %.2f %% too far %.2f %% | ratio %.2f, %.2f | %d scenes worse "
                 "bad-2, %d with over 5 points fewer correct\n",
-                list.size(), ours_bad2 / count, ours_far / count, ref_bad2 / count,
-                ref_far / count, ours_bad2 / ref_bad2, ours_far / ref_far, worse_bad2,
-                fewer_correct);
+                list.size(), ours_bad2 / count, ours_far / count, ref_bad2 / count, ref_far / count,
+                ours_bad2 / ref_bad2, ours_far / ref_far, worse_bad2, fewer_correct);
     EXPECT_LE(ours_bad2, 0.5 * ref_bad2);
     EXPECT_LE(ours_far, 0.5 * ref_far);
 }
@@ -204,8 +203,7 @@ TEST(CensusSgmAccuracy, SurfaceNearerThanTheRangeReadsNearerThanRange)
     const double closest = processor.disparityRange().closest_depth_m;
     std::printf("[accuracy] enlarged tsukuba, 32 disparities (closest %.2f m): %s, %.1f %% of "
                 "the region at the range limit\n",
-                closest, reasonCode(out.reading.reason),
-                100.0 * out.reading.range_limit_fraction);
+                closest, reasonCode(out.reading.reason), 100.0 * out.reading.range_limit_fraction);
     EXPECT_FALSE(out.reading.valid);
     EXPECT_EQ(out.reading.reason, NoReadingReason::NearerThanRange);
     EXPECT_NEAR(out.reading.nearer_than_m, closest, 1e-9);

@@ -64,7 +64,7 @@ std::string basename(const std::string& path)
 }
 
 class ChessboardCalibrationTest : public ::testing::Test {
-protected:
+  protected:
     // Corner search and calibration of the 13 pairs, once for all tests.
     static void SetUpTestSuite()
     {
@@ -87,7 +87,7 @@ protected:
 
     static const ChessboardCalibrationResult& result() { return *result_; }
 
-private:
+  private:
     static ChessboardCalibrationResult* result_;
 };
 
@@ -103,7 +103,8 @@ double rotationAngleDeg(const cv::Matx33d& r)
 TEST_F(ChessboardCalibrationTest, UsesAllThirteenRealPairsWithinTheTargets)
 {
     const ChessboardCalibrationResult& r = result();
-    std::printf("[accuracy] pair        found  RMS left  RMS right  epipolar (rows)  epipolar (F)\n");
+    std::printf(
+        "[accuracy] pair        found  RMS left  RMS right  epipolar (rows)  epipolar (F)\n");
     for (const PairReport& p : r.pairs) {
         std::printf("[accuracy] %-11s %s/%s   %8.3f  %9.3f  %15.3f  %12.3f  %s\n",
                     basename(p.left_path).c_str(), p.left_found ? "L" : "-",
@@ -147,8 +148,8 @@ TEST_F(ChessboardCalibrationTest, UsesAllThirteenRealPairsWithinTheTargets)
           std::tuple(c.right, c.R2, c.P2, c.valid_roi_right)}) {
         EXPECT_GE(roi.area(), 0.99 * 640 * 480) << roi;
         cv::Mat map_x, map_y;
-        cv::initUndistortRectifyMap(camera.camera_matrix, camera.distortion, rotation,
-                                    projection, {640, 480}, CV_32FC1, map_x, map_y);
+        cv::initUndistortRectifyMap(camera.camera_matrix, camera.distortion, rotation, projection,
+                                    {640, 480}, CV_32FC1, map_x, map_y);
         double min_x, max_x, min_y, max_y;
         cv::minMaxLoc(map_x(roi), &min_x, &max_x);
         cv::minMaxLoc(map_y(roi), &min_y, &max_y);
@@ -171,12 +172,15 @@ TEST_F(ChessboardCalibrationTest, UsesAllThirteenRealPairsWithinTheTargets)
     std::vector<cv::Point3f> board;
     for (int y = 0; y < 6; ++y)
         for (int x = 0; x < 9; ++x)
-            board.emplace_back(static_cast<float>(x * kSquareM), static_cast<float>(y * kSquareM), 0.0f);
+            board.emplace_back(static_cast<float>(x * kSquareM), static_cast<float>(y * kSquareM),
+                               0.0f);
     std::vector<double> baselines;
     for (const PairReport& p : r.pairs) {
         cv::Vec3d rl, tl, rr, tr;
-        ASSERT_TRUE(cv::solvePnP(board, p.left_corners, c.left.camera_matrix, c.left.distortion, rl, tl));
-        ASSERT_TRUE(cv::solvePnP(board, p.right_corners, c.right.camera_matrix, c.right.distortion, rr, tr));
+        ASSERT_TRUE(
+            cv::solvePnP(board, p.left_corners, c.left.camera_matrix, c.left.distortion, rl, tl));
+        ASSERT_TRUE(cv::solvePnP(board, p.right_corners, c.right.camera_matrix, c.right.distortion,
+                                 rr, tr));
         cv::Matx33d Rl, Rr;
         cv::Rodrigues(rl, Rl);
         cv::Rodrigues(rr, Rr);
@@ -226,11 +230,12 @@ TEST_F(ChessboardCalibrationTest, DepthOnTheBoardAgreesWithTheBoardsPose)
     std::vector<cv::Point3f> board;
     for (int y = 0; y < 6; ++y)
         for (int x = 0; x < 9; ++x)
-            board.emplace_back(static_cast<float>(x * kSquareM), static_cast<float>(y * kSquareM), 0.0f);
+            board.emplace_back(static_cast<float>(x * kSquareM), static_cast<float>(y * kSquareM),
+                               0.0f);
 
     struct Plane {
-        cv::Vec3d normal;   // rectified left camera frame
-        double offset_m;    // normal . X = offset for points X of the board
+        cv::Vec3d normal; // rectified left camera frame
+        double offset_m;  // normal . X = offset for points X of the board
     };
     std::vector<Plane> planes;
     double nearest_m = HUGE_VAL;
@@ -250,7 +255,7 @@ TEST_F(ChessboardCalibrationTest, DepthOnTheBoardAgreesWithTheBoardsPose)
     }
 
     ProcessorSettings settings;
-    settings.matcher.min_depth_m = 0.95 * nearest_m;   // every board within the range
+    settings.matcher.min_depth_m = 0.95 * nearest_m; // every board within the range
     settings.compute_cloud = false;
     StereoProcessor processor(c, settings);
     DepthResult out;
@@ -276,8 +281,8 @@ TEST_F(ChessboardCalibrationTest, DepthOnTheBoardAgreesWithTheBoardsPose)
         // The corners' own disparity, matched by the detector rather than the matcher:
         // separates the calibration's share of any error from the matcher's.
         std::vector<cv::Point2f> right_rect;
-        cv::undistortPoints(p.right_corners, right_rect, c.right.camera_matrix,
-                            c.right.distortion, c.R2, c.P2, kUndistort);
+        cv::undistortPoints(p.right_corners, right_rect, c.right.camera_matrix, c.right.distortion,
+                            c.R2, c.P2, kUndistort);
         double corner_error = 0.0;
         for (size_t k = 0; k < rect.size(); ++k) {
             const double z = g.depthFromDisparity(rect[k].x - right_rect[k].x);
@@ -307,8 +312,7 @@ TEST_F(ChessboardCalibrationTest, DepthOnTheBoardAgreesWithTheBoardsPose)
             ++no_reading;
             std::printf("[accuracy] %-11s board %5d px, %4.1f %% with depth: no reading; "
                         "corners' depth within %.2f %%\n",
-                        basename(p.left_path).c_str(), region, 100.0 * valid,
-                        100.0 * corner_error);
+                        basename(p.left_path).c_str(), region, 100.0 * valid, 100.0 * corner_error);
             continue;
         }
         auto median = [](std::vector<double> v) {
@@ -355,7 +359,7 @@ TEST_F(ChessboardCalibrationTest, PreviewShowsTheFirstPairRectifiedWithRowLines)
     cv::Mat left, right;
     rectifier.rectifyLeft(cv::imread(samplePath("left", 1), cv::IMREAD_GRAYSCALE), left);
     rectifier.rectifyRight(cv::imread(samplePath("right", 1), cv::IMREAD_GRAYSCALE), right);
-    const cv::Rect band(0, 2, 640, 10);   // above the board, no corner drawn there
+    const cv::Rect band(0, 2, 640, 10); // above the board, no corner drawn there
     cv::Mat left_band, right_band;
     cv::extractChannel(preview(band), left_band, 0);
     cv::extractChannel(preview(band + cv::Point(640, 0)), right_band, 0);
@@ -401,7 +405,7 @@ TEST_F(ChessboardCalibrationTest, AlphaOneKeepsEveryRawPixel)
         calibrateFromCorners(result().pairs, cv::Size(640, 480), options);
     const StereoCalibration& c = r.calibration;
     // The raw image's corners and edge midpoints all land inside the rectified image.
-    const std::vector<cv::Point2f> edge = {{0, 0}, {319.5f, 0}, {639, 0}, {639, 239.5f},
+    const std::vector<cv::Point2f> edge = {{0, 0},     {319.5f, 0},   {639, 0}, {639, 239.5f},
                                            {639, 479}, {319.5f, 479}, {0, 479}, {0, 239.5f}};
     for (const auto& [camera, rotation, projection] :
          {std::tuple(c.left, c.R1, c.P1), std::tuple(c.right, c.R2, c.P2)}) {
@@ -461,10 +465,8 @@ TEST(ChessboardCalibration, SkipsAPairWithoutTheBoardWhateverItsSize)
     samplePaths(left, right, 7);
     ASSERT_EQ(cv::imread(left[0], cv::IMREAD_GRAYSCALE).size(), cv::Size(612, 459));
     int reported = 0;
-    const ChessboardCalibrationResult r =
-        calibrateChessboard(left, right, sampleOptions(), [&](const CornerProgress&) {
-            ++reported;
-        });
+    const ChessboardCalibrationResult r = calibrateChessboard(
+        left, right, sampleOptions(), [&](const CornerProgress&) { ++reported; });
     EXPECT_EQ(reported, 7);
     EXPECT_EQ(r.pairs_used, 6);
     EXPECT_FALSE(r.pairs[0].used);
@@ -486,8 +488,8 @@ TEST(ChessboardCalibration, RefusesUsedPairsOfDifferingSizesNamingThem)
         cv::copyMakeBorder(image, image, 0, 40, 0, 60, cv::BORDER_REPLICATE);
         ASSERT_TRUE(cv::imwrite(large.back(), image));
     }
-    const std::string message = refusal({samplePath("left", 1), large[0]},
-                                        {samplePath("right", 1), large[1]});
+    const std::string message =
+        refusal({samplePath("left", 1), large[0]}, {samplePath("right", 1), large[1]});
     EXPECT_TRUE(contains(message, "pair " + large[0] + " / " + large[1])) << message;
     EXPECT_TRUE(contains(message, "700x520")) << message;
     EXPECT_TRUE(contains(message, samplePath("left", 1))) << message;
@@ -508,7 +510,7 @@ TEST(ChessboardCalibration, RefusesABoardSizeFoundNowhereSuggestingInnerCorners)
     std::vector<std::string> left, right;
     samplePaths(left, right, 2);
     ChessboardCalibrationOptions options = sampleOptions();
-    options.board.cols = 10;   // the squares counted, not the inner corners
+    options.board.cols = 10; // the squares counted, not the inner corners
     options.board.rows = 7;
     const std::string message = refusal(left, right, options);
     EXPECT_TRUE(contains(message, "10x7 board was found in none of the 4 images")) << message;

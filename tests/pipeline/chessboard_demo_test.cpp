@@ -51,7 +51,7 @@ std::string fileName(const std::string& path)
 }
 
 class ChessboardDemoTest : public ::testing::Test {
-protected:
+  protected:
     // The demo's calibration (the 13 pairs: 01..14, the sample set has no 10) and its
     // configuration, once for all tests.
     static void SetUpTestSuite()
@@ -83,7 +83,7 @@ protected:
     static const ChessboardCalibrationResult& result() { return *result_; }
     static const ServiceConfig& config() { return *config_; }
 
-private:
+  private:
     static ChessboardCalibrationResult* result_;
     static ServiceConfig* config_;
 };
@@ -97,7 +97,7 @@ TEST_F(ChessboardDemoTest, EveryReadingOnTheBoardIsWithinAFewPercentOfItsPose)
     const RectifiedGeometry& g = calibration.rectified;
     ASSERT_EQ(result().pairs_used, 13);
     ProcessorSettings settings = config().processing;
-    settings.compute_cloud = false;   // not needed for the reading
+    settings.compute_cloud = false; // not needed for the reading
     const NearestSettings& nearest = settings.nearest;
     StereoProcessor processor(calibration, settings);
     const DisparityRange range = processor.disparityRange();
@@ -125,8 +125,8 @@ TEST_F(ChessboardDemoTest, EveryReadingOnTheBoardIsWithinAFewPercentOfItsPose)
         processor.process(cv::imread(pair.left_path, cv::IMREAD_GRAYSCALE),
                           cv::imread(pair.right_path, cv::IMREAD_GRAYSCALE), 0, i, out);
         const Reading& reading = out.reading;
-        const BoardPose pose = boardPoseFromCorners(calibration, *calibration.board,
-                                                    pair.left_corners);
+        const BoardPose pose =
+            boardPoseFromCorners(calibration, *calibration.board, pair.left_corners);
         const std::optional<BoardDepthInRegion> board = boardDepthInRegion(pose, g, nearest);
         ASSERT_TRUE(board.has_value()) << pair.left_path << ": the board is outside the region";
         closest_board_m = std::min(closest_board_m, board->nearest_m);
@@ -134,9 +134,9 @@ TEST_F(ChessboardDemoTest, EveryReadingOnTheBoardIsWithinAFewPercentOfItsPose)
         EXPECT_GE(board->depth_m, nearest.min_depth_m) << pair.left_path;
         EXPECT_LE(board->depth_m, nearest.max_depth_m) << pair.left_path;
 
-        std::printf("[accuracy] %-11s %5.1f %%  %5.1f %%  %6.1f %%  ", fileName(pair.left_path).c_str(),
-                    100.0 * board->coverage, 100.0 * reading.valid_fraction,
-                    100.0 * reading.in_range_fraction);
+        std::printf("[accuracy] %-11s %5.1f %%  %5.1f %%  %6.1f %%  ",
+                    fileName(pair.left_path).c_str(), 100.0 * board->coverage,
+                    100.0 * reading.valid_fraction, 100.0 * reading.in_range_fraction);
         if (!reading.valid) {
             std::printf("no reading (%s)  %.4f m (%.3f..%.3f)\n", reasonCode(reading.reason),
                         board->depth_m, board->nearest_m, board->farthest_m);
@@ -177,10 +177,10 @@ TEST_F(ChessboardDemoTest, BoardPoseAgreesWithTheCornersTriangulated)
         const BoardPose pose = boardPoseFromCorners(c, *c.board, pair.left_corners);
         worst_rms = std::max(worst_rms, pose.reprojection_rms_px);
         std::vector<cv::Point2f> left, right;
-        cv::undistortPoints(pair.left_corners, left, c.left.camera_matrix, c.left.distortion,
-                            c.R1, c.P1, criteria);
-        cv::undistortPoints(pair.right_corners, right, c.right.camera_matrix,
-                            c.right.distortion, c.R2, c.P2, criteria);
+        cv::undistortPoints(pair.left_corners, left, c.left.camera_matrix, c.left.distortion, c.R1,
+                            c.P1, criteria);
+        cv::undistortPoints(pair.right_corners, right, c.right.camera_matrix, c.right.distortion,
+                            c.R2, c.P2, criteria);
         for (size_t k = 0; k < left.size(); ++k) {
             const double triangulated = g.depthFromDisparity(left[k].x - right[k].x);
             const double plane = pose.depthAt(left[k], g);
@@ -230,8 +230,7 @@ TEST_F(ChessboardDemoTest, BoardPoseRefusesWhatItCannotUse)
     EXPECT_THROW(boardPoseFromCorners(c, {9, 5, kSquareM}, corners), std::invalid_argument);
     EXPECT_THROW(boardPoseFromCorners(c, {9, 6, 0.0}, corners), std::invalid_argument);
     const StereoCalibration rectified = makeRectifiedCalibration({640, 480}, 500.0, 0.1);
-    EXPECT_THROW(boardPoseFromCorners(rectified, {9, 6, kSquareM}, corners),
-                 std::invalid_argument);
+    EXPECT_THROW(boardPoseFromCorners(rectified, {9, 6, kSquareM}, corners), std::invalid_argument);
 }
 
 } // namespace

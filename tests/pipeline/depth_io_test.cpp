@@ -1,7 +1,5 @@
 // Result files: PFM and KITTI disparity, millimetre depth PNG, binary PLY, colour depth.
 
-#include <unistd.h>
-
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -13,6 +11,7 @@
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
+#include <unistd.h>
 
 #include "pipeline/depth_io.hpp"
 
@@ -22,7 +21,7 @@ namespace {
 constexpr float kInf = std::numeric_limits<float>::infinity();
 
 class DepthIo : public ::testing::Test {
-protected:
+  protected:
     std::string path(const std::string& name)
     {
         const std::string p = std::string(STEREOD_BINARY_DIR) + "/pipeline_depth_io_test_" +
@@ -45,7 +44,7 @@ protected:
         return s.str();
     }
 
-private:
+  private:
     std::vector<std::string> created_;
 };
 
@@ -53,9 +52,9 @@ private:
 cv::Mat sampleDisparity()
 {
     cv::Mat d(3, 4, CV_32FC1);
-    const float values[12] = {1.5f, 2.25f, kInf, 0.0f,          // top row
-                              17.0f, 255.5f, 300.0f, -1.0f,     //
-                              std::nanf(""), 3.0f, 4.0f, 5.0f}; // bottom row
+    const float values[12] = {1.5f,          2.25f,  kInf,   0.0f,  // top row
+                              17.0f,         255.5f, 300.0f, -1.0f, //
+                              std::nanf(""), 3.0f,   4.0f,   5.0f}; // bottom row
     std::memcpy(d.data, values, sizeof values);
     return d;
 }
@@ -143,13 +142,13 @@ TEST_F(DepthIo, KittiPngRoundTripAndInvalidConvention)
     writeDisparity(p, d);
     const cv::Mat raw = cv::imread(p, cv::IMREAD_UNCHANGED);
     ASSERT_EQ(raw.type(), CV_16UC1);
-    EXPECT_EQ(raw.at<uint16_t>(0, 0), 384);     // 1.5 * 256
-    EXPECT_EQ(raw.at<uint16_t>(0, 2), 0);       // +inf: invalid
-    EXPECT_EQ(raw.at<uint16_t>(0, 3), 0);       // 0 px cannot be told from invalid
-    EXPECT_EQ(raw.at<uint16_t>(1, 1), 65408);   // 255.5 * 256
-    EXPECT_EQ(raw.at<uint16_t>(1, 2), 0);       // 300 px does not fit: invalid, not clipped
-    EXPECT_EQ(raw.at<uint16_t>(1, 3), 0);       // negative: invalid
-    EXPECT_EQ(raw.at<uint16_t>(2, 0), 0);       // NaN: invalid
+    EXPECT_EQ(raw.at<uint16_t>(0, 0), 384);   // 1.5 * 256
+    EXPECT_EQ(raw.at<uint16_t>(0, 2), 0);     // +inf: invalid
+    EXPECT_EQ(raw.at<uint16_t>(0, 3), 0);     // 0 px cannot be told from invalid
+    EXPECT_EQ(raw.at<uint16_t>(1, 1), 65408); // 255.5 * 256
+    EXPECT_EQ(raw.at<uint16_t>(1, 2), 0);     // 300 px does not fit: invalid, not clipped
+    EXPECT_EQ(raw.at<uint16_t>(1, 3), 0);     // negative: invalid
+    EXPECT_EQ(raw.at<uint16_t>(2, 0), 0);     // NaN: invalid
 
     const cv::Mat back = readDisparity(p);
     ASSERT_EQ(back.type(), CV_32FC1);
@@ -174,7 +173,7 @@ TEST_F(DepthIo, DepthPngInMillimetresWithZeroInvalid)
     EXPECT_EQ(raw.at<uint16_t>(0, 0), 1234);
     EXPECT_EQ(raw.at<uint16_t>(0, 1), 0);
     EXPECT_EQ(raw.at<uint16_t>(0, 2), 65535);
-    EXPECT_EQ(raw.at<uint16_t>(0, 3), 0);   // beyond 65.535 m: invalid, never clipped
+    EXPECT_EQ(raw.at<uint16_t>(0, 3), 0); // beyond 65.535 m: invalid, never clipped
     EXPECT_EQ(raw.at<uint16_t>(0, 4), 0);
     EXPECT_EQ(raw.at<uint16_t>(0, 5), 0);
 
@@ -196,9 +195,8 @@ TEST_F(DepthIo, DepthToMillimetresReusesTheBuffer)
 
 TEST_F(DepthIo, PlyHeaderAndPointCount)
 {
-    const std::vector<CloudPoint> cloud = {{0.1f, -0.2f, 1.5f, 128.0f},
-                                           {-1.0f, 0.5f, 3.25f, 7.0f},
-                                           {0.0f, 0.0f, 0.75f, 255.0f}};
+    const std::vector<CloudPoint> cloud = {
+        {0.1f, -0.2f, 1.5f, 128.0f}, {-1.0f, 0.5f, 3.25f, 7.0f}, {0.0f, 0.0f, 0.75f, 255.0f}};
     const std::string p = path("cloud.ply");
     writePly(p, cloud);
     const std::string file = bytes(p);
@@ -240,7 +238,7 @@ TEST_F(DepthIo, ColorizeNearWarmFarCoolInvalidBlack)
     std::memcpy(z.data, values, sizeof values);
     const cv::Mat c = colorizeDepth(z, 0.5, 10.0);
     ASSERT_EQ(c.type(), CV_8UC3);
-    const cv::Vec3b near = c.at<cv::Vec3b>(0, 0);   // BGR
+    const cv::Vec3b near = c.at<cv::Vec3b>(0, 0); // BGR
     const cv::Vec3b far = c.at<cv::Vec3b>(0, 1);
     EXPECT_GT(near[2], near[0]) << "near is red-ish";
     EXPECT_GT(far[0], far[2]) << "far is blue-ish";

@@ -56,11 +56,11 @@ TEST(DepthToMillimetres, RoundsLikeDoublePrecisionAtEveryMillimetreBoundary)
             z = std::nextafter(z, kInf);
         }
     }
-    const std::vector<float> special = {0.0f, -0.0f, -0.001f, -70.0f, 1e-30f,
-                                        std::numeric_limits<float>::denorm_min(),
-                                        65.535f, 65.5355f, 65.536f, 70.0f, 1e30f,
-                                        std::numeric_limits<float>::max(), kInf, -kInf,
-                                        std::numeric_limits<float>::quiet_NaN()};
+    const std::vector<float> special = {0.0f,    -0.0f,    -0.001f,
+                                        -70.0f,  1e-30f,   std::numeric_limits<float>::denorm_min(),
+                                        65.535f, 65.5355f, 65.536f,
+                                        70.0f,   1e30f,    std::numeric_limits<float>::max(),
+                                        kInf,    -kInf,    std::numeric_limits<float>::quiet_NaN()};
     values.insert(values.end(), special.begin(), special.end());
 
     const cv::Mat depth_m(1, static_cast<int>(values.size()), CV_32FC1, values.data());
@@ -69,8 +69,7 @@ TEST(DepthToMillimetres, RoundsLikeDoublePrecisionAtEveryMillimetreBoundary)
     ASSERT_EQ(depth_mm.type(), CV_16UC1);
     ASSERT_EQ(depth_mm.size(), depth_m.size());
     float first_bad = 0.0f;
-    EXPECT_EQ(countMismatches(depth_m, depth_mm, first_bad), 0)
-        << "first at " << first_bad << " m";
+    EXPECT_EQ(countMismatches(depth_m, depth_mm, first_bad), 0) << "first at " << first_bad << " m";
     // The edges of the range, spelt out.
     const auto mmOf = [](float z) {
         const cv::Mat one(1, 1, CV_32FC1, cv::Scalar(z));
@@ -78,10 +77,10 @@ TEST(DepthToMillimetres, RoundsLikeDoublePrecisionAtEveryMillimetreBoundary)
         depthToMillimetres(one, out);
         return out.at<uint16_t>(0, 0);
     };
-    EXPECT_EQ(mmOf(0.0004f), 0);        // rounds to 0 mm: invalid
+    EXPECT_EQ(mmOf(0.0004f), 0); // rounds to 0 mm: invalid
     EXPECT_EQ(mmOf(0.0006f), 1);
     EXPECT_EQ(mmOf(65.535f), 65535);
-    EXPECT_EQ(mmOf(65.5356f), 0);       // rounds to 65536 mm: does not fit, invalid
+    EXPECT_EQ(mmOf(65.5356f), 0); // rounds to 65536 mm: does not fit, invalid
     EXPECT_EQ(mmOf(1e30f), 0);
 }
 

@@ -22,7 +22,7 @@ namespace {
 constexpr int kFrames = 20;
 
 class HotPathAllocations : public ::testing::Test {
-protected:
+  protected:
     static void SetUpTestSuite() { bench::installCountingMatAllocator(); }
 };
 
@@ -32,7 +32,7 @@ TEST_F(HotPathAllocations, CountersSeeBothKindsOfAllocation)
     const bench::AllocationWindow window;
     const cv::Mat image(48, 64, CV_8UC1);
     EXPECT_EQ(window.matAllocations(), 1u);
-    EXPECT_GE(window.cppAllocations(), 1u);   // the buffer's header (UMatData)
+    EXPECT_GE(window.cppAllocations(), 1u); // the buffer's header (UMatData)
 }
 
 TEST_F(HotPathAllocations, RectifierAllocatesNothingAfterTheFirstFrame)

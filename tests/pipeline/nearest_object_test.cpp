@@ -91,8 +91,8 @@ TEST(NearestObject, TooFewValidPixels)
 TEST(NearestObject, ASliverInRangeIsNoReading)
 {
     cv::Mat depth(100, 100, CV_32FC1, cv::Scalar(0.0));
-    depth.rowRange(0, 40).setTo(25.0);                     // valid, beyond max_depth_m
-    depth.rowRange(40, 44).setTo(0.98);                    // 400 px in range: 4 %
+    depth.rowRange(0, 40).setTo(25.0);  // valid, beyond max_depth_m
+    depth.rowRange(40, 44).setTo(0.98); // 400 px in range: 4 %
     NearestObjectFinder finder;
     NearestSettings settings = wholeImage();
     const Reading r = finder.find(depth, settings, 0, 0);
@@ -110,8 +110,8 @@ TEST(NearestObject, ASliverInRangeIsNoReading)
 
 TEST(NearestObject, NothingInRange)
 {
-    cv::Mat depth(100, 100, CV_32FC1, cv::Scalar(25.0));   // all beyond max_depth_m
-    depth.at<float>(0, 0) = 2.0f;                          // in range, but one pixel only
+    cv::Mat depth(100, 100, CV_32FC1, cv::Scalar(25.0)); // all beyond max_depth_m
+    depth.at<float>(0, 0) = 2.0f;                        // in range, but one pixel only
     NearestObjectFinder finder;
     const Reading r = finder.find(depth, wholeImage(), 0, 0);
     EXPECT_FALSE(r.valid);
@@ -123,8 +123,8 @@ TEST(NearestObject, NothingInRange)
 TEST(NearestObject, OnlyTheRegionCounts)
 {
     cv::Mat depth(100, 100, CV_32FC1, cv::Scalar(0.0));
-    depth(cv::Rect(25, 25, 50, 50)).setTo(4.0);   // the default region, full
-    depth.at<float>(0, 0) = 0.5f;                 // outside it
+    depth(cv::Rect(25, 25, 50, 50)).setTo(4.0); // the default region, full
+    depth.at<float>(0, 0) = 0.5f;               // outside it
     NearestObjectFinder finder;
     NearestSettings s = wholeImage();
     s.roi = RegionOfInterest{};
@@ -141,7 +141,7 @@ TEST(NearestObject, ValidatesSettings)
     s.roi.width = 0.0;
     EXPECT_THROW(validateNearestSettings(s), std::invalid_argument);
     s = NearestSettings{};
-    s.roi.x = 0.8;   // 0.8 + 0.5 > 1
+    s.roi.x = 0.8; // 0.8 + 0.5 > 1
     EXPECT_THROW(validateNearestSettings(s), std::invalid_argument);
     s = NearestSettings{};
     s.max_depth_m = s.min_depth_m;

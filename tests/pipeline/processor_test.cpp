@@ -50,9 +50,9 @@ TEST(DisparityRange, DerivedFromTheClosestDepth)
 TEST(DisparityRange, ExactMultipleBoundaries)
 {
     const RectifiedGeometry g = geometry(100.0, 0.1, 0.0);   // f*B = 10
-    EXPECT_EQ(rangeFor(10.0 / 15.0, g).num_disparities, 16);   // d_max 15: 0..15
-    EXPECT_EQ(rangeFor(10.0 / 16.0, g).num_disparities, 32);   // d_max 16 needs a 17th
-    EXPECT_EQ(rangeFor(100.0, g).num_disparities, 16);          // far: never below 16
+    EXPECT_EQ(rangeFor(10.0 / 15.0, g).num_disparities, 16); // d_max 15: 0..15
+    EXPECT_EQ(rangeFor(10.0 / 16.0, g).num_disparities, 32); // d_max 16 needs a 17th
+    EXPECT_EQ(rangeFor(100.0, g).num_disparities, 16);       // far: never below 16
 }
 
 TEST(DisparityRange, SubtractsDoffs)
@@ -67,7 +67,7 @@ TEST(DisparityRange, SubtractsDoffs)
 TEST(DisparityRange, CappedAtMaxNumDisparities)
 {
     const RectifiedGeometry g = geometry(700.0, 0.12, 0.0);
-    const DisparityRange r = rangeFor(0.1, g, 128);   // wants 841 disparities
+    const DisparityRange r = rangeFor(0.1, g, 128); // wants 841 disparities
     EXPECT_EQ(r.num_disparities, 128);
     EXPECT_TRUE(r.capped);
     EXPECT_NEAR(r.closest_depth_m, 84.0 / 127.0, 1e-12);
@@ -97,7 +97,7 @@ TEST(MatcherSettings, RejectsWhatOpenCvCannotRun)
         return "";
     };
     EXPECT_EQ(message(MatcherSettings{}), "");
-    MatcherSettings opencv;   // OpenCV's SGBM: its own limits
+    MatcherSettings opencv; // OpenCV's SGBM: its own limits
     opencv.kind = MatcherKind::Sgbm;
     EXPECT_EQ(message(opencv), "");
     MatcherSettings s = opencv;
@@ -115,7 +115,7 @@ TEST(MatcherSettings, RejectsWhatOpenCvCannotRun)
     EXPECT_EQ(message(s), "matcher.num_disparities: must be 0 (derived from min_depth_m) or a "
                           "positive multiple of 16, got 20");
     s = opencv;
-    s.p1 = 900;   // p2 defaults to 800
+    s.p1 = 900; // p2 defaults to 800
     EXPECT_EQ(message(s), "matcher.p2: must be greater than p1 (800 <= 900)");
     s = opencv;
     s.min_depth_m = 0.0;
@@ -132,7 +132,7 @@ TEST(MatcherSettings, RejectsWhatOpenCvCannotRun)
     s.paths = 4;
     EXPECT_EQ(message(s), "matcher.paths: must be 3 or 5, got 4");
     s = census;
-    s.p2 = 250;   // with a 7x5 census (34 bits) the 8-bit path costs would overflow
+    s.p2 = 250; // with a 7x5 census (34 bits) the 8-bit path costs would overflow
     EXPECT_NE(message(s).find("matcher.p2: census cost"), std::string::npos);
     s = census;
     s.num_disparities = 512;
@@ -141,7 +141,7 @@ TEST(MatcherSettings, RejectsWhatOpenCvCannotRun)
 }
 
 class Processor : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override
     {
         left_colour_ = cv::imread(kTsukuba + "im3.png", cv::IMREAD_COLOR);
@@ -150,9 +150,9 @@ protected:
         cv::cvtColor(left_colour_, left_, cv::COLOR_BGR2GRAY);
         cv::cvtColor(right_colour_, right_, cv::COLOR_BGR2GRAY);
         // f*B = 10 px*m with doffs 5: tsukuba's disparities 5..15 are 0.5 .. 1 m.
-        calibration_ = makeRectifiedCalibration(left_.size(), 100.0, 0.1, std::nullopt,
-                                                std::nullopt, 5.0);
-        settings_.matcher.min_depth_m = 0.7;     // 14.3 - 5: 16 disparities
+        calibration_ =
+            makeRectifiedCalibration(left_.size(), 100.0, 0.1, std::nullopt, std::nullopt, 5.0);
+        settings_.matcher.min_depth_m = 0.7; // 14.3 - 5: 16 disparities
         settings_.nearest.min_depth_m = 0.1;
         settings_.nearest.max_depth_m = 5.0;
     }
@@ -359,7 +359,7 @@ TEST_F(Processor, UpdateSettingsAppliesLiveAndRejectsInvalid)
     ProcessorSettings bm = settings_;
     bm.matcher.kind = MatcherKind::Bm;
     bm.matcher.block_size = 9;
-    bm.matcher.min_depth_m = 0.45;   // 22.2 - 5: 32 disparities
+    bm.matcher.min_depth_m = 0.45; // 22.2 - 5: 32 disparities
     p.updateSettings(bm);
     EXPECT_EQ(p.matcherName(), "bm");
     EXPECT_EQ(p.disparityRange().num_disparities, 32);
@@ -414,7 +414,7 @@ TEST_F(Processor, MatcherSettingsReachOpenCv)
 
 TEST_F(Processor, RejectsARangeWiderThanTheImage)
 {
-    settings_.matcher.num_disparities = 400;   // tsukuba is 384 px wide
+    settings_.matcher.num_disparities = 400; // tsukuba is 384 px wide
     settings_.matcher.max_num_disparities = 512;
     EXPECT_THROW(StereoProcessor(calibration_, settings_), std::invalid_argument);
 }
@@ -431,10 +431,10 @@ TEST(FixedPoint, ConvertsSixteenthsAndMarksInvalid)
     DisparityRange range;
     range.min_disparity = 0;
     range.num_disparities = 16;
-    cv::Mat fixed(1, 20, CV_16SC1, cv::Scalar(-16));   // OpenCV's "invalid" for min 0
-    fixed.at<int16_t>(0, 16) = 16 * 12 + 8;            // 12.5 px
-    fixed.at<int16_t>(0, 17) = 0;                      // 0 px is a valid disparity
-    fixed.at<int16_t>(0, 5) = 16 * 3;                  // inside the unmatched columns
+    cv::Mat fixed(1, 20, CV_16SC1, cv::Scalar(-16)); // OpenCV's "invalid" for min 0
+    fixed.at<int16_t>(0, 16) = 16 * 12 + 8;          // 12.5 px
+    fixed.at<int16_t>(0, 17) = 0;                    // 0 px is a valid disparity
+    fixed.at<int16_t>(0, 5) = 16 * 3;                // inside the unmatched columns
     cv::Mat d;
     fixedPointToPixels(fixed, range, d);
     ASSERT_EQ(d.type(), CV_32FC1);

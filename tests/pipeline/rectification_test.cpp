@@ -3,8 +3,6 @@
 // saved and loaded through our file format, and the rectified pairs must put every
 // chessboard corner on the same row in both images.
 
-#include <unistd.h>
-
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -14,6 +12,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <unistd.h>
 
 #include "pipeline/calibration.hpp"
 #include "pipeline/rectifier.hpp"
@@ -50,7 +49,7 @@ TEST(Rectification, PutsChessboardCornersOnTheSameRowOnARealRig)
     std::vector<std::vector<cv::Point2f>> left_corners, right_corners;
     for (int i = 1; i <= 14; ++i) {
         if (i == 10)
-            continue;   // the sample set has no pair 10
+            continue; // the sample set has no pair 10
         char name[32];
         std::snprintf(name, sizeof name, "%02d.jpg", i);
         const cv::Mat l = cv::imread(kSamples + "left" + name, cv::IMREAD_GRAYSCALE);
@@ -67,11 +66,12 @@ TEST(Rectification, PutsChessboardCornersOnTheSameRowOnARealRig)
                                  << " (Debian package opencv-doc)";
     const cv::Size size = lefts[0].size();
 
-    constexpr double kSquareM = 0.025;   // the sample's square size is not published
+    constexpr double kSquareM = 0.025; // the sample's square size is not published
     std::vector<cv::Point3f> board;
     for (int y = 0; y < kBoard.height; ++y)
         for (int x = 0; x < kBoard.width; ++x)
-            board.emplace_back(static_cast<float>(x * kSquareM), static_cast<float>(y * kSquareM), 0.0f);
+            board.emplace_back(static_cast<float>(x * kSquareM), static_cast<float>(y * kSquareM),
+                               0.0f);
     const std::vector<std::vector<cv::Point3f>> objects(lefts.size(), board);
 
     StereoCalibration c;
@@ -93,8 +93,8 @@ TEST(Rectification, PutsChessboardCornersOnTheSameRowOnARealRig)
     c.R = cv::Matx33d(R);
     c.T = cv::Vec3d(T.ptr<double>());
     cv::Mat R1, R2, P1, P2, Q;
-    cv::stereoRectify(K1, D1, K2, D2, size, R, T, R1, R2, P1, P2, Q, cv::CALIB_ZERO_DISPARITY,
-                      0.0, size, &c.valid_roi_left, &c.valid_roi_right);
+    cv::stereoRectify(K1, D1, K2, D2, size, R, T, R1, R2, P1, P2, Q, cv::CALIB_ZERO_DISPARITY, 0.0,
+                      size, &c.valid_roi_left, &c.valid_roi_right);
     c.R1 = cv::Matx33d(R1);
     c.R2 = cv::Matx33d(R2);
     c.P1 = cv::Matx34d(P1);

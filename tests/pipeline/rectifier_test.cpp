@@ -69,7 +69,8 @@ cv::Mat whollyOutside(const cv::Mat& map_xy, cv::Size size)
     for (int y = 0; y < map_xy.rows; ++y)
         for (int x = 0; x < map_xy.cols; ++x) {
             const cv::Vec2s p = map_xy.at<cv::Vec2s>(y, x);
-            const bool outside = p[0] < -1 || p[0] >= size.width || p[1] < -1 || p[1] >= size.height;
+            const bool outside =
+                p[0] < -1 || p[0] >= size.width || p[1] < -1 || p[1] >= size.height;
             mask.at<uint8_t>(y, x) = outside ? 255 : 0;
         }
     return mask;
@@ -119,8 +120,8 @@ Maps fixedPointMaps(const CameraIntrinsics& camera, const cv::Matx33d& rotation,
                     const cv::Matx34d& projection, cv::Size size)
 {
     Maps m;
-    cv::initUndistortRectifyMap(camera.camera_matrix, camera.distortion, rotation, projection,
-                                size, CV_16SC2, m.xy, m.frac);
+    cv::initUndistortRectifyMap(camera.camera_matrix, camera.distortion, rotation, projection, size,
+                                CV_16SC2, m.xy, m.frac);
     return m;
 }
 
@@ -173,7 +174,8 @@ TEST(RealRig, PixelsWithoutRawDataAreBlack)
     ASSERT_GT(straddling, 100);
     EXPECT_EQ(cv::countNonZero(rectified & outside), 0);
     // The raw image's content is there elsewhere (not an all-black output).
-    EXPECT_GT(cv::countNonZero(rectified), (static_cast<int>(rectified.total()) - outside_count) / 2);
+    EXPECT_GT(cv::countNonZero(rectified),
+              (static_cast<int>(rectified.total()) - outside_count) / 2);
 }
 
 // The benchmark's rig (mild distortion, a 0.5 degree turn, alpha 0) on a real scene, the
@@ -207,7 +209,7 @@ TEST(PlausibleRig, RectifiesASimulatedRawPairLikeOpenCvRemap)
 // that put the neighbourhood everywhere around and across its edges: just inside, on the
 // first and last row and column, one pixel out, far out, and at the limits of int16.
 class EdgeMaps : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override
     {
         const cv::Mat aloe = readGray(kSamples + "aloeL.jpg");
@@ -229,7 +231,8 @@ protected:
                 // every seventh, both now and then.
                 const int sx = x % 5 == 0 ? pick(special_x) : rng.uniform(-3, src_.cols + 3);
                 const int sy = x % 7 == 0 ? pick(special_y) : rng.uniform(-3, src_.rows + 3);
-                map_xy_.at<cv::Vec2s>(y, x) = cv::Vec2s(static_cast<short>(sx), static_cast<short>(sy));
+                map_xy_.at<cv::Vec2s>(y, x) =
+                    cv::Vec2s(static_cast<short>(sx), static_cast<short>(sy));
                 map_frac_.at<uint16_t>(y, x) = static_cast<uint16_t>(rng.uniform(0, 1024));
             }
     }
@@ -281,8 +284,8 @@ TEST_F(EdgeMaps, EdgePixelsFadeToBlackLikeAConstantBorder)
     cv::Mat out;
     remapBilinear(white, xy, frac, out);
     EXPECT_EQ(out.at<uint8_t>(0, 0), 255);
-    EXPECT_EQ(out.at<uint8_t>(0, 1), 128);   // 255 * 1/2, rounded
-    EXPECT_EQ(out.at<uint8_t>(0, 2), 143);   // 255 * (3/4)^2 = 143.4
+    EXPECT_EQ(out.at<uint8_t>(0, 1), 128); // 255 * 1/2, rounded
+    EXPECT_EQ(out.at<uint8_t>(0, 2), 143); // 255 * (3/4)^2 = 143.4
     EXPECT_EQ(out.at<uint8_t>(0, 3), 0);
     EXPECT_EQ(cv::norm(out, openCvRemap(white, xy, frac), cv::NORM_INF), 0.0);
 }
@@ -307,29 +310,25 @@ TEST_F(EdgeMaps, RefusesWhatItCannotResample)
 {
     cv::Mat out;
     const cv::Mat colour(src_.size(), CV_8UC3, cv::Scalar::all(0));
-    EXPECT_TRUE(test::contains(
-        test::refusalMessage<std::invalid_argument>([&] { remapBilinear(colour, map_xy_, map_frac_, out); }),
-        "CV_8UC1"));
-    EXPECT_TRUE(test::contains(test::refusalMessage<std::invalid_argument>([&] {
-                                   remapBilinear(cv::Mat(), map_xy_, map_frac_, out);
-                               }),
+    EXPECT_TRUE(test::contains(test::refusalMessage<std::invalid_argument>(
+                                   [&] { remapBilinear(colour, map_xy_, map_frac_, out); }),
+                               "CV_8UC1"));
+    EXPECT_TRUE(test::contains(test::refusalMessage<std::invalid_argument>(
+                                   [&] { remapBilinear(cv::Mat(), map_xy_, map_frac_, out); }),
                                "source"));
     cv::Mat float_map;
     map_xy_.convertTo(float_map, CV_32FC2);
-    EXPECT_TRUE(test::contains(test::refusalMessage<std::invalid_argument>([&] {
-                                   remapBilinear(src_, float_map, map_frac_, out);
-                               }),
+    EXPECT_TRUE(test::contains(test::refusalMessage<std::invalid_argument>(
+                                   [&] { remapBilinear(src_, float_map, map_frac_, out); }),
                                "map_xy"));
     const cv::Mat short_frac = map_frac_.rowRange(0, 10);
-    EXPECT_TRUE(test::contains(test::refusalMessage<std::invalid_argument>([&] {
-                                   remapBilinear(src_, map_xy_, short_frac, out);
-                               }),
+    EXPECT_TRUE(test::contains(test::refusalMessage<std::invalid_argument>(
+                                   [&] { remapBilinear(src_, map_xy_, short_frac, out); }),
                                "map_frac"));
     // In place: the output would overwrite pixels still to be read.
     cv::Mat same(map_xy_.size(), CV_8UC1, cv::Scalar(1));
-    EXPECT_TRUE(test::contains(test::refusalMessage<std::invalid_argument>([&] {
-                                   remapBilinear(same, map_xy_, map_frac_, same);
-                               }),
+    EXPECT_TRUE(test::contains(test::refusalMessage<std::invalid_argument>(
+                                   [&] { remapBilinear(same, map_xy_, map_frac_, same); }),
                                "share"));
 }
 

@@ -4,8 +4,6 @@
 //
 // ScratchDir is thread-bound (one per test); the functions are reentrant.
 
-#include <unistd.h>
-
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -13,11 +11,12 @@
 #include <string>
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 namespace stereod::test {
 
 class ScratchDir {
-public:
+  public:
     explicit ScratchDir(const std::string& prefix)
         : path_(std::filesystem::temp_directory_path() /
                 (prefix + "_" + std::to_string(::getpid())))
@@ -30,7 +29,7 @@ public:
 
     std::string file(const std::string& name) const { return (path_ / name).string(); }
 
-private:
+  private:
     std::filesystem::path path_;
 };
 
@@ -43,8 +42,7 @@ inline std::string readFile(const std::string& path)
 
 // Runs `run`, which must throw an `Error`; returns its message (a test failure, and "",
 // when nothing is thrown).
-template <typename Error>
-std::string refusalMessage(const std::function<void()>& run)
+template <typename Error> std::string refusalMessage(const std::function<void()>& run)
 {
     try {
         run();

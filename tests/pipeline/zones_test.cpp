@@ -30,8 +30,8 @@ StereoCalibration adirondackCalibration(cv::Size size)
 }
 
 struct SceneDepth {
-    cv::Mat measured_m;   // from the pipeline
-    cv::Mat truth_m;      // from the ground truth
+    cv::Mat measured_m; // from the pipeline
+    cv::Mat truth_m;    // from the ground truth
     RectifiedGeometry geometry;
     double closest_m = 0.0;
 };
@@ -190,15 +190,15 @@ TEST(Zones, HysteresisHoldsOverFlickeringFrames)
     const auto state = [&](const cv::Mat& depth) {
         return monitor.update(depth, s.geometry, s.closest_m, 0, 0).front().state;
     };
-    EXPECT_NE(state(occupied), ZoneState::Occupied);   // one frame is not enough
+    EXPECT_NE(state(occupied), ZoneState::Occupied); // one frame is not enough
     EXPECT_NE(state(missed), ZoneState::Occupied);
     EXPECT_NE(state(occupied), ZoneState::Occupied);
-    EXPECT_EQ(state(occupied), ZoneState::Occupied);   // two in a row
-    EXPECT_EQ(state(missed), ZoneState::Occupied);     // one miss does not clear it
+    EXPECT_EQ(state(occupied), ZoneState::Occupied); // two in a row
+    EXPECT_EQ(state(missed), ZoneState::Occupied);   // one miss does not clear it
     EXPECT_EQ(state(occupied), ZoneState::Occupied);
     EXPECT_EQ(state(missed), ZoneState::Occupied);
     EXPECT_EQ(state(missed), ZoneState::Occupied);
-    EXPECT_NE(state(missed), ZoneState::Occupied);     // three misses in a row do
+    EXPECT_NE(state(missed), ZoneState::Occupied); // three misses in a row do
 }
 
 // What three zones cost per frame at 718x496 (printed for the record, not asserted:
@@ -219,7 +219,8 @@ TEST(Zones, CostPerFrameIsPrinted)
     for (int i = 0; i < kFrames; ++i)
         monitor.update(s.measured_m, s.geometry, s.closest_m, i, static_cast<uint64_t>(i));
     const double ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count() /
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+            .count() /
         kFrames;
     std::printf("[zones] three zones at %dx%d: %.2f ms per frame\n", s.measured_m.cols,
                 s.measured_m.rows, ms);

@@ -32,7 +32,7 @@ using json = nlohmann::json;
 const std::string kInteropDir = std::string(STEREOD_SOURCE_DIR) + "/tests/mcap_interop";
 
 class McapInterop : public ::testing::Test {
-protected:
+  protected:
     void SetUp() override
     {
         if (std::string(STEREOD_NODE).empty()) {
@@ -129,7 +129,8 @@ TEST_F(McapInterop, OurBagReadByMcapCoreAndRosmsg2Serialization)
     const json& left = got["first"][kMcapLeftImageTopic];
     EXPECT_EQ(left["logTime"], pairs[0].left_stamp_ns);
     EXPECT_EQ(left["message"]["header"]["stamp"]["sec"], pairs[0].left_stamp_ns / 1'000'000'000);
-    EXPECT_EQ(left["message"]["header"]["stamp"]["nanosec"], pairs[0].left_stamp_ns % 1'000'000'000);
+    EXPECT_EQ(left["message"]["header"]["stamp"]["nanosec"],
+              pairs[0].left_stamp_ns % 1'000'000'000);
     EXPECT_EQ(left["message"]["header"]["frame_id"], "stereo_left_optical_frame");
     EXPECT_EQ(left["message"]["encoding"], "mono8");
     EXPECT_EQ(left["message"]["width"], size.width);
@@ -161,21 +162,23 @@ TEST_F(McapInterop, BagWrittenByMcapCoreIsPairedByOurReader)
     test::stampPairs(pairs, 7'000'000'000, 66'666'667);
     const auto [left_info, right_info] = cameraInfoPair(size);
     auto info_json = [](const ros2::CameraInfo& i) {
-        return json{{"width", i.width}, {"height", i.height}, {"distortion_model", i.distortion_model},
-                    {"d", i.d}, {"k", i.k}, {"r", i.r}, {"p", i.p}};
+        return json{
+            {"width", i.width}, {"height", i.height}, {"distortion_model", i.distortion_model},
+            {"d", i.d},         {"k", i.k},           {"r", i.r},
+            {"p", i.p}};
     };
-    json spec = {{"left_topic", "/robot/cam_left/image"},
-                 {"right_topic", "/robot/cam_right/image"},
-                 {"other_topic", "/robot/front/image_color"},
-                 {"left_info", info_json(left_info)},
-                 {"right_info", info_json(right_info)},
-                 {"pairs", json::array()}};
+    json spec = {
+        {"left_topic", "/robot/cam_left/image"},     {"right_topic", "/robot/cam_right/image"},
+        {"other_topic", "/robot/front/image_color"}, {"left_info", info_json(left_info)},
+        {"right_info", info_json(right_info)},       {"pairs", json::array()}};
     for (std::size_t k = 0; k < pairs.size(); ++k) {
         const std::string l = dir_.file("l" + std::to_string(k) + ".pgm");
         const std::string r = dir_.file("r" + std::to_string(k) + ".pgm");
         ASSERT_TRUE(cv::imwrite(l, pairs[k].left));
         ASSERT_TRUE(cv::imwrite(r, pairs[k].right));
-        spec["pairs"].push_back({{"left", l}, {"right", r}, {"left_stamp_ns", pairs[k].left_stamp_ns},
+        spec["pairs"].push_back({{"left", l},
+                                 {"right", r},
+                                 {"left_stamp_ns", pairs[k].left_stamp_ns},
                                  {"right_stamp_ns", pairs[k].right_stamp_ns}});
     }
     std::ofstream(dir_.file("spec.json")) << spec.dump();
@@ -206,12 +209,15 @@ TEST_F(McapInterop, BagWrittenByMcapCoreIsPairedByOurReader)
     EXPECT_EQ(index.camera_info->first.k, left_info.k);
 
     // Named topics too, and a wrong name is refused with the bag's image topics listed.
-    EXPECT_EQ(indexMcapStereo(reader, "/robot/cam_left/image", "/robot/cam_right/image").pairs.size(), 6u);
+    EXPECT_EQ(
+        indexMcapStereo(reader, "/robot/cam_left/image", "/robot/cam_right/image").pairs.size(),
+        6u);
     try {
         indexMcapStereo(reader, "/stereo/left/image_raw", "/robot/cam_right/image");
         FAIL() << "a missing topic was accepted";
     } catch (const mcap::McapError& e) {
-        EXPECT_NE(std::string(e.what()).find("/robot/front/image_color"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("/robot/front/image_color"), std::string::npos)
+            << e.what();
     }
 }
 
@@ -223,7 +229,7 @@ TEST_F(McapInterop, CutBagReadableUpToItsLastCompleteChunk)
     const auto [left_info, right_info] = cameraInfoPair(size);
     const std::string path = dir_.file("full.mcap");
     mcap::WriterOptions options = McapRecordingWriter::defaultOptions();
-    options.chunk_size_bytes = 40'000;   // about 2 pairs a chunk
+    options.chunk_size_bytes = 40'000; // about 2 pairs a chunk
     {
         McapRecordingWriter writer(path, options);
         writer.setCameraInfo(left_info, right_info);
@@ -240,7 +246,8 @@ TEST_F(McapInterop, CutBagReadableUpToItsLastCompleteChunk)
     std::string bytes((std::istreambuf_iterator<char>(in)), {});
     // A kill -9 in the middle of writing a chunk: the file ends inside it.
     const std::string cut = dir_.file("cut.mcap");
-    std::ofstream(cut, std::ios::binary).write(bytes.data(), static_cast<std::streamsize>(bytes.size() * 6 / 10));
+    std::ofstream(cut, std::ios::binary)
+        .write(bytes.data(), static_cast<std::streamsize>(bytes.size() * 6 / 10));
 
     mcap::Reader reader(cut);
     EXPECT_FALSE(reader.hasSummary());

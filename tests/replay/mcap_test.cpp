@@ -3,9 +3,6 @@
 // chunk. The independent check (@mcap/core reading our files, and writing files we read)
 // is tests/mcap_interop.
 
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <cstdint>
 #include <fstream>
 #include <iterator>
@@ -13,6 +10,8 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "replay/mcap_reader.hpp"
 #include "replay/mcap_writer.hpp"
@@ -45,7 +44,8 @@ std::vector<Sent> writeFile(const std::string& path, int count, WriterOptions op
 {
     Writer writer(path, options);
     const uint16_t image = writer.addSchema("sensor_msgs/msg/Image", "ros2msg", "uint32 height\n");
-    const uint16_t info = writer.addSchema("sensor_msgs/msg/CameraInfo", "ros2msg", "uint32 height\n");
+    const uint16_t info =
+        writer.addSchema("sensor_msgs/msg/CameraInfo", "ros2msg", "uint32 height\n");
     const uint16_t left = writer.addChannel(image, "/left", "cdr", {{"offered_qos_profiles", ""}});
     const uint16_t right = writer.addChannel(image, "/right", "cdr");
     const uint16_t cam = writer.addChannel(info, "/info", "cdr");
@@ -91,7 +91,7 @@ WriterOptions smallChunks(WriterOptions::Compression compression)
     WriterOptions o;
     o.profile = "ros2";
     o.compression = compression;
-    o.chunk_size_bytes = 20'000;   // about 6 messages a chunk
+    o.chunk_size_bytes = 20'000; // about 6 messages a chunk
     return o;
 }
 
@@ -202,7 +202,8 @@ TEST(McapFile, RefusesToOverwriteAndNonMcap)
 TEST(McapFile, TruncatedFileKeepsEveryCompleteChunk)
 {
     test::TempDir dir;
-    const auto sent = writeFile(dir.file("full.mcap"), 40, smallChunks(WriterOptions::Compression::Zstd));
+    const auto sent =
+        writeFile(dir.file("full.mcap"), 40, smallChunks(WriterOptions::Compression::Zstd));
     const std::string bytes = slurp(dir.file("full.mcap"));
     std::vector<ChunkIndex> chunks;
     {
@@ -226,12 +227,12 @@ TEST(McapFile, TruncatedFileKeepsEveryCompleteChunk)
 
     std::vector<uint64_t> cuts;
     for (const auto& c : chunks) {
-        cuts.push_back(c.chunk_start_offset);                        // just before a chunk
-        cuts.push_back(c.chunk_start_offset + 5);                    // inside its prefix
-        cuts.push_back(c.chunk_start_offset + c.chunk_length / 2);   // in its middle
-        cuts.push_back(c.chunk_start_offset + c.chunk_length);       // just after it
+        cuts.push_back(c.chunk_start_offset);                      // just before a chunk
+        cuts.push_back(c.chunk_start_offset + 5);                  // inside its prefix
+        cuts.push_back(c.chunk_start_offset + c.chunk_length / 2); // in its middle
+        cuts.push_back(c.chunk_start_offset + c.chunk_length);     // just after it
     }
-    cuts.push_back(bytes.size() - 30);   // inside the footer: summary lost, data intact
+    cuts.push_back(bytes.size() - 30); // inside the footer: summary lost, data intact
     for (const uint64_t cut : cuts) {
         SCOPED_TRACE("cut at byte " + std::to_string(cut));
         const std::string path = dir.file("cut.mcap");
@@ -282,7 +283,8 @@ TEST(McapFile, DamagedFilesAreRefusedOrReadNeverCrash)
         const uint16_t schema = writer.addSchema("s", "ros2msg", "uint8 x\n");
         const uint16_t channel = writer.addChannel(schema, "/t", "cdr", {{"k", "v"}});
         for (int k = 0; k < 6; ++k) {
-            writer.write(channel, static_cast<uint64_t>(k), static_cast<uint64_t>(k), payload(k, 0, 700));
+            writer.write(channel, static_cast<uint64_t>(k), static_cast<uint64_t>(k),
+                         payload(k, 0, 700));
         }
     }
     const std::string bytes = slurp(dir.file("small.mcap"));
@@ -292,7 +294,8 @@ TEST(McapFile, DamagedFilesAreRefusedOrReadNeverCrash)
         try {
             Reader reader(path);
             std::size_t n = 0;
-            reader.forEachMessage([&](const MessageView& m, const MessageRef&) { n += m.data.size(); });
+            reader.forEachMessage(
+                [&](const MessageView& m, const MessageRef&) { n += m.data.size(); });
         } catch (const McapError&) {
         }
     };

@@ -17,7 +17,7 @@ namespace stereod {
 namespace {
 
 namespace fs = std::filesystem;
-using test::TempDir;   // tests/ctl/process.hpp
+using test::TempDir; // tests/ctl/process.hpp
 
 std::string readText(const std::string& path)
 {
@@ -110,7 +110,7 @@ TEST(Recording, WriterRefusesBadImagesAndLeavesNoRowForThem)
     const cv::Mat bigger(cv::Size(120, 80), CV_8UC1, cv::Scalar::all(7));
     EXPECT_THROW(writer.write(color, pairs[1].right, 20, 21), RecordingError);
     EXPECT_THROW(writer.write(pairs[1].left, bigger, 20, 21), RecordingError);
-    EXPECT_THROW(writer.write(bigger, bigger, 20, 21), RecordingError);   // not the first size
+    EXPECT_THROW(writer.write(bigger, bigger, 20, 21), RecordingError); // not the first size
     EXPECT_THROW(writer.write(cv::Mat(), pairs[1].right, 20, 21), RecordingError);
     EXPECT_EQ(writer.pairsWritten(), 1u);
 
@@ -125,16 +125,17 @@ TEST(Recording, ReaderSkipsMalformedRowsAndNamesFileAndLine)
 {
     TempDir tmp;
     writeText(tmp.file("frames.csv"),
-              std::string(kFramesCsvHeader) + "\n"
-              "0,1000,1100,left/a.png,right/a.png\n"          // line 2: good
-              "1,10x0,1100,left/b.png,right/b.png\n"          // line 3: bad left stamp
-              "2,3000\n"                                      // line 4: too few fields
-              "\n"                                            // line 5: blank, ignored
-              "3, 4000 , 3900 ,left/d.png,right/d.png\r\n"    // line 6: good (spaces, CRLF)
-              "-4,5000,5000,left/e.png,right/e.png\n"         // line 7: negative index
-              "5,6000,6000,/abs/f.png,right/f.png\n"          // line 8: absolute name
-              "6,7000,7000,left/g.png,\n"                     // line 9: empty right name
-              "7,8000,8000,left/h.png,right/h.png,extra\n");  // line 10: too many fields
+              std::string(kFramesCsvHeader) +
+                  "\n"
+                  "0,1000,1100,left/a.png,right/a.png\n"         // line 2: good
+                  "1,10x0,1100,left/b.png,right/b.png\n"         // line 3: bad left stamp
+                  "2,3000\n"                                     // line 4: too few fields
+                  "\n"                                           // line 5: blank, ignored
+                  "3, 4000 , 3900 ,left/d.png,right/d.png\r\n"   // line 6: good (spaces, CRLF)
+                  "-4,5000,5000,left/e.png,right/e.png\n"        // line 7: negative index
+                  "5,6000,6000,/abs/f.png,right/f.png\n"         // line 8: absolute name
+                  "6,7000,7000,left/g.png,\n"                    // line 9: empty right name
+                  "7,8000,8000,left/h.png,right/h.png,extra\n"); // line 10: too many fields
     const Recording recording = openRecording(tmp.path(), 10.0);
     ASSERT_EQ(recording.entries.size(), 2u);
     EXPECT_EQ(recording.entries[0].index, 0u);
@@ -147,9 +148,9 @@ TEST(Recording, ReaderSkipsMalformedRowsAndNamesFileAndLine)
     EXPECT_EQ(recording.bad_rows, 6u);
     ASSERT_EQ(recording.problems.size(), 6u);
     const std::string csv = tmp.file("frames.csv");
-    const char* expected[] = {":3: left_stamp_ns", ":4: expected 5 fields", ":7: index",
-                              ":8: left file name", ":9: right file name is empty",
-                              ":10: expected 5 fields"};
+    const char* expected[] = {
+        ":3: left_stamp_ns",  ":4: expected 5 fields",        ":7: index",
+        ":8: left file name", ":9: right file name is empty", ":10: expected 5 fields"};
     for (std::size_t k = 0; k < 6; ++k) {
         EXPECT_EQ(recording.problems[k].rfind(csv, 0), 0u) << recording.problems[k];
         EXPECT_NE(recording.problems[k].find(expected[k]), std::string::npos)
@@ -213,7 +214,7 @@ TEST(Recording, CutShortIndexStillGivesEveryCompleteRow)
     const std::string csv = dir + "/frames.csv";
     const std::string text = readText(csv);
     const std::size_t last_row = text.rfind('\n', text.size() - 2) + 1;
-    writeText(csv, text.substr(0, last_row + 6));   // "3,5150" of the fourth row
+    writeText(csv, text.substr(0, last_row + 6)); // "3,5150" of the fourth row
 
     const Recording recording = openRecording(dir, 10.0);
     ASSERT_EQ(recording.entries.size(), 3u);
@@ -223,8 +224,7 @@ TEST(Recording, CutShortIndexStillGivesEveryCompleteRow)
     ASSERT_EQ(recording.problems.size(), 1u);
     EXPECT_NE(recording.problems[0].find("frames.csv:5:"), std::string::npos)
         << recording.problems[0];
-    EXPECT_NE(recording.problems[0].find("cut short"), std::string::npos)
-        << recording.problems[0];
+    EXPECT_NE(recording.problems[0].find("cut short"), std::string::npos) << recording.problems[0];
 }
 
 TEST(Recording, PlainFolderPairsLeftAndRightImagesByNameOrder)

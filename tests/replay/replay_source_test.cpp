@@ -13,14 +13,14 @@
 #include <thread>
 #include <vector>
 
-#include <gtest/gtest.h>
 #include <fcntl.h>
-#include <sys/resource.h>
-#include <sys/stat.h>
-#include <unistd.h>
+#include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 #include <spdlog/sinks/ringbuffer_sink.h>
 #include <spdlog/spdlog.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "replay/replay_source.hpp"
 #include "tests/ctl/process.hpp"
@@ -30,7 +30,7 @@ namespace stereod {
 namespace {
 
 namespace fs = std::filesystem;
-using test::TempDir;   // tests/ctl/process.hpp
+using test::TempDir; // tests/ctl/process.hpp
 using test::TestPair;
 
 constexpr int64_t kMs = 1'000'000;
@@ -94,7 +94,9 @@ void expectPairMatches(const StereoPair& pair, const TestPair& recorded, uint64_
 // source, drain the ring, then free the source (and with it the frames' pool).
 struct Rig {
     Rig(ReplayOptions options, std::size_t ring_capacity)
-        : source(std::move(options)), ring(ring_capacity) {}
+        : source(std::move(options)), ring(ring_capacity)
+    {
+    }
     ~Rig()
     {
         source.stop();
@@ -106,7 +108,7 @@ struct Rig {
 };
 
 class ReplaySourceTest : public ::testing::Test {
-protected:
+  protected:
     // A recording of `count` Tsukuba pairs, 40 ms apart, with the test skews.
     std::string makeRecording(int count, int64_t spacing_ns = 40 * kMs)
     {
@@ -124,7 +126,7 @@ protected:
 TEST_F(ReplaySourceTest, LockstepDeliversEveryPairInOrderThenFinishes)
 {
     const std::string dir = makeRecording(6);
-    Rig rig(lockstep(dir), 2);   // smaller than the recording: the source must wait, not drop
+    Rig rig(lockstep(dir), 2); // smaller than the recording: the source must wait, not drop
     ReplaySource& source = rig.source;
     PairRing& ring = rig.ring;
     EXPECT_EQ(source.frameSize(), cv::Size(96, 72));
@@ -138,7 +140,7 @@ TEST_F(ReplaySourceTest, LockstepDeliversEveryPairInOrderThenFinishes)
     int64_t previous_ns = started_ns;
     for (std::size_t k = 0; k < got.size(); ++k) {
         expectPairMatches(got[k], pairs_[k], k);
-        EXPECT_GE(got[k].stampNs(), previous_ns);   // delivery times, CLOCK_MONOTONIC
+        EXPECT_GE(got[k].stampNs(), previous_ns); // delivery times, CLOCK_MONOTONIC
         previous_ns = got[k].stampNs();
     }
     EXPECT_LE(previous_ns, monotonicNowNs());
@@ -173,7 +175,7 @@ TEST_F(ReplaySourceTest, LockstepWaitsForBuffersHeldDownstreamInsteadOfDropping)
 {
     const std::string dir = makeRecording(8);
     ReplayOptions options = lockstep(dir);
-    options.pool_pairs = 2;   // fewer than the ring holds plus what the consumer keeps
+    options.pool_pairs = 2; // fewer than the ring holds plus what the consumer keeps
     Rig rig(options, 4);
     ReplaySource& source = rig.source;
     PairRing& ring = rig.ring;
@@ -333,7 +335,7 @@ TEST_F(ReplaySourceTest, PacedReplayDropsPairsWhenEveryBufferIsHeld)
     options.path = dir;
     options.pacing = ReplayOptions::Pacing::Paced;
     options.loop = false;
-    options.pool_pairs = 1;   // the first pair, unconsumed in the ring, holds both buffers
+    options.pool_pairs = 1; // the first pair, unconsumed in the ring, holds both buffers
     Rig rig(options, 4);
     ReplaySource& source = rig.source;
     PairRing& ring = rig.ring;
@@ -370,7 +372,7 @@ TEST_F(ReplaySourceTest, StopDuringALongPacedGapReturnsAtOnce)
     EXPECT_EQ(source.status().state, SourceState::Stopped);
     EXPECT_EQ(source.status().pairs, 1u);
     EXPECT_FALSE(ring.tryPop().has_value());
-    EXPECT_FALSE(ring.stopped());   // paced: the ring is left as it was
+    EXPECT_FALSE(ring.stopped()); // paced: the ring is left as it was
 }
 
 TEST_F(ReplaySourceTest, StopReleasesALockstepReplayWaitingOnAFullRing)
@@ -400,7 +402,7 @@ TEST_F(ReplaySourceTest, PlainFolderReplaysAtTheNominalRate)
         const std::string n = "_" + std::to_string(k) + ".png";
         ASSERT_TRUE(cv::imwrite(tmp_.file("left" + n), pairs_[k].left));
         ASSERT_TRUE(cv::imwrite(tmp_.file("right" + n), pairs_[k].right));
-        pairs_[k].left_stamp_ns = static_cast<int64_t>(k) * 40 * kMs;   // 25 fps
+        pairs_[k].left_stamp_ns = static_cast<int64_t>(k) * 40 * kMs; // 25 fps
         pairs_[k].right_stamp_ns = pairs_[k].left_stamp_ns;
     }
     ReplayOptions options = lockstep(tmp_.path());
@@ -472,10 +474,10 @@ TEST_F(ReplaySourceTest, OpenCvSampleFolderSkipsPairsOfAnotherSize)
 TEST_F(ReplaySourceTest, BadFilesAreSkippedCountedAndLoggedOncePerFile)
 {
     const std::string dir = makeRecording(7);
-    test::writeGarbage(dir + "/left/000002.png");                 // corrupt
-    fs::remove(dir + "/right/000004.png");                        // missing
+    test::writeGarbage(dir + "/left/000002.png"); // corrupt
+    fs::remove(dir + "/right/000004.png");        // missing
     const std::vector<TestPair> big = test::tsukubaPairs(1, cv::Size(120, 90));
-    cv::imwrite(dir + "/left/000005.png", big[0].left);          // another size
+    cv::imwrite(dir + "/left/000005.png", big[0].left); // another size
     cv::imwrite(dir + "/right/000005.png", big[0].right);
 
     // Capture the warnings.
@@ -502,9 +504,9 @@ TEST_F(ReplaySourceTest, BadFilesAreSkippedCountedAndLoggedOncePerFile)
     const SourceStatus status = source.status();
     // Two whole passes saw every bad file once each; the third, running ahead of the
     // consumer into the ring, may have met them once more before stop().
-    EXPECT_GE(status.cameras[0].bad_frames, 4u);   // 000002 corrupt, 000005 wrong size
+    EXPECT_GE(status.cameras[0].bad_frames, 4u); // 000002 corrupt, 000005 wrong size
     EXPECT_LE(status.cameras[0].bad_frames, 6u);
-    EXPECT_GE(status.cameras[1].bad_frames, 2u);   // 000004 missing
+    EXPECT_GE(status.cameras[1].bad_frames, 2u); // 000004 missing
     EXPECT_LE(status.cameras[1].bad_frames, 3u);
     EXPECT_EQ(status.cameras[0].dropped, 0u);
     EXPECT_FALSE(status.cameras[1].last_error.empty());
@@ -707,7 +709,7 @@ TEST_F(ReplaySourceTest, McapBagReplaysLikeARecording)
         writer.setCameraInfo(info, info);
         for (const TestPair& p : pairs_)
             writer.write(p.left, p.right, p.left_stamp_ns, p.right_stamp_ns);
-    }   // closed by the destructor
+    } // closed by the destructor
     Rig rig(lockstep(bag), 2);
     ReplaySource& source = rig.source;
     EXPECT_EQ(source.frameSize(), cv::Size(96, 72));

@@ -3,11 +3,10 @@
 #include <fstream>
 #include <random>
 
-#include <zlib.h>
-
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <zlib.h>
 
 #include "replay/recording.hpp"
 

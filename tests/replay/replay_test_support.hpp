@@ -11,7 +11,7 @@
 namespace stereod::test {
 
 struct TestPair {
-    cv::Mat left;                  // CV_8UC1
+    cv::Mat left; // CV_8UC1
     cv::Mat right;
     int64_t left_stamp_ns = 0;
     int64_t right_stamp_ns = 0;

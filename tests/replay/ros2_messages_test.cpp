@@ -17,19 +17,21 @@ TEST(Ros2Messages, ImageBytesAreXcdr1LittleEndian)
     const uint8_t pixels[6] = {1, 2, 3, 4, 5, 6};
     std::string out;
     serializeImage(Header{Time{7, 9}, "cam"}, 2, 3, "mono8", 3, pixels, 6, out);
-    const std::string expected = std::string(
-        "\x00\x01\x00\x00"           // encapsulation: CDR little-endian
-        "\x07\x00\x00\x00"           // stamp.sec
-        "\x09\x00\x00\x00"           // stamp.nanosec
-        "\x04\x00\x00\x00" "cam\x00" // frame_id, length with NUL
-        "\x02\x00\x00\x00"           // height
-        "\x03\x00\x00\x00"           // width
-        "\x06\x00\x00\x00" "mono8\x00"
-        "\x00"                       // is_bigendian
-        "\x00"                       // padding: step is aligned to 4
-        "\x03\x00\x00\x00"           // step
-        "\x06\x00\x00\x00"           // data length
-        "\x01\x02\x03\x04\x05\x06", 54);
+    const std::string expected = std::string("\x00\x01\x00\x00" // encapsulation: CDR little-endian
+                                             "\x07\x00\x00\x00" // stamp.sec
+                                             "\x09\x00\x00\x00" // stamp.nanosec
+                                             "\x04\x00\x00\x00"
+                                             "cam\x00"          // frame_id, length with NUL
+                                             "\x02\x00\x00\x00" // height
+                                             "\x03\x00\x00\x00" // width
+                                             "\x06\x00\x00\x00"
+                                             "mono8\x00"
+                                             "\x00"             // is_bigendian
+                                             "\x00"             // padding: step is aligned to 4
+                                             "\x03\x00\x00\x00" // step
+                                             "\x06\x00\x00\x00" // data length
+                                             "\x01\x02\x03\x04\x05\x06",
+                                             54);
     EXPECT_EQ(out, expected);
     const ImageView back = parseImage(out);
     EXPECT_EQ(back.header.stamp.sec, 7);
@@ -116,7 +118,8 @@ TEST(Ros2Messages, SchemaTextsCarryTheirDependencies)
     EXPECT_EQ(imageSchemaText().rfind("std_msgs/Header header\n", 0), 0u);
     EXPECT_NE(imageSchemaText().find(sep + "\nMSG: std_msgs/Header\n"), std::string::npos);
     EXPECT_NE(imageSchemaText().find(sep + "\nMSG: builtin_interfaces/Time\n"), std::string::npos);
-    EXPECT_NE(cameraInfoSchemaText().find("MSG: sensor_msgs/RegionOfInterest\n"), std::string::npos);
+    EXPECT_NE(cameraInfoSchemaText().find("MSG: sensor_msgs/RegionOfInterest\n"),
+              std::string::npos);
     EXPECT_NE(pointCloud2SchemaText().find("MSG: sensor_msgs/PointField\n"), std::string::npos);
 }
 

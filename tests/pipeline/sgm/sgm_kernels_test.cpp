@@ -219,8 +219,8 @@ void expectBlocksMatch(const std::vector<uint8_t>& actual, const std::vector<uin
         for (const uint8_t* b : {a, e}) {
             ASSERT_TRUE(std::all_of(b + 1, b + kPathPad, [](uint8_t v) { return v == 255; }))
                 << "pad before pixel " << x << (b == a ? " (simd)" : " (scalar)");
-            ASSERT_TRUE(std::all_of(b + kPathPad + lanes, b + block,
-                                    [](uint8_t v) { return v == 255; }))
+            ASSERT_TRUE(
+                std::all_of(b + kPathPad + lanes, b + block, [](uint8_t v) { return v == 255; }))
                 << "pad after pixel " << x << (b == a ? " (simd)" : " (scalar)");
         }
     }
@@ -263,7 +263,8 @@ TEST(SgmKernelsTest, PathsForwardMatchesScalar)
                             for (int i = 0; i < above; ++i) {
                                 p2_above[i] = penalties(width, model, random);
                                 p2_ptr[i] = p2_above[i].data();
-                                expected_prev[i] = y == 0 ? nullptr : expected_rows[i][cur ^ 1].data();
+                                expected_prev[i] =
+                                    y == 0 ? nullptr : expected_rows[i][cur ^ 1].data();
                                 actual_prev[i] = y == 0 ? nullptr : actual_rows[i][cur ^ 1].data();
                                 expected_cur[i] = expected_rows[i][cur].data();
                                 actual_cur[i] = actual_rows[i][cur].data();
@@ -303,8 +304,8 @@ TEST(SgmKernelsTest, WinnersBackwardMatchesScalar)
                             // 3 levels: many equal sums (ties go to the smallest lane);
                             // 200: few.
                             SCOPED_TRACE(describe(width, num_disparities, min_disparity) +
-                                         ", other paths " + std::to_string(others) +
-                                         ", levels " + std::to_string(levels));
+                                         ", other paths " + std::to_string(others) + ", levels " +
+                                         std::to_string(levels));
                             const int lanes = lanesFor(num_disparities);
                             const size_t block = pathBlockBytes(lanes);
                             const auto cost =
@@ -319,9 +320,9 @@ TEST(SgmKernelsTest, WinnersBackwardMatchesScalar)
                                 for (int x = 0; x < width; ++x) {
                                     const int best = random.uniform(0, num_disparities - 1);
                                     for (int k = 0; k < lanes; ++k) {
-                                        const int valley = std::abs(k - best) * 8 +
-                                                           random.uniform(0, levels - 1) *
-                                                               (200 / levels);
+                                        const int valley =
+                                            std::abs(k - best) * 8 +
+                                            random.uniform(0, levels - 1) * (200 / levels);
                                         r[static_cast<size_t>(x) * block + kPathPad +
                                           static_cast<size_t>(k)] =
                                             static_cast<uint8_t>(std::min(255, valley));
@@ -342,19 +343,19 @@ TEST(SgmKernelsTest, WinnersBackwardMatchesScalar)
                             std::vector<uint16_t> actual_right(static_cast<size_t>(width), 8);
                             fillRandom(sum_scratch, random, 0, 65535);
                             fillRandom(scratch, random, 0, 65535);
-                            scalarKernels().winners_backward(
-                                cost.data(), p2.data(), model.p1, width, lanes, path_rows,
-                                min_disparity, num_disparities, path_scratch.data(),
-                                sum_scratch.data(), expected.data(), expected_right.data(),
-                                scratch.data());
+                            scalarKernels().winners_backward(cost.data(), p2.data(), model.p1,
+                                                             width, lanes, path_rows, min_disparity,
+                                                             num_disparities, path_scratch.data(),
+                                                             sum_scratch.data(), expected.data(),
+                                                             expected_right.data(), scratch.data());
                             fillRandom(sum_scratch, random, 0, 65535);
                             fillRandom(scratch, random, 0, 65535);
                             std::fill(path_scratch.begin(), path_scratch.end(), uint8_t{255});
-                            simdKernels().winners_backward(
-                                cost.data(), p2.data(), model.p1, width, lanes, path_rows,
-                                min_disparity, num_disparities, path_scratch.data(),
-                                sum_scratch.data(), actual.data(), actual_right.data(),
-                                scratch.data());
+                            simdKernels().winners_backward(cost.data(), p2.data(), model.p1, width,
+                                                           lanes, path_rows, min_disparity,
+                                                           num_disparities, path_scratch.data(),
+                                                           sum_scratch.data(), actual.data(),
+                                                           actual_right.data(), scratch.data());
                             for (int x = 0; x < width; ++x) {
                                 const Winner& e = expected[static_cast<size_t>(x)];
                                 const Winner& a = actual[static_cast<size_t>(x)];
