@@ -158,7 +158,10 @@ struct RecordOptions {
     std::string out_dir;            // a directory that must not exist or be empty, or a
                                     // new file ending in .mcap (a ROS 2 bag)
     std::optional<uint64_t> frames; // stop after this many pairs; none: until stopped
-    std::size_t queue_pairs = 32;   // pairs buffered between the socket and the disk
+    // --with: the results to record beside each pair in a bag ("depth", "points"); checked
+    // by runRecord().
+    std::vector<std::string> with;
+    std::size_t queue_pairs = 32; // pairs buffered between the socket and the disk
     bool json = false;
 };
 

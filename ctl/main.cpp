@@ -143,6 +143,11 @@ CLI::App* declareRecord(CLI::App& app, RecordOptions& o, CommandSockets& sockets
         ->required();
     cmd->add_option("--frames", o.frames, "stop after this many pairs")
         ->check(CLI::Range(uint64_t{1}, std::numeric_limits<uint64_t>::max()));
+    cmd->add_option("--with", o.with,
+                    "with FILE.mcap: also record the service's results of each pair, a "
+                    "comma-separated list of: depth (/stereo/depth, 32FC1 metres), points "
+                    "(/stereo/points, PointCloud2)")
+        ->delimiter(',');
     cmd->add_option("--queue", o.queue_pairs,
                     "pairs held between the socket and the disk; more are dropped and counted")
         ->check(CLI::Range(std::size_t{1}, std::size_t{4096}))

@@ -1,7 +1,9 @@
 // `stereoctl record`: the service's raw pairs (the `raw` stream of docs/protocol.md) written
 // as a recording that the replay source plays back: a CSV+PNG directory
 // (replay/recording.hpp), or, when --out ends in `.mcap`, a ROS 2 bag
-// (replay/mcap_recording.hpp) with the calibration in force as camera_info.
+// (replay/mcap_recording.hpp) with the calibration in force as camera_info and, with
+// --with depth,points, each pair's depth and point cloud (the raw stream `with` them: one
+// event holds a pair and its results, so they cannot be mismatched).
 //
 // Two threads: this one reads the stream off the socket into a bounded pool of pair
 // buffers; a writer thread encodes and writes them with RecordingWriter. When every buffer
@@ -49,7 +51,32 @@ struct PairBuffer {
     cv::Mat right;
     int64_t left_stamp_ns = 0;
     int64_t right_stamp_ns = 0;
+    cv::Mat depth_m;               // CV_32FC1 metres, 0 = none; empty: the service sent none
+    std::vector<float> cloud_xyzi; // 4 floats a point
+    bool cloud_present = false;    // the event carried a cloud (maybe of no point)
 };
+
+// What --with asked for.
+struct Results {
+    bool depth = false;
+    bool points = false;
+    bool any() const noexcept { return depth || points; }
+};
+
+Results parseWith(const std::vector<std::string>& with)
+{
+    Results results;
+    for (const std::string& item : with) {
+        if (item == "depth") {
+            results.depth = true;
+        } else if (item == "points") {
+            results.points = true;
+        } else {
+            throw UsageError("--with: unknown \"" + item + "\"; accepted: depth, points");
+        }
+    }
+    return results;
+}
 
 // Pair buffers travelling between the socket reader and the writer thread: a fixed set,
 // each either free or queued for writing.
@@ -297,9 +324,22 @@ class Progress {
     std::chrono::steady_clock::time_point last_{};
 };
 
-// Reads the two payloads of a raw event into `pair`; false (payloads read past) when the
-// event does not carry exactly raw_left and raw_right.
-bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair)
+// Reads the `cloud` payload (f32_xyzi) into `xyzi`.
+void readCloudPayload(ProtocolClient& client, const Payload& payload, std::vector<float>& xyzi)
+{
+    if (payload.format != "f32_xyzi" || payload.bytes != payload.points * 4 * sizeof(float)) {
+        throw ClientError("a raw event's cloud from " + client.socketPath() + " is not " +
+                              std::to_string(payload.points) + " f32_xyzi points",
+                          0);
+    }
+    xyzi.resize(payload.points * 4);
+    client.readPayload(xyzi.data(), payload.bytes);
+}
+
+// Reads the payloads of a raw event into `pair`; false (payloads read past) when the event
+// does not carry exactly raw_left and raw_right, or lacks a result that `results` asks for.
+bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair,
+                 const Results& results)
 {
     const auto payloads = event.find("payloads");
     if (payloads == event.end() || !payloads->is_array()) {
@@ -307,13 +347,30 @@ bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair)
     }
     bool complete = true;
     int sides = 0;
+    if (pair != nullptr) {
+        pair->depth_m.release();
+        pair->cloud_present = false;
+    }
     for (const json& header : *payloads) {
         const Payload payload = parsePayload(header);
+        if (pair != nullptr && results.depth && payload.name == "depth" &&
+            payload.format == "f32_m") {
+            // An uncalibrated service has no depth: 0 x 0, read as none.
+            if (payload.width > 0 && payload.height > 0)
+                readImagePayload(client, payload, CV_32FC1, pair->depth_m);
+            continue;
+        }
+        if (pair != nullptr && results.points && payload.name == "cloud") {
+            readCloudPayload(client, payload, pair->cloud_xyzi);
+            pair->cloud_present = true;
+            continue;
+        }
         const bool left = payload.name == "raw_left";
         const bool right = payload.name == "raw_right";
         if (pair == nullptr || (!left && !right) || payload.format != "u8_gray") {
             client.skipPayload(payload.bytes);
-            complete = complete && (left || right);
+            complete =
+                complete && (left || right || payload.name == "depth" || payload.name == "cloud");
             continue;
         }
         readImagePayload(client, payload, CV_8UC1, left ? pair->left : pair->right);
@@ -321,6 +378,22 @@ bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair)
         ++sides;
     }
     return pair != nullptr && complete && sides == 2;
+}
+
+// The service's `with` results are missing from an event: a service older than them.
+void checkResultsPresent(const json& event, const Results& results, const std::string& socket)
+{
+    bool depth = false;
+    bool cloud = false;
+    for (const json& header : event.value("payloads", json::array())) {
+        depth = depth || header.value("name", std::string()) == "depth";
+        cloud = cloud || header.value("name", std::string()) == "cloud";
+    }
+    if ((results.depth && !depth) || (results.points && !cloud)) {
+        throw UsageError("the service at " + socket +
+                         " sends no depth or points with its raw pairs (a stereod older than "
+                         "`subscribe` `with`); record without --with");
+    }
 }
 
 // The calibration in force in the service, as file text; empty when it runs uncalibrated.
@@ -347,7 +420,11 @@ int runRecord(const RecordOptions& options)
     if (options.queue_pairs == 0) {
         throw UsageError("--queue must be at least 1 pair");
     }
+    const Results results = parseWith(options.with);
     const bool mcap = isMcapPath(options.out_dir);
+    if (results.any() && !mcap) {
+        throw UsageError("--with needs --out FILE.mcap: a CSV+PNG recording holds raw pairs only");
+    }
     if (mcap) {
         checkOutputFile(options.out_dir);
     } else {
@@ -359,6 +436,10 @@ int runRecord(const RecordOptions& options)
     client.setCancelFd(signals.fd());
 
     const std::string calibration_text = serviceCalibration(client);
+    if (results.any() && calibration_text.empty()) {
+        throw UsageError("--with: the service makes no depth or points without a calibration "
+                         "file in force; record without --with");
+    }
     bool calibration_written = false; // calibration.yaml, or camera_info in the bag
     std::optional<RecordingWriter> csv;
     std::optional<McapRecordingWriter> bag;
@@ -385,8 +466,18 @@ int runRecord(const RecordOptions& options)
             fmt::print(stderr, "stereoctl: the service runs uncalibrated: the bag has no "
                                "camera_info\n");
         }
-        write = [&bag](const PairBuffer& p) {
+        if (results.depth)
+            bag->enableDepth();
+        if (results.points)
+            bag->enablePoints();
+        // A pair's depth and points carry its left image's stamp: the depth is the left
+        // camera's view, and a ROS user pairs them with the image by stamp.
+        write = [&bag, results](const PairBuffer& p) {
             bag->write(p.left, p.right, p.left_stamp_ns, p.right_stamp_ns);
+            if (results.depth && !p.depth_m.empty())
+                bag->writeDepth(p.depth_m, p.left_stamp_ns);
+            if (results.points && p.cloud_present)
+                bag->writePoints(p.cloud_xyzi.data(), p.cloud_xyzi.size() / 4, p.left_stamp_ns);
         };
     } else {
         csv.emplace(options.out_dir);
@@ -410,7 +501,17 @@ int runRecord(const RecordOptions& options)
     std::string gone_reason;
 
     try {
-        client.request({{"cmd", "subscribe"}, {"stream", "raw"}});
+        json subscribe = {{"cmd", "subscribe"}, {"stream", "raw"}};
+        if (results.any()) {
+            json with = json::array();
+            if (results.depth)
+                with.push_back("depth");
+            if (results.points)
+                with.push_back("cloud");
+            subscribe["with"] = std::move(with);
+        }
+        client.request(subscribe);
+        bool results_checked = !results.any();
         // Pairs come as fast as the cameras deliver, or not at all while the source is
         // down: only the service going away, a signal or the disk ends the wait.
         client.setTimeout(ProtocolClient::kWaitForever);
@@ -428,12 +529,16 @@ int runRecord(const RecordOptions& options)
                 client.skipPayload(payloadBytes(event));
                 continue;
             }
+            if (!results_checked) {
+                checkResultsPresent(event, results, client.socketPath());
+                results_checked = true;
+            }
             counts.service_skipped += event.value("skipped", uint64_t{0});
             const std::optional<std::size_t> slot = queue.takeFree();
             if (!slot) {
-                readRawPair(client, event, nullptr);
+                readRawPair(client, event, nullptr, results);
                 ++counts.queue_dropped;
-            } else if (readRawPair(client, event, &queue.buffer(*slot))) {
+            } else if (readRawPair(client, event, &queue.buffer(*slot), results)) {
                 queue.push(*slot);
                 ++counts.received;
             } else {

@@ -88,34 +88,51 @@ std::optional<SnapshotItem> snapshotItemFromName(std::string_view name)
     return std::nullopt;
 }
 
+// Reads `key`, an array of strings each one of `known`, into `names`. Returns the
+// problem, if any.
+std::optional<std::string> readNames(const Json& request, const char* key,
+                                     const std::vector<std::string>& known,
+                                     std::vector<std::string>& names)
+{
+    const Json& list = request.at(key);
+    const std::string quoted = std::string("\"") + key + "\"";
+    if (!list.is_array())
+        return quoted + " must be an array of strings, not " + list.type_name();
+    std::size_t index = 0;
+    for (const Json& entry : list) {
+        const std::string where = quoted + "[" + std::to_string(index++) + "]";
+        if (!entry.is_string())
+            return where + " must be a string, not " + entry.type_name();
+        const std::string& name = entry.get_ref<const std::string&>();
+        if (std::find(known.begin(), known.end(), name) == known.end())
+            return where + ": unknown item " + quoteText(name) + "; known: " + joinNames(known);
+        names.push_back(name);
+    }
+    return std::nullopt;
+}
+
+bool present(const Json& request, const char* key)
+{
+    const auto it = request.find(key);
+    return it != request.end() && !it->is_null();
+}
+
 ParseResult parseSnapshot(const Json& request, const std::optional<Json>& id)
 {
     SnapshotRequest snapshot;
-    const auto it = request.find("items");
-    if (it == request.end() || it->is_null()) {
+    if (!present(request, "items")) {
         snapshot.items = {SnapshotItem::Depth, SnapshotItem::Disparity, SnapshotItem::Left,
                           SnapshotItem::Cloud};
         return Request{snapshot, id};
     }
-    if (!it->is_array())
-        return badRequest(
-            std::string("\"items\" must be an array of strings, not ") + it->type_name(), id);
-    std::size_t index = 0;
-    for (const Json& entry : *it) {
-        const std::string where = "\"items\"[" + std::to_string(index++) + "]";
-        if (!entry.is_string())
-            return badRequest(where + " must be a string, not " + entry.type_name(), id);
-        const std::string& name = entry.get_ref<const std::string&>();
-        const std::optional<SnapshotItem> item = snapshotItemFromName(name);
-        if (!item)
-            return badRequest(where + ": unknown item " + quoteText(name) +
-                                  "; known: " + joinNames(knownSnapshotItems()),
-                              id);
-        bool repeated = false;
-        for (const SnapshotItem seen : snapshot.items)
-            repeated = repeated || seen == *item;
-        if (!repeated)
-            snapshot.items.push_back(*item);
+    std::vector<std::string> names;
+    if (std::optional<std::string> problem =
+            readNames(request, "items", knownSnapshotItems(), names))
+        return badRequest(std::move(*problem), id);
+    for (const std::string& name : names) {
+        const SnapshotItem item = *snapshotItemFromName(name);
+        if (std::find(snapshot.items.begin(), snapshot.items.end(), item) == snapshot.items.end())
+            snapshot.items.push_back(item);
     }
     return Request{snapshot, id};
 }
@@ -143,6 +160,18 @@ ParseResult parseSubscribe(const Json& request, const std::optional<Json>& id)
     }
     if (std::optional<std::string> problem = readPositive(request, "max_hz", subscribe.max_hz))
         return badRequest(std::move(*problem), id);
+    if (!present(request, "with"))
+        return Request{subscribe, id};
+    if (subscribe.stream != StreamKind::Raw)
+        return badRequest("\"with\" applies to the raw stream only", id);
+    static const std::vector<std::string> known_with = {"depth", "cloud"};
+    std::vector<std::string> with;
+    if (std::optional<std::string> problem = readNames(request, "with", known_with, with))
+        return badRequest(std::move(*problem), id);
+    for (const std::string& item : with) {
+        subscribe.with_depth = subscribe.with_depth || item == "depth";
+        subscribe.with_cloud = subscribe.with_cloud || item == "cloud";
+    }
     return Request{subscribe, id};
 }
 
@@ -565,10 +594,32 @@ void appendDepthEventHeader(std::string& out, const DepthEventHeader& header,
     out.push_back('\n');
 }
 
-void appendRawEventHeader(std::string& out, const RawEventHeader& header, uint64_t skipped)
+namespace {
+
+// One image's descriptor in a payloads array; `stamp_ns` only when given.
+void appendImageDescriptor(std::string& payloads, const char* name, const char* format, int width,
+                           int height, std::size_t element_bytes,
+                           std::optional<int64_t> stamp_ns = std::nullopt)
 {
-    const uint64_t bytes =
-        static_cast<uint64_t>(header.width) * static_cast<uint64_t>(header.height);
+    if (payloads.back() != '[')
+        payloads.push_back(',');
+    JsonObjectWriter payload(payloads);
+    payload.field("name", name);
+    payload.field("format", format);
+    payload.field("width", width);
+    payload.field("height", height);
+    payload.field("bytes", static_cast<uint64_t>(width) * static_cast<uint64_t>(height) *
+                               static_cast<uint64_t>(element_bytes));
+    if (stamp_ns)
+        payload.field("stamp_ns", *stamp_ns);
+    payload.close();
+}
+
+} // namespace
+
+void appendRawEventHeader(std::string& out, const RawEventHeader& header, uint64_t skipped,
+                          bool with_depth, bool with_cloud)
+{
     JsonObjectWriter object(out);
     object.field("event", "raw");
     object.field("frame", header.frame);
@@ -577,23 +628,25 @@ void appendRawEventHeader(std::string& out, const RawEventHeader& header, uint64
     object.field("skipped", skipped);
     std::string& payloads = object.openField("payloads");
     payloads.push_back('[');
-    const struct {
-        const char* name;
-        int64_t stamp_ns;
-    } sides[] = {{"raw_left", header.left_stamp_ns}, {"raw_right", header.right_stamp_ns}};
-    for (const auto& side : sides) {
-        if (&side != &sides[0])
-            payloads.push_back(',');
+    appendImageDescriptor(payloads, "raw_left", "u8_gray", header.width, header.height, 1,
+                          header.left_stamp_ns);
+    appendImageDescriptor(payloads, "raw_right", "u8_gray", header.width, header.height, 1,
+                          header.right_stamp_ns);
+    if (with_depth)
+        appendImageDescriptor(payloads, "depth", "f32_m", header.depth_width, header.depth_height,
+                              sizeof(float));
+    if (with_cloud) {
+        payloads.push_back(',');
         JsonObjectWriter payload(payloads);
-        payload.field("name", side.name);
-        payload.field("format", "u8_gray");
-        payload.field("width", header.width);
-        payload.field("height", header.height);
-        payload.field("bytes", bytes);
-        payload.field("stamp_ns", side.stamp_ns);
+        payload.field("name", "cloud");
+        payload.field("format", "f32_xyzi");
+        payload.field("points", header.cloud_points);
+        payload.field("bytes", header.cloud_points * 4 * sizeof(float));
         payload.close();
     }
     payloads.push_back(']');
+    if (with_depth || with_cloud)
+        object.field("depth_valid", header.depth_valid);
     object.close();
     out.push_back('\n');
 }

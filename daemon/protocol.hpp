@@ -72,6 +72,11 @@ struct SnapshotRequest {
 struct SubscribeRequest {
     StreamKind stream = StreamKind::Readings;
     std::optional<double> max_hz; // > 0 and finite when present
+    // The raw stream only (`"with": ["depth", "cloud"]`): each raw event also carries the
+    // pair's depth (f32_m) and point cloud (f32_xyzi), so a recorder gets a pair and its
+    // results in one event, under one frame number.
+    bool with_depth = false;
+    bool with_cloud = false;
 };
 
 struct ReloadRequest {};
@@ -178,16 +183,25 @@ void appendDepthEventHeader(std::string& out, const DepthEventHeader& header,
 // The header line of a raw event; two u8_gray payloads of width * height bytes follow it,
 // raw_left then raw_right. Stamps are each camera's own capture stamp (Frame::
 // source_stamp_ns: CLOCK_MONOTONIC for cameras, the recorded stamp on replay).
+// A subscription `with` depth or cloud adds, after them, `depth` (f32_m, depth_width x
+// depth_height float32) and `cloud` (f32_xyzi, cloud_points x 16 bytes), and the pair's
+// `depth_valid`.
 struct RawEventHeader {
     uint64_t frame = 0;
     int64_t left_stamp_ns = 0;
     int64_t right_stamp_ns = 0;
     int width = 0;
     int height = 0;
+    bool depth_valid = false;
+    int depth_width = 0;
+    int depth_height = 0;
+    uint64_t cloud_points = 0;
 };
 
-// Appends the raw event's header line (always with "skipped"), without the payloads.
-// Allocates nothing once `out` has the capacity.
-void appendRawEventHeader(std::string& out, const RawEventHeader& header, uint64_t skipped);
+// Appends the raw event's header line (always with "skipped"), without the payloads; with
+// the depth and cloud descriptors when asked for. Allocates nothing once `out` has the
+// capacity.
+void appendRawEventHeader(std::string& out, const RawEventHeader& header, uint64_t skipped,
+                          bool with_depth = false, bool with_cloud = false);
 
 } // namespace stereod

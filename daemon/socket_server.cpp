@@ -896,6 +896,11 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
     raw_header.right_stamp_ns = raw.right_stamp_ns;
     raw_header.width = raw.left.cols;
     raw_header.height = raw.left.rows;
+    const cv::Mat& depth_m = frame.result.depth_m;
+    raw_header.depth_valid = frame.depth_valid;
+    raw_header.depth_width = depth_m.empty() ? 0 : depth_m.cols;
+    raw_header.depth_height = depth_m.empty() ? 0 : depth_m.rows;
+    raw_header.cloud_points = frame.result.cloud.size();
 
     serveWaitingSnapshots(&frame, nullptr, now_ns);
 
@@ -953,8 +958,10 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
                     client.out.append(zones_event_);
                 }
             } else if (is_raw) {
-                if (subscription.skipped > 0) {
-                    appendRawEventHeader(client.out, raw_header, subscription.skipped);
+                const bool with = subscription.with_depth || subscription.with_cloud;
+                if (subscription.skipped > 0 || with) {
+                    appendRawEventHeader(client.out, raw_header, subscription.skipped,
+                                         subscription.with_depth, subscription.with_cloud);
                 } else {
                     if (raw_header_.empty())
                         appendRawEventHeader(raw_header_, raw_header, 0);
@@ -962,6 +969,11 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
                 }
                 appendMatBytes(client.out, raw.left);
                 appendMatBytes(client.out, raw.right);
+                if (subscription.with_depth)
+                    appendMatBytes(client.out, depth_m);
+                if (subscription.with_cloud)
+                    client.out.append(reinterpret_cast<const char*>(frame.result.cloud.data()),
+                                      frame.result.cloud.size() * sizeof(CloudPoint));
             } else if (!is_depth) {
                 if (subscription.skipped > 0) {
                     appendReadingEvent(client.out, report, now_ns, subscription.skipped);
@@ -1368,6 +1380,8 @@ void SocketServer::handle(Client& client, const SubscribeRequest& request,
     subscription.active = true;
     subscription.max_hz = request.max_hz;
     subscription.last_sequence = last_dispatched_sequence_;
+    subscription.with_depth = request.with_depth;
+    subscription.with_cloud = request.with_cloud;
     Json answer = okReply(id);
     answer["stream"] = streamName(request.stream);
     reply(client, answer);

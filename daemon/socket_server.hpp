@@ -147,6 +147,8 @@ class SocketServer {
         int64_t next_due_ns = 0;      // rate limit: earliest time of the next event
         uint64_t skipped = 0;         // events lost since the last one delivered
         uint64_t last_sequence = 0;   // publisher sequence of the last frame considered
+        bool with_depth = false;      // raw only: each event carries the pair's depth
+        bool with_cloud = false;      // raw only: each event carries the pair's cloud
     };
 
     // A snapshot with raw items that waits for the next pair carrying raw frames (raw

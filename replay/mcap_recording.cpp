@@ -1,7 +1,9 @@
 #include "replay/mcap_recording.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <cstring>
+#include <limits>
 #include <map>
 
 #include <fcntl.h>
@@ -75,11 +77,11 @@ McapRecordingWriter::McapRecordingWriter(const std::string& path, mcap::WriterOp
     : writer_(path, std::move(options))
 {
     const std::map<std::string, std::string> metadata = {{"offered_qos_profiles", kOfferedQos}};
-    const uint16_t image = writer_.addSchema(ros2::kImageType, "ros2msg", ros2::imageSchemaText());
+    image_schema_ = writer_.addSchema(ros2::kImageType, "ros2msg", ros2::imageSchemaText());
     const uint16_t info =
         writer_.addSchema(ros2::kCameraInfoType, "ros2msg", ros2::cameraInfoSchemaText());
-    left_channel_ = writer_.addChannel(image, kMcapLeftImageTopic, "cdr", metadata);
-    right_channel_ = writer_.addChannel(image, kMcapRightImageTopic, "cdr", metadata);
+    left_channel_ = writer_.addChannel(image_schema_, kMcapLeftImageTopic, "cdr", metadata);
+    right_channel_ = writer_.addChannel(image_schema_, kMcapRightImageTopic, "cdr", metadata);
     left_info_channel_ = writer_.addChannel(info, kMcapLeftInfoTopic, "cdr", metadata);
     right_info_channel_ = writer_.addChannel(info, kMcapRightInfoTopic, "cdr", metadata);
 }
@@ -139,6 +141,71 @@ uint64_t McapRecordingWriter::write(const cv::Mat& left, const cv::Mat& right,
                       static_cast<uint32_t>(pairs_));
     }
     return pairs_++;
+}
+
+void McapRecordingWriter::enableDepth()
+{
+    if (!depth_channel_) {
+        depth_channel_ = writer_.addChannel(image_schema_, kMcapDepthTopic, "cdr",
+                                            {{"offered_qos_profiles", kOfferedQos}});
+    }
+}
+
+void McapRecordingWriter::enablePoints()
+{
+    if (!points_channel_) {
+        const uint16_t schema =
+            writer_.addSchema(ros2::kPointCloud2Type, "ros2msg", ros2::pointCloud2SchemaText());
+        points_channel_ = writer_.addChannel(schema, kMcapPointsTopic, "cdr",
+                                             {{"offered_qos_profiles", kOfferedQos}});
+    }
+}
+
+void McapRecordingWriter::writeDepth(const cv::Mat& depth_m, int64_t stamp_ns)
+{
+    if (!depth_channel_) {
+        throw mcap::McapError(writer_.path() + ": depth written without enableDepth()", EINVAL);
+    }
+    if (depth_m.type() != CV_32FC1 || depth_m.empty()) {
+        throw mcap::McapError(writer_.path() + ": a depth image must be float32 metres", EINVAL);
+    }
+    // One pass: a copy with NaN, ROS's "no depth" (REP 118), where the pipeline has 0.
+    depth_nan_.create(depth_m.size(), CV_32FC1);
+    const float none = std::numeric_limits<float>::quiet_NaN();
+    for (int row = 0; row < depth_m.rows; ++row) {
+        const float* in = depth_m.ptr<float>(row);
+        float* out = depth_nan_.ptr<float>(row);
+        for (int col = 0; col < depth_m.cols; ++col) {
+            out[col] = in[col] > 0.0f ? in[col] : none;
+        }
+    }
+    const auto width = static_cast<uint32_t>(depth_m.cols);
+    const ros2::Header header{ros2::Time::fromNs(stamp_ns), kLeftFrame};
+    ros2::serializeImage(header, static_cast<uint32_t>(depth_m.rows), width, "32FC1",
+                         static_cast<uint32_t>(width * sizeof(float)), depth_nan_.data,
+                         depth_nan_.total() * sizeof(float), message_);
+    const auto t = static_cast<uint64_t>(stamp_ns);
+    writer_.write(*depth_channel_, t, t, message_, lastSequence());
+}
+
+void McapRecordingWriter::writePoints(const float* xyzi, std::size_t points, int64_t stamp_ns)
+{
+    if (!points_channel_) {
+        throw mcap::McapError(writer_.path() + ": points written without enablePoints()", EINVAL);
+    }
+    static const std::vector<ros2::PointField> fields = {
+        {"x", 0, ros2::PointField::FLOAT32, 1},
+        {"y", 4, ros2::PointField::FLOAT32, 1},
+        {"z", 8, ros2::PointField::FLOAT32, 1},
+        {"intensity", 12, ros2::PointField::FLOAT32, 1}};
+    constexpr uint32_t kPointStep = 4 * sizeof(float);
+    const auto width = static_cast<uint32_t>(points);
+    const ros2::Header header{ros2::Time::fromNs(stamp_ns), kLeftFrame};
+    // Dense: the cloud holds only points with a depth, none NaN.
+    ros2::serializePointCloud2(header, 1, width, fields, kPointStep, width * kPointStep, xyzi,
+                               points * kPointStep, true, message_);
+    const auto t = static_cast<uint64_t>(stamp_ns);
+    writer_.write(*points_channel_, t, t, message_, lastSequence());
 }
 
 McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_topic,

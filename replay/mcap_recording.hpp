@@ -7,9 +7,15 @@
 //   /stereo/right/image_raw    sensor_msgs/msg/Image
 //   /stereo/left/camera_info   sensor_msgs/msg/CameraInfo, with every pair when the
 //   /stereo/right/camera_info  calibration is known (the right one's p[3] = -fx' * B)
+//   /stereo/depth              sensor_msgs/msg/Image, 32FC1 metres, NaN = no depth
+//                              (optional: enableDepth())
+//   /stereo/points             sensor_msgs/msg/PointCloud2, x y z intensity float32
+//                              (optional: enablePoints())
 // log_time, publish_time and header.stamp are the capture stamps (ns, CLOCK_MONOTONIC
-// for live recordings); frame ids stereo_{left,right}_optical_frame (REP 103 optical
-// frames: x right, y down, z forward).
+// for live recordings); a pair's depth and points carry its left image's stamp. Frame ids
+// stereo_{left,right}_optical_frame (REP 103 optical frames: x right, y down, z forward);
+// depth and points are in the rectified left camera's, stereo_left_optical_frame, as
+// stereo_image_proc gives its disparity and points the left camera's frame id.
 //
 // Read: any MCAP whose channels carry two sensor_msgs/msg/Image streams (ours, or a ROS 2
 // bag from a robot), paired by header stamp; the camera_info channels beside the image
@@ -35,6 +41,8 @@ inline constexpr const char* kMcapLeftImageTopic = "/stereo/left/image_raw";
 inline constexpr const char* kMcapRightImageTopic = "/stereo/right/image_raw";
 inline constexpr const char* kMcapLeftInfoTopic = "/stereo/left/camera_info";
 inline constexpr const char* kMcapRightInfoTopic = "/stereo/right/camera_info";
+inline constexpr const char* kMcapDepthTopic = "/stereo/depth";
+inline constexpr const char* kMcapPointsTopic = "/stereo/points";
 
 // True when `path` names an MCAP file (by its first bytes; a directory is not).
 bool isMcapFile(const std::string& path);
@@ -61,6 +69,20 @@ class McapRecordingWriter {
     uint64_t write(const cv::Mat& left, const cv::Mat& right, int64_t left_stamp_ns,
                    int64_t right_stamp_ns);
 
+    // Adds the /stereo/depth and /stereo/points channels (before the first pair, so that
+    // readers see them even when no message follows).
+    void enableDepth();
+    void enablePoints();
+
+    // The depth of the pair last written: CV_32FC1 metres, 0 = no depth (the pipeline's
+    // convention), written as 32FC1 with NaN where there is none. Throws mcap::McapError
+    // (EINVAL for a wrong image, or without enableDepth()).
+    void writeDepth(const cv::Mat& depth_m, int64_t stamp_ns);
+    // The point cloud of the pair last written: `points` points of 4 float32 each (x, y, z
+    // in metres, intensity 0..255), written as an unorganised (height 1), dense cloud.
+    // Throws mcap::McapError (EINVAL without enablePoints()).
+    void writePoints(const float* xyzi, std::size_t points, int64_t stamp_ns);
+
     // Writes the summary and closes the file. Throws mcap::McapError.
     void close() { writer_.close(); }
 
@@ -69,16 +91,25 @@ class McapRecordingWriter {
 
   private:
     void writeImage(uint16_t channel, const cv::Mat& image, int64_t stamp_ns, const char* frame_id);
+    // The MCAP sequence of the pair last written, which its depth and points share.
+    uint32_t lastSequence() const noexcept
+    {
+        return static_cast<uint32_t>(pairs_ == 0 ? 0 : pairs_ - 1);
+    }
 
     mcap::Writer writer_;
     uint16_t left_channel_ = 0;
     uint16_t right_channel_ = 0;
     uint16_t left_info_channel_ = 0;
     uint16_t right_info_channel_ = 0;
+    std::optional<uint16_t> depth_channel_;
+    std::optional<uint16_t> points_channel_;
+    uint16_t image_schema_ = 0;
     std::optional<std::pair<ros2::CameraInfo, ros2::CameraInfo>> camera_info_;
     cv::Size size_;
     uint64_t pairs_ = 0;
     std::string message_; // scratch: one serialized message, reused
+    cv::Mat depth_nan_;   // scratch: the depth with NaN for 0, reused
 };
 
 // One pair of a bag: where its two Image messages are, and their header stamps.

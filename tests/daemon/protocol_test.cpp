@@ -78,6 +78,15 @@ TEST(ProtocolParse, RawFramesAndCalibration)
     EXPECT_EQ(std::get<SnapshotRequest>(snapshot.command).items, expected);
     // The default stays the processed result's four items.
     EXPECT_EQ(std::get<SnapshotRequest>(parseOk(R"({"cmd":"snapshot"})").command).items.size(), 4u);
+    // A recorder asks for each pair's depth and cloud in the raw event.
+    const SubscribeRequest with = std::get<SubscribeRequest>(
+        parseOk(R"({"cmd":"subscribe","stream":"raw","with":["cloud","depth"]})").command);
+    EXPECT_TRUE(with.with_depth);
+    EXPECT_TRUE(with.with_cloud);
+    const SubscribeRequest depth_only = std::get<SubscribeRequest>(
+        parseOk(R"({"cmd":"subscribe","stream":"raw","with":["depth"]})").command);
+    EXPECT_TRUE(depth_only.with_depth);
+    EXPECT_FALSE(depth_only.with_cloud);
 }
 
 TEST(ProtocolParse, SnapshotItemsKeepTheirOrderWithoutRepeats)
@@ -211,15 +220,19 @@ TEST(ProtocolParse, WrongTypesNameTheField)
         const char* line;
         const char* field;
     };
-    for (const Case& c : {Case{R"({"cmd":"distance","max_age_ms":"500"})", "max_age_ms"},
-                          Case{R"({"cmd":"distance","max_age_ms":true})", "max_age_ms"},
-                          Case{R"({"cmd":"subscribe"})", "stream"},
-                          Case{R"({"cmd":"subscribe","stream":5})", "stream"},
-                          Case{R"({"cmd":"subscribe","stream":"video"})", "video"},
-                          Case{R"({"cmd":"subscribe","stream":"depth","max_hz":[5]})", "max_hz"},
-                          Case{R"({"cmd":"snapshot","items":"depth"})", "items"},
-                          Case{R"({"cmd":"snapshot","items":["depth",7]})", "items\"[1]"},
-                          Case{R"({"cmd":"snapshot","items":["depth","mesh"]})", "mesh"}}) {
+    for (const Case& c :
+         {Case{R"({"cmd":"distance","max_age_ms":"500"})", "max_age_ms"},
+          Case{R"({"cmd":"distance","max_age_ms":true})", "max_age_ms"},
+          Case{R"({"cmd":"subscribe"})", "stream"},
+          Case{R"({"cmd":"subscribe","stream":5})", "stream"},
+          Case{R"({"cmd":"subscribe","stream":"video"})", "video"},
+          Case{R"({"cmd":"subscribe","stream":"depth","max_hz":[5]})", "max_hz"},
+          Case{R"({"cmd":"snapshot","items":"depth"})", "items"},
+          Case{R"({"cmd":"snapshot","items":["depth",7]})", "items\"[1]"},
+          Case{R"({"cmd":"snapshot","items":["depth","mesh"]})", "mesh"},
+          Case{R"({"cmd":"subscribe","stream":"raw","with":"depth"})", "with"},
+          Case{R"({"cmd":"subscribe","stream":"raw","with":["mesh"]})", "known: depth, cloud"},
+          Case{R"({"cmd":"subscribe","stream":"depth","with":["depth"]})", "raw stream only"}}) {
         const ProtocolError error = parseError(c.line);
         EXPECT_EQ(error.code, ErrorCode::BadRequest) << c.line;
         EXPECT_NE(error.message.find(c.field), std::string::npos)
@@ -494,6 +507,23 @@ TEST(ProtocolEvents, RawEventHeaderFollowsTheContract)
     EXPECT_EQ(event["payloads"][1]["name"], "raw_right");
     EXPECT_EQ(event["payloads"][1]["stamp_ns"], 81263512001);
     EXPECT_EQ(event["payloads"][1]["bytes"], 307200);
+    EXPECT_FALSE(event.contains("depth_valid"));
+
+    // With the pair's depth and cloud: their descriptors after the two frames.
+    header.depth_valid = true;
+    header.depth_width = 620;
+    header.depth_height = 470;
+    header.cloud_points = 1000;
+    out.clear();
+    appendRawEventHeader(out, header, 0, true, true);
+    event = parseStrict(out);
+    EXPECT_EQ(event["depth_valid"], true);
+    ASSERT_EQ(event["payloads"].size(), 4u);
+    EXPECT_EQ(event["payloads"][2],
+              Json::parse(R"({"name":"depth","format":"f32_m","width":620,"height":470,)"
+                          R"("bytes":1165600})"));
+    EXPECT_EQ(event["payloads"][3],
+              Json::parse(R"({"name":"cloud","format":"f32_xyzi","points":1000,"bytes":16000})"));
 }
 
 TEST(JsonWriter, NumbersAndStrings)
