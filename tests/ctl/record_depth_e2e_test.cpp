@@ -1,0 +1,253 @@
+// `stereoctl record --with depth,points`: each pair's depth and point cloud in the bag, at
+// the pair's stamp, as the service computed them (checked against its snapshot, through
+// @mcap/core and @foxglove/rosmsg2-serialization), NaN and no point where the service
+// trusts no depth, refused `--with` values, and the bag replays on its image topics.
+
+#include <cmath>
+#include <cstring>
+#include <map>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "replay/mcap_recording.hpp"
+#include "replay/ros2_messages.hpp"
+#include "tests/ctl/record_e2e_fixture.hpp"
+
+namespace stereod {
+namespace {
+
+using namespace record_e2e;
+
+// What a bag holds on one topic: per message its log time and its header stamp.
+struct TopicStamps {
+    std::vector<uint64_t> log_times;
+    std::vector<int64_t> header_stamps;
+};
+
+std::map<std::string, TopicStamps> stampsByTopic(const std::string& path)
+{
+    mcap::Reader reader(path);
+    std::map<std::string, TopicStamps> topics;
+    reader.forEachMessage([&](const mcap::MessageView& message, const mcap::MessageRef&) {
+        const std::string& topic = reader.channels().at(message.channel_id).topic;
+        int64_t stamp_ns = 0;
+        if (topic == kMcapPointsTopic)
+            stamp_ns = ros2::parsePointCloud2(message.data).header.stamp.toNs();
+        else if (topic.find("camera_info") == std::string::npos)
+            stamp_ns = ros2::parseImage(message.data).header.stamp.toNs();
+        else
+            stamp_ns = ros2::parseCameraInfo(message.data).header.stamp.toNs();
+        topics[topic].log_times.push_back(message.log_time_ns);
+        topics[topic].header_stamps.push_back(stamp_ns);
+    });
+    return topics;
+}
+
+TEST_F(RecordE2e, DepthAndPointsCarryTheStampsOfTheirPairs)
+{
+    startService(true);
+    const std::string out = dir_.file("depth.mcap");
+    const ProcessResult recorded =
+        ctl({"record", "--out", out, "--frames", "8", "--with", "depth,points", "--json"});
+    ASSERT_EQ(recorded.exit_code, 0) << recorded.out << recorded.err;
+    EXPECT_EQ(Json::parse(recorded.out)["pairs"], 8);
+    EXPECT_EQ(expectBagOfSourcePairs(out, source_), 8u);
+
+    const auto topics = stampsByTopic(out);
+    const TopicStamps& left = topics.at(kMcapLeftImageTopic);
+    ASSERT_EQ(left.header_stamps.size(), 8u);
+    for (const char* topic : {kMcapDepthTopic, kMcapPointsTopic}) {
+        ASSERT_EQ(topics.count(topic), 1u) << topic;
+        const TopicStamps& results = topics.at(topic);
+        // One depth and one cloud per pair, in the pairs' order, each at its pair's left
+        // stamp (header and log time alike).
+        EXPECT_EQ(results.header_stamps, left.header_stamps) << topic;
+        EXPECT_EQ(results.log_times, left.log_times) << topic;
+    }
+
+    mcap::Reader reader(out);
+    reader.forEachMessage([&](const mcap::MessageView& message, const mcap::MessageRef&) {
+        const std::string& topic = reader.channels().at(message.channel_id).topic;
+        if (topic == kMcapDepthTopic) {
+            const ros2::ImageView depth = ros2::parseImage(message.data);
+            EXPECT_EQ(depth.encoding, "32FC1");
+            EXPECT_EQ(depth.width, static_cast<uint32_t>(kSize.width));
+            EXPECT_EQ(depth.height, static_cast<uint32_t>(kSize.height));
+            EXPECT_EQ(depth.step, 4u * kSize.width);
+            EXPECT_EQ(depth.header.frame_id, "stereo_left_optical_frame");
+        } else if (topic == kMcapPointsTopic) {
+            const ros2::PointCloud2View cloud = ros2::parsePointCloud2(message.data);
+            EXPECT_EQ(cloud.header.frame_id, "stereo_left_optical_frame");
+            EXPECT_GT(cloud.width, 1000u);
+        }
+    });
+
+    // The bag replays: its image topics pair up (depth, an Image too, is no camera), and
+    // stereod gives readings from it.
+    const McapStereoIndex index = indexMcapStereo(reader, "", "");
+    EXPECT_EQ(index.right_topic, kMcapRightImageTopic);
+    EXPECT_EQ(index.pairs.size(), 8u);
+    EXPECT_EQ(index.unpaired_left + index.unpaired_right, 0u);
+    const std::string log = dir_.file("replay.log");
+    const std::string socket = dir_.file("r.sock");
+    ChildProcess replay({stereodPath(), "--replay", out, "--socket", socket}, log);
+    const Json reading = firstReading(socket, replay, log);
+    EXPECT_EQ(reading.value("valid", false), true) << reading.dump() << readFile(log);
+    replay.sendSignal(SIGTERM);
+    replay.waitFor(10s);
+}
+
+TEST_F(RecordE2e, PairsWithoutTrustedDepthGetNaNDepthAndNoPoints)
+{
+    // 20 ms between the cameras: every pair is out of sync (source.max_skew_ms 5).
+    for (SourcePair& pair : source_)
+        pair.right_stamp_ns = pair.left_stamp_ns + 20'000'000;
+    startService(true);
+    const std::string out = dir_.file("unsynced.mcap");
+    const ProcessResult recorded =
+        ctl({"record", "--out", out, "--frames", "4", "--with", "depth,points", "--json"});
+    ASSERT_EQ(recorded.exit_code, 0) << recorded.out << recorded.err;
+
+    mcap::Reader reader(out);
+    std::size_t depths = 0, clouds = 0;
+    reader.forEachMessage([&](const mcap::MessageView& message, const mcap::MessageRef&) {
+        const std::string& topic = reader.channels().at(message.channel_id).topic;
+        if (topic == kMcapDepthTopic) {
+            const ros2::ImageView depth = ros2::parseImage(message.data);
+            ASSERT_EQ(depth.data.size(), 4u * kSize.area());
+            std::size_t numbers = 0;
+            for (std::size_t i = 0; i < depth.data.size(); i += 4) {
+                float value = 0.0f;
+                std::memcpy(&value, depth.data.data() + i, 4);
+                numbers += std::isnan(value) ? 0 : 1;
+            }
+            EXPECT_EQ(numbers, 0u) << "an untrusted pair's depth has numbers";
+            ++depths;
+        } else if (topic == kMcapPointsTopic) {
+            EXPECT_EQ(ros2::parsePointCloud2(message.data).width, 0u);
+            ++clouds;
+        }
+    });
+    EXPECT_EQ(depths, 4u);
+    EXPECT_EQ(clouds, 4u);
+}
+
+TEST_F(RecordE2e, UnknownWithValuesAreRefusedNamingTheAcceptedOnes)
+{
+    socket_ = dir_.file("none.sock");
+    for (const std::vector<std::string>& args :
+         {std::vector<std::string>{"--with", "depth,mesh"}, {"--with", "disparity"}}) {
+        std::vector<std::string> command = {"record", "--out", dir_.file("x.mcap")};
+        command.insert(command.end(), args.begin(), args.end());
+        const ProcessResult r = ctl(command);
+        EXPECT_EQ(r.exit_code, 2) << r.out << r.err;
+        EXPECT_NE(r.err.find("accepted: depth, points"), std::string::npos) << r.err;
+        EXPECT_EQ(test::lineCount(r.err), 1u) << r.err;
+    }
+    const ProcessResult csv = ctl({"record", "--out", dir_.file("dir"), "--with", "depth"});
+    EXPECT_EQ(csv.exit_code, 2) << csv.err;
+    EXPECT_NE(csv.err.find("FILE.mcap"), std::string::npos) << csv.err;
+}
+
+TEST_F(RecordE2e, UncalibratedServiceHasNoDepthToRecord)
+{
+    startService(false);
+    const std::string out = dir_.file("raw.mcap");
+    const ProcessResult r = ctl({"record", "--out", out, "--frames", "2", "--with", "depth"});
+    EXPECT_EQ(r.exit_code, 2) << r.out << r.err;
+    EXPECT_NE(r.err.find("without a calibration"), std::string::npos) << r.err;
+    // Without --with it records the raw pairs as before.
+    EXPECT_EQ(ctl({"record", "--out", dir_.file("raw2.mcap"), "--frames", "2"}).exit_code, 0);
+}
+
+// Through an independent reader: the depth and the cloud in the bag are those the service
+// gives in a snapshot of the same pair.
+TEST_F(RecordE2e, RecordedDepthAndPointsAreTheSnapshotsThroughRosmsg2Serialization)
+{
+    const std::string interop = interopScripts();
+    if (interop.empty())
+        GTEST_SKIP() << "node is not installed";
+    ASSERT_FALSE(HasFailure());
+    startService(true);
+
+    // The snapshot: a pair's raw left frame (its stamp names the pair), depth and cloud.
+    ProtocolClient client(socket_, 30000ms);
+    const Json snapshot = client.request(
+        {{"cmd", "snapshot"}, {"items", Json::array({"raw_left", "depth", "cloud"})}});
+    ASSERT_EQ(snapshot["ok"], true) << snapshot.dump();
+    ASSERT_EQ(snapshot["depth_valid"], true) << snapshot.dump();
+    const Json& payloads = snapshot["payloads"];
+    readGray(client, payloads[0]);
+    const int64_t stamp_ns = payloads[0]["stamp_ns"];
+    cv::Mat depth_mm(payloads[1]["height"].get<int>(), payloads[1]["width"].get<int>(), CV_16UC1);
+    ASSERT_EQ(payloads[1]["bytes"], depth_mm.total() * 2);
+    client.readPayload(depth_mm.data, depth_mm.total() * 2);
+    std::vector<float> cloud(payloads[2]["points"].get<std::size_t>() * 4);
+    client.readPayload(cloud.data(), cloud.size() * sizeof(float));
+
+    // Three loops of the six source pairs: the snapshot's pair is among them.
+    const std::string out = dir_.file("results.mcap");
+    const ProcessResult recorded =
+        ctl({"record", "--out", out, "--frames", "18", "--with", "depth,points"});
+    ASSERT_EQ(recorded.exit_code, 0) << recorded.out << recorded.err;
+    const ProcessResult node =
+        runProcess({STEREOD_NODE, interop + "/read_results.mjs", out, std::to_string(stamp_ns)});
+    ASSERT_EQ(node.exit_code, 0) << node.err;
+    const Json got = Json::parse(node.out);
+    EXPECT_EQ(got["counts"][kMcapDepthTopic], 18);
+    EXPECT_EQ(got["counts"][kMcapPointsTopic], 18);
+
+    const Json& depth = got["depth"];
+    ASSERT_TRUE(depth.is_object()) << "no depth at the snapshot's stamp " << stamp_ns;
+    EXPECT_EQ(depth["logTime"], stamp_ns);
+    const Json& image = depth["message"];
+    EXPECT_EQ(image["encoding"], "32FC1");
+    EXPECT_EQ(image["width"], depth_mm.cols);
+    EXPECT_EQ(image["height"], depth_mm.rows);
+    EXPECT_EQ(image["step"], depth_mm.cols * 4);
+    EXPECT_EQ(image["is_bigendian"], 0);
+    const Json& values = image["data"];
+    ASSERT_EQ(values.size(), depth_mm.total());
+    std::size_t with_depth = 0, mismatched = 0;
+    for (int row = 0; row < depth_mm.rows; ++row) {
+        for (int col = 0; col < depth_mm.cols; ++col) {
+            const uint16_t mm = depth_mm.at<uint16_t>(row, col);
+            const Json& value = values[static_cast<std::size_t>(row) * depth_mm.cols + col];
+            // NaN (null in JSON) exactly where the snapshot has none; else within 1 mm.
+            const bool same =
+                mm == 0 ? value.is_null()
+                        : value.is_number() && std::abs(value.get<double>() * 1000.0 - mm) <= 1.0;
+            mismatched += same ? 0 : 1;
+            with_depth += mm == 0 ? 0 : 1;
+        }
+    }
+    EXPECT_EQ(mismatched, 0u);
+    EXPECT_GT(with_depth, depth_mm.total() / 2);
+
+    const Json& points = got["points"];
+    ASSERT_TRUE(points.is_object()) << "no points at the snapshot's stamp " << stamp_ns;
+    EXPECT_EQ(points["logTime"], stamp_ns);
+    const Json& message = points["message"];
+    const Json fields = Json::parse(R"([
+        {"name": "x", "offset": 0, "datatype": 7, "count": 1},
+        {"name": "y", "offset": 4, "datatype": 7, "count": 1},
+        {"name": "z", "offset": 8, "datatype": 7, "count": 1},
+        {"name": "intensity", "offset": 12, "datatype": 7, "count": 1}])");
+    EXPECT_EQ(message["fields"], fields);
+    EXPECT_EQ(message["point_step"], 16);
+    EXPECT_EQ(message["height"], 1);
+    EXPECT_EQ(message["width"], cloud.size() / 4);
+    EXPECT_EQ(message["row_step"], cloud.size() * 4);
+    EXPECT_EQ(message["is_dense"], true);
+    ASSERT_EQ(message["data"].size(), cloud.size());
+    std::size_t differing = 0;
+    for (std::size_t i = 0; i < cloud.size(); ++i)
+        differing += message["data"][i].get<float>() == cloud[i] ? 0 : 1;
+    EXPECT_EQ(differing, 0u) << "of " << cloud.size() / 4 << " points";
+}
+
+} // namespace
+} // namespace stereod
