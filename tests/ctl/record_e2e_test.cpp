@@ -25,6 +25,7 @@
 #include "replay/replay_source.hpp"
 #include "tests/ctl/process.hpp"
 #include "tests/ctl/record_e2e_fixture.hpp"
+#include "tests/replay/replay_test_support.hpp"
 
 namespace stereod {
 namespace {
@@ -222,21 +223,36 @@ TEST_F(RecordE2e, McapRecordingHoldsThePairsAndTheCalibration)
     EXPECT_NEAR(back.rectified.focal_px, kFocalPx, 1e-9);
     EXPECT_NEAR(back.rectified.baseline_m, kBaselineM, 1e-12);
 
-    // And @mcap/core reads it, when the interop packages are installed (the full check
-    // is tests/replay/mcap_interop_test.cpp).
-    const std::string interop = std::string(STEREOD_SOURCE_DIR) + "/tests/mcap_interop";
-    if (!std::string(STEREOD_NODE).empty() &&
-        fs::exists(interop + "/node_modules/@mcap/core/package.json")) {
+    // And @mcap/core reads it, rosmsg2-serialization decoding the first image and
+    // camera_info of each side: the source pair's pixels, the calibration in force.
+    const std::string interop = interopScripts();
+    if (!interop.empty()) {
         const ProcessResult node = runProcess({STEREOD_NODE, interop + "/read_ours.mjs", out});
         ASSERT_EQ(node.exit_code, 0) << node.err;
         const Json got = Json::parse(node.out);
         EXPECT_EQ(got["profile"], "ros2");
         EXPECT_EQ(got["messageCount"], 32);
         EXPECT_EQ(got["streamDone"], true);
-        EXPECT_EQ(got["counted"][kMcapLeftImageTopic], 8);
-        EXPECT_EQ(got["counted"][kMcapRightInfoTopic], 8);
-        EXPECT_EQ(got["first"][kMcapLeftImageTopic]["message"]["width"], kSize.width);
-        EXPECT_EQ(got["first"][kMcapLeftImageTopic]["message"]["encoding"], "mono8");
+        for (const Json& channel : got["channels"]) {
+            EXPECT_EQ(channel["count"], 8) << channel.dump();
+            EXPECT_EQ(channel["schemaEncoding"], "ros2msg") << channel.dump();
+            EXPECT_EQ(channel["messageEncoding"], "cdr") << channel.dump();
+        }
+        const Json& left = got["first"][kMcapLeftImageTopic];
+        const Json& right = got["first"][kMcapRightImageTopic];
+        EXPECT_EQ(left["message"]["width"], kSize.width);
+        EXPECT_EQ(left["message"]["encoding"], "mono8");
+        const SourcePair* source = pairWithStamps(left["logTime"], right["logTime"]);
+        ASSERT_NE(source, nullptr) << left["logTime"] << "/" << right["logTime"];
+        EXPECT_EQ(left["message"]["data"], test::base64(source->left));
+        EXPECT_EQ(right["message"]["data"], test::base64(source->right));
+        const Json& left_info = got["first"][kMcapLeftInfoTopic]["message"];
+        const Json& right_info = got["first"][kMcapRightInfoTopic]["message"];
+        EXPECT_DOUBLE_EQ(left_info["k"][0].get<double>(), kFocalPx);
+        EXPECT_DOUBLE_EQ(right_info["p"][0].get<double>(), kFocalPx);
+        EXPECT_NEAR(right_info["p"][3].get<double>(), -kFocalPx * kBaselineM, 1e-9);
+        EXPECT_EQ(left_info["width"], kSize.width);
+        EXPECT_EQ(left_info["height"], kSize.height);
     }
 
     // Never over a user's file.

@@ -69,24 +69,6 @@ std::pair<ros2::CameraInfo, ros2::CameraInfo> cameraInfoPair(cv::Size size)
     return {cameraInfoMessage(l), cameraInfoMessage(r)};
 }
 
-std::string base64(const cv::Mat& image)
-{
-    static const char* table = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    const cv::Mat m = image.isContinuous() ? image : image.clone();
-    const auto* p = m.data;
-    const std::size_t n = m.total();
-    std::string out;
-    for (std::size_t i = 0; i < n; i += 3) {
-        const uint32_t v = (uint32_t{p[i]} << 16) | (i + 1 < n ? uint32_t{p[i + 1]} << 8 : 0) |
-                           (i + 2 < n ? uint32_t{p[i + 2]} : 0);
-        out += table[(v >> 18) & 63];
-        out += table[(v >> 12) & 63];
-        out += i + 1 < n ? table[(v >> 6) & 63] : '=';
-        out += i + 2 < n ? table[v & 63] : '=';
-    }
-    return out;
-}
-
 TEST_F(McapInterop, OurBagReadByMcapCoreAndRosmsg2Serialization)
 {
     const cv::Size size(96, 72);
@@ -136,10 +118,10 @@ TEST_F(McapInterop, OurBagReadByMcapCoreAndRosmsg2Serialization)
     EXPECT_EQ(left["message"]["width"], size.width);
     EXPECT_EQ(left["message"]["height"], size.height);
     EXPECT_EQ(left["message"]["step"], size.width);
-    EXPECT_EQ(left["message"]["data"], base64(pairs[0].left));
+    EXPECT_EQ(left["message"]["data"], test::base64(pairs[0].left));
     const json& right = got["first"][kMcapRightImageTopic];
     EXPECT_EQ(right["logTime"], pairs[0].right_stamp_ns);
-    EXPECT_EQ(right["message"]["data"], base64(pairs[0].right));
+    EXPECT_EQ(right["message"]["data"], test::base64(pairs[0].right));
 
     const json& info = got["first"][kMcapRightInfoTopic]["message"];
     EXPECT_EQ(info["distortion_model"], "plumb_bob");

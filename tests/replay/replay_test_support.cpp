@@ -135,6 +135,24 @@ void writeBytes(const std::string& path, const std::vector<uint8_t>& bytes)
               static_cast<std::streamsize>(bytes.size()));
 }
 
+std::string base64(const cv::Mat& image)
+{
+    static const char* table = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    const cv::Mat m = image.isContinuous() ? image : image.clone();
+    const auto* p = m.data;
+    const std::size_t n = m.total();
+    std::string out;
+    for (std::size_t i = 0; i < n; i += 3) {
+        const uint32_t v = (uint32_t{p[i]} << 16) | (i + 1 < n ? uint32_t{p[i + 1]} << 8 : 0) |
+                           (i + 2 < n ? uint32_t{p[i + 2]} : 0);
+        out += table[(v >> 18) & 63];
+        out += table[(v >> 12) & 63];
+        out += i + 1 < n ? table[(v >> 6) & 63] : '=';
+        out += i + 2 < n ? table[v & 63] : '=';
+    }
+    return out;
+}
+
 } // namespace stereod::test
 
 #if defined(__SANITIZE_THREAD__)

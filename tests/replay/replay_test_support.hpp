@@ -32,6 +32,10 @@ void writeRecording(const std::string& dir, const std::vector<TestPair>& pairs,
 // microseconds, either sign.
 int64_t testSkewNs(int k);
 
+// The pixels of an 8-bit image, row after row, in base64: how the interop scripts
+// (tests/mcap_interop) print image data.
+std::string base64(const cv::Mat& image);
+
 // Pixel-for-pixel equality of two single-channel 8-bit images.
 bool samePixels(const cv::Mat& a, const cv::Mat& b);
 
