@@ -224,6 +224,7 @@ class Snapshot(Dict[str, np.ndarray]):
 _FORMATS: Dict[str, Tuple[str, int]] = {
     # format: (numpy dtype, values per element)
     "u16_mm": ("<u2", 1),
+    "f32_m": ("<f4", 1),
     "f32_px": ("<f4", 1),
     "u8_gray": ("u1", 1),
     "f32_xyzi": ("<f4", 4),
@@ -232,8 +233,8 @@ _FORMATS: Dict[str, Tuple[str, int]] = {
 
 def decode_payload(descriptor: Json, data: Union[bytes, bytearray, memoryview]) -> np.ndarray:
     """Turns one binary payload into a numpy array, after its descriptor (``format``,
-    ``width``, ``height`` or ``points``, ``bytes``). ``u16_mm`` becomes float32 metres
-    with NaN for 0 (invalid); see :class:`Snapshot` for the others."""
+    ``width``, ``height`` or ``points``, ``bytes``). ``u16_mm`` and ``f32_m`` become
+    float32 metres with NaN for 0 (invalid); see :class:`Snapshot` for the others."""
     fmt = descriptor.get("format")
     size = len(data)
     if descriptor.get("bytes") is not None and int(descriptor["bytes"]) != size:
@@ -255,6 +256,10 @@ def decode_payload(descriptor: Json, data: Union[bytes, bytearray, memoryview]) 
             pixels = np.frombuffer(data, dtype=dtype).reshape(height, width)
         if fmt == "u16_mm":
             metres = pixels.astype(np.float32) / np.float32(1000.0)
+            metres[pixels == 0] = np.nan
+            return metres
+        if fmt == "f32_m":
+            metres = pixels.copy()
             metres[pixels == 0] = np.nan
             return metres
         return pixels
@@ -556,7 +561,8 @@ class Client:
         return Snapshot(reply, _decode_all(descriptors, blobs))
 
     def subscribe(self, kind: str = "readings", max_hz: Optional[float] = None,
-                  event_timeout_s: Optional[float] = None) -> Iterator[Any]:
+                  event_timeout_s: Optional[float] = None,
+                  results: Optional[Iterable[str]] = None) -> Iterator[Any]:
         """Events of a stream, on a connection of their own, until the generator is
         closed (``close()``, ``break`` out of a ``for`` loop, or garbage collection).
 
@@ -569,6 +575,10 @@ class Client:
         ``right_stamp_ns``, ``skipped``, ``raw_left``, ``raw_right`` (uint8) and ``header``.
         ``max_hz`` (> 0) lowers the event rate.
 
+        ``results`` (``raw`` only): ``["depth", "cloud"]`` or either; each raw event then
+        also holds that pair's ``depth`` (float32 metres, NaN = none, not rounded to the
+        millimetre), ``cloud`` (N x 4 float32) and ``depth_valid``.
+
         Subscribing happens on the first ``next()``. Waiting for an event is bounded by
         ``event_timeout_s`` (default: none, since a source that went down sends nothing
         more); past it :class:`ServiceUnavailable` is raised. A lost connection raises
@@ -577,6 +587,8 @@ class Client:
         request: Json = {"cmd": "subscribe", "stream": kind}
         if max_hz is not None:
             request["max_hz"] = max_hz
+        if results is not None:
+            request["with"] = list(results)
         connection = _Connection(self.socket_path, self.timeout_s)
         try:
             connection.send(request)

@@ -194,6 +194,26 @@ def test_subscribe_depth_frames(client):
     np.testing.assert_array_equal(np.isnan(events[0]["depth"]), np.isnan(events[1]["depth"]))
 
 
+def test_subscribe_raw_with_depth_and_cloud(client):
+    stream = client.subscribe("raw", event_timeout_s=30, results=["depth", "cloud"])
+    event = next(stream)
+    stream.close()
+    assert event["raw_left"].dtype == np.uint8
+    assert event["raw_left"].shape == (HEIGHT, WIDTH)
+    assert event["depth_valid"] is True
+    # The pair's own depth in metres, NaN where there is none, and its cloud.
+    depth = event["depth"]
+    assert depth.dtype == np.float32
+    assert depth.shape == (HEIGHT, WIDTH)
+    assert np.isnan(depth).any() and (depth[~np.isnan(depth)] > 0).all()
+    cloud = event["cloud"]
+    assert cloud.dtype == np.float32 and cloud.shape[1] == 4
+    assert 0 < cloud.shape[0] <= np.count_nonzero(~np.isnan(depth))
+    with pytest.raises(ProtocolError) as raised:
+        next(client.subscribe("raw", results=["mesh"]))
+    assert raised.value.code == "bad_request"
+
+
 def test_subscribe_zones(client):
     stream = client.subscribe("zones", event_timeout_s=30)
     event = next(stream)
