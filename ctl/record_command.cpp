@@ -51,9 +51,12 @@ struct PairBuffer {
     cv::Mat right;
     int64_t left_stamp_ns = 0;
     int64_t right_stamp_ns = 0;
-    cv::Mat depth_m;               // CV_32FC1 metres, 0 = none; empty: the service sent none
+    // The pair's results (--with), when the event carried them. The buffers keep their
+    // size from pair to pair.
+    cv::Mat depth_m; // CV_32FC1 metres, 0 = none
+    bool depth_present = false;
     std::vector<float> cloud_xyzi; // 4 floats a point
-    bool cloud_present = false;    // the event carried a cloud (maybe of no point)
+    bool cloud_present = false;    // (a cloud may have no point)
 };
 
 // What --with asked for.
@@ -336,8 +339,9 @@ void readCloudPayload(ProtocolClient& client, const Payload& payload, std::vecto
     client.readPayload(xyzi.data(), payload.bytes);
 }
 
-// Reads the payloads of a raw event into `pair`; false (payloads read past) when the event
-// does not carry exactly raw_left and raw_right, or lacks a result that `results` asks for.
+// Reads the payloads of a raw event into `pair` (its results only when `results` asks for
+// them); false (payloads read past) when the event does not carry exactly raw_left and
+// raw_right.
 bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair,
                  const Results& results)
 {
@@ -348,7 +352,7 @@ bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair,
     bool complete = true;
     int sides = 0;
     if (pair != nullptr) {
-        pair->depth_m.release();
+        pair->depth_present = false;
         pair->cloud_present = false;
     }
     for (const json& header : *payloads) {
@@ -356,7 +360,8 @@ bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair,
         if (pair != nullptr && results.depth && payload.name == "depth" &&
             payload.format == "f32_m") {
             // An uncalibrated service has no depth: 0 x 0, read as none.
-            if (payload.width > 0 && payload.height > 0)
+            pair->depth_present = payload.width > 0 && payload.height > 0;
+            if (pair->depth_present)
                 readImagePayload(client, payload, CV_32FC1, pair->depth_m);
             continue;
         }
@@ -474,7 +479,7 @@ int runRecord(const RecordOptions& options)
         // camera's view, and a ROS user pairs them with the image by stamp.
         write = [&bag, results](const PairBuffer& p) {
             bag->write(p.left, p.right, p.left_stamp_ns, p.right_stamp_ns);
-            if (results.depth && !p.depth_m.empty())
+            if (results.depth && p.depth_present)
                 bag->writeDepth(p.depth_m, p.left_stamp_ns);
             if (results.points && p.cloud_present)
                 bag->writePoints(p.cloud_xyzi.data(), p.cloud_xyzi.size() / 4, p.left_stamp_ns);
