@@ -34,6 +34,7 @@
 #include "ctl/signal_catcher.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/calibration_formats.hpp"
+#include "protocol/request.hpp"
 #include "replay/mcap_recording.hpp"
 #include "replay/recording.hpp"
 
@@ -309,15 +310,15 @@ bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair)
     int sides = 0;
     for (const json& header : *payloads) {
         const Payload payload = parsePayload(header);
-        const bool left = payload.name == "raw_left";
-        const bool right = payload.name == "raw_right";
-        if (pair == nullptr || (!left && !right) || payload.format != "u8_gray") {
+        const bool left = payload.name == snapshotItemName(SnapshotItem::RawLeft);
+        const bool right = payload.name == snapshotItemName(SnapshotItem::RawRight);
+        if (pair == nullptr || (!left && !right) || payload.format != kFormatGray) {
             client.skipPayload(payload.bytes);
             complete = complete && (left || right);
             continue;
         }
         readImagePayload(client, payload, CV_8UC1, left ? pair->left : pair->right);
-        (left ? pair->left_stamp_ns : pair->right_stamp_ns) = payload.stamp_ns;
+        (left ? pair->left_stamp_ns : pair->right_stamp_ns) = payload.stamp_ns.value_or(0);
         ++sides;
     }
     return pair != nullptr && complete && sides == 2;
