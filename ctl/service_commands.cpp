@@ -22,7 +22,7 @@ namespace {
 
 using json = nlohmann::ordered_json;
 
-ProtocolClient connect(const ServiceOptions& options)
+ProtocolClient connect(const ConnectionOptions& options)
 {
     return ProtocolClient(options.socket_path, std::chrono::milliseconds(options.timeout_ms));
 }
