@@ -330,7 +330,7 @@ ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceH
                                        : "starting";
 
     const SourceStatus source_status = source_->status();
-    ServiceStatus::Source& source = status.source;
+    StatusSource& source = status.source;
     source.kind = source_status.kind;
     source.state = toString(source_status.state);
     source.last_error = source_status.last_error;
@@ -351,7 +351,7 @@ ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceH
     source.clock_offset_ms = source_status.clock_offset_ms;
     source.warnings = source_status.warnings;
 
-    ServiceStatus::Pipeline& pipeline = status.pipeline;
+    StatusPipeline& pipeline = status.pipeline;
     pipeline.range = initial_range_;
     pipeline.matcher = initial_matcher_;
     if (latest != nullptr) {
@@ -368,7 +368,7 @@ ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceH
         pipeline.latency_p99_ms = stats.latency_p99_ms;
     }
 
-    ServiceStatus::CalibrationHealth& rig_health = status.calibration_health;
+    StatusCalibrationHealth& rig_health = status.calibration_health;
     if (!health_) {
         rig_health.state = healthStateName(HealthState::Unknown);
         rig_health.reason = "uncalibrated";
@@ -376,7 +376,7 @@ ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceH
         const HealthReport report = health_->report();
         rig_health.state = healthStateName(report.state);
         rig_health.reason = report.reason;
-        ServiceStatus::HealthChecks& checks = rig_health.checks.emplace();
+        StatusHealthChecks& checks = rig_health.checks.emplace();
         checks.row_offset_px = report.row_offset_px;
         checks.row_offset_p90_px = report.row_offset_p90_px;
         checks.matches = report.matches;
@@ -389,7 +389,7 @@ ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceH
                 static_cast<double>(monotonicNowNs() - report.checked_stamp_ns) / 1e9;
     }
 
-    ServiceStatus::Calibration& calibration = status.calibration;
+    StatusCalibration& calibration = status.calibration;
     calibration.path = options_.calibration_path;
     if (calibration_) {
         calibration.kind =

@@ -22,9 +22,11 @@
 // frames).
 
 #include <cstdint>
+#include <exception>
 #include <functional>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <unordered_map>
 #include <vector>
 
@@ -143,8 +145,12 @@ class SocketServer {
         }
     };
 
+    // socket_server.cpp: the loop and what it watches.
     void addToEpoll(int fd, uint64_t tag, uint32_t events);
     void acceptClients();
+    void onTick();
+
+    // socket_server_connections.cpp: a connection's input, output and end.
     void readClient(Client& client);
     // Closes the clients whose peers have hung up, without waiting for their events.
     void closeHungUpClients();
@@ -153,50 +159,49 @@ class SocketServer {
     void handleLines(Client& client);
     // Gives each client in ready_ its next turn.
     void serveReadyClients();
-    void handleRequest(Client& client, std::string_view line);
-    // Logs a request that threw and answers it with `internal`.
-    void replyFailed(Client& client, const std::exception& error, const std::optional<Json>& id);
     void rejectTooLarge(Client& client);
     void writeClient(Client& client);
     void updateEpoll(Client& client);
     void closeClient(Client& client);
     void reapClients();
-    // Appends `bytes` to the client's output, first compacting what was sent.
     // Makes room at the end of the client's output: drops the part already sent once it
     // is at least half of the buffer (amortised O(1) per byte, no per-send memmove).
     void compactOut(Client& client);
     void reply(Client& client, const Json& json);
+    // A reply written straight into the client's output, without a Json tree: `"ok": true`
+    // and the id written; the caller adds its fields, closes it and ends the line.
+    JsonObjectWriter openDirectReply(Client& client, const std::optional<Json>& id);
     // Drops the client when its unsent data exceed the backlog limit; returns whether.
     bool dropIfBacklogged(Client& client);
 
-    void onPublished();
-    void dispatchFrame(const PublishedFrame& frame, int64_t now_ns);
-    // Tells readings subscribers that the source went down (no frame will say so).
-    void broadcastSourceDown(const SourceHealth& health, int64_t now_ns);
-    bool due(Subscription& subscription, double max_hz_config, int64_t now_ns) const;
-    void onTick();
-
+    // socket_server_requests.cpp: the request handlers.
+    void handleRequest(Client& client, std::string_view line);
+    // Logs a request that threw and answers it with `internal`.
+    void replyFailed(Client& client, const std::exception& error, const std::optional<Json>& id);
     // The reading to hand out now: the newest one, or no_frame_yet / source_down / stale.
     // `message` holds the reason sentence the report points to.
     ReadingReport currentReading(const PublishedFrame* latest, double max_age_ms,
                                  const SourceHealth& health, int64_t now_ns,
                                  std::string& message) const;
-
     void handle(Client& client, const HelloRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const DistanceRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const StatusRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const SnapshotRequest& request, const std::optional<Json>& id);
-    void handle(Client& client, const SubscribeRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const ReloadRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const CalibrationRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const ZonesRequest& request, const std::optional<Json>& id);
-    // A reply written straight into the client's output, without a Json tree: `"ok": true`
-    // and the id written; the caller adds its fields, closes it and ends the line.
-    JsonObjectWriter openDirectReply(Client& client, const std::optional<Json>& id);
-
     // Answers a snapshot from `frame` (its raw frames must be present when asked for).
     void sendSnapshot(Client& client, const SnapshotRequest& request, const std::optional<Json>& id,
                       const PublishedFrame& frame);
+
+    // socket_server_subscriptions.cpp: events to subscribers, snapshots waiting for raw
+    // frames.
+    void handle(Client& client, const SubscribeRequest& request, const std::optional<Json>& id);
+    void onPublished();
+    void dispatchFrame(const PublishedFrame& frame, int64_t now_ns);
+    // Tells readings subscribers that the source went down (no frame will say so).
+    void broadcastSourceDown(const SourceHealth& health, int64_t now_ns);
+    bool due(Subscription& subscription, double max_hz_config, int64_t now_ns) const;
     // Answers the client's waiting snapshot from `frame` (nullptr: with `error`), then
     // serves the requests that queued up behind it.
     void finishWaiting(Client& client, const PublishedFrame* frame, std::string_view error);

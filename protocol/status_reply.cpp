@@ -8,7 +8,7 @@ namespace stereod {
 
 namespace {
 
-Json sourceJson(const ServiceStatus::Source& source)
+Json sourceJson(const StatusSource& source)
 {
     Json out = Json::object();
     out["kind"] = source.kind;
@@ -17,7 +17,7 @@ Json sourceJson(const ServiceStatus::Source& source)
     if (source.down_reason)
         out["down_reason"] = *source.down_reason;
     Json cameras = Json::array();
-    for (const ServiceStatus::Camera& camera : source.cameras) {
+    for (const StatusCamera& camera : source.cameras) {
         cameras.push_back({{"name", camera.name},
                            {"state", camera.state},
                            {"fps", roundTo(camera.fps, 2)},
@@ -41,7 +41,7 @@ Json sourceJson(const ServiceStatus::Source& source)
     return out;
 }
 
-Json pipelineJson(const ServiceStatus::Pipeline& pipeline)
+Json pipelineJson(const StatusPipeline& pipeline)
 {
     Json out = Json::object();
     out["frames"] = pipeline.frames;
@@ -65,7 +65,7 @@ Json pipelineJson(const ServiceStatus::Pipeline& pipeline)
     return out;
 }
 
-Json calibrationHealthJson(const ServiceStatus::CalibrationHealth& health)
+Json calibrationHealthJson(const StatusCalibrationHealth& health)
 {
     Json out = Json::object();
     out["state"] = health.state;
@@ -73,7 +73,7 @@ Json calibrationHealthJson(const ServiceStatus::CalibrationHealth& health)
         out["reason"] = health.reason;
     if (!health.checks)
         return out;
-    const ServiceStatus::HealthChecks& checks = *health.checks;
+    const StatusHealthChecks& checks = *health.checks;
     out["row_offset_px"] = roundTo(checks.row_offset_px, 3);
     out["row_offset_p90_px"] = roundTo(checks.row_offset_p90_px, 3);
     out["matches"] = checks.matches;
@@ -86,7 +86,7 @@ Json calibrationHealthJson(const ServiceStatus::CalibrationHealth& health)
     return out;
 }
 
-Json calibrationJson(const ServiceStatus::Calibration& calibration)
+Json calibrationJson(const StatusCalibration& calibration)
 {
     Json out = Json::object();
     out["path"] = calibration.path;

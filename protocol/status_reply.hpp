@@ -29,82 +29,87 @@ struct ClientCounters {
     uint64_t disconnected_slow = 0; // subscribers dropped past the backlog limit
 };
 
+// One camera in `status`.
+struct StatusCamera {
+    std::string name;
+    std::string state;
+    double fps = 0.0;
+    uint64_t frames = 0;
+    uint64_t dropped = 0;
+    uint64_t bad_frames = 0;
+    std::string last_bad_frame;
+    uint64_t unpaired = 0;
+    std::string last_error;
+};
+
+// The frame source in `status`.
+struct StatusSource {
+    std::string kind;
+    std::string state;
+    std::string last_error;
+    std::optional<std::string> down_reason; // when the service judges the source down
+    std::vector<StatusCamera> cameras;
+    uint64_t pairs = 0;
+    uint64_t ring_dropped = 0;
+    uint64_t unpaired_dropped = 0;
+    double skew_mean_ms = 0.0;
+    double skew_p99_ms = 0.0;
+    double skew_max_ms = 0.0;
+    bool clock_offset_detected = false;
+    double clock_offset_ms = 0.0;
+    std::vector<std::string> warnings;
+};
+
+// The worker in `status`.
+struct StatusPipeline {
+    uint64_t frames = 0;
+    double fps = 0.0; // 0 once frames stopped coming
+    std::string matcher;
+    DisparityRange range;
+    uint64_t bad_frames = 0;
+    uint64_t out_of_sync = 0;
+    StageTimings stage_mean_ms;
+    double publish_mean_ms = 0.0;
+    double latency_p50_ms = 0.0; // capture stamp to publication
+    double latency_p99_ms = 0.0;
+};
+
+// The numbers of the rig's calibration checks (daemon/calibration_health_monitor.hpp).
+struct StatusHealthChecks {
+    double row_offset_px = 0.0;
+    double row_offset_p90_px = 0.0;
+    int matches = 0;
+    double trend_px_per_min = 0.0;
+    uint64_t checks = 0;
+    double check_ms = 0.0;
+    double interval_s = 0.0;
+    std::optional<double> checked_age_s; // none before the first check
+};
+
+// The rig's calibration checks in `status`.
+struct StatusCalibrationHealth {
+    std::string state;                        // healthStateName()
+    std::string reason;                       // empty: none
+    std::optional<StatusHealthChecks> checks; // none when uncalibrated: nothing is checked
+};
+
+// The calibration in force in `status`.
+struct StatusCalibration {
+    std::string path;
+    std::string kind = "none";                 // "none", "full" or "rectified"
+    std::optional<RectifiedGeometry> geometry; // none when uncalibrated
+    std::optional<double> rms_px;
+    std::optional<double> epipolar_error_px;
+};
+
 // Everything the `status` object says, as plain values. States are the protocol's names.
 struct ServiceStatus {
-    struct Camera {
-        std::string name;
-        std::string state;
-        double fps = 0.0;
-        uint64_t frames = 0;
-        uint64_t dropped = 0;
-        uint64_t bad_frames = 0;
-        std::string last_bad_frame;
-        uint64_t unpaired = 0;
-        std::string last_error;
-    };
-
-    struct Source {
-        std::string kind;
-        std::string state;
-        std::string last_error;
-        std::optional<std::string> down_reason; // when the service judges the source down
-        std::vector<Camera> cameras;
-        uint64_t pairs = 0;
-        uint64_t ring_dropped = 0;
-        uint64_t unpaired_dropped = 0;
-        double skew_mean_ms = 0.0;
-        double skew_p99_ms = 0.0;
-        double skew_max_ms = 0.0;
-        bool clock_offset_detected = false;
-        double clock_offset_ms = 0.0;
-        std::vector<std::string> warnings;
-    };
-
-    struct Pipeline {
-        uint64_t frames = 0;
-        double fps = 0.0; // 0 once frames stopped coming
-        std::string matcher;
-        DisparityRange range;
-        uint64_t bad_frames = 0;
-        uint64_t out_of_sync = 0;
-        StageTimings stage_mean_ms;
-        double publish_mean_ms = 0.0;
-        double latency_p50_ms = 0.0; // capture stamp to publication
-        double latency_p99_ms = 0.0;
-    };
-
-    // The numbers of the rig's calibration checks (daemon/calibration_health_monitor.hpp).
-    struct HealthChecks {
-        double row_offset_px = 0.0;
-        double row_offset_p90_px = 0.0;
-        int matches = 0;
-        double trend_px_per_min = 0.0;
-        uint64_t checks = 0;
-        double check_ms = 0.0;
-        double interval_s = 0.0;
-        std::optional<double> checked_age_s; // none before the first check
-    };
-
-    struct CalibrationHealth {
-        std::string state;                  // healthStateName()
-        std::string reason;                 // empty: none
-        std::optional<HealthChecks> checks; // none when uncalibrated: nothing is checked
-    };
-
-    struct Calibration {
-        std::string path;
-        std::string kind = "none";                 // "none", "full" or "rectified"
-        std::optional<RectifiedGeometry> geometry; // none when uncalibrated
-        std::optional<double> rms_px;
-        std::optional<double> epipolar_error_px;
-    };
-
     double uptime_s = 0.0;
     std::string state; // "starting", "running", "source_down", "uncalibrated"
-    Source source;
-    Pipeline pipeline;
-    CalibrationHealth calibration_health;
-    Calibration calibration;
+    StatusSource source;
+    StatusPipeline pipeline;
+    StatusCalibrationHealth calibration_health;
+    StatusCalibration calibration;
     ClientCounters clients;
     ReadingReport reading; // its message is borrowed
     int64_t now_ns = 0;    // for the reading's age

@@ -34,7 +34,7 @@ ServiceStatus runningStatus()
     status.pipeline.publish_mean_ms = 0.5;
     status.pipeline.latency_p99_ms = 40.0004;
     status.calibration_health.state = "ok";
-    ServiceStatus::HealthChecks& checks = status.calibration_health.checks.emplace();
+    StatusHealthChecks& checks = status.calibration_health.checks.emplace();
     checks.row_offset_px = 0.12345;
     checks.matches = 210;
     checks.checks = 6;
