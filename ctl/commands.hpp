@@ -22,30 +22,30 @@ class UsageError : public std::runtime_error {
     using std::runtime_error::runtime_error;
 };
 
-// Options every command that talks to the service shares.
-struct ServiceOptions {
+// How to reach the service: what every command that talks to it shares.
+struct ConnectionOptions {
     std::string socket_path = "/run/stereod/stereod.sock";
     int timeout_ms = 5000; // limit on each wait for the service
 };
 
 struct DistanceOptions {
-    ServiceOptions service;
+    ConnectionOptions service;
     bool json = false;
     std::optional<double> max_age_ms;
 };
 
 struct StatusOptions {
-    ServiceOptions service;
+    ConnectionOptions service;
     bool json = false;
 };
 
 struct WatchOptions {
-    ServiceOptions service;
+    ConnectionOptions service;
     bool json = false;
 };
 
 struct SnapshotOptions {
-    ServiceOptions service;
+    ConnectionOptions service;
     std::string depth_path;      // .png, uint16 millimetres
     std::string disparity_path;  // .pfm or .png (KITTI)
     std::string cloud_path;      // .ply
@@ -102,7 +102,7 @@ struct CalibrateOptions {
     double unit_m = 1.0;                  // metres per unit of stereo_calib's T
     // The live chessboard form (--live): raw pairs from the running service.
     bool live = false;
-    ServiceOptions service;
+    ConnectionOptions service;
     int count = 0;                   // accepted pairs to collect
     std::string save_pairs_dir;      // where accepted pairs go; default next to out_path
     std::optional<double> timeout_s; // stop collecting after this long; none: until Ctrl-C
@@ -132,7 +132,7 @@ struct BoardDistanceOptions {
 
 // `stereoctl zones`: exit 0 all clear, 1 any occupied, 2 unknown, stale or none, 3 no service.
 struct ZonesOptions {
-    ServiceOptions service;
+    ConnectionOptions service;
     bool json = false;
     bool watch = false;         // one block per frame until interrupted
     double max_age_ms = 1000.0; // older zones count as unknown
@@ -143,7 +143,7 @@ struct ZonesOptions {
 // Exit 0 ok, 1 degraded or failed, 2 unknown (no verdict) or bad arguments.
 struct CheckCalibrationOptions {
     // Without files: from the running service (its calibration_health).
-    ServiceOptions service;
+    ConnectionOptions service;
     std::string left_glob;  // raw left images
     std::string right_glob; // raw right images, paired in sorted order
     std::string calib_path; // full calibration (YAML)
@@ -154,7 +154,7 @@ struct CheckCalibrationOptions {
 
 // `stereoctl record`: the service's raw pairs written as a recording.
 struct RecordOptions {
-    ServiceOptions service;
+    ConnectionOptions service;
     std::string out_dir;            // a directory that must not exist or be empty, or a
                                     // new file ending in .mcap (a ROS 2 bag)
     std::optional<uint64_t> frames; // stop after this many pairs; none: until stopped

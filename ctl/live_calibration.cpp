@@ -31,6 +31,7 @@
 #include "ctl/signal_catcher.hpp"
 #include "pipeline/calibration_coverage.hpp"
 #include "pipeline/chessboard_calibration.hpp"
+#include "protocol/request.hpp"
 
 namespace stereod {
 
@@ -64,10 +65,12 @@ void readRawPair(ProtocolClient& client, const json& event, RawPair& pair)
     bool have_left = false, have_right = false;
     for (const json& header : *payloads) {
         const Payload payload = parsePayload(header);
-        if (payload.name == "raw_left" && payload.format == "u8_gray") {
+        if (payload.name == snapshotItemName(SnapshotItem::RawLeft) &&
+            payload.format == kFormatGray) {
             readImagePayload(client, payload, CV_8UC1, pair.left);
             have_left = true;
-        } else if (payload.name == "raw_right" && payload.format == "u8_gray") {
+        } else if (payload.name == snapshotItemName(SnapshotItem::RawRight) &&
+                   payload.format == kFormatGray) {
             readImagePayload(client, payload, CV_8UC1, pair.right);
             have_right = true;
         } else {

@@ -44,7 +44,7 @@ std::string oneLineFailure(const CLI::App*, const CLI::Error& error)
 // options it fills.
 struct CommandSocket {
     const CLI::Option* option = nullptr;
-    ServiceOptions* service = nullptr;
+    ConnectionOptions* service = nullptr;
 };
 using CommandSockets = std::vector<CommandSocket>;
 
@@ -54,7 +54,7 @@ const char* const kSocketHelp =
 // --socket on a command. It takes no value from the environment itself: STEREOD_SOCKET
 // belongs to the application's --socket (before the command), which this one overrides
 // (resolveSockets).
-CLI::Option* addSocketOption(CLI::App* command, ServiceOptions& options, const char* help,
+CLI::Option* addSocketOption(CLI::App* command, ConnectionOptions& options, const char* help,
                              CommandSockets& sockets)
 {
     CLI::Option* option =
@@ -81,8 +81,8 @@ void resolveSockets(const CLI::Option& global_option, const std::string& global_
 // A command that talks to the service: --socket, --timeout-ms, and --json when `json` is
 // given.
 CLI::App* addServiceCommand(CLI::App& app, const char* name, const char* description,
-                            ServiceOptions& options, CommandSockets& sockets, bool* json = nullptr,
-                            const char* json_help = nullptr)
+                            ConnectionOptions& options, CommandSockets& sockets,
+                            bool* json = nullptr, const char* json_help = nullptr)
 {
     CLI::App* command = app.add_subcommand(name, description);
     addSocketOption(command, options, kSocketHelp, sockets);

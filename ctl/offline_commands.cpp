@@ -15,11 +15,11 @@
 #include "ctl/commands.hpp"
 #include "ctl/exit_codes.hpp"
 #include "ctl/output.hpp"
-#include "daemon/protocol.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/census_sgm_matcher.hpp"
 #include "pipeline/depth_io.hpp"
 #include "pipeline/stereo_processor.hpp"
+#include "protocol/reading_json.hpp"
 
 namespace stereod {
 

@@ -1,43 +1,43 @@
 #include "ctl/payload.hpp"
 
-#include <algorithm>
+#include <optional>
+#include <utility>
 
 #include <fmt/format.h>
 
 namespace stereod {
 
+namespace {
+
+ClientError bytesNotACount(const nlohmann::ordered_json& header)
+{
+    return ClientError(
+        "a header from the service has a \"bytes\" that is not a count: " + header.dump(), 0);
+}
+
+} // namespace
+
 std::size_t payloadBytes(const nlohmann::ordered_json& header)
 {
-    const auto bytes = header.find("bytes");
-    if (bytes == header.end()) {
-        return 0;
+    const std::optional<std::size_t> bytes = payloadBytesFromJson(header);
+    if (!bytes) {
+        throw bytesNotACount(header);
     }
-    if (!bytes->is_number_unsigned()) {
-        throw ClientError(
-            "a header from the service has a \"bytes\" that is not a count: " + header.dump(), 0);
-    }
-    return bytes->get<std::size_t>();
+    return *bytes;
 }
 
 Payload parsePayload(const nlohmann::ordered_json& header)
 {
-    Payload p;
-    p.name = header.value("name", std::string());
-    p.format = header.value("format", std::string());
-    p.width = header.value("width", 0);
-    p.height = header.value("height", 0);
-    p.points = header.value("points", std::size_t{0});
-    p.bytes = payloadBytes(header);
-    p.stamp_ns = header.value("stamp_ns", int64_t{0});
-    return p;
+    std::optional<Payload> payload = payloadFromJson(header);
+    if (!payload) {
+        throw bytesNotACount(header);
+    }
+    return std::move(*payload);
 }
 
 void readImagePayload(ProtocolClient& client, const Payload& payload, int type, cv::Mat& image)
 {
-    const std::size_t expected = static_cast<std::size_t>(std::max(payload.width, 0)) *
-                                 static_cast<std::size_t>(std::max(payload.height, 0)) *
-                                 CV_ELEM_SIZE(type);
-    if (payload.width <= 0 || payload.height <= 0 || payload.bytes != expected) {
+    if (!imagePayloadAddsUp(payload, type)) {
         throw ClientError(fmt::format("the service announced a {} payload of {}x{} {} in {} "
                                       "bytes, which does not add up",
                                       payload.name, payload.width, payload.height, payload.format,
@@ -46,6 +46,19 @@ void readImagePayload(ProtocolClient& client, const Payload& payload, int type, 
     }
     image.create(payload.height, payload.width, type);
     client.readPayload(image.data, payload.bytes);
+}
+
+void readCloudPayload(ProtocolClient& client, const Payload& payload,
+                      std::vector<CloudPoint>& cloud)
+{
+    if (!cloudPayloadAddsUp(payload)) {
+        throw ClientError(fmt::format("the service announced {} cloud points in {} bytes, "
+                                      "which does not add up",
+                                      payload.points, payload.bytes),
+                          0);
+    }
+    cloud.resize(payload.points);
+    client.readPayload(cloud.data(), payload.bytes);
 }
 
 } // namespace stereod

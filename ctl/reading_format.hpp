@@ -1,7 +1,8 @@
 #pragma once
 // The reading object of the protocol (docs/protocol.md, "The reading object") as
 // `stereoctl` prints it and decides its exit code from it. (The object itself is built by
-// the protocol library, daemon/protocol.hpp, for the service and `stereoctl depth` alike.)
+// the protocol library, protocol/reading_json.hpp, for the service and `stereoctl depth`
+// alike.)
 //
 // Reentrant: pure functions.
 

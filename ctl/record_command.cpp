@@ -36,6 +36,7 @@
 #include "ctl/signal_catcher.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/calibration_formats.hpp"
+#include "protocol/request.hpp"
 #include "replay/mcap_recording.hpp"
 #include "replay/recording.hpp"
 
@@ -55,8 +56,8 @@ struct PairBuffer {
     // size from pair to pair.
     cv::Mat depth_m; // CV_32FC1 metres, 0 = none
     bool depth_present = false;
-    std::vector<float> cloud_xyzi; // 4 floats a point
-    bool cloud_present = false;    // (a cloud may have no point)
+    std::vector<CloudPoint> cloud;
+    bool cloud_present = false; // (a cloud may have no point)
 };
 
 // What --with asked for.
@@ -327,18 +328,6 @@ class Progress {
     std::chrono::steady_clock::time_point last_{};
 };
 
-// Reads the `cloud` payload (f32_xyzi) into `xyzi`.
-void readCloudPayload(ProtocolClient& client, const Payload& payload, std::vector<float>& xyzi)
-{
-    if (payload.format != "f32_xyzi" || payload.bytes != payload.points * 4 * sizeof(float)) {
-        throw ClientError("a raw event's cloud from " + client.socketPath() + " is not " +
-                              std::to_string(payload.points) + " f32_xyzi points",
-                          0);
-    }
-    xyzi.resize(payload.points * 4);
-    client.readPayload(xyzi.data(), payload.bytes);
-}
-
 // Reads the payloads of a raw event into `pair` (its results only when `results` asks for
 // them); false (payloads read past) when the event does not carry exactly raw_left and
 // raw_right.
@@ -357,29 +346,31 @@ bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair,
     }
     for (const json& header : *payloads) {
         const Payload payload = parsePayload(header);
-        if (pair != nullptr && results.depth && payload.name == "depth" &&
-            payload.format == "f32_m") {
+        const std::string_view name = payload.name;
+        if (pair != nullptr && results.depth && name == snapshotItemName(SnapshotItem::Depth) &&
+            payload.format == kFormatDepthM) {
             // An uncalibrated service has no depth: 0 x 0, read as none.
             pair->depth_present = payload.width > 0 && payload.height > 0;
             if (pair->depth_present)
                 readImagePayload(client, payload, CV_32FC1, pair->depth_m);
             continue;
         }
-        if (pair != nullptr && results.points && payload.name == "cloud") {
-            readCloudPayload(client, payload, pair->cloud_xyzi);
+        if (pair != nullptr && results.points && name == snapshotItemName(SnapshotItem::Cloud)) {
+            readCloudPayload(client, payload, pair->cloud);
             pair->cloud_present = true;
             continue;
         }
-        const bool left = payload.name == "raw_left";
-        const bool right = payload.name == "raw_right";
-        if (pair == nullptr || (!left && !right) || payload.format != "u8_gray") {
+        const bool left = name == snapshotItemName(SnapshotItem::RawLeft);
+        const bool right = name == snapshotItemName(SnapshotItem::RawRight);
+        if (pair == nullptr || (!left && !right) || payload.format != kFormatGray) {
             client.skipPayload(payload.bytes);
             complete =
-                complete && (left || right || payload.name == "depth" || payload.name == "cloud");
+                complete && (left || right || name == snapshotItemName(SnapshotItem::Depth) ||
+                             name == snapshotItemName(SnapshotItem::Cloud));
             continue;
         }
         readImagePayload(client, payload, CV_8UC1, left ? pair->left : pair->right);
-        (left ? pair->left_stamp_ns : pair->right_stamp_ns) = payload.stamp_ns;
+        (left ? pair->left_stamp_ns : pair->right_stamp_ns) = payload.stamp_ns.value_or(0);
         ++sides;
     }
     return pair != nullptr && complete && sides == 2;
@@ -391,8 +382,9 @@ void checkResultsPresent(const json& event, const Results& results, const std::s
     bool depth = false;
     bool cloud = false;
     for (const json& header : event.value("payloads", json::array())) {
-        depth = depth || header.value("name", std::string()) == "depth";
-        cloud = cloud || header.value("name", std::string()) == "cloud";
+        const std::string name = header.value("name", std::string());
+        depth = depth || name == snapshotItemName(SnapshotItem::Depth);
+        cloud = cloud || name == snapshotItemName(SnapshotItem::Cloud);
     }
     if ((results.depth && !depth) || (results.points && !cloud)) {
         throw UsageError("the service at " + socket +
@@ -482,7 +474,8 @@ int runRecord(const RecordOptions& options)
             if (results.depth && p.depth_present)
                 bag->writeDepth(p.depth_m, p.left_stamp_ns);
             if (results.points && p.cloud_present)
-                bag->writePoints(p.cloud_xyzi.data(), p.cloud_xyzi.size() / 4, p.left_stamp_ns);
+                bag->writePoints(reinterpret_cast<const float*>(p.cloud.data()), p.cloud.size(),
+                                 p.left_stamp_ns);
         };
     } else {
         csv.emplace(options.out_dir);
@@ -510,9 +503,9 @@ int runRecord(const RecordOptions& options)
         if (results.any()) {
             json with = json::array();
             if (results.depth)
-                with.push_back("depth");
+                with.push_back(snapshotItemName(SnapshotItem::Depth));
             if (results.points)
-                with.push_back("cloud");
+                with.push_back(snapshotItemName(SnapshotItem::Cloud));
             subscribe["with"] = std::move(with);
         }
         client.request(subscribe);

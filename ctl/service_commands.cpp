@@ -1,6 +1,5 @@
 // The commands that talk to the running service: distance, status, watch, snapshot.
 
-#include <bit>
 #include <cstdio>
 #include <vector>
 
@@ -15,19 +14,15 @@
 #include "ctl/reading_format.hpp"
 #include "ctl/signal_catcher.hpp"
 #include "pipeline/depth_io.hpp"
+#include "protocol/request.hpp"
 
 namespace stereod {
 
 namespace {
 
-// The payload formats are little-endian (docs/protocol.md) and are read in place.
-static_assert(std::endian::native == std::endian::little,
-              "payloads are read in place: add byte swapping for big-endian hosts");
-static_assert(sizeof(CloudPoint) == 16, "f32_xyzi points are 16 bytes");
-
 using json = nlohmann::ordered_json;
 
-ProtocolClient connect(const ServiceOptions& options)
+ProtocolClient connect(const ConnectionOptions& options)
 {
     return ProtocolClient(options.socket_path, std::chrono::milliseconds(options.timeout_ms));
 }
@@ -290,27 +285,25 @@ int runSnapshot(const SnapshotOptions& options)
     bool have_confidence = false;
     for (const json& header : payloads) {
         const Payload payload = parsePayload(header);
-        if (payload.name == "depth" && payload.format == "u16_mm") {
+        if (payload.name == snapshotItemName(SnapshotItem::Depth) &&
+            payload.format == kFormatDepthMm) {
             readImagePayload(client, payload, CV_16UC1, depth_mm);
             have_depth = true;
-        } else if (payload.name == "disparity" && payload.format == "f32_px") {
+        } else if (payload.name == snapshotItemName(SnapshotItem::Disparity) &&
+                   payload.format == kFormatDisparityPx) {
             readImagePayload(client, payload, CV_32FC1, disparity);
             have_disparity = true;
-        } else if (payload.name == "left" && payload.format == "u8_gray") {
+        } else if (payload.name == snapshotItemName(SnapshotItem::Left) &&
+                   payload.format == kFormatGray) {
             readImagePayload(client, payload, CV_8UC1, left);
             have_left = true;
-        } else if (payload.name == "confidence" && payload.format == "u8_confidence") {
+        } else if (payload.name == snapshotItemName(SnapshotItem::Confidence) &&
+                   payload.format == kFormatConfidence) {
             readImagePayload(client, payload, CV_8UC1, confidence);
             have_confidence = true;
-        } else if (payload.name == "cloud" && payload.format == "f32_xyzi") {
-            if (payload.bytes != payload.points * sizeof(CloudPoint)) {
-                throw ClientError(fmt::format("the service announced {} cloud points in {} bytes, "
-                                              "which does not add up",
-                                              payload.points, payload.bytes),
-                                  0);
-            }
-            cloud.resize(payload.points);
-            client.readPayload(cloud.data(), payload.bytes);
+        } else if (payload.name == snapshotItemName(SnapshotItem::Cloud) &&
+                   payload.format == kFormatCloud) {
+            readCloudPayload(client, payload, cloud);
             have_cloud = true;
         } else {
             // A payload this client does not know (a newer service): read past it.

@@ -17,6 +17,7 @@
 #include "ctl/signal_catcher.hpp"
 #include "pipeline/depth_io.hpp"
 #include "pipeline/zones.hpp"
+#include "protocol/request.hpp"
 
 namespace stereod {
 
@@ -88,7 +89,8 @@ void drawPicture(ProtocolClient& client, const json& reply, const std::string& p
     cv::Mat depth_mm;
     for (const json& header : snapshot.value("payloads", json::array())) {
         const Payload payload = parsePayload(header);
-        if (payload.name == "depth" && payload.format == "u16_mm")
+        if (payload.name == snapshotItemName(SnapshotItem::Depth) &&
+            payload.format == kFormatDepthMm)
             readImagePayload(client, payload, CV_16UC1, depth_mm);
         else
             client.skipPayload(payload.bytes);

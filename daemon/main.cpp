@@ -14,6 +14,7 @@
 #include "capture/device_list.hpp"
 #include "config/service_config.hpp"
 #include "daemon/service.hpp"
+#include "daemon/service_launch.hpp"
 #include "daemon/stop_signal_watch.hpp"
 
 namespace {

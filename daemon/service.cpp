@@ -1,12 +1,10 @@
 #include "daemon/service.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <chrono>
-#include <cstring>
-#include <filesystem>
-#include <fstream>
-#include <sstream>
+#include <cstdio>
 #include <string_view>
 #include <system_error>
 #include <thread>
@@ -16,14 +14,7 @@
 #include <spdlog/spdlog.h>
 #include <sys/eventfd.h>
 #include <sys/signalfd.h>
-#include <systemd/sd-daemon.h>
 #include <unistd.h>
-
-#include "daemon/camera_source_factory.hpp"
-#include "daemon/json_writer.hpp"
-#include "pipeline/calibration_formats.hpp"
-#include "replay/recording.hpp"
-#include "replay/replay_source.hpp"
 
 namespace stereod {
 
@@ -44,35 +35,16 @@ void applyLogLevel(const std::string& level)
     spdlog::set_level(spdlog::level::from_str(level));
 }
 
-// The calibration file's text, read once: what is parsed is what `calibration` hands out.
-// Throws std::runtime_error naming the file and the errno text.
-std::string readCalibrationText(const std::string& path)
+// The worker's frame rate now: a rate measured over frames that stopped coming is no rate.
+double currentFps(const PublishedFrame& latest, int64_t now_ns)
 {
-    std::ifstream in(path, std::ios::binary);
-    if (!in)
-        throw std::runtime_error(path + ": cannot open: " + std::system_category().message(errno));
-    std::ostringstream text;
-    text << in.rdbuf();
-    if (in.bad())
-        throw std::runtime_error(path + ": cannot read: " + std::system_category().message(errno));
-    return text.str();
+    const double quiet_s = static_cast<double>(now_ns - latest.published_ns) / 1e9;
+    const double fps = latest.stats.fps;
+    return quiet_s < std::max(2.0, fps > 0.0 ? 3.0 / fps : 2.0) ? fps : 0.0;
 }
 
-// Loads the calibration at `path`: its text (for the `calibration` request) and the parsed
-// calibration. Throws StartupError(Calibration) naming the file and the problem.
-StereoCalibration loadCalibrationFile(const std::string& path, std::string& text)
-{
-    try {
-        text = readCalibrationText(path);
-        return parseCalibration(text, path);
-    } catch (const std::exception& e) {
-        throw StartupError(ExitCode::Calibration, e.what());
-    }
-}
+} // namespace
 
-// The processing settings as the stereo chain checks them against the calibration (a
-// disparity range wider than the image, a region of interest of no pixel, ...): the
-// problem, naming the key and `origin` (the configuration file), or empty when they fit.
 std::string processingProblem(const ProcessorSettings& settings,
                               const StereoCalibration& calibration, const std::string& origin)
 {
@@ -86,8 +58,6 @@ std::string processingProblem(const ProcessorSettings& settings,
     }
     return {};
 }
-
-} // namespace
 
 // A configuration whose only problems are the replay path, or only the calibration
 // path, is a source or a calibration problem for the exit code: `stereod --replay DIR`
@@ -349,121 +319,86 @@ SourceHealth Service::sourceHealth(int64_t now_ns)
     return health;
 }
 
-void Service::describe(Json& status, const PublishedFrame* latest, const SourceHealth& health,
-                       int64_t now_ns)
+ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceHealth& health,
+                                     int64_t now_ns)
 {
-    status["uptime_s"] = roundTo(static_cast<double>(now_ns - started_ns_) / 1e9, 1);
-    status["state"] = health.down         ? "source_down"
-                      : !calibration_     ? "uncalibrated"
-                      : latest != nullptr ? "running"
-                                          : "starting";
+    ServiceStatus status;
+    status.uptime_s = static_cast<double>(now_ns - started_ns_) / 1e9;
+    status.state = health.down         ? "source_down"
+                   : !calibration_     ? "uncalibrated"
+                   : latest != nullptr ? "running"
+                                       : "starting";
 
     const SourceStatus source_status = source_->status();
-    Json source = Json::object();
-    source["kind"] = source_status.kind;
-    source["state"] = toString(source_status.state);
-    source["last_error"] = source_status.last_error;
+    StatusSource& source = status.source;
+    source.kind = source_status.kind;
+    source.state = toString(source_status.state);
+    source.last_error = source_status.last_error;
     if (health.down)
-        source["down_reason"] = health.message;
-    Json cameras = Json::array();
+        source.down_reason = health.message;
     for (const CameraStatus& camera : source_status.cameras) {
-        cameras.push_back({{"name", camera.name},
-                           {"state", toString(camera.state)},
-                           {"fps", roundTo(camera.fps, 2)},
-                           {"frames", camera.frames},
-                           {"dropped", camera.dropped},
-                           {"bad_frames", camera.bad_frames},
-                           {"last_bad_frame", camera.last_bad_frame},
-                           {"unpaired", camera.unpaired},
-                           {"last_error", camera.last_error}});
+        source.cameras.push_back({camera.name, toString(camera.state), camera.fps, camera.frames,
+                                  camera.dropped, camera.bad_frames, camera.last_bad_frame,
+                                  camera.unpaired, camera.last_error});
     }
-    source["cameras"] = std::move(cameras);
-    source["pairs"] = source_status.pairs;
-    source["ring_dropped"] = ring_->dropped();
-    source["unpaired_dropped"] = source_status.unpaired_dropped;
-    source["skew_ms"] = {{"mean", roundTo(source_status.skew_mean_ms, 3)},
-                         {"p99", roundTo(source_status.skew_p99_ms, 3)},
-                         {"max", roundTo(source_status.skew_max_ms, 3)}};
-    source["clock_offset"] = {{"detected", source_status.clock_offset_detected},
-                              {"estimate_ms", roundTo(source_status.clock_offset_ms, 3)}};
-    source["warnings"] = source_status.warnings;
-    status["source"] = std::move(source);
+    source.pairs = source_status.pairs;
+    source.ring_dropped = ring_->dropped();
+    source.unpaired_dropped = source_status.unpaired_dropped;
+    source.skew_mean_ms = source_status.skew_mean_ms;
+    source.skew_p99_ms = source_status.skew_p99_ms;
+    source.skew_max_ms = source_status.skew_max_ms;
+    source.clock_offset_detected = source_status.clock_offset_detected;
+    source.clock_offset_ms = source_status.clock_offset_ms;
+    source.warnings = source_status.warnings;
 
-    PipelineStats stats;
-    stats.range = initial_range_;
-    std::string matcher = initial_matcher_;
-    double fps = 0.0;
+    StatusPipeline& pipeline = status.pipeline;
+    pipeline.range = initial_range_;
+    pipeline.matcher = initial_matcher_;
     if (latest != nullptr) {
-        stats = latest->stats;
-        matcher = stats.matcher.data();
-        // A rate measured over frames that stopped coming is no rate now.
-        const double quiet_s = static_cast<double>(now_ns - latest->published_ns) / 1e9;
-        fps = quiet_s < std::max(2.0, stats.fps > 0.0 ? 3.0 / stats.fps : 2.0) ? stats.fps : 0.0;
+        const PipelineStats& stats = latest->stats;
+        pipeline.frames = stats.frames;
+        pipeline.fps = currentFps(*latest, now_ns);
+        pipeline.matcher = stats.matcher.data();
+        pipeline.range = stats.range;
+        pipeline.bad_frames = stats.bad_frames;
+        pipeline.out_of_sync = stats.out_of_sync;
+        pipeline.stage_mean_ms = stats.stage_mean_ms;
+        pipeline.publish_mean_ms = stats.publish_mean_ms;
+        pipeline.latency_p50_ms = stats.latency_p50_ms;
+        pipeline.latency_p99_ms = stats.latency_p99_ms;
     }
-    Json pipeline = Json::object();
-    pipeline["frames"] = stats.frames;
-    pipeline["fps"] = roundTo(fps, 2);
-    pipeline["matcher"] = matcher;
-    pipeline["num_disparities"] = stats.range.num_disparities;
-    pipeline["min_disparity"] = stats.range.min_disparity;
-    pipeline["closest_depth_m"] = roundTo(stats.range.closest_depth_m, 3);
-    pipeline["disparity_range_capped"] = stats.range.capped;
-    pipeline["bad_frames"] = stats.bad_frames;
-    pipeline["out_of_sync"] = stats.out_of_sync;
-    const StageTimings& stage = stats.stage_mean_ms;
-    pipeline["stage_ms"] = {
-        {"rectify", roundTo(stage.rectify_ms, 3)}, {"match", roundTo(stage.match_ms, 3)},
-        {"depth", roundTo(stage.depth_ms, 3)},     {"nearest", roundTo(stage.nearest_ms, 3)},
-        {"cloud", roundTo(stage.cloud_ms, 3)},     {"publish", roundTo(stats.publish_mean_ms, 3)}};
-    // From the capture stamp of a pair to the publication of its result (the last 256 pairs).
-    pipeline["latency_ms"] = {{"p50", roundTo(stats.latency_p50_ms, 3)},
-                              {"p99", roundTo(stats.latency_p99_ms, 3)}};
-    status["pipeline"] = std::move(pipeline);
 
-    Json rig_health = Json::object();
+    StatusCalibrationHealth& rig_health = status.calibration_health;
     if (!health_) {
-        rig_health["state"] = healthStateName(HealthState::Unknown);
-        rig_health["reason"] = "uncalibrated";
+        rig_health.state = healthStateName(HealthState::Unknown);
+        rig_health.reason = "uncalibrated";
     } else {
         const HealthReport report = health_->report();
-        rig_health["state"] = healthStateName(report.state);
-        if (!report.reason.empty())
-            rig_health["reason"] = report.reason;
-        rig_health["row_offset_px"] = roundTo(report.row_offset_px, 3);
-        rig_health["row_offset_p90_px"] = roundTo(report.row_offset_p90_px, 3);
-        rig_health["matches"] = report.matches;
-        rig_health["trend_px_per_min"] = roundTo(report.trend_px_per_min, 4);
-        rig_health["checks"] = report.checks;
-        rig_health["check_ms"] = roundTo(report.check_ms, 2);
-        rig_health["interval_s"] = config_.calibration_health.interval_s;
+        rig_health.state = healthStateName(report.state);
+        rig_health.reason = report.reason;
+        StatusHealthChecks& checks = rig_health.checks.emplace();
+        checks.row_offset_px = report.row_offset_px;
+        checks.row_offset_p90_px = report.row_offset_p90_px;
+        checks.matches = report.matches;
+        checks.trend_px_per_min = report.trend_px_per_min;
+        checks.checks = report.checks;
+        checks.check_ms = report.check_ms;
+        checks.interval_s = config_.calibration_health.interval_s;
         if (report.checked_stamp_ns > 0)
-            rig_health["checked_age_s"] =
-                roundTo(static_cast<double>(monotonicNowNs() - report.checked_stamp_ns) / 1e9, 2);
+            checks.checked_age_s =
+                static_cast<double>(monotonicNowNs() - report.checked_stamp_ns) / 1e9;
     }
-    status["calibration_health"] = std::move(rig_health);
 
-    Json calibration = Json::object();
-    calibration["path"] = options_.calibration_path;
-    if (!calibration_) {
-        calibration["kind"] = "none";
-        status["calibration"] = std::move(calibration);
-        return;
+    StatusCalibration& calibration = status.calibration;
+    calibration.path = options_.calibration_path;
+    if (calibration_) {
+        calibration.kind =
+            calibration_->kind == StereoCalibration::Kind::Full ? "full" : "rectified";
+        calibration.geometry = calibration_->rectified;
+        calibration.rms_px = calibration_->rms_px;
+        calibration.epipolar_error_px = calibration_->epipolar_error_px;
     }
-    const RectifiedGeometry& geometry = calibration_->rectified;
-    calibration["kind"] =
-        calibration_->kind == StereoCalibration::Kind::Full ? "full" : "rectified";
-    calibration["focal_px"] = geometry.focal_px;
-    calibration["baseline_m"] = geometry.baseline_m;
-    calibration["doffs_px"] = geometry.doffs_px;
-    calibration["cx_px"] = geometry.cx_px;
-    calibration["cy_px"] = geometry.cy_px;
-    calibration["width"] = geometry.image_size.width;
-    calibration["height"] = geometry.image_size.height;
-    if (calibration_->rms_px)
-        calibration["rms_px"] = *calibration_->rms_px;
-    if (calibration_->epipolar_error_px)
-        calibration["epipolar_error_px"] = *calibration_->epipolar_error_px;
-    status["calibration"] = std::move(calibration);
+    return status;
 }
 
 ReloadOutcome Service::loadAndApply()
@@ -560,10 +495,7 @@ std::string Service::statusText(int64_t now_ns, const SourceHealth& health)
     if (latest != nullptr) {
         facts.have_frame = true;
         facts.frame = latest->result.frame;
-        // A rate measured over frames that stopped coming is no rate now.
-        const double quiet_s = static_cast<double>(now_ns - latest->published_ns) / 1e9;
-        const double fps = latest->stats.fps;
-        facts.fps = quiet_s < std::max(2.0, fps > 0.0 ? 3.0 / fps : 2.0) ? fps : 0.0;
+        facts.fps = currentFps(*latest, now_ns);
     }
     facts.last_error = !last_error_.empty() ? std::string_view(last_error_)
                                             : std::string_view(source_status.last_error);
@@ -602,131 +534,6 @@ void Service::onTick(int64_t now_ns)
     }
     if (notifier_.statusDue(now_ns))
         notifier_.status(statusText(now_ns, sourceHealth(now_ns)), now_ns);
-}
-
-std::string checkConfiguration(const std::string& path)
-{
-    const ServiceConfig config = loadConfig(path);
-    std::string calibration_path = config.calibration_path;
-    if (calibration_path.empty() && config.source.kind == SourceKind::Replay) {
-        // A recording's own calibration, as start-up would find it.
-        std::error_code error;
-        const std::filesystem::path in_recording =
-            std::filesystem::path(config.source.replay.path) / kCalibrationName;
-        if (std::filesystem::is_directory(config.source.replay.path, error) &&
-            std::filesystem::is_regular_file(in_recording, error))
-            calibration_path = in_recording.string();
-    }
-    if (calibration_path.empty())
-        return {};
-    std::string text;
-    const StereoCalibration calibration = loadCalibrationFile(calibration_path, text);
-    const std::string problem = processingProblem(config.processing, calibration, path);
-    if (!problem.empty())
-        throw StartupError(ExitCode::InvalidConfig,
-                           problem + " (calibration " + calibration_path + ")");
-    return calibration_path;
-}
-
-std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle_signals)
-{
-    ServiceConfig config;
-    try {
-        if (!request.config_path.empty()) {
-            config = loadConfig(request.config_path, request.overrides);
-        } else {
-            config = defaultConfig();
-            applyOverrides(config, request.overrides);
-            validateConfig(config);
-        }
-    } catch (const ConfigError& e) {
-        throw StartupError(exitCodeFor(e), std::string("invalid configuration:\n") + e.what());
-    } catch (const std::exception& e) {
-        throw StartupError(ExitCode::InvalidConfig,
-                           std::string("cannot read the configuration: ") + e.what());
-    }
-    applyLogLevel(config.log_level);
-
-    std::unique_ptr<FrameSource> source;
-    std::string source_name;           // for messages: the recording or the cameras
-    std::string recording_calibration; // a replay's own calibration.yaml, if any
-    // A replayed bag's camera_info pair, if any: the calibration when none is given.
-    std::optional<std::pair<ros2::CameraInfo, ros2::CameraInfo>> bag_camera_info;
-    if (config.source.kind == SourceKind::Replay) {
-        ReplayOptions replay;
-        replay.path = config.source.replay.path;
-        replay.left_topic = config.source.replay.left_topic;
-        replay.right_topic = config.source.replay.right_topic;
-        replay.pacing = config.source.replay.pacing == ReplayPacing::Lockstep
-                            ? ReplayOptions::Pacing::Lockstep
-                            : ReplayOptions::Pacing::Paced;
-        replay.loop = config.source.replay.loop;
-        replay.fps = config.source.replay.fps;
-        // Pairs in flight: the ring, the one the worker holds, the one being filled.
-        replay.pool_pairs = static_cast<std::size_t>(config.source.ring_capacity) + 2;
-        auto replay_source = std::make_unique<ReplaySource>(replay);
-        const SourceStatus source_status = replay_source->status();
-        if (source_status.state == SourceState::Failed || replay_source->frameSize().empty())
-            throw StartupError(ExitCode::Source,
-                               "cannot replay " + replay.path + ": " + source_status.last_error);
-        recording_calibration = replay_source->calibrationPath();
-        bag_camera_info = replay_source->bagCameraInfo();
-        source_name = replay.path;
-        source = std::move(replay_source);
-    } else {
-        // The cameras open in run(): a camera that cannot start is a Source error there.
-        try {
-            source = makeCameraSource(config.source);
-        } catch (const std::exception& e) {
-            throw StartupError(ExitCode::Source, e.what());
-        }
-        source_name = config.source.kind == SourceKind::V4l2
-                          ? config.source.cameras.left + " and " + config.source.cameras.right
-                          : config.source.cameras.device;
-    }
-
-    std::string calibration_path = config.calibration_path;
-    if (calibration_path.empty())
-        calibration_path = recording_calibration;
-    // No calibration anywhere: a robot's first start. The service runs uncalibrated and
-    // serves raw frames, so that the rig can be calibrated from it.
-    std::optional<StereoCalibration> calibration;
-    std::string calibration_text;
-    if (!calibration_path.empty()) {
-        calibration = loadCalibrationFile(calibration_path, calibration_text);
-        spdlog::info(
-            "calibration {}: {}, {}x{}, focal {:.1f} px, baseline {:.4f} m", calibration_path,
-            calibration->kind == StereoCalibration::Kind::Full ? "full" : "rectified-only",
-            calibration->rectified.image_size.width, calibration->rectified.image_size.height,
-            calibration->rectified.focal_px, calibration->rectified.baseline_m);
-    } else if (bag_camera_info) {
-        const std::string origin = source_name + " (camera_info)";
-        try {
-            calibration =
-                calibrationFromRosCameraInfo(rosCameraInfoFromMessage(bag_camera_info->first),
-                                             rosCameraInfoFromMessage(bag_camera_info->second),
-                                             origin + " left", origin + " right");
-            calibration_text = formatCalibration(*calibration, origin);
-        } catch (const std::exception& e) {
-            throw StartupError(ExitCode::Calibration, e.what());
-        }
-        spdlog::info("calibration from {}: focal {:.1f} px, baseline {:.4f} m", origin,
-                     calibration->rectified.focal_px, calibration->rectified.baseline_m);
-    } else {
-        spdlog::warn("no calibration given (--calib, `calibration` in the configuration) and "
-                     "none in {}",
-                     source_name);
-    }
-
-    ServiceOptions options;
-    options.config_path = request.config_path;
-    options.overrides = request.overrides;
-    options.calibration_path = calibration_path;
-    options.calibration_text = std::move(calibration_text);
-    options.handle_signals = handle_signals;
-    options.notify_systemd = true;
-    return std::make_unique<Service>(std::move(config), std::move(source), std::move(calibration),
-                                     std::move(options));
 }
 
 } // namespace stereod

@@ -68,6 +68,12 @@ class StartupError : public std::runtime_error {
 // InvalidConfig.
 ExitCode exitCodeFor(const ConfigError& error);
 
+// The processing settings as the stereo chain checks them against the calibration (a
+// disparity range wider than the image, a region of interest of no pixel, ...): the
+// problem, naming the key and `origin` (the configuration file), or empty when they fit.
+std::string processingProblem(const ProcessorSettings& settings,
+                              const StereoCalibration& calibration, const std::string& origin);
+
 // Blocks SIGTERM, SIGINT and SIGHUP in the calling thread (and the threads it creates
 // later), so that they reach the service only through its signalfd. Call it first thing
 // in main(), before any thread exists.
@@ -131,8 +137,8 @@ class Service final : private ServerBackend {
 
   private:
     SourceHealth sourceHealth(int64_t now_ns) override;
-    void describe(Json& status, const PublishedFrame* latest, const SourceHealth& health,
-                  int64_t now_ns) override;
+    ServiceStatus serviceStatus(const PublishedFrame* latest, const SourceHealth& health,
+                                int64_t now_ns) override;
     ReloadOutcome reload() override;
     void onTick(int64_t now_ns) override;
     // The watchdog rule (daemon/systemd_notifier.hpp), asked by the pinger's thread: the
@@ -182,26 +188,5 @@ class Service final : private ServerBackend {
     std::atomic<bool> stop_seen_{false}; // see stopRequested()
     bool worker_abandoned_ = false;
 };
-
-// `stereod --check-config FILE`: the checks of start-up that need neither a running source
-// nor the socket. The file and its values (throws ConfigError with every problem), the
-// calibration it names or the recording's calibration.yaml (StartupError: Calibration),
-// and the processing settings against that calibration, as the stereo chain will check
-// them (StartupError: InvalidConfig). Returns the calibration checked against, or empty
-// when none is named.
-std::string checkConfiguration(const std::string& path);
-
-// What `stereod` was asked to run, from its command line.
-struct LaunchRequest {
-    std::string config_path; // empty: built-in defaults
-    ConfigOverrides overrides;
-};
-
-// Reads the configuration (file or defaults) with the overrides and validates it; opens
-// the replay; finds and loads the calibration (--calib, the file's `calibration`, or the
-// recording's calibration.yaml; none of them: uncalibrated mode); builds the service.
-// Throws StartupError with the exit code for the problem (a calibration that is given but
-// unreadable, invalid or not the frame size among them).
-std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle_signals);
 
 } // namespace stereod

@@ -14,13 +14,19 @@
 // Thread contract: construction, run(), watch(), setPublishConfig(), counters() and the
 // destructor on one thread (the I/O thread); requestStop() from any thread and from a
 // signal handler. The backend is called on the I/O thread only.
+//
+// The class spans several files, one job each: socket_server.cpp (set-up, the event loop,
+// accepting connections, the timer), socket_server_connections.cpp (a connection's input,
+// output and end), socket_server_requests.cpp (the request handlers) and
+// socket_server_subscriptions.cpp (events to subscribers, snapshots waiting for raw
+// frames).
 
 #include <cstdint>
+#include <exception>
 #include <functional>
-#include <memory>
 #include <optional>
-#include <stdexcept>
 #include <string>
+#include <string_view>
 #include <unordered_map>
 #include <vector>
 
@@ -28,59 +34,18 @@
 #include <sys/types.h>
 
 #include "config/service_config.hpp"
-#include "daemon/json_writer.hpp"
+#include "daemon/listening_socket.hpp"
 #include "daemon/log_limiter.hpp"
-#include "daemon/protocol.hpp"
 #include "daemon/publisher.hpp"
+#include "daemon/server_backend.hpp"
 #include "daemon/unique_fd.hpp"
 #include "pipeline/calibration.hpp"
+#include "protocol/json_writer.hpp"
+#include "protocol/reading_json.hpp"
+#include "protocol/request.hpp"
+#include "protocol/status_reply.hpp"
 
 namespace stereod {
-
-// The socket cannot be set up. what() names the path and the reason (errno text).
-class SocketError : public std::runtime_error {
-  public:
-    using std::runtime_error::runtime_error;
-};
-
-// Whether the frame source is producing, as the service judges it.
-struct SourceHealth {
-    bool down = false;
-    std::string message; // why, with numbers, when down
-};
-
-// The outcome of a `reload`, for its reply.
-struct ReloadOutcome {
-    bool ok = true;
-    ErrorCode error = ErrorCode::Internal; // when !ok
-    std::string message;                   // when !ok
-    std::vector<std::string> changed;
-    std::vector<std::string> restart_needed;
-};
-
-// What the server needs from the service. Called on the I/O thread only.
-class ServerBackend {
-  public:
-    virtual ~ServerBackend() = default;
-
-    virtual SourceHealth sourceHealth(int64_t now_ns) = 0;
-
-    // Adds the service's parts of the `status` reply: "uptime_s", "state", "source",
-    // "pipeline", "calibration". `latest` is the newest result, or nullptr.
-    virtual void describe(Json& status, const PublishedFrame* latest, const SourceHealth& health,
-                          int64_t now_ns) = 0;
-
-    // Re-reads the configuration and applies what can change live.
-    virtual ReloadOutcome reload() = 0;
-
-    // Runs on every timer tick (about every 100 ms).
-    virtual void onTick(int64_t now_ns) = 0;
-};
-
-// Removes the socket file a SocketServer of this process bound and still owns, if any
-// (never a file systemd handed over, nor one that replaced ours). Any thread: for a stop
-// that cannot wait for the server's destructor (daemon/stop_signal_watch.hpp).
-void removeOwnedSocketFile() noexcept;
 
 struct ServerOptions {
     SocketConfig socket;
@@ -97,23 +62,10 @@ struct ServerOptions {
     bool accept_systemd_socket = false;
 };
 
-struct ClientCounters {
-    uint64_t connected = 0;         // open connections
-    uint64_t subscribers = 0;       // connections with at least one subscription
-    uint64_t accepted = 0;          // connections accepted since start
-    uint64_t rejected = 0;          // turned away with too_many_clients
-    uint64_t not_allowed = 0;       // turned away by socket.allow_uids / allow_gids
-    uint64_t idle_closed = 0;       // disconnected after socket.idle_timeout_s of silence
-    uint64_t frames_dropped = 0;    // events skipped for subscribers with unsent data
-    uint64_t disconnected_slow = 0; // subscribers dropped past the backlog limit
-};
-
 class SocketServer {
   public:
-    // Binds and listens: creates the parent directory when missing; refuses a symbolic
-    // link or a non-socket at the path; removes a stale socket file only when nothing
-    // answers on it, and fails when something does; applies socket.mode and
-    // socket.group. Throws SocketError naming the path and the reason.
+    // Binds and listens (daemon/listening_socket.hpp) and sets up the event loop. Throws
+    // SocketError naming the path and the reason.
     SocketServer(const ServerOptions& options, Publisher& publisher, ServerBackend& backend);
     // Closes every connection and removes the socket file if it is still the one bound.
     ~SocketServer();
@@ -141,6 +93,13 @@ class SocketServer {
     static constexpr int64_t kTickNs = 100'000'000;
 
   private:
+    // epoll tags (epoll_event.data.u64) from this one on are clients; a client's number in
+    // the log is its tag minus this.
+    static constexpr uint64_t kFirstClientTag = uint64_t{1} << 40;
+    // Raw frames are copied by the worker for this long after a raw snapshot or the last
+    // tick that saw a raw subscriber.
+    static constexpr int64_t kRawInterestNs = 2'000'000'000;
+
     struct Subscription {
         bool active = false;
         std::optional<double> max_hz; // the client's own limit
@@ -188,8 +147,12 @@ class SocketServer {
         }
     };
 
+    // socket_server.cpp: the loop and what it watches.
     void addToEpoll(int fd, uint64_t tag, uint32_t events);
     void acceptClients();
+    void onTick();
+
+    // socket_server_connections.cpp: a connection's input, output and end.
     void readClient(Client& client);
     // Closes the clients whose peers have hung up, without waiting for their events.
     void closeHungUpClients();
@@ -198,48 +161,49 @@ class SocketServer {
     void handleLines(Client& client);
     // Gives each client in ready_ its next turn.
     void serveReadyClients();
-    void handleRequest(Client& client, std::string_view line);
     void rejectTooLarge(Client& client);
     void writeClient(Client& client);
     void updateEpoll(Client& client);
     void closeClient(Client& client);
     void reapClients();
-    // Appends `bytes` to the client's output, first compacting what was sent.
     // Makes room at the end of the client's output: drops the part already sent once it
     // is at least half of the buffer (amortised O(1) per byte, no per-send memmove).
     void compactOut(Client& client);
     void reply(Client& client, const Json& json);
+    // A reply written straight into the client's output, without a Json tree: `"ok": true`
+    // and the id written; the caller adds its fields, closes it and ends the line.
+    JsonObjectWriter openDirectReply(Client& client, const std::optional<Json>& id);
     // Drops the client when its unsent data exceed the backlog limit; returns whether.
     bool dropIfBacklogged(Client& client);
 
-    void onPublished();
-    void dispatchFrame(const PublishedFrame& frame, int64_t now_ns);
-    // Tells readings subscribers that the source went down (no frame will say so).
-    void broadcastSourceDown(const SourceHealth& health, int64_t now_ns);
-    bool due(Subscription& subscription, double max_hz_config, int64_t now_ns) const;
-    void onTick();
-
+    // socket_server_requests.cpp: the request handlers.
+    void handleRequest(Client& client, std::string_view line);
+    // Logs a request that threw and answers it with `internal`.
+    void replyFailed(Client& client, const std::exception& error, const std::optional<Json>& id);
     // The reading to hand out now: the newest one, or no_frame_yet / source_down / stale.
     // `message` holds the reason sentence the report points to.
     ReadingReport currentReading(const PublishedFrame* latest, double max_age_ms,
                                  const SourceHealth& health, int64_t now_ns,
                                  std::string& message) const;
-
     void handle(Client& client, const HelloRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const DistanceRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const StatusRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const SnapshotRequest& request, const std::optional<Json>& id);
-    void handle(Client& client, const SubscribeRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const ReloadRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const CalibrationRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const ZonesRequest& request, const std::optional<Json>& id);
-    // A reply written straight into the client's output, without a Json tree: `"ok": true`
-    // and the id written; the caller adds its fields, closes it and ends the line.
-    JsonObjectWriter openDirectReply(Client& client, const std::optional<Json>& id);
-
     // Answers a snapshot from `frame` (its raw frames must be present when asked for).
     void sendSnapshot(Client& client, const SnapshotRequest& request, const std::optional<Json>& id,
                       const PublishedFrame& frame);
+
+    // socket_server_subscriptions.cpp: events to subscribers, snapshots waiting for raw
+    // frames.
+    void handle(Client& client, const SubscribeRequest& request, const std::optional<Json>& id);
+    void onPublished();
+    void dispatchFrame(const PublishedFrame& frame, int64_t now_ns);
+    // Tells readings subscribers that the source went down (no frame will say so).
+    void broadcastSourceDown(const SourceHealth& health, int64_t now_ns);
+    bool due(Subscription& subscription, double max_hz_config, int64_t now_ns) const;
     // Answers the client's waiting snapshot from `frame` (nullptr: with `error`), then
     // serves the requests that queued up behind it.
     void finishWaiting(Client& client, const PublishedFrame* frame, std::string_view error);
@@ -254,10 +218,7 @@ class SocketServer {
     Publisher& publisher_;
     ServerBackend& backend_;
 
-    UniqueFd listen_fd_;
-    bool owns_socket_file_ = false; // false for a socket handed over by systemd
-    dev_t socket_dev_ = 0;          // identity of the bound file, so that only it is removed
-    ino_t socket_ino_ = 0;
+    ListeningSocket listener_;
     UniqueFd epoll_fd_;
     UniqueFd stop_fd_; // eventfd written by requestStop()
     UniqueFd timer_fd_;

@@ -8,8 +8,8 @@
 #include <spdlog/spdlog.h>
 #include <time.h>
 
+#include "daemon/listening_socket.hpp"
 #include "daemon/service.hpp"
-#include "daemon/socket_server.hpp"
 
 namespace stereod {
 

@@ -19,7 +19,7 @@ targets=("$@")
 [ ${#targets[@]} -eq 0 ] && targets=(fuzz_protocol fuzz_config)
 
 declare -A corpus=([fuzz_protocol]=protocol [fuzz_config]=config)
-declare -A dict=([fuzz_protocol]=tests/daemon/fuzz_protocol.dict [fuzz_config]=tests/config/fuzz_config.dict)
+declare -A dict=([fuzz_protocol]=tests/protocol/fuzz_protocol.dict [fuzz_config]=tests/config/fuzz_config.dict)
 for target in "${targets[@]}"; do
   if [ -z "${corpus[$target]:-}" ]; then
     echo "fuzz.sh: unknown target '$target' (expected fuzz_protocol or fuzz_config)" >&2

@@ -16,9 +16,9 @@
 
 #include "bench/alloc_counter.hpp"
 #include "capture/frame_pool.hpp"
-#include "daemon/protocol.hpp"
 #include "daemon/publisher.hpp"
 #include "daemon/worker.hpp"
+#include "protocol/events.hpp"
 
 namespace stereod {
 namespace {

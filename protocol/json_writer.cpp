@@ -1,4 +1,4 @@
-#include "daemon/json_writer.hpp"
+#include "protocol/json_writer.hpp"
 
 #include <array>
 #include <charconv>

@@ -4,14 +4,16 @@
 // must be one line of valid JSON.
 //
 // Built with clang by tests/fuzz/CMakeLists.txt and run by scripts/fuzz.sh [SECONDS]
-// from the seeds in tests/fuzz/corpus/protocol/ with tests/daemon/fuzz_protocol.dict.
+// from the seeds in tests/fuzz/corpus/protocol/ with tests/protocol/fuzz_protocol.dict.
 
 #include <cstddef>
 #include <cstdint>
 #include <string>
 #include <string_view>
 
-#include "daemon/protocol.hpp"
+#include "protocol/events.hpp"
+#include "protocol/reply.hpp"
+#include "protocol/request.hpp"
 
 namespace {
 

@@ -1,5 +1,4 @@
-// The protocol without sockets: the request parser on good and bad input, and the reading
-// object and event lines the service writes (docs/protocol.md).
+// The request parser without sockets, on good and bad input (docs/protocol.md).
 
 #include <cmath>
 #include <limits>
@@ -8,8 +7,7 @@
 
 #include <gtest/gtest.h>
 
-#include "daemon/json_writer.hpp"
-#include "daemon/protocol.hpp"
+#include "protocol/request.hpp"
 
 namespace stereod {
 namespace {
@@ -31,12 +29,6 @@ ProtocolError parseError(std::string_view line)
         return {};
     }
     return std::get<ProtocolError>(result);
-}
-
-// The JSON text must parse (strictly, as UTF-8) whatever went into it.
-Json parseStrict(const std::string& text)
-{
-    return Json::parse(text);
 }
 
 TEST(ProtocolParse, KnownCommands)
@@ -148,7 +140,7 @@ TEST(ProtocolParse, NonUtf8BytesAreBadJsonWithAValidReply)
     // The library quotes the bytes it read; the reply line must still be valid UTF-8.
     std::string reply;
     appendJsonLine(reply, errorReply(error.code, error.message, error.id));
-    EXPECT_NO_THROW(parseStrict(reply)) << reply;
+    EXPECT_NO_THROW(Json::parse(reply)) << reply;
 }
 
 TEST(ProtocolParse, MissingOrMistypedCmdIsBadRequest)
@@ -294,258 +286,6 @@ TEST(ProtocolParse, EveryByteValueAlone)
         ASSERT_TRUE(std::holds_alternative<ProtocolError>(result)) << byte;
         EXPECT_EQ(std::get<ProtocolError>(result).code, ErrorCode::BadJson) << byte;
     }
-}
-
-TEST(ProtocolReplies, ErrorReplyShape)
-{
-    std::string line;
-    appendJsonLine(line, errorReply(ErrorCode::RequestTooLarge, "too long", Json(7)));
-    ASSERT_FALSE(line.empty());
-    EXPECT_EQ(line.back(), '\n');
-    EXPECT_EQ(line.find('\n'), line.size() - 1);
-    const Json reply = parseStrict(line);
-    EXPECT_EQ(reply["ok"], false);
-    EXPECT_EQ(reply["id"], 7);
-    EXPECT_EQ(reply["error"]["code"], "request_too_large");
-    EXPECT_EQ(reply["error"]["message"], "too long");
-}
-
-TEST(ProtocolReplies, HelloListsCommandsStreamsAndItems)
-{
-    const Json reply = helloReply(std::nullopt);
-    EXPECT_EQ(reply["ok"], true);
-    EXPECT_FALSE(reply.contains("id"));
-    EXPECT_EQ(reply["service"], "stereod");
-    EXPECT_EQ(reply["protocol"], kProtocolVersion);
-    EXPECT_EQ(reply["commands"].size(), 8u);
-    EXPECT_EQ(reply["streams"], Json::parse(R"(["readings","depth","raw","zones"])"));
-    EXPECT_EQ(
-        reply["snapshot_items"],
-        Json::parse(R"(["left","disparity","depth","cloud","raw_left","raw_right","confidence"])"));
-}
-
-TEST(ProtocolReplies, ErrorCodeNamesAreTheDocumentedOnes)
-{
-    EXPECT_STREQ(errorCodeName(ErrorCode::BadJson), "bad_json");
-    EXPECT_STREQ(errorCodeName(ErrorCode::BadRequest), "bad_request");
-    EXPECT_STREQ(errorCodeName(ErrorCode::UnknownCommand), "unknown_command");
-    EXPECT_STREQ(errorCodeName(ErrorCode::RequestTooLarge), "request_too_large");
-    EXPECT_STREQ(errorCodeName(ErrorCode::TooManyClients), "too_many_clients");
-    EXPECT_STREQ(errorCodeName(ErrorCode::NotAvailable), "not_available");
-    EXPECT_STREQ(errorCodeName(ErrorCode::InvalidConfig), "invalid_config");
-    EXPECT_STREQ(errorCodeName(ErrorCode::Internal), "internal");
-    EXPECT_STREQ(errorCodeName(ErrorCode::NotAllowed), "not_allowed");
-    EXPECT_STREQ(errorCodeName(ErrorCode::IdleTimeout), "idle_timeout");
-}
-
-Reading validReading()
-{
-    Reading reading;
-    reading.valid = true;
-    reading.reason = NoReadingReason::None;
-    reading.distance_m = 1.41249;
-    reading.stamp_ns = 81'263'511'234;
-    reading.frame = 118;
-    reading.valid_fraction = 0.83;
-    reading.in_range_fraction = 0.8;
-    reading.min_valid_fraction = 0.1;
-    reading.region_pixels = 355680;
-    return reading;
-}
-
-TEST(ProtocolReading, ValidReadingHasEveryField)
-{
-    ReadingReport report;
-    report.reading = validReading();
-    const int64_t now_ns = report.reading.stamp_ns + 37'200'000;
-    const Json reading = readingToJson(report, now_ns);
-    EXPECT_EQ(reading["valid"], true);
-    EXPECT_NEAR(reading["distance_m"].get<double>(), 1.4125, 1e-9);
-    EXPECT_EQ(reading["stamp_ns"], 81263511234);
-    EXPECT_NEAR(reading["age_ms"].get<double>(), 37.2, 1e-9);
-    EXPECT_EQ(reading["frame"], 118);
-    EXPECT_NEAR(reading["valid_fraction"].get<double>(), 0.83, 1e-12);
-    EXPECT_NEAR(reading["in_range_fraction"].get<double>(), 0.8, 1e-12);
-    EXPECT_EQ(reading["region_pixels"], 355680);
-    EXPECT_FALSE(reading.contains("reason"));
-}
-
-TEST(ProtocolReading, RefusalCarriesReasonWithNumbers)
-{
-    ReadingReport report;
-    report.reading = validReading();
-    report.reading.valid = false;
-    report.reading.reason = NoReadingReason::TooFewValidPixels;
-    report.reading.valid_fraction = 0.02;
-    report.reading.in_range_fraction = 0.0;
-    const Json reading = readingToJson(report, report.reading.stamp_ns);
-    EXPECT_EQ(reading["valid"], false);
-    EXPECT_TRUE(reading["distance_m"].is_null());
-    EXPECT_EQ(reading["reason"]["code"], "too_few_valid_pixels");
-    EXPECT_EQ(reading["reason"]["message"],
-              "too few valid pixels in the region: 2.0 % valid, 10.0 % needed");
-
-    report.reading.reason = NoReadingReason::NothingInRange;
-    report.reading.valid_fraction = 0.83;
-    report.reading.in_range_fraction = 0.0001;
-    report.reading.region_pixels = 200000;
-    report.reading.min_pixels = 50;
-    EXPECT_EQ(readingToJson(report, 0)["reason"]["message"],
-              "nothing within the depth range in the region: 20 pixels in range, 50 needed "
-              "(83.0 % valid, 0.0 % in range)");
-}
-
-TEST(ProtocolReading, GivenMessageWinsAndIsEscaped)
-{
-    ReadingReport report;
-    report.reading = validReading();
-    report.reading.valid = false;
-    report.reading.reason = NoReadingReason::BadFrame;
-    const std::string message = "cannot decode \"left.png\":\n\tbad\x01 byte \xc3 here";
-    report.message = message;
-    std::string text;
-    appendReadingJson(text, report, report.reading.stamp_ns);
-    const Json reading = parseStrict(text);
-    EXPECT_EQ(reading["reason"]["code"], "bad_frame");
-    const std::string got = reading["reason"]["message"];
-    EXPECT_EQ(got.substr(0, 28), "cannot decode \"left.png\":\n\tb");
-    EXPECT_NE(got.find("\x01"), std::string::npos);
-    EXPECT_NE(got.find("\xEF\xBF\xBD"), std::string::npos); // the lone 0xC3 replaced
-}
-
-TEST(ProtocolReading, NoFrameYetHasNoStampNorAge)
-{
-    ReadingReport report;
-    report.reading.reason = NoReadingReason::NoFrameYet;
-    report.has_frame = false;
-    const Json reading = readingToJson(report, 123);
-    EXPECT_EQ(reading["valid"], false);
-    EXPECT_FALSE(reading.contains("stamp_ns"));
-    EXPECT_FALSE(reading.contains("age_ms"));
-    EXPECT_EQ(reading["reason"]["code"], "no_frame_yet");
-
-    // A source that failed before its first pair: source_down, still without a stamp.
-    report.reading.reason = NoReadingReason::SourceDown;
-    report.message = "frame source down: the replay source is failed";
-    const Json down = readingToJson(report, 123);
-    EXPECT_FALSE(down.contains("stamp_ns"));
-    EXPECT_EQ(down["reason"]["code"], "source_down");
-    EXPECT_EQ(down["reason"]["message"], "frame source down: the replay source is failed");
-}
-
-TEST(ProtocolReading, InconsistentValidFlagIsNeverANumber)
-{
-    ReadingReport report;
-    report.reading = validReading();
-    report.reading.reason = NoReadingReason::NothingInRange; // valid stays true
-    const Json reading = readingToJson(report, report.reading.stamp_ns);
-    EXPECT_EQ(reading["valid"], false);
-    EXPECT_TRUE(reading["distance_m"].is_null());
-}
-
-TEST(ProtocolEvents, ReadingEventIsOneLine)
-{
-    ReadingReport report;
-    report.reading = validReading();
-    std::string line;
-    appendReadingEvent(line, report, report.reading.stamp_ns, 0);
-    EXPECT_EQ(line.find('\n'), line.size() - 1);
-    const Json event = parseStrict(line);
-    EXPECT_EQ(event["event"], "reading");
-    EXPECT_FALSE(event.contains("skipped"));
-    EXPECT_EQ(event["reading"]["frame"], 118);
-
-    line.clear();
-    appendReadingEvent(line, report, report.reading.stamp_ns, 3);
-    EXPECT_EQ(parseStrict(line)["skipped"], 3);
-}
-
-TEST(ProtocolEvents, DepthEventHeaderGivesThePayloadSize)
-{
-    ReadingReport report;
-    report.reading = validReading();
-    DepthEventHeader header;
-    header.frame = 118;
-    header.stamp_ns = report.reading.stamp_ns;
-    header.width = 1282;
-    header.height = 1110;
-    header.bytes = 1282u * 1110u * 2u;
-    std::string line;
-    appendDepthEventHeader(line, header, report, report.reading.stamp_ns, 2);
-    const Json event = parseStrict(line);
-    EXPECT_EQ(event["event"], "depth");
-    EXPECT_EQ(event["format"], "u16_mm");
-    EXPECT_EQ(event["width"], 1282);
-    EXPECT_EQ(event["height"], 1110);
-    EXPECT_EQ(event["bytes"], 2846040);
-    EXPECT_EQ(event["skipped"], 2);
-    EXPECT_EQ(event["reading"]["valid"], true);
-}
-
-TEST(ProtocolEvents, RawEventHeaderFollowsTheContract)
-{
-    RawEventHeader header;
-    header.frame = 42;
-    header.left_stamp_ns = 81263511234;
-    header.right_stamp_ns = 81263512001;
-    header.width = 640;
-    header.height = 480;
-    std::string out;
-    appendRawEventHeader(out, header, 3);
-    ASSERT_EQ(out.back(), '\n');
-    EXPECT_EQ(out.find('\n'), out.size() - 1);
-    Json event = parseStrict(out);
-    EXPECT_EQ(event["event"], "raw");
-    EXPECT_EQ(event["frame"], 42);
-    EXPECT_EQ(event["left_stamp_ns"], 81263511234);
-    EXPECT_EQ(event["right_stamp_ns"], 81263512001);
-    EXPECT_EQ(event["skipped"], 3);
-    ASSERT_EQ(event["payloads"].size(), 2u);
-    EXPECT_EQ(event["payloads"][0],
-              Json::parse(R"({"name":"raw_left","format":"u8_gray","width":640,"height":480,)"
-                          R"("bytes":307200,"stamp_ns":81263511234})"));
-    EXPECT_EQ(event["payloads"][1]["name"], "raw_right");
-    EXPECT_EQ(event["payloads"][1]["stamp_ns"], 81263512001);
-    EXPECT_EQ(event["payloads"][1]["bytes"], 307200);
-    EXPECT_FALSE(event.contains("depth_valid"));
-
-    // With the pair's depth and cloud: their descriptors after the two frames.
-    header.depth_valid = true;
-    header.depth_width = 620;
-    header.depth_height = 470;
-    header.cloud_points = 1000;
-    out.clear();
-    appendRawEventHeader(out, header, 0, true, true);
-    event = parseStrict(out);
-    EXPECT_EQ(event["depth_valid"], true);
-    ASSERT_EQ(event["payloads"].size(), 4u);
-    EXPECT_EQ(event["payloads"][2],
-              Json::parse(R"({"name":"depth","format":"f32_m","width":620,"height":470,)"
-                          R"("bytes":1165600})"));
-    EXPECT_EQ(event["payloads"][3],
-              Json::parse(R"({"name":"cloud","format":"f32_xyzi","points":1000,"bytes":16000})"));
-}
-
-TEST(JsonWriter, NumbersAndStrings)
-{
-    std::string out;
-    appendJsonNumber(out, std::numeric_limits<double>::infinity());
-    out.push_back(' ');
-    appendJsonNumber(out, std::nan(""));
-    out.push_back(' ');
-    appendJsonNumber(out, 0.1);
-    out.push_back(' ');
-    appendJsonNumber(out, int64_t{-9'000'000'000'000'000'000});
-    EXPECT_EQ(out, "null null 0.1 -9000000000000000000");
-
-    // Valid multi-byte sequences pass; overlong forms, surrogates and truncated ones do not.
-    out.clear();
-    appendJsonString(out, "\xC3\xA9 \xE2\x82\xAC \xF0\x9F\x98\x80 \xC0\xAF \xED\xA0\x80 \xE2\x82");
-    EXPECT_EQ(out, "\"\xC3\xA9 \xE2\x82\xAC \xF0\x9F\x98\x80 \xEF\xBF\xBD\xEF\xBF\xBD "
-                   "\xEF\xBF\xBD\xEF\xBF\xBD\xEF\xBF\xBD \xEF\xBF\xBD\xEF\xBF\xBD\"");
-    EXPECT_NO_THROW(parseStrict(out));
-    EXPECT_DOUBLE_EQ(roundTo(37.20000001, 3), 37.2);
-    EXPECT_DOUBLE_EQ(roundTo(1e300, 3), 1e300);
 }
 
 } // namespace

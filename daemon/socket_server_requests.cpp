@@ -1,0 +1,308 @@
+#include <algorithm>
+#include <array>
+#include <cstdio>
+#include <stdexcept>
+
+#include <spdlog/spdlog.h>
+
+#include "capture/frame.hpp"
+#include "daemon/socket_server.hpp"
+#include "protocol/payload.hpp"
+
+namespace stereod {
+
+namespace {
+
+struct SnapshotImage {
+    const cv::Mat& mat;
+    std::string_view format;
+};
+
+// The image a snapshot item sends, and its payload format. Not for the cloud.
+SnapshotImage snapshotImage(const PublishedFrame& frame, SnapshotItem item)
+{
+    switch (item) {
+    case SnapshotItem::Depth:
+        return {frame.depth_mm, kFormatDepthMm};
+    case SnapshotItem::Disparity:
+        return {frame.result.disparity, kFormatDisparityPx};
+    case SnapshotItem::Left:
+        return {frame.result.left_rectified, kFormatGray};
+    case SnapshotItem::RawLeft:
+        return {frame.raw.left, kFormatGray};
+    case SnapshotItem::RawRight:
+        return {frame.raw.right, kFormatGray};
+    case SnapshotItem::Confidence:
+        return {frame.result.confidence, kFormatConfidence};
+    case SnapshotItem::Cloud:
+        break;
+    }
+    throw std::logic_error("a snapshot's cloud is not an image");
+}
+
+// The descriptor of a snapshot item's payload; raw frames carry their capture stamps.
+Payload snapshotPayload(const PublishedFrame& frame, SnapshotItem item)
+{
+    if (item == SnapshotItem::Cloud)
+        return cloudPayload(frame.result.cloud.size());
+    const SnapshotImage image = snapshotImage(frame, item);
+    Payload payload = imagePayload(snapshotItemName(item), image.format, image.mat);
+    if (item == SnapshotItem::RawLeft)
+        payload.stamp_ns = frame.raw.left_stamp_ns;
+    else if (item == SnapshotItem::RawRight)
+        payload.stamp_ns = frame.raw.right_stamp_ns;
+    return payload;
+}
+
+} // namespace
+
+void SocketServer::handleRequest(Client& client, std::string_view line)
+{
+    ParseResult parsed = parseRequest(line);
+    if (ProtocolError* error = std::get_if<ProtocolError>(&parsed)) {
+        reply(client, errorReply(error->code, error->message, error->id));
+        return;
+    }
+    Request& request = std::get<Request>(parsed);
+    try {
+        std::visit([&](const auto& command) { handle(client, command, request.id); },
+                   request.command);
+    } catch (const std::exception& e) {
+        replyFailed(client, e, request.id);
+    }
+}
+
+void SocketServer::replyFailed(Client& client, const std::exception& error,
+                               const std::optional<Json>& id)
+{
+    log_limiter_.log(spdlog::level::err, "client.request_failed", monotonicNowNs(),
+                     "client {}: request failed: {}", client.id - kFirstClientTag, error.what());
+    reply(client, errorReply(ErrorCode::Internal, error.what(), id));
+}
+
+ReadingReport SocketServer::currentReading(const PublishedFrame* latest, double max_age_ms,
+                                           const SourceHealth& health, int64_t now_ns,
+                                           std::string& message) const
+{
+    ReadingReport report;
+    if (latest == nullptr) {
+        report.has_frame = false;
+        report.reading.valid = false;
+        if (!options_.calibrated && !health.down) {
+            report.reading.reason = NoReadingReason::Uncalibrated;
+            message = reasonText(NoReadingReason::Uncalibrated);
+        } else if (health.down) {
+            report.reading.reason = NoReadingReason::SourceDown;
+            message = std::string(reasonText(NoReadingReason::SourceDown)) + ": " + health.message;
+        } else {
+            report.reading.reason = NoReadingReason::NoFrameYet;
+            message = reasonText(NoReadingReason::NoFrameYet);
+        }
+        report.message = message;
+        return report;
+    }
+    report.reading = latest->result.reading;
+    report.message = latest->reason_message.view();
+    const auto refuse = [&](NoReadingReason reason) {
+        report.reading.valid = false;
+        report.reading.distance_m = 0.0;
+        report.reading.reason = reason;
+        report.message = message;
+    };
+    if (health.down) {
+        message = std::string(reasonText(NoReadingReason::SourceDown)) + ": " + health.message;
+        refuse(NoReadingReason::SourceDown);
+        return report;
+    }
+    // Without a calibration no reading will ever carry a distance: that is the reason to
+    // give, whatever the age of the frame.
+    if (report.reading.reason == NoReadingReason::Uncalibrated)
+        return report;
+    const double age_ms = static_cast<double>(now_ns - report.reading.stamp_ns) / 1e6;
+    if (age_ms > max_age_ms) {
+        std::array<char, 160> text{};
+        std::snprintf(text.data(), text.size(), "%s: %.1f ms old, %.1f ms allowed",
+                      reasonText(NoReadingReason::Stale), age_ms, max_age_ms);
+        message = text.data();
+        refuse(NoReadingReason::Stale);
+    }
+    return report;
+}
+
+void SocketServer::handle(Client& client, const HelloRequest&, const std::optional<Json>& id)
+{
+    Json answer = helloReply(id);
+    answer["calibrated"] = options_.calibrated;
+    reply(client, answer);
+}
+
+void SocketServer::handle(Client& client, const DistanceRequest& request,
+                          const std::optional<Json>& id)
+{
+    const int64_t now_ns = monotonicNowNs();
+    const SourceHealth health = backend_.sourceHealth(now_ns);
+    std::string message;
+    const ReadingReport report = currentReading(
+        publisher_.latest(), request.max_age_ms.value_or(options_.publish.max_reading_age_ms),
+        health, now_ns, message);
+    if (client.dead || dropIfBacklogged(client))
+        return;
+    // Written directly: `distance` may be polled at a high rate.
+    JsonObjectWriter object = openDirectReply(client, id);
+    appendReadingJson(object.openField("reading"), report, now_ns);
+    object.close();
+    client.out.push_back('\n');
+}
+
+void SocketServer::handle(Client& client, const StatusRequest&, const std::optional<Json>& id)
+{
+    const int64_t now_ns = monotonicNowNs();
+    const PublishedFrame* latest = publisher_.latest();
+    const SourceHealth health = backend_.sourceHealth(now_ns);
+    ServiceStatus status = backend_.serviceStatus(latest, health, now_ns);
+    status.clients = counters();
+    std::string message;
+    status.reading =
+        currentReading(latest, options_.publish.max_reading_age_ms, health, now_ns, message);
+    status.now_ns = now_ns;
+    Json answer = okReply(id);
+    answer["status"] = statusToJson(status);
+    reply(client, answer);
+}
+
+void SocketServer::handle(Client& client, const SnapshotRequest& request,
+                          const std::optional<Json>& id)
+{
+    const bool wants_raw =
+        std::any_of(request.items.begin(), request.items.end(), [](SnapshotItem item) {
+            return item == SnapshotItem::RawLeft || item == SnapshotItem::RawRight;
+        });
+    const int64_t now_ns = monotonicNowNs();
+    const PublishedFrame* latest = publisher_.latest();
+    if (wants_raw) {
+        publisher_.wantRawUntil(now_ns + kRawInterestNs);
+        // The newest pair has raw frames only if someone asked for them recently; else
+        // the next pair will (answered by serveWaitingSnapshots()).
+        if (latest == nullptr || !latest->raw.present) {
+            client.waiting = WaitingSnapshot{request, id, now_ns};
+            return;
+        }
+    }
+    if (latest == nullptr) {
+        reply(client, errorReply(ErrorCode::NotAvailable, "no frame processed yet", id));
+        return;
+    }
+    sendSnapshot(client, request, id, *latest);
+}
+
+void SocketServer::sendSnapshot(Client& client, const SnapshotRequest& request,
+                                const std::optional<Json>& id, const PublishedFrame& frame)
+{
+    const PublishedFrame* latest = &frame;
+    const int64_t now_ns = monotonicNowNs();
+    const DepthResult& result = latest->result;
+    const struct {
+        const cv::Mat& mat;
+        int type;
+        const char* name;
+    } images[] = {{latest->depth_mm, CV_16UC1, "depth"},
+                  {result.disparity, CV_32FC1, "disparity"},
+                  {result.left_rectified, CV_8UC1, "left"}};
+    for (const auto& image : images) {
+        if (!image.mat.empty() && image.mat.type() != image.type)
+            throw std::logic_error(std::string("the ") + image.name +
+                                   " image of the result has an unexpected pixel type");
+    }
+
+    std::string message;
+    const ReadingReport report = currentReading(latest, options_.publish.max_reading_age_ms,
+                                                backend_.sourceHealth(now_ns), now_ns, message);
+    const RectifiedGeometry& geometry = options_.geometry;
+    Json answer = okReply(id);
+    answer["frame"] = result.frame;
+    answer["stamp_ns"] = result.stamp_ns;
+    answer["depth_valid"] = latest->depth_valid;
+    answer["reading"] = readingToJson(report, now_ns);
+    answer["calibration"] = {{"focal_px", geometry.focal_px},
+                             {"baseline_m", geometry.baseline_m},
+                             {"cx_px", geometry.cx_px},
+                             {"cy_px", geometry.cy_px},
+                             {"doffs_px", geometry.doffs_px}};
+    Json payloads = Json::array();
+    for (const SnapshotItem item : request.items)
+        payloads.push_back(payloadToJson(snapshotPayload(frame, item)));
+    answer["payloads"] = std::move(payloads);
+    reply(client, answer);
+    if (client.dead)
+        return;
+    for (const SnapshotItem item : request.items) {
+        if (item == SnapshotItem::Cloud)
+            client.out.append(reinterpret_cast<const char*>(result.cloud.data()),
+                              result.cloud.size() * sizeof(CloudPoint));
+        else
+            appendMatBytes(client.out, snapshotImage(frame, item).mat);
+    }
+}
+
+void SocketServer::handle(Client& client, const ReloadRequest&, const std::optional<Json>& id)
+{
+    const ReloadOutcome outcome = backend_.reload();
+    if (!outcome.ok) {
+        reply(client, errorReply(outcome.error, outcome.message, id));
+        return;
+    }
+    Json answer = okReply(id);
+    answer["changed"] = outcome.changed;
+    answer["restart_needed"] = outcome.restart_needed;
+    reply(client, answer);
+}
+
+void SocketServer::handle(Client& client, const ZonesRequest&, const std::optional<Json>& id)
+{
+    const int64_t now_ns = monotonicNowNs();
+    const PublishedFrame* latest = publisher_.latest();
+    if (client.dead || dropIfBacklogged(client))
+        return;
+    JsonObjectWriter object = openDirectReply(client, id);
+    if (latest == nullptr) {
+        object.nullField("frame");
+        object.openField("zones").append("[]");
+    } else {
+        object.field("frame", latest->result.frame);
+        object.field("stamp_ns", latest->result.stamp_ns);
+        object.field("age_ms",
+                     roundTo(static_cast<double>(now_ns - latest->result.stamp_ns) / 1e6, 3));
+        appendZonesJson(object.openField("zones"), latest->zones);
+        appendCameraPoseJson(object.openField("camera_pose"), latest->camera_pose);
+        if (options_.calibrated) {
+            // What a client needs to draw the zones on the rectified left image.
+            JsonObjectWriter camera(object.openField("camera"));
+            camera.field("focal_px", options_.geometry.focal_px);
+            camera.field("cx_px", options_.geometry.cx_px);
+            camera.field("cy_px", options_.geometry.cy_px);
+            camera.field("width", options_.geometry.image_size.width);
+            camera.field("height", options_.geometry.image_size.height);
+            camera.close();
+        }
+    }
+    object.close();
+    client.out.push_back('\n');
+}
+
+void SocketServer::handle(Client& client, const CalibrationRequest&, const std::optional<Json>& id)
+{
+    Json answer = okReply(id);
+    answer["calibrated"] = options_.calibrated;
+    if (options_.calibrated) {
+        if (options_.calibration_text.empty()) {
+            reply(client, errorReply(ErrorCode::NotAvailable,
+                                     "the calibration in force was not read from a file", id));
+            return;
+        }
+        answer["path"] = options_.calibration_path;
+        answer["text"] = options_.calibration_text;
+    }
+    reply(client, answer);
+}
+
+} // namespace stereod

@@ -1,0 +1,114 @@
+#include "protocol/payload.hpp"
+
+#include <algorithm>
+
+#include "protocol/json_writer.hpp"
+
+namespace stereod {
+
+Payload imagePayload(std::string_view name, std::string_view format, const cv::Mat& mat)
+{
+    Payload payload;
+    payload.name = name;
+    payload.format = format;
+    payload.width = mat.empty() ? 0 : mat.cols;
+    payload.height = mat.empty() ? 0 : mat.rows;
+    payload.bytes = matBytes(mat);
+    return payload;
+}
+
+Payload cloudPayload(std::size_t points)
+{
+    Payload payload;
+    payload.name = "cloud";
+    payload.format = kFormatCloud;
+    payload.points = points;
+    payload.bytes = points * sizeof(CloudPoint);
+    return payload;
+}
+
+uint64_t matBytes(const cv::Mat& mat)
+{
+    return mat.empty() ? 0 : static_cast<uint64_t>(mat.total()) * mat.elemSize();
+}
+
+void appendMatBytes(std::string& out, const cv::Mat& mat)
+{
+    if (mat.empty())
+        return;
+    const std::size_t row_bytes = static_cast<std::size_t>(mat.cols) * mat.elemSize();
+    if (mat.isContinuous()) {
+        out.append(reinterpret_cast<const char*>(mat.data),
+                   row_bytes * static_cast<std::size_t>(mat.rows));
+        return;
+    }
+    for (int row = 0; row < mat.rows; ++row)
+        out.append(reinterpret_cast<const char*>(mat.ptr(row)), row_bytes);
+}
+
+void appendPayloadJson(std::string& out, const Payload& payload)
+{
+    JsonObjectWriter object(out);
+    object.field("name", payload.name);
+    object.field("format", payload.format);
+    if (payload.format == kFormatCloud) {
+        object.field("points", static_cast<uint64_t>(payload.points));
+    } else {
+        object.field("width", payload.width);
+        object.field("height", payload.height);
+    }
+    object.field("bytes", static_cast<uint64_t>(payload.bytes));
+    if (payload.stamp_ns)
+        object.field("stamp_ns", *payload.stamp_ns);
+    object.close();
+}
+
+Json payloadToJson(const Payload& payload)
+{
+    std::string text;
+    appendPayloadJson(text, payload);
+    return Json::parse(text);
+}
+
+std::optional<std::size_t> payloadBytesFromJson(const Json& header)
+{
+    const auto bytes = header.find("bytes");
+    if (bytes == header.end())
+        return 0;
+    // Parsed text holds a count as unsigned; a value built in a program may hold it signed.
+    if (!bytes->is_number_integer() || (!bytes->is_number_unsigned() && bytes->get<int64_t>() < 0))
+        return std::nullopt;
+    return bytes->get<std::size_t>();
+}
+
+std::optional<Payload> payloadFromJson(const Json& header)
+{
+    const std::optional<std::size_t> bytes = payloadBytesFromJson(header);
+    if (!bytes)
+        return std::nullopt;
+    Payload payload;
+    payload.name = header.value("name", std::string());
+    payload.format = header.value("format", std::string());
+    payload.width = header.value("width", 0);
+    payload.height = header.value("height", 0);
+    payload.points = header.value("points", std::size_t{0});
+    payload.bytes = *bytes;
+    if (const auto stamp = header.find("stamp_ns"); stamp != header.end())
+        payload.stamp_ns = stamp->get<int64_t>();
+    return payload;
+}
+
+bool imagePayloadAddsUp(const Payload& payload, int type)
+{
+    const std::size_t expected = static_cast<std::size_t>(std::max(payload.width, 0)) *
+                                 static_cast<std::size_t>(std::max(payload.height, 0)) *
+                                 CV_ELEM_SIZE(type);
+    return payload.width > 0 && payload.height > 0 && payload.bytes == expected;
+}
+
+bool cloudPayloadAddsUp(const Payload& payload)
+{
+    return payload.bytes == payload.points * sizeof(CloudPoint);
+}
+
+} // namespace stereod

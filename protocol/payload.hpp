@@ -1,0 +1,84 @@
+#pragma once
+// The binary payloads that follow some replies and events (docs/protocol.md, "Binary
+// payloads"): their formats, their descriptors (the entries of `payloads` and the depth
+// event's header), how the service writes an image's bytes, and how a client checks what
+// it is told before reading. One definition for the service and its clients.
+//
+// Payload bytes are in host order, which the protocol fixes as little-endian; both sides
+// send and read them in place.
+//
+// Reentrant: every function here is pure or writes only into the caller's buffer.
+
+#include <bit>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <type_traits>
+
+#include <opencv2/core/mat.hpp>
+
+#include "pipeline/stereo_processor.hpp"
+#include "protocol/reply.hpp"
+
+namespace stereod {
+
+static_assert(std::endian::native == std::endian::little,
+              "payloads are sent and read in place: add byte swapping for big-endian hosts");
+static_assert(sizeof(CloudPoint) == 16 && std::is_trivially_copyable_v<CloudPoint>,
+              "an f32_xyzi point travels as four float32");
+
+// The payload formats.
+inline constexpr std::string_view kFormatDepthMm = "u16_mm";           // uint16 mm, 0 = none
+inline constexpr std::string_view kFormatDepthM = "f32_m";             // float32 m, 0 = none
+inline constexpr std::string_view kFormatDisparityPx = "f32_px";       // float32 px, inf = none
+inline constexpr std::string_view kFormatGray = "u8_gray";             // uint8 intensity
+inline constexpr std::string_view kFormatConfidence = "u8_confidence"; // 0 = no disparity
+inline constexpr std::string_view kFormatCloud = "f32_xyzi";           // CloudPoint, 16 bytes
+
+// One payload's descriptor. Images have a width and a height; the cloud has points.
+struct Payload {
+    std::string name; // a snapshot item's name (protocol/request.hpp), raw_left, ...
+    std::string format;
+    int width = 0;
+    int height = 0;
+    std::size_t points = 0;
+    std::size_t bytes = 0;
+    std::optional<int64_t> stamp_ns; // capture time of a raw frame
+};
+
+// The descriptor of `mat`'s pixels as the service sends them (an empty image: 0 bytes).
+Payload imagePayload(std::string_view name, std::string_view format, const cv::Mat& mat);
+
+// The descriptor of `points` cloud points.
+Payload cloudPayload(std::size_t points);
+
+// Bytes of `mat`'s pixels; 0 for an empty image.
+uint64_t matBytes(const cv::Mat& mat);
+
+// Appends `mat`'s pixels row by row, without padding.
+void appendMatBytes(std::string& out, const cv::Mat& mat);
+
+// Appends the descriptor as a JSON object: name, format, then points and bytes (the
+// cloud) or width, height and bytes (an image), then stamp_ns when there is one.
+// Allocates nothing once `out` has the capacity.
+void appendPayloadJson(std::string& out, const Payload& payload);
+
+// The same object, for composing replies.
+Json payloadToJson(const Payload& payload);
+
+// The `bytes` of a header or descriptor: 0 when absent, nullopt when it is not a count.
+std::optional<std::size_t> payloadBytesFromJson(const Json& header);
+
+// Reads a descriptor; missing fields stay at their defaults. nullopt when `bytes` is not a
+// count (the client cannot know how much to read past).
+std::optional<Payload> payloadFromJson(const Json& header);
+
+// Whether an image payload of OpenCV `type` has width x height x element size bytes.
+bool imagePayloadAddsUp(const Payload& payload, int type);
+
+// Whether a cloud payload has 16 bytes per point.
+bool cloudPayloadAddsUp(const Payload& payload);
+
+} // namespace stereod

@@ -1,0 +1,88 @@
+#pragma once
+// The requests of the socket protocol (docs/protocol.md) and their parser: a pure
+// function from one line of bytes to a request or the error reply to send, unit-tested and
+// fuzzed on its own, without sockets.
+//
+// Reentrant: every function here is pure.
+
+#include <optional>
+#include <string>
+#include <string_view>
+#include <variant>
+#include <vector>
+
+#include "protocol/reply.hpp"
+
+namespace stereod {
+
+// Raw: the pairs as captured, before rectification (two u8_gray payloads per event).
+// Zones: the keep-out zones of every frame (`{"event":"zones",...}` lines).
+enum class StreamKind { Readings, Depth, Raw, Zones };
+const char* streamName(StreamKind stream) noexcept;
+
+// RawLeft, RawRight: the pair's frames as captured, before rectification.
+// Confidence: the matcher's per-pixel confidence (u8, 0 = no disparity, 1..255).
+enum class SnapshotItem { Depth, Disparity, Left, Cloud, RawLeft, RawRight, Confidence };
+const char* snapshotItemName(SnapshotItem item) noexcept;
+
+struct HelloRequest {};
+
+struct DistanceRequest {
+    std::optional<double> max_age_ms; // > 0 and finite when present
+};
+
+struct StatusRequest {};
+
+struct SnapshotRequest {
+    // In the order the payloads are to be sent, without repeats. Default (no `items`):
+    // depth, disparity, left, cloud.
+    std::vector<SnapshotItem> items;
+};
+
+struct SubscribeRequest {
+    StreamKind stream = StreamKind::Readings;
+    std::optional<double> max_hz; // > 0 and finite when present
+    // The raw stream only (`"with": ["depth", "cloud"]`): each raw event also carries the
+    // pair's depth (f32_m) and point cloud (f32_xyzi), so a recorder gets a pair and its
+    // results in one event, under one frame number.
+    bool with_depth = false;
+    bool with_cloud = false;
+};
+
+struct ReloadRequest {};
+
+// The calibration in force, as the text of its file.
+struct CalibrationRequest {};
+
+// The keep-out zones of the latest frame.
+struct ZonesRequest {};
+
+using Command = std::variant<HelloRequest, DistanceRequest, StatusRequest, SnapshotRequest,
+                             SubscribeRequest, ReloadRequest, CalibrationRequest, ZonesRequest>;
+
+struct Request {
+    Command command;
+    std::optional<Json> id; // echoed in the reply when the request had one
+};
+
+// Why a line is not a request: the error reply to send.
+struct ProtocolError {
+    ErrorCode code = ErrorCode::BadRequest;
+    std::string message;    // names the field and the problem
+    std::optional<Json> id; // the request's id when the line had one
+};
+
+using ParseResult = std::variant<Request, ProtocolError>;
+
+// Parses one request line (without its newline). Any byte sequence gives a Request or a
+// ProtocolError; no exception escapes (bar std::bad_alloc). Unknown fields are ignored so
+// that newer clients can talk to this service; a JSON null counts as an absent optional
+// field.
+ParseResult parseRequest(std::string_view line);
+
+// The commands, streams and snapshot items this service knows, as `hello` lists them.
+const std::vector<std::string>& knownCommands();
+const std::vector<std::string>& knownStreams();
+const std::vector<std::string>& knownSnapshotItems();
+
+} // namespace stereod
