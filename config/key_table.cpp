@@ -1,0 +1,446 @@
+#include "config/key_table.hpp"
+
+#include <algorithm>
+
+#include "pipeline/zones.hpp"
+
+namespace stereod::config_detail {
+
+// The keep-out zones: a list of boxes in the robot's base frame.
+KeyDef zonesKey()
+{
+    KeyDef def{"zones", kLive, {}, {}};
+    def.read = [](const YAML::Node& node, ServiceConfig& config, const ReadContext&) -> ReadResult {
+        const std::string expected =
+            "a list of {name, min: [x, y, z], max: [x, y, z], min_points, enter_frames, "
+            "leave_frames}, metres in the robot's base frame";
+        if (!node.IsNull() && !node.IsSequence())
+            return ReadFailure{"not a list", expected};
+        std::vector<ZoneSettings> zones;
+        for (std::size_t i = 0; i < node.size(); ++i) {
+            const YAML::Node item = node[i];
+            const std::string where = "zone " + std::to_string(i + 1);
+            if (!item.IsMap())
+                return ReadFailure{where + " is not a mapping", expected};
+            ZoneSettings zone;
+            for (const auto& entry : item) {
+                const std::string key = entry.first.as<std::string>();
+                const YAML::Node& value = entry.second;
+                if (key == "name" && value.IsScalar()) {
+                    zone.name = value.Scalar();
+                } else if (key == "min" || key == "max") {
+                    const auto v = parseVec3(value);
+                    if (!v)
+                        return ReadFailure{where + ": " + key + " is not [x, y, z]", expected};
+                    (key == "min" ? zone.min_m : zone.max_m) = *v;
+                } else if (key == "min_points" || key == "enter_frames" || key == "leave_frames") {
+                    const auto v = value.IsScalar() ? parseInteger(value.Scalar()) : std::nullopt;
+                    if (!v || *v < 1 || *v > 1000000)
+                        return ReadFailure{where + ": " + key + " is not a whole number >= 1",
+                                           expected};
+                    (key == "min_points"     ? zone.min_points
+                     : key == "enter_frames" ? zone.enter_frames
+                                             : zone.leave_frames) = static_cast<int>(*v);
+                } else {
+                    return ReadFailure{where + ": unknown key " + key, expected};
+                }
+            }
+            zones.push_back(std::move(zone));
+        }
+        config.zones.zones = std::move(zones);
+        return std::nullopt;
+    };
+    def.show = [](const ServiceConfig& config) {
+        std::string text = "[";
+        for (const ZoneSettings& z : config.zones.zones)
+            text += (text.size() > 1 ? ", " : "") + std::string("{name: ") + z.name +
+                    ", min: " + showVec3(z.min_m) + ", max: " + showVec3(z.max_m) +
+                    ", min_points: " + std::to_string(z.min_points) +
+                    ", enter_frames: " + std::to_string(z.enter_frames) +
+                    ", leave_frames: " + std::to_string(z.leave_frames) + "}";
+        return text + "]";
+    };
+    return def;
+}
+
+const Names<PowerLineFrequency>& powerLineNames()
+{
+    static const Names<PowerLineFrequency> names = {{"disabled", PowerLineFrequency::Disabled},
+                                                    {"50hz", PowerLineFrequency::Hz50},
+                                                    {"60hz", PowerLineFrequency::Hz60},
+                                                    {"auto", PowerLineFrequency::Auto}};
+    return names;
+}
+
+KeyDef powerLineKey()
+{
+    std::vector<std::string> known{std::string(kKeep)};
+    for (const auto& entry : powerLineNames()) {
+        known.push_back(entry.first);
+    }
+    return keepKey(
+        "source.cameras.controls.power_line_frequency", kRestart,
+        [](auto& c) -> auto& { return c.source.cameras.controls.power_line; }, "unknown value",
+        listNames(known),
+        [](std::string_view text) -> std::optional<PowerLineFrequency> {
+            for (const auto& [name, value] : powerLineNames()) {
+                if (text == name) {
+                    return value;
+                }
+            }
+            return std::nullopt;
+        },
+        [](PowerLineFrequency value) {
+            for (const auto& [name, entry] : powerLineNames()) {
+                if (entry == value) {
+                    return name;
+                }
+            }
+            return std::string("?");
+        });
+}
+// The matcher's name sets two fields: the OpenCV matcher and, for SGBM, its mode.
+struct AlgorithmName {
+    std::string name;
+    MatcherKind kind;
+    SgbmMode mode;
+};
+
+const std::vector<AlgorithmName>& algorithmNames()
+{
+    static const std::vector<AlgorithmName> names = {
+        {"census-sgm", MatcherKind::CensusSgm, SgbmMode::Sgbm},
+        {"sgbm", MatcherKind::Sgbm, SgbmMode::Sgbm},
+        {"sgbm-3way", MatcherKind::Sgbm, SgbmMode::ThreeWay},
+        {"sgbm-hh", MatcherKind::Sgbm, SgbmMode::Hh},
+        {"sgbm-hh4", MatcherKind::Sgbm, SgbmMode::Hh4},
+        {"bm", MatcherKind::Bm, SgbmMode::Sgbm},
+    };
+    return names;
+}
+
+std::string algorithmName(const MatcherSettings& matcher)
+{
+    for (const auto& entry : algorithmNames()) {
+        if (entry.kind == matcher.kind &&
+            (matcher.kind != MatcherKind::Sgbm || entry.mode == matcher.sgbm_mode)) {
+            return entry.name;
+        }
+    }
+    return "?";
+}
+
+KeyDef algorithmKey()
+{
+    KeyDef def{"matcher.algorithm", kLive, {}, {}};
+    def.read = [](const YAML::Node& node, ServiceConfig& config, const ReadContext&) -> ReadResult {
+        std::vector<std::string> known;
+        for (const auto& entry : algorithmNames()) {
+            if (node.IsScalar() && node.Scalar() == entry.name) {
+                config.processing.matcher.kind = entry.kind;
+                config.processing.matcher.sgbm_mode = entry.mode;
+                return std::nullopt;
+            }
+            known.push_back(entry.name);
+        }
+        return ReadFailure{"unknown matcher", expectedOneOf(known, scalarText(node))};
+    };
+    def.show = [](const ServiceConfig& config) { return algorithmName(config.processing.matcher); };
+    return def;
+}
+
+KeyDef modeKey()
+{
+    KeyDef def{"socket.mode", kRestart, {}, {}};
+    def.read = [](const YAML::Node& node, ServiceConfig& config, const ReadContext&) -> ReadResult {
+        const auto mode = node.IsScalar() ? parseMode(node.Scalar()) : std::nullopt;
+        if (!mode) {
+            return ReadFailure{"not an octal file mode", "octal digits, like \"0660\""};
+        }
+        config.socket.mode = *mode;
+        return std::nullopt;
+    };
+    def.show = [](const ServiceConfig& config) {
+        return "\"" + formatMode(config.socket.mode) + "\"";
+    };
+    return def;
+}
+
+const std::vector<std::string>& logLevelNames()
+{
+    // spdlog's level names (spdlog::level::to_string_view), least severe first.
+    static const std::vector<std::string> names = {"trace", "debug",    "info", "warn",
+                                                   "error", "critical", "off"};
+    return names;
+}
+
+std::vector<KeyDef> buildKeyTable()
+{
+    std::vector<KeyDef> keys;
+    const auto add = [&keys](KeyDef def) { keys.push_back(std::move(def)); };
+
+    add(choiceKey(
+        "source.type", kRestart, [](auto& c) -> auto& { return c.source.kind; },
+        Names<SourceKind>{{"replay", SourceKind::Replay},
+                          {"v4l2", SourceKind::V4l2},
+                          {"side_by_side", SourceKind::SideBySide}}));
+    add(textKey(
+        "source.replay.path", kRestart, [](auto& c) -> auto& { return c.source.replay.path; },
+        true));
+    add(choiceKey(
+        "source.replay.pacing", kRestart, [](auto& c) -> auto& { return c.source.replay.pacing; },
+        Names<ReplayPacing>{{"paced", ReplayPacing::Paced}, {"lockstep", ReplayPacing::Lockstep}}));
+    add(realKey(
+        "source.replay.fps", kRestart, [](auto& c) -> auto& { return c.source.replay.fps; },
+        "frames per second"));
+    add(boolKey(
+        "source.replay.loop", kRestart, [](auto& c) -> auto& { return c.source.replay.loop; }));
+    add(textKey(
+        "source.replay.topics.left", kRestart,
+        [](auto& c) -> auto& { return c.source.replay.left_topic; }, false));
+    add(textKey(
+        "source.replay.topics.right", kRestart,
+        [](auto& c) -> auto& { return c.source.replay.right_topic; }, false));
+    add(textKey(
+        "source.cameras.left", kRestart, [](auto& c) -> auto& { return c.source.cameras.left; },
+        false));
+    add(textKey(
+        "source.cameras.right", kRestart, [](auto& c) -> auto& { return c.source.cameras.right; },
+        false));
+    add(textKey(
+        "source.cameras.device", kRestart, [](auto& c) -> auto& { return c.source.cameras.device; },
+        false));
+    add(choiceKey(
+        "source.cameras.format", kRestart, [](auto& c) -> auto& { return c.source.cameras.format; },
+        Names<PixelFormatChoice>{{"auto", PixelFormatChoice::Auto},
+                                 {"grey", PixelFormatChoice::Grey},
+                                 {"yuyv", PixelFormatChoice::Yuyv},
+                                 {"mjpeg", PixelFormatChoice::Mjpeg}}));
+    add(integerKey(
+        "source.cameras.width", kRestart, [](auto& c) -> auto& { return c.source.cameras.width; }));
+    add(integerKey(
+        "source.cameras.height", kRestart,
+        [](auto& c) -> auto& { return c.source.cameras.height; }));
+    add(realKey(
+        "source.cameras.fps", kRestart, [](auto& c) -> auto& { return c.source.cameras.fps; },
+        "frames per second"));
+    add(boolKey(
+        "source.cameras.lock_exposure", kRestart,
+        [](auto& c) -> auto& { return c.source.cameras.lock_exposure; }));
+    add(keepBoolKey(
+        "source.cameras.controls.auto_exposure",
+        [](auto& c) -> auto& { return c.source.cameras.controls.auto_exposure; }));
+    add(keepIntegerKey(
+        "source.cameras.controls.exposure_us",
+        [](auto& c) -> auto& { return c.source.cameras.controls.exposure_us; }, "us"));
+    add(keepIntegerKey(
+        "source.cameras.controls.gain",
+        [](auto& c) -> auto& { return c.source.cameras.controls.gain; }, "device units"));
+    add(keepBoolKey(
+        "source.cameras.controls.auto_white_balance",
+        [](auto& c) -> auto& { return c.source.cameras.controls.auto_white_balance; }));
+    add(keepIntegerKey(
+        "source.cameras.controls.white_balance_k",
+        [](auto& c) -> auto& { return c.source.cameras.controls.white_balance_k; }, "kelvin"));
+    add(powerLineKey());
+    add(integerKey(
+        "source.ring_capacity", kRestart, [](auto& c) -> auto& { return c.source.ring_capacity; }));
+    add(realKey(
+        "source.max_skew_ms", kRestart, [](auto& c) -> auto& { return c.source.max_skew_ms; },
+        "ms"));
+    add(realKey(
+        "source.stall_timeout_ms", kRestart,
+        [](auto& c) -> auto& { return c.source.stall_timeout_ms; }, "ms"));
+    add(textKey(
+        "calibration", kRestart, [](auto& c) -> auto& { return c.calibration_path; }, true));
+
+    add(algorithmKey());
+    add(realKey(
+        "matcher.min_depth_m", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.min_depth_m; }, "m"));
+    add(autoIntegerKey(
+        "matcher.num_disparities", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.num_disparities; },
+        "auto or a positive multiple of 16"));
+    add(integerKey(
+        "matcher.max_num_disparities", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.max_num_disparities; }));
+    add(integerKey(
+        "matcher.min_disparity", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.min_disparity; }));
+    add(integerKey(
+        "matcher.block_size", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.block_size; }));
+    add(integerKey(
+        "matcher.uniqueness_ratio", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.uniqueness_ratio; }));
+    add(integerKey(
+        "matcher.speckle_window_px", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.speckle_window_px; }));
+    add(integerKey(
+        "matcher.speckle_range_px", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.speckle_range_px; }));
+    add(integerKey(
+        "matcher.lr_max_diff_px", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.lr_max_diff_px; }));
+    add(autoIntegerKey(
+        "matcher.p1", kLive, [](auto& c) -> auto& { return c.processing.matcher.p1; },
+        "auto or an integer from 1 to 32767"));
+    add(autoIntegerKey(
+        "matcher.p2", kLive, [](auto& c) -> auto& { return c.processing.matcher.p2; },
+        "auto or an integer from 1 to 32767"));
+    add(integerKey(
+        "matcher.pre_filter_cap", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.pre_filter_cap; }));
+    add(integerKey(
+        "matcher.texture_threshold", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.texture_threshold; }));
+    add(autoIntegerKey(
+        "matcher.census_width", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.census_width; },
+        "auto or an odd number of pixels"));
+    add(autoIntegerKey(
+        "matcher.census_height", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.census_height; },
+        "auto or an odd number of pixels"));
+    add(autoIntegerKey(
+        "matcher.paths", kLive, [](auto& c) -> auto& { return c.processing.matcher.paths; },
+        "auto, 3 or 5"));
+    add(autoIntegerKey(
+        "matcher.p2_gradient_scale", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.p2_gradient_scale; },
+        "auto or grey levels"));
+    add(autoIntegerKey(
+        "matcher.threads", kLive, [](auto& c) -> auto& { return c.processing.matcher.threads; },
+        "auto (the cores available) or a number of threads"));
+
+    add(realKey(
+        "nearest.roi.x", kLive, [](auto& c) -> auto& { return c.processing.nearest.roi.x; },
+        "image widths"));
+    add(realKey(
+        "nearest.roi.y", kLive, [](auto& c) -> auto& { return c.processing.nearest.roi.y; },
+        "image heights"));
+    add(realKey(
+        "nearest.roi.width", kLive, [](auto& c) -> auto& { return c.processing.nearest.roi.width; },
+        "image widths"));
+    add(realKey(
+        "nearest.roi.height", kLive,
+        [](auto& c) -> auto& { return c.processing.nearest.roi.height; }, "image heights"));
+    add(realKey(
+        "nearest.min_depth_m", kLive,
+        [](auto& c) -> auto& { return c.processing.nearest.min_depth_m; }, "m"));
+    add(realKey(
+        "nearest.max_depth_m", kLive,
+        [](auto& c) -> auto& { return c.processing.nearest.max_depth_m; }, "m"));
+    add(realKey(
+        "nearest.percentile", kLive,
+        [](auto& c) -> auto& { return c.processing.nearest.percentile; }, "percent"));
+    add(realKey(
+        "nearest.min_valid_fraction", kLive,
+        [](auto& c) -> auto& { return c.processing.nearest.min_valid_fraction; }, ""));
+    add(integerKey(
+        "nearest.min_pixels", kLive,
+        [](auto& c) -> auto& { return c.processing.nearest.min_pixels; }));
+    add(realKey(
+        "nearest.min_in_range_fraction", kLive,
+        [](auto& c) -> auto& { return c.processing.nearest.min_in_range_fraction; }, ""));
+    add(integerKey(
+        "nearest.min_confidence", kLive,
+        [](auto& c) -> auto& { return c.processing.nearest.min_confidence; }));
+    add(realKey(
+        "nearest.range_limit_fraction", kLive,
+        [](auto& c) -> auto& { return c.processing.nearest.range_limit_fraction; }, ""));
+    add(boolKey(
+        "point_cloud", kLive, [](auto& c) -> auto& { return c.processing.compute_cloud; }));
+    add(vec3Key(
+        "robot.camera_pose.translation_m", kLive,
+        [](auto& c) -> auto& { return c.zones.camera_pose.translation_m; }, "metres"));
+    add(vec3Key(
+        "robot.camera_pose.rpy_deg", kLive,
+        [](auto& c) -> auto& { return c.zones.camera_pose.rpy_deg; }, "degrees"));
+    add(realKey(
+        "robot.min_visible_fraction", kLive,
+        [](auto& c) -> auto& { return c.zones.min_visible_fraction; }, ""));
+    add(zonesKey());
+    add(realKey(
+        "calibration_health.interval_s", kLive,
+        [](auto& c) -> auto& { return c.calibration_health.interval_s; }, "s"));
+    add(boolKey(
+        "calibration_health.withhold_when_failed", kLive,
+        [](auto& c) -> auto& { return c.calibration_health.withhold_when_failed; }));
+
+    add(textKey(
+        "socket.path", kRestart, [](auto& c) -> auto& { return c.socket.path; }, true));
+    add(modeKey());
+    add(textKey(
+        "socket.group", kRestart, [](auto& c) -> auto& { return c.socket.group; }, false));
+    add(integerKey(
+        "socket.max_clients", kRestart, [](auto& c) -> auto& { return c.socket.max_clients; }));
+    add(integerKey(
+        "socket.max_request_bytes", kRestart,
+        [](auto& c) -> auto& { return c.socket.max_request_bytes; }));
+    add(realKey(
+        "socket.idle_timeout_s", kRestart, [](auto& c) -> auto& { return c.socket.idle_timeout_s; },
+        "s"));
+    add(idListKey(
+        "socket.allow_uids", kRestart, [](auto& c) -> auto& { return c.socket.allow_uids; }));
+    add(idListKey(
+        "socket.allow_gids", kRestart, [](auto& c) -> auto& { return c.socket.allow_gids; }));
+
+    add(realKey(
+        "publish.readings_max_hz", kLive,
+        [](auto& c) -> auto& { return c.publish.readings_max_hz; }, "Hz"));
+    add(realKey(
+        "publish.depth_max_hz", kLive, [](auto& c) -> auto& { return c.publish.depth_max_hz; },
+        "Hz"));
+    add(integerKey(
+        "publish.max_client_backlog_bytes", kLive,
+        [](auto& c) -> auto& { return c.publish.max_client_backlog_bytes; }));
+    add(realKey(
+        "publish.max_reading_age_ms", kLive,
+        [](auto& c) -> auto& { return c.publish.max_reading_age_ms; }, "ms"));
+    add(textKey(
+        "log_level", kLive, [](auto& c) -> auto& { return c.log_level; }, false));
+    return keys;
+}
+
+const Schema& schema()
+{
+    static const Schema instance = [] {
+        Schema built;
+        built.keys = buildKeyTable();
+        for (const auto& def : built.keys) {
+            SchemaNode* node = &built.root;
+            size_t start = 0;
+            while (true) {
+                const size_t dot = def.path.find('.', start);
+                const std::string part = def.path.substr(start, dot - start);
+                SchemaNode* next = nullptr;
+                for (auto& entry : node->children) {
+                    if (entry.name == part) {
+                        next = &entry;
+                    }
+                }
+                if (next == nullptr) {
+                    node->children.push_back(SchemaNode{part, nullptr, {}});
+                    next = &node->children.back();
+                }
+                node = next;
+                if (dot == std::string::npos) {
+                    break;
+                }
+                start = dot + 1;
+            }
+            node->key = &def;
+        }
+        return built;
+    }();
+    return instance;
+}
+
+std::string joinPath(const std::string& prefix, std::string_view name)
+{
+    return prefix.empty() ? std::string(name) : prefix + "." + std::string(name);
+}
+
+} // namespace stereod::config_detail
