@@ -42,10 +42,10 @@
 #include <optional>
 #include <thread>
 
+#include "capture/captured_frame.hpp"
 #include "capture/frame.hpp"
 #include "capture/frame_source.hpp"
 #include "capture/spsc_ring.hpp"
-#include "capture/v4l2_camera.hpp"
 
 namespace stereod {
 

@@ -20,31 +20,6 @@
 
 namespace stereod {
 
-const char* toString(PixelFormatChoice format) noexcept
-{
-    switch (format) {
-    case PixelFormatChoice::Auto:
-        return "auto";
-    case PixelFormatChoice::Grey:
-        return "grey";
-    case PixelFormatChoice::Yuyv:
-        return "yuyv";
-    case PixelFormatChoice::Mjpeg:
-        return "mjpeg";
-    }
-    return "unknown";
-}
-
-std::optional<PixelFormatChoice> parsePixelFormatChoice(const std::string& text) noexcept
-{
-    for (PixelFormatChoice choice : {PixelFormatChoice::Auto, PixelFormatChoice::Grey,
-                                     PixelFormatChoice::Yuyv, PixelFormatChoice::Mjpeg}) {
-        if (strcasecmp(text.c_str(), toString(choice)) == 0)
-            return choice;
-    }
-    return std::nullopt;
-}
-
 namespace {
 
 // Where each kernel buffer of a BufferSet is. Only a releasing holder moves Held to

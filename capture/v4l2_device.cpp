@@ -15,8 +15,6 @@ namespace stereod {
 
 namespace {
 
-constexpr double kRateTolerance = 0.01; // a rate matches within 1 %
-
 double intervalToFps(const v4l2_fract& interval) noexcept
 {
     return interval.numerator == 0 ? 0.0
@@ -37,98 +35,13 @@ v4l2_fract fpsToInterval(double fps) noexcept
     return interval;
 }
 
-bool sameRate(double a, double b) noexcept
-{
-    return std::abs(a - b) <= kRateTolerance * std::max(a, b);
-}
-
 std::string fixedText(const uint8_t* text, std::size_t size)
 {
     const auto* chars = reinterpret_cast<const char*>(text);
     return std::string(chars, strnlen(chars, size));
 }
 
-std::string formatRate(double fps)
-{
-    return std::abs(fps - std::round(fps)) < 0.005 ? fmt::format("{:.0f}", fps)
-                                                   : fmt::format("{:.2f}", fps);
-}
-
-// The formats we can turn into grayscale, in the order `auto` prefers them.
-constexpr uint32_t kAutoOrder[] = {V4L2_PIX_FMT_GREY, V4L2_PIX_FMT_YUYV, V4L2_PIX_FMT_MJPEG};
-
-uint32_t choiceFourcc(PixelFormatChoice choice) noexcept
-{
-    switch (choice) {
-    case PixelFormatChoice::Grey:
-        return V4L2_PIX_FMT_GREY;
-    case PixelFormatChoice::Yuyv:
-        return V4L2_PIX_FMT_YUYV;
-    case PixelFormatChoice::Mjpeg:
-        return V4L2_PIX_FMT_MJPEG;
-    case PixelFormatChoice::Auto:
-        break;
-    }
-    return 0;
-}
-
 } // namespace
-
-bool FrameSizeDescription::contains(int w, int h) const noexcept
-{
-    if (!isRange())
-        return w == width && h == height;
-    const int sw = std::max(step_width, 1);
-    const int sh = std::max(step_height, 1);
-    return w >= width && w <= max_width && h >= height && h <= max_height &&
-           (w - width) % sw == 0 && (h - height) % sh == 0;
-}
-
-bool FrameSizeDescription::offersRate(double rate) const noexcept
-{
-    if (max_fps > 0.0 && rate >= min_fps * (1.0 - kRateTolerance) &&
-        rate <= max_fps * (1.0 + kRateTolerance))
-        return true;
-    return std::any_of(fps.begin(), fps.end(), [rate](double f) { return sameRate(f, rate); });
-}
-
-std::string fourccName(uint32_t fourcc)
-{
-    std::string name;
-    for (int i = 0; i < 4; ++i) {
-        const char c = static_cast<char>((fourcc >> (8 * i)) & 0xff);
-        if (c != ' ' && c != '\0')
-            name.push_back(c);
-    }
-    return name;
-}
-
-std::string describeFormat(const FormatDescription& format)
-{
-    std::string text = format.name;
-    const char* separator = " ";
-    for (const FrameSizeDescription& size : format.sizes) {
-        text += separator;
-        separator = ", ";
-        if (size.isRange())
-            text += fmt::format("{}x{}..{}x{} step {}x{}", size.width, size.height, size.max_width,
-                                size.max_height, size.step_width, size.step_height);
-        else
-            text += fmt::format("{}x{}", size.width, size.height);
-        if (!size.fps.empty()) {
-            text += " @ ";
-            for (std::size_t i = 0; i < size.fps.size(); ++i)
-                text += (i == 0 ? "" : "/") + formatRate(size.fps[i]);
-            text += " fps";
-        } else if (size.max_fps > 0.0) {
-            text +=
-                fmt::format(" @ {}..{} fps", formatRate(size.min_fps), formatRate(size.max_fps));
-        }
-    }
-    if (format.sizes.empty())
-        text += " (no sizes listed)";
-    return text;
-}
 
 V4l2Device::~V4l2Device()
 {
@@ -296,63 +209,13 @@ int V4l2Device::negotiate(const CameraSettings& settings, NegotiatedFormat& out)
         return rc;
 
     const bool is_auto = settings.format == PixelFormatChoice::Auto;
-    std::vector<uint32_t> candidates;
-    if (is_auto)
-        candidates.assign(std::begin(kAutoOrder), std::end(kAutoOrder));
-    else
-        candidates.push_back(choiceFourcc(settings.format));
-
-    const FormatDescription* chosen = nullptr;
-    std::string passed_over; // for `auto`: the better formats and why they were not taken
-    for (uint32_t fourcc : candidates) {
-        const auto it =
-            std::find_if(formats.begin(), formats.end(),
-                         [fourcc](const FormatDescription& f) { return f.fourcc == fourcc; });
-        if (it == formats.end()) {
-            passed_over += fmt::format("{}{} not offered", passed_over.empty() ? "" : "; ",
-                                       fourccName(fourcc));
-            continue;
-        }
-        // A driver that lists no sizes (no ENUM_FRAMESIZES) is trusted to S_FMT below.
-        const bool size_ok =
-            it->sizes.empty() ||
-            std::any_of(it->sizes.begin(), it->sizes.end(), [&](const FrameSizeDescription& s) {
-                return s.contains(settings.width, settings.height);
-            });
-        bool rate_ok = true;
-        if (size_ok && !it->sizes.empty()) {
-            rate_ok = false;
-            for (const FrameSizeDescription& s : it->sizes) {
-                if (!s.contains(settings.width, settings.height))
-                    continue;
-                // No listed rates: the driver does not enumerate them; S_PARM decides.
-                if ((s.fps.empty() && s.max_fps <= 0.0) || s.offersRate(settings.fps))
-                    rate_ok = true;
-            }
-        }
-        if (size_ok && rate_ok) {
-            chosen = &*it;
-            break;
-        }
-        passed_over +=
-            fmt::format("{}{} not at {}x{} @ {} fps", passed_over.empty() ? "" : "; ", it->name,
-                        settings.width, settings.height, formatRate(settings.fps));
-    }
-
-    if (chosen == nullptr) {
-        std::string offered;
-        for (const FormatDescription& f : formats) {
-            const bool usable = std::find(std::begin(kAutoOrder), std::end(kAutoOrder), f.fourcc) !=
-                                std::end(kAutoOrder);
-            offered += fmt::format("{}{}{}", offered.empty() ? "" : "; ", describeFormat(f),
-                                   usable ? "" : " (not usable)");
-        }
-        error_ = fmt::format(
-            "{} ({}) cannot deliver {} {}x{} @ {} fps; it offers: {}", path_, identity_.card,
-            is_auto ? "GREY, YUYV or MJPG" : fourccName(candidates[0]), settings.width,
-            settings.height, formatRate(settings.fps), offered.empty() ? "no formats" : offered);
+    const FormatChoice choice = chooseFormat(formats, settings);
+    if (choice.format == nullptr) {
+        error_ = fmt::format("{} ({}) {}", path_, identity_.card, choice.refusal);
         return -EINVAL;
     }
+    const FormatDescription* chosen = choice.format;
+    const std::string& passed_over = choice.passed_over;
 
     v4l2_format format{};
     format.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
@@ -421,158 +284,6 @@ int V4l2Device::negotiate(const CameraSettings& settings, NegotiatedFormat& out)
         out.reason = fmt::format("{} as configured{}", chosen->name, rate_note);
     }
     return 0;
-}
-
-int V4l2Device::queryControl(uint32_t id, v4l2_queryctrl& query)
-{
-    query = v4l2_queryctrl{};
-    query.id = id;
-    if (const int rc = xioctl(VIDIOC_QUERYCTRL, &query); rc < 0)
-        return rc;
-    if ((query.flags & V4L2_CTRL_FLAG_DISABLED) != 0)
-        return -EINVAL;
-    return 0;
-}
-
-ControlReading V4l2Device::readControl(const char* name, uint32_t id, int64_t unit)
-{
-    ControlReading reading;
-    reading.name = name;
-    reading.id = id;
-    v4l2_queryctrl query{};
-    if (queryControl(id, query) < 0)
-        return reading;
-    reading.present = true;
-    v4l2_control control{};
-    control.id = id;
-    if (const int rc = xioctl(VIDIOC_G_CTRL, &control); rc < 0)
-        reading.error = fmt::format("VIDIOC_G_CTRL: {}", std::strerror(-rc));
-    else
-        reading.actual_value = static_cast<int64_t>(control.value) * unit;
-    return reading;
-}
-
-ControlReading V4l2Device::setControl(const char* name, uint32_t id, int64_t value, int64_t unit)
-{
-    ControlReading reading;
-    reading.name = name;
-    reading.id = id;
-    reading.requested = true;
-    reading.requested_value = value;
-    v4l2_queryctrl query{};
-    if (queryControl(id, query) < 0) {
-        reading.error = "not offered by the device";
-        return reading;
-    }
-    reading.present = true;
-
-    // Values in the unit of `name` (exposure in us) become device units (100 us).
-    int64_t raw = (value + unit / 2) / unit;
-    if (query.type == V4L2_CTRL_TYPE_INTEGER || query.type == V4L2_CTRL_TYPE_BOOLEAN) {
-        const int64_t step = std::max<int64_t>(query.step, 1);
-        const int64_t clamped =
-            query.minimum +
-            (std::clamp<int64_t>(raw, query.minimum, query.maximum) - query.minimum) / step * step;
-        if (clamped != raw)
-            reading.error = fmt::format("asked {}, device range {}..{} step {}: set {}", value,
-                                        query.minimum * unit, query.maximum * unit, step * unit,
-                                        clamped * unit);
-        raw = clamped;
-    }
-    v4l2_control control{};
-    control.id = id;
-    control.value = static_cast<int32_t>(raw);
-    if (const int rc = xioctl(VIDIOC_S_CTRL, &control); rc < 0)
-        reading.error = fmt::format("VIDIOC_S_CTRL refused {}: {}", value, std::strerror(-rc));
-
-    const ControlReading read_back = readControl(name, id, unit);
-    reading.actual_value = read_back.actual_value;
-    if (!read_back.error.empty())
-        reading.error = read_back.error;
-    else if (reading.error.empty() && read_back.actual_value != raw * unit)
-        reading.error = fmt::format("device kept {}", read_back.actual_value);
-    return reading;
-}
-
-std::vector<ControlReading> V4l2Device::applyControls(const CameraControls& controls,
-                                                      bool lock_exposure)
-{
-    std::vector<ControlReading> readings;
-    // Auto exposure first: the absolute exposure is inactive (or refused) while it is on.
-    if (lock_exposure || controls.auto_exposure.has_value()) {
-        const bool want_auto = !lock_exposure && *controls.auto_exposure;
-        ControlReading reading =
-            setControl("auto_exposure", V4L2_CID_EXPOSURE_AUTO,
-                       want_auto ? V4L2_EXPOSURE_AUTO : V4L2_EXPOSURE_MANUAL, 1);
-        // Many UVC cameras offer only manual and aperture priority (their "auto").
-        if (want_auto && reading.present && !reading.error.empty()) {
-            ControlReading aperture = setControl("auto_exposure", V4L2_CID_EXPOSURE_AUTO,
-                                                 V4L2_EXPOSURE_APERTURE_PRIORITY, 1);
-            if (aperture.error.empty())
-                reading = aperture;
-        }
-        readings.push_back(std::move(reading));
-    }
-    if (controls.exposure_us.has_value()) {
-        readings.push_back(
-            setControl("exposure_us", V4L2_CID_EXPOSURE_ABSOLUTE, *controls.exposure_us, 100));
-    } else if (lock_exposure) {
-        // Freeze the exposure the device has now.
-        const ControlReading current = readControl("exposure_us", V4L2_CID_EXPOSURE_ABSOLUTE, 100);
-        if (current.present && current.error.empty())
-            readings.push_back(
-                setControl("exposure_us", V4L2_CID_EXPOSURE_ABSOLUTE, current.actual_value, 100));
-        else
-            readings.push_back(current);
-    }
-    if (controls.gain.has_value())
-        readings.push_back(setControl("gain", V4L2_CID_GAIN, *controls.gain, 1));
-    if (controls.auto_white_balance.has_value() || controls.white_balance_k.has_value()) {
-        const bool want_auto =
-            controls.white_balance_k.has_value() ? false : *controls.auto_white_balance;
-        readings.push_back(
-            setControl("auto_white_balance", V4L2_CID_AUTO_WHITE_BALANCE, want_auto ? 1 : 0, 1));
-    }
-    if (controls.white_balance_k.has_value())
-        readings.push_back(setControl("white_balance_k", V4L2_CID_WHITE_BALANCE_TEMPERATURE,
-                                      *controls.white_balance_k, 1));
-    if (controls.power_line.has_value())
-        readings.push_back(setControl("power_line_frequency", V4L2_CID_POWER_LINE_FREQUENCY,
-                                      static_cast<int64_t>(*controls.power_line), 1));
-
-    // Then everything else the project knows, as the device has it.
-    for (ControlReading& reading : readControls()) {
-        const bool listed =
-            std::any_of(readings.begin(), readings.end(),
-                        [&](const ControlReading& r) { return r.id == reading.id; });
-        if (!listed)
-            readings.push_back(std::move(reading));
-    }
-    return readings;
-}
-
-std::vector<ControlReading> V4l2Device::readControls()
-{
-    struct Known {
-        const char* name;
-        uint32_t id;
-        int64_t unit;
-    };
-    static constexpr Known kKnown[] = {
-        {"auto_exposure", V4L2_CID_EXPOSURE_AUTO, 1},
-        {"exposure_us", V4L2_CID_EXPOSURE_ABSOLUTE, 100},
-        {"gain", V4L2_CID_GAIN, 1},
-        {"auto_white_balance", V4L2_CID_AUTO_WHITE_BALANCE, 1},
-        {"white_balance_k", V4L2_CID_WHITE_BALANCE_TEMPERATURE, 1},
-        {"power_line_frequency", V4L2_CID_POWER_LINE_FREQUENCY, 1},
-    };
-    std::vector<ControlReading> readings;
-    for (const Known& known : kKnown) {
-        ControlReading reading = readControl(known.name, known.id, known.unit);
-        if (reading.present)
-            readings.push_back(std::move(reading));
-    }
-    return readings;
 }
 
 int V4l2Device::allocateBuffers(int count)

@@ -18,39 +18,10 @@
 
 #include <linux/videodev2.h>
 
-#include "capture/v4l2_camera.hpp"
+#include "capture/camera_settings.hpp"
+#include "capture/format_choice.hpp"
 
 namespace stereod {
-
-// One frame size a format offers, with the frame rates offered at that size.
-struct FrameSizeDescription {
-    int width = 0; // px; a discrete size, or the smallest of a range
-    int height = 0;
-    int max_width = 0; // px; a range (stepwise/continuous) when > 0
-    int max_height = 0;
-    int step_width = 0;
-    int step_height = 0;
-    std::vector<double> fps; // discrete rates, fastest first
-    double min_fps = 0.0;    // a range of rates when max_fps > 0
-    double max_fps = 0.0;
-
-    bool isRange() const noexcept { return max_width > 0; }
-    bool contains(int w, int h) const noexcept;
-    bool offersRate(double rate) const noexcept; // within 1 %
-};
-
-struct FormatDescription {
-    uint32_t fourcc = 0;
-    std::string name;        // the fourcc as text: "GREY", "YUYV", "MJPG"
-    std::string description; // the driver's text
-    bool compressed = false;
-    std::vector<FrameSizeDescription> sizes;
-};
-
-// "GREY" for V4L2_PIX_FMT_GREY, etc.
-std::string fourccName(uint32_t fourcc);
-// "YUYV 640x480 @ 30/15 fps, 1280x720 @ 10 fps": what a format offers, for messages.
-std::string describeFormat(const FormatDescription& format);
 
 struct DeviceIdentity {
     std::string driver;       // v4l2_capability.driver ("uvcvideo")

@@ -11,9 +11,10 @@
 #include <string>
 #include <vector>
 
-#include "capture/v4l2_camera.hpp"
+#include "capture/camera_settings.hpp"
 #include "pipeline/stereo_processor.hpp"
 #include "pipeline/zones.hpp"
+#include "replay/replay_pacing.hpp"
 
 namespace stereod {
 
@@ -32,10 +33,6 @@ enum class SourceKind {
     Replay,     // a recording on disk (source.replay)
     V4l2,       // two V4L2 cameras, paired by stereo sync (source.cameras.left/right)
     SideBySide, // one V4L2 device whose frames hold left|right halves (source.cameras.device)
-};
-enum class ReplayPacing {
-    Paced,    // frames delivered at their recorded times, like real cameras
-    Lockstep, // as fast as the worker consumes, nothing dropped, repeatable
 };
 
 struct ReplayConfig {
