@@ -12,7 +12,6 @@
 #include <opencv2/core/mat.hpp>
 
 #include "pipeline/matcher_settings.hpp"
-#include "pipeline/stereo_processor.hpp"
 
 namespace stereod {
 

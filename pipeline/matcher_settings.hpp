@@ -46,4 +46,12 @@ struct MatcherSettings {
     int threads = 0;           // threads inside matching; 0: the cores available
 };
 
+// How the disparity range was chosen, for logs and `status`.
+struct DisparityRange {
+    int min_disparity = 0;
+    int num_disparities = 0;      // multiple of 16
+    double closest_depth_m = 0.0; // the nearest depth this range can see
+    bool capped = false;          // true when max_num_disparities kept min_depth_m out of sight
+};
+
 } // namespace stereod

@@ -59,14 +59,6 @@ struct DepthResult {
     int64_t stamp_ns = 0; // capture time of the pair, CLOCK_MONOTONIC
 };
 
-// How the disparity range was chosen, for logs and `status`.
-struct DisparityRange {
-    int min_disparity = 0;
-    int num_disparities = 0;      // multiple of 16
-    double closest_depth_m = 0.0; // the nearest depth this range can see
-    bool capped = false;          // true when max_num_disparities kept min_depth_m out of sight
-};
-
 // Works out the disparity range from the settings and the rectified geometry.
 DisparityRange chooseDisparityRange(const MatcherSettings& settings,
                                     const RectifiedGeometry& geometry);
