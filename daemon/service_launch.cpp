@@ -100,9 +100,7 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle
         replay.path = config.source.replay.path;
         replay.left_topic = config.source.replay.left_topic;
         replay.right_topic = config.source.replay.right_topic;
-        replay.pacing = config.source.replay.pacing == ReplayPacing::Lockstep
-                            ? ReplayOptions::Pacing::Lockstep
-                            : ReplayOptions::Pacing::Paced;
+        replay.pacing = config.source.replay.pacing;
         replay.loop = config.source.replay.loop;
         replay.fps = config.source.replay.fps;
         // Pairs in flight: the ring, the one the worker holds, the one being filled.

@@ -215,7 +215,7 @@ ReplaySource::ReplaySource(ReplayOptions options) : options_(std::move(options))
         std::make_unique<FramePool>(2 * std::max<std::size_t>(options_.pool_pairs, 1), frame_size_);
     spdlog::info("replay: {}: {} pairs of {}{}, {}{}", recording_.dir, recording_.entries.size(),
                  sizeText(frame_size_), recording_.has_index ? "" : " (plain folder)",
-                 options_.pacing == ReplayOptions::Pacing::Paced ? "paced" : "lockstep",
+                 options_.pacing == ReplayPacing::Paced ? "paced" : "lockstep",
                  options_.loop ? ", looping" : "");
 }
 
@@ -270,7 +270,7 @@ void ReplaySource::stop() noexcept
     wake_cv_.notify_all();
     // A lockstep producer may sit in pushWait() on a full ring: only stopping the ring
     // releases it.
-    if (ring_ != nullptr && options_.pacing == ReplayOptions::Pacing::Lockstep)
+    if (ring_ != nullptr && options_.pacing == ReplayPacing::Lockstep)
         ring_->stop();
     if (thread_.joinable())
         thread_.join();
@@ -495,7 +495,7 @@ void ReplaySource::run() noexcept
 {
     const std::vector<RecordingEntry>& entries = recording_.entries;
     const std::size_t count = entries.size();
-    const bool paced = options_.pacing == ReplayOptions::Pacing::Paced;
+    const bool paced = options_.pacing == ReplayPacing::Paced;
     const int64_t period_ns = period_ns_;
     // A loop goes on one period after the last pair, as the recording would have.
     const int64_t loop_ns = saturatingAddNs(schedule_ns_.back(), period_ns);

@@ -57,22 +57,18 @@
 #include "capture/frame_source.hpp"
 #include "replay/mcap_recording.hpp"
 #include "replay/recording.hpp"
+#include "replay/replay_pacing.hpp"
 
 namespace stereod {
 
 struct ReplayOptions {
-    enum class Pacing {
-        Paced,    // at the recorded time spacing
-        Lockstep, // as fast as the consumer takes pairs; nothing dropped
-    };
-
     std::string path; // a recording directory, a folder of left*/right*, or an
                       // MCAP file (recognised by its magic bytes)
     // The image topics of an MCAP bag; empty: /stereo/{left,right}/image_raw, or the one
     // pair of image topics whose names say left and right (indexMcapStereo()).
     std::string left_topic;
     std::string right_topic;
-    Pacing pacing = Pacing::Paced;
+    ReplayPacing pacing = ReplayPacing::Paced;
     bool loop = true;  // start over at the end instead of finishing
     double fps = 10.0; // nominal rate of a plain folder (no frames.csv)
     // Pairs that can be in flight at once (filled by the source, queued in the ring,

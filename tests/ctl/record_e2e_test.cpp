@@ -148,7 +148,7 @@ TEST_F(RecordE2e, RecordingReplaysAsTheSamePairs)
     const Recording recording = openRecording(out, 10.0);
     ReplayOptions options;
     options.path = out;
-    options.pacing = ReplayOptions::Pacing::Lockstep;
+    options.pacing = ReplayPacing::Lockstep;
     options.loop = false;
     ReplaySource replay(options);
     PairRing ring(4);

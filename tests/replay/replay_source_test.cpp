@@ -39,7 +39,7 @@ ReplayOptions lockstep(const std::string& path, bool loop = false)
 {
     ReplayOptions options;
     options.path = path;
-    options.pacing = ReplayOptions::Pacing::Lockstep;
+    options.pacing = ReplayPacing::Lockstep;
     options.loop = loop;
     // Tests keep every pair they pop; the pool must cover that (a worker keeps one).
     options.pool_pairs = 16;
@@ -236,7 +236,7 @@ TEST_F(ReplaySourceTest, PacedDeliveryKeepsTheRecordedSpacing)
     const std::string dir = makeRecording(5, spacing_ns);
     ReplayOptions options;
     options.path = dir;
-    options.pacing = ReplayOptions::Pacing::Paced;
+    options.pacing = ReplayPacing::Paced;
     options.loop = false;
     options.pool_pairs = 10;
     Rig rig(options, 8);
@@ -279,7 +279,7 @@ TEST_F(ReplaySourceTest, StampsSteppingBackKeepThePaceAndAreWarnedOnce)
     spdlog::set_default_logger(std::make_shared<spdlog::logger>("replay-test", sink));
     ReplayOptions options;
     options.path = dir;
-    options.pacing = ReplayOptions::Pacing::Paced;
+    options.pacing = ReplayPacing::Paced;
     options.loop = true;
     options.pool_pairs = 24; // the test keeps every pair it pops
     std::size_t got_count = 0;
@@ -333,7 +333,7 @@ TEST_F(ReplaySourceTest, PacedReplayDropsPairsWhenEveryBufferIsHeld)
     const std::string dir = makeRecording(4, 1 * kMs);
     ReplayOptions options;
     options.path = dir;
-    options.pacing = ReplayOptions::Pacing::Paced;
+    options.pacing = ReplayPacing::Paced;
     options.loop = false;
     options.pool_pairs = 1; // the first pair, unconsumed in the ring, holds both buffers
     Rig rig(options, 4);
@@ -359,7 +359,7 @@ TEST_F(ReplaySourceTest, StopDuringALongPacedGapReturnsAtOnce)
     test::writeRecording(tmp_.file("rec"), pairs_);
     ReplayOptions options;
     options.path = tmp_.file("rec");
-    options.pacing = ReplayOptions::Pacing::Paced;
+    options.pacing = ReplayPacing::Paced;
     Rig rig(options, 2);
     ReplaySource& source = rig.source;
     PairRing& ring = rig.ring;
