@@ -11,6 +11,8 @@
 
 #include <opencv2/core/mat.hpp>
 
+#include "base/clock.hpp"
+
 namespace stereod {
 
 struct Frame;
@@ -45,34 +47,6 @@ struct FrameReturn {
 // Owning handle: destroying it gives the buffer back to where it came from.
 using FrameHandle = std::unique_ptr<Frame, FrameReturn>;
 
-// a - b and a + b in ns, saturated to the int64_t range instead of wrapping: stamps
-// come from devices and recordings, and may be anything (a recording stamped INT64_MIN
-// and INT64_MAX must read as far apart, not as 0 apart).
-constexpr int64_t saturatingSubNs(int64_t a, int64_t b) noexcept
-{
-    int64_t difference = 0;
-    if (__builtin_sub_overflow(a, b, &difference))
-        return a < b ? std::numeric_limits<int64_t>::min() : std::numeric_limits<int64_t>::max();
-    return difference;
-}
-
-constexpr int64_t saturatingAddNs(int64_t a, int64_t b) noexcept
-{
-    int64_t sum = 0;
-    if (__builtin_add_overflow(a, b, &sum))
-        return b < 0 ? std::numeric_limits<int64_t>::min() : std::numeric_limits<int64_t>::max();
-    return sum;
-}
-
-// |value|, with INT64_MIN giving INT64_MAX.
-constexpr int64_t saturatingAbsNs(int64_t value) noexcept
-{
-    return value >= 0
-               ? value
-               : (value == std::numeric_limits<int64_t>::min() ? std::numeric_limits<int64_t>::max()
-                                                               : -value);
-}
-
 // A left and a right frame taken at (nearly) the same instant.
 struct StereoPair {
     FrameHandle left;
@@ -87,8 +61,5 @@ struct StereoPair {
         return (left && right) ? saturatingSubNs(right->stamp_ns, left->stamp_ns) : 0;
     }
 };
-
-// Current CLOCK_MONOTONIC time in nanoseconds: the clock of every capture stamp.
-int64_t monotonicNowNs() noexcept;
 
 } // namespace stereod

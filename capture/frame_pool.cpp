@@ -5,13 +5,6 @@
 
 namespace stereod {
 
-int64_t monotonicNowNs() noexcept
-{
-    timespec ts{};
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
 FramePool::FramePool(std::size_t count, cv::Size size, int type)
     : size_(size), frames_(count), in_use_(std::make_unique<std::atomic<bool>[]>(count))
 {

@@ -2,6 +2,7 @@
 // The one interface every producer of stereo pairs implements: two V4L2 cameras with
 // stereo sync, one side-by-side device, and the replay of a recording.
 
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -39,6 +40,9 @@ struct CameraStatus {
     uint64_t unpaired = 0;      // frames stereo sync dropped without a partner
 };
 
+// The pairs the skew figures of SourceStatus cover: the most recent ones.
+inline constexpr std::size_t kSkewWindowPairs = 256;
+
 struct SourceStatus {
     std::string kind; // "replay", "v4l2", "side-by-side"
     SourceState state = SourceState::Stopped;
@@ -46,7 +50,9 @@ struct SourceStatus {
     std::vector<CameraStatus> cameras;
     uint64_t pairs = 0;            // pairs delivered into the ring
     uint64_t unpaired_dropped = 0; // frames dropped for lack of a partner in time
-    double skew_mean_ms = 0.0;     // |right - left| capture time of delivered pairs
+    // |right - left| capture time over the last kSkewWindowPairs delivered pairs, in ms;
+    // every source means the same window.
+    double skew_mean_ms = 0.0;
     double skew_p99_ms = 0.0;
     double skew_max_ms = 0.0;
     // Stereo sync found the two cameras' frames consistently apart (capture/stereo_sync.hpp):

@@ -116,9 +116,7 @@ std::optional<StereoPair> StereoSync::takePair()
         }
 
         noteDistance(skew_ns);
-        skew_ns_[skew_next_] = skew_ns;
-        skew_next_ = (skew_next_ + 1) % kSkewWindow;
-        skew_count_ = std::min(skew_count_ + 1, kSkewWindow);
+        skew_.add(skew_ns);
         newest_done_ns_[kLeft] = l_ns;
         newest_done_ns_[kRight] = r_ns;
 
@@ -189,28 +187,11 @@ SyncStats StereoSync::stats() const noexcept
     out.drops[kLeft] = drops_[kLeft];
     out.drops[kRight] = drops_[kRight];
 
-    if (skew_count_ > 0) {
-        std::array<int64_t, kSkewWindow> magnitude{};
-        int64_t abs_sum = 0;
-        int64_t signed_sum = 0;
-        int64_t max_ns = 0;
-        for (std::size_t i = 0; i < skew_count_; ++i) {
-            magnitude[i] = absNs(skew_ns_[i]);
-            abs_sum += magnitude[i];
-            signed_sum += skew_ns_[i];
-            max_ns = std::max(max_ns, magnitude[i]);
-        }
-        const auto count = static_cast<int64_t>(skew_count_);
-        out.skew_mean_ms = toMs(abs_sum) / static_cast<double>(count);
-        out.skew_signed_mean_ms = toMs(signed_sum) / static_cast<double>(count);
-        out.skew_max_ms = toMs(max_ns);
-        // p99 by the nearest-rank method: the smallest value at or above 99 % of them.
-        const std::size_t rank = (skew_count_ * 99 + 99) / 100; // ceil(0.99 n), >= 1
-        auto* nth = magnitude.begin() + static_cast<std::ptrdiff_t>(rank - 1);
-        std::nth_element(magnitude.begin(), nth,
-                         magnitude.begin() + static_cast<std::ptrdiff_t>(skew_count_));
-        out.skew_p99_ms = toMs(*nth);
-    }
+    const RollingSummary skew = skew_.summary();
+    out.skew_mean_ms = skew.mean_abs_ns / 1e6;
+    out.skew_signed_mean_ms = skew.mean_ns / 1e6;
+    out.skew_max_ms = toMs(skew.max_abs_ns);
+    out.skew_p99_ms = toMs(skew.p99_abs_ns);
 
     out.offset_samples = distance_count_;
     if (distance_count_ > 0) {

@@ -42,6 +42,7 @@
 #include <optional>
 #include <thread>
 
+#include "base/rolling_window.hpp"
 #include "capture/captured_frame.hpp"
 #include "capture/frame.hpp"
 #include "capture/frame_source.hpp"
@@ -70,7 +71,7 @@ struct SideDrops {
 struct SyncStats {
     uint64_t pairs = 0;
     SideDrops drops[2]; // indexed by StereoSide
-    // |right - left| of the recent pairs (the last kSkewWindow), in ms.
+    // |right - left| of the recent pairs (the last kSkewWindowPairs), in ms.
     double skew_mean_ms = 0.0;
     double skew_p99_ms = 0.0;
     double skew_max_ms = 0.0;
@@ -89,7 +90,6 @@ struct SyncStats {
 class StereoSync {
   public:
     static constexpr std::size_t kMaxPending = 8;
-    static constexpr std::size_t kSkewWindow = 256;  // pairs in the skew statistics
     static constexpr std::size_t kOffsetWindow = 64; // distances in the offset estimate
     // Distances needed before an offset is reported.
     static constexpr std::size_t kOffsetMinSamples = 16;
@@ -147,9 +147,7 @@ class StereoSync {
     uint64_t pairs_ = 0;
     SideDrops drops_[2];
 
-    std::array<int64_t, kSkewWindow> skew_ns_{}; // signed right - left of recent pairs
-    std::size_t skew_next_ = 0;
-    std::size_t skew_count_ = 0;
+    RollingWindow<kSkewWindowPairs> skew_; // signed right - left of recent pairs
     std::array<int64_t, kOffsetWindow> distance_ns_{};
     std::size_t distance_next_ = 0;
     std::size_t distance_count_ = 0;

@@ -14,6 +14,7 @@
 #include <sys/eventfd.h>
 #include <unistd.h>
 
+#include "base/system_error.hpp"
 #include "capture/frame_decoder.hpp"
 #include "capture/frame_pool.hpp"
 #include "capture/v4l2_device.hpp"
@@ -134,8 +135,8 @@ class V4l2Camera::Impl {
             wake_fd_ = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
             if (wake_fd_ < 0) {
                 const int error_number = errno;
-                setState(SourceState::Failed, fmt::format("{}: eventfd: {}", settings_.device,
-                                                          std::strerror(error_number)));
+                setState(SourceState::Failed,
+                         fmt::format("{}: eventfd: {}", settings_.device, errnoText(error_number)));
                 return -error_number;
             }
         }
@@ -398,7 +399,7 @@ class V4l2Camera::Impl {
         const int ready = ::poll(fds, 2, wait_ms);
         if (ready < 0) {
             if (errno != EINTR)
-                failDevice(fmt::format("{}: poll: {}", settings_.device, std::strerror(errno)));
+                failDevice(fmt::format("{}: poll: {}", settings_.device, errnoText(errno)));
             return;
         }
         if ((fds[1].revents & POLLIN) != 0)

@@ -7,6 +7,7 @@
 #include <fmt/format.h>
 #include <libv4l2.h>
 
+#include "base/system_error.hpp"
 #include "capture/v4l2_device.hpp"
 
 namespace stereod {
@@ -34,7 +35,7 @@ ControlReading V4l2Device::readControl(const char* name, uint32_t id, int64_t un
     v4l2_control control{};
     control.id = id;
     if (const int rc = xioctl(VIDIOC_G_CTRL, &control); rc < 0)
-        reading.error = fmt::format("VIDIOC_G_CTRL: {}", std::strerror(-rc));
+        reading.error = fmt::format("VIDIOC_G_CTRL: {}", errnoText(-rc));
     else
         reading.actual_value = static_cast<int64_t>(control.value) * unit;
     return reading;
@@ -71,7 +72,7 @@ ControlReading V4l2Device::setControl(const char* name, uint32_t id, int64_t val
     control.id = id;
     control.value = static_cast<int32_t>(raw);
     if (const int rc = xioctl(VIDIOC_S_CTRL, &control); rc < 0)
-        reading.error = fmt::format("VIDIOC_S_CTRL refused {}: {}", value, std::strerror(-rc));
+        reading.error = fmt::format("VIDIOC_S_CTRL refused {}: {}", value, errnoText(-rc));
 
     const ControlReading read_back = readControl(name, id, unit);
     reading.actual_value = read_back.actual_value;

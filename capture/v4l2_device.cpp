@@ -11,6 +11,8 @@
 #include <libv4l2.h>
 #include <sys/mman.h>
 
+#include "base/system_error.hpp"
+
 namespace stereod {
 
 namespace {
@@ -73,7 +75,7 @@ V4l2Device& V4l2Device::operator=(V4l2Device&& other) noexcept
 
 int V4l2Device::fail(const char* what, int error_number)
 {
-    error_ = fmt::format("{} on {}: {}", what, path_, std::strerror(error_number));
+    error_ = fmt::format("{} on {}: {}", what, path_, errnoText(error_number));
     return -error_number;
 }
 
@@ -258,7 +260,7 @@ int V4l2Device::negotiate(const CameraSettings& settings, NegotiatedFormat& out)
     parm.parm.capture.timeperframe = fpsToInterval(settings.fps);
     std::string rate_note;
     if (const int rc = xioctl(VIDIOC_S_PARM, &parm); rc < 0) {
-        rate_note = fmt::format(", frame rate not settable ({})", std::strerror(-rc));
+        rate_note = fmt::format(", frame rate not settable ({})", errnoText(-rc));
         parm = v4l2_streamparm{};
         parm.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
         if (xioctl(VIDIOC_G_PARM, &parm) < 0)

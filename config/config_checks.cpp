@@ -12,6 +12,7 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include "base/system_error.hpp"
 #include "config/key_table.hpp"
 #include "pipeline/census_sgm_matcher.hpp"
 #include "pipeline/zones.hpp"
@@ -155,7 +156,7 @@ void checkPath(Checker& checker, const std::string& key, const std::string& path
     } else if (!directory && !fs::is_regular_file(status)) {
         checker.fail(key, "is not a regular file", expected);
     } else if (::access(path.c_str(), R_OK | (directory ? X_OK : 0)) != 0) {
-        checker.fail(key, std::string("cannot be read: ") + std::strerror(errno), expected);
+        checker.fail(key, std::string("cannot be read: ") + errnoText(errno), expected);
     }
 }
 
@@ -429,7 +430,7 @@ void checkSocket(Checker& checker, const SocketConfig& socket)
                 ::getgrnam_r(socket.group.c_str(), &entry, buffer.data(), buffer.size(), &found);
             if (error != 0) {
                 checker.fail("socket.group",
-                             std::string("cannot be looked up: ") + std::strerror(error),
+                             std::string("cannot be looked up: ") + errnoText(error),
                              "a group of this system");
             } else if (found == nullptr) {
                 checker.fail("socket.group", "no such group", "a group of this system, or empty");

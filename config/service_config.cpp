@@ -9,6 +9,7 @@
 #include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
+#include "base/system_error.hpp"
 #include "config/config_checks.hpp"
 #include "config/key_table.hpp"
 #include "pipeline/census_sgm_matcher.hpp"
@@ -170,7 +171,7 @@ std::string readConfigFile(const std::string& path)
     }
     std::FILE* file = std::fopen(path.c_str(), "rb");
     if (file == nullptr) {
-        throw ConfigError({path + ": cannot read the configuration: " + std::strerror(errno)});
+        throw ConfigError({path + ": cannot read the configuration: " + errnoText(errno)});
     }
     std::string text;
     char buffer[8192];
@@ -186,7 +187,7 @@ std::string readConfigFile(const std::string& path)
     const int read_errno = errno;
     std::fclose(file);
     if (failed) {
-        throw ConfigError({path + ": cannot read the configuration: " + std::strerror(read_errno)});
+        throw ConfigError({path + ": cannot read the configuration: " + errnoText(read_errno)});
     }
     return text;
 }

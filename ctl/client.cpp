@@ -11,14 +11,11 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include "base/system_error.hpp"
+
 namespace stereod {
 
 namespace {
-
-std::string errnoText(int error_number)
-{
-    return std::system_category().message(error_number);
-}
 
 using Clock = std::chrono::steady_clock;
 

@@ -9,6 +9,8 @@
 #include <sys/signalfd.h>
 #include <unistd.h>
 
+#include "base/system_error.hpp"
+
 namespace stereod {
 
 SignalCatcher::SignalCatcher()
@@ -23,8 +25,7 @@ SignalCatcher::SignalCatcher()
     if (fd_ < 0) {
         const int error_number = errno;
         pthread_sigmask(SIG_SETMASK, &previous_, nullptr);
-        throw std::runtime_error("cannot create a signalfd: " +
-                                 std::system_category().message(error_number));
+        throw std::runtime_error("cannot create a signalfd: " + errnoText(error_number));
     }
 }
 

@@ -17,14 +17,11 @@
 #include <systemd/sd-daemon.h>
 #include <unistd.h>
 
+#include "base/system_error.hpp"
+
 namespace stereod {
 
 namespace {
-
-std::string errnoText(int error)
-{
-    return std::system_category().message(error);
-}
 
 struct BoundSocket {
     UniqueFd fd;

@@ -11,8 +11,8 @@
 
 #include <sys/types.h>
 
+#include "base/unique_fd.hpp"
 #include "config/service_config.hpp"
-#include "daemon/unique_fd.hpp"
 
 namespace stereod {
 

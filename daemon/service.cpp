@@ -16,6 +16,8 @@
 #include <sys/signalfd.h>
 #include <unistd.h>
 
+#include "base/system_error.hpp"
+
 namespace stereod {
 
 namespace {
@@ -151,8 +153,7 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
 
     stop_fd_ = UniqueFd(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
     if (!stop_fd_)
-        throw StartupError(ExitCode::Failure,
-                           "cannot create an eventfd: " + std::system_category().message(errno));
+        throw StartupError(ExitCode::Failure, "cannot create an eventfd: " + errnoText(errno));
     server_->watch(stop_fd_.get(), [this] { onStopRequest(); });
 
     if (options_.handle_signals) {
@@ -160,8 +161,7 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
         const sigset_t signals = serviceSignals();
         signal_fd_ = UniqueFd(::signalfd(-1, &signals, SFD_NONBLOCK | SFD_CLOEXEC));
         if (!signal_fd_)
-            throw StartupError(ExitCode::Failure, "cannot create a signalfd: " +
-                                                      std::system_category().message(errno));
+            throw StartupError(ExitCode::Failure, "cannot create a signalfd: " + errnoText(errno));
         server_->watch(signal_fd_.get(), [this] { onSignal(); });
     }
 }
@@ -179,9 +179,8 @@ ExitCode Service::run()
     const int rc = source_->start(*ring_);
     if (rc < 0) {
         const std::string reason = source_->status().last_error;
-        throw StartupError(ExitCode::Source,
-                           "cannot start the frame source: " +
-                               (reason.empty() ? std::system_category().message(-rc) : reason));
+        throw StartupError(ExitCode::Source, "cannot start the frame source: " +
+                                                 (reason.empty() ? errnoText(-rc) : reason));
     }
     running_ = true;
     worker_->start();

@@ -25,6 +25,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "base/unique_fd.hpp"
 #include "capture/frame_source.hpp"
 #include "config/service_config.hpp"
 #include "daemon/calibration_health_monitor.hpp"
@@ -32,7 +33,6 @@
 #include "daemon/socket_server.hpp"
 #include "daemon/source_counter_watch.hpp"
 #include "daemon/systemd_notifier.hpp"
-#include "daemon/unique_fd.hpp"
 #include "daemon/worker.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/stereo_processor.hpp"

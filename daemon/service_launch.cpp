@@ -10,6 +10,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "base/system_error.hpp"
 #include "daemon/camera_source_factory.hpp"
 #include "pipeline/calibration_formats.hpp"
 #include "replay/recording.hpp"
@@ -25,11 +26,11 @@ std::string readCalibrationText(const std::string& path)
 {
     std::ifstream in(path, std::ios::binary);
     if (!in)
-        throw std::runtime_error(path + ": cannot open: " + std::system_category().message(errno));
+        throw std::runtime_error(path + ": cannot open: " + errnoText(errno));
     std::ostringstream text;
     text << in.rdbuf();
     if (in.bad())
-        throw std::runtime_error(path + ": cannot read: " + std::system_category().message(errno));
+        throw std::runtime_error(path + ": cannot read: " + errnoText(errno));
     return text.str();
 }
 

@@ -13,6 +13,7 @@
 #include <sys/timerfd.h>
 #include <unistd.h>
 
+#include "base/system_error.hpp"
 #include "capture/frame.hpp"
 #include "daemon/peer_credentials.hpp"
 
@@ -31,11 +32,6 @@ constexpr uint64_t kTagWatchBase = uint64_t{1} << 32;
 // the rest is read on a later turn).
 constexpr std::size_t kReadChunkBytes = 64 * 1024;
 constexpr int kMaxEvents = 64;
-
-std::string errnoText(int error)
-{
-    return std::system_category().message(error);
-}
 
 // Seconds as a person writes them: "30", "0.5".
 std::string formatSeconds(double seconds)

@@ -33,12 +33,12 @@
 #include <poll.h>
 #include <sys/types.h>
 
+#include "base/unique_fd.hpp"
 #include "config/service_config.hpp"
 #include "daemon/listening_socket.hpp"
 #include "daemon/log_limiter.hpp"
 #include "daemon/publisher.hpp"
 #include "daemon/server_backend.hpp"
-#include "daemon/unique_fd.hpp"
 #include "pipeline/calibration.hpp"
 #include "protocol/json_writer.hpp"
 #include "protocol/reading_json.hpp"

@@ -5,6 +5,7 @@
 #include <sys/epoll.h>
 #include <sys/socket.h>
 
+#include "base/system_error.hpp"
 #include "capture/frame.hpp"
 #include "daemon/socket_server.hpp"
 
@@ -246,7 +247,7 @@ void SocketServer::updateEpoll(Client& client)
     event.data.u64 = client.id;
     if (::epoll_ctl(epoll_fd_.get(), EPOLL_CTL_MOD, client.fd.get(), &event) != 0) {
         spdlog::error("client {}: epoll_ctl(MOD): {}", client.id - kFirstClientTag,
-                      std::system_category().message(errno));
+                      errnoText(errno));
         closeClient(client);
         return;
     }

@@ -14,6 +14,7 @@
 #include <spdlog/spdlog.h>
 #include <yaml-cpp/yaml.h>
 
+#include "base/system_error.hpp"
 #include "pipeline/chessboard_calibration.hpp"
 
 namespace stereod {
@@ -29,7 +30,7 @@ std::string readText(const std::string& path)
 {
     std::ifstream in(path, std::ios::binary);
     if (!in)
-        fail(path, 0, "", std::string("cannot open: ") + std::strerror(errno));
+        fail(path, 0, "", std::string("cannot open: ") + errnoText(errno));
     std::ostringstream text;
     text << in.rdbuf();
     return text.str();
@@ -281,7 +282,7 @@ void writeText(const std::string& path, const std::string& text)
     if (out)
         out << text;
     if (!out || !out.flush())
-        fail(path, 0, "", std::string("cannot write: ") + std::strerror(errno));
+        fail(path, 0, "", std::string("cannot write: ") + errnoText(errno));
 }
 
 // ---------------------------------------------------------------------------------------

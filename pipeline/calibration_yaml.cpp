@@ -12,6 +12,7 @@
 #include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
+#include "base/system_error.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/calibration_checks.hpp"
 
@@ -406,11 +407,6 @@ class Writer {
   private:
     std::ostringstream out_;
 };
-
-std::string errnoText(int error)
-{
-    return std::strerror(error);
-}
 
 } // namespace
 

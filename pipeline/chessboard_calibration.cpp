@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 #include <unistd.h>
 
+#include "base/system_error.hpp"
 #include "pipeline/rectifier.hpp"
 
 namespace stereod {
@@ -149,7 +150,7 @@ void alignCornerOrder(const std::vector<cv::Point2f>& left, std::vector<cv::Poin
 cv::Mat readGray(const std::string& path)
 {
     if (::access(path.c_str(), R_OK) != 0)
-        throw ChessboardCalibrationError("cannot read image " + path + ": " + std::strerror(errno));
+        throw ChessboardCalibrationError("cannot read image " + path + ": " + errnoText(errno));
     cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
     if (image.empty())
         throw ChessboardCalibrationError("cannot read image " + path +
@@ -646,7 +647,7 @@ void writeRectifiedPreview(const ChessboardCalibrationResult& result, const std:
                   static_cast<std::streamsize>(bytes.size()));
     if (!out || !out.flush())
         throw ChessboardCalibrationError("cannot write preview " + png_path + ": " +
-                                         std::strerror(errno));
+                                         errnoText(errno));
 }
 
 } // namespace stereod

@@ -17,6 +17,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "base/system_error.hpp"
+
 namespace stereod {
 namespace {
 
@@ -37,7 +39,7 @@ constexpr double kMillimetresPerMetre = 1000.0;
 
 std::string errnoSuffix(int error)
 {
-    return error != 0 ? std::string(": ") + std::strerror(error) : std::string();
+    return error != 0 ? std::string(": ") + errnoText(error) : std::string();
 }
 
 std::string extensionOf(const std::string& path)

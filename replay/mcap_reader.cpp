@@ -7,6 +7,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "base/system_error.hpp"
+
 namespace stereod::mcap {
 
 namespace {
@@ -23,13 +25,13 @@ Reader::Reader(const std::string& path) : path_(path)
     fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd_ < 0) {
         const int code = errno;
-        throw McapError(path + ": cannot open: " + std::strerror(code), code);
+        throw McapError(path + ": cannot open: " + errnoText(code), code);
     }
     struct stat st {};
     if (::fstat(fd_, &st) != 0) {
         const int code = errno;
         ::close(fd_);
-        throw McapError(path + ": cannot stat: " + std::strerror(code), code);
+        throw McapError(path + ": cannot stat: " + errnoText(code), code);
     }
     const auto file_size = static_cast<uint64_t>(st.st_size);
     file_size_ = file_size;
@@ -79,7 +81,7 @@ bool Reader::readAt(uint64_t offset, uint64_t size, std::string& out) const
                 continue;
             }
             const int code = errno;
-            throw McapError(path_ + ": read failed: " + std::strerror(code), code);
+            throw McapError(path_ + ": read failed: " + errnoText(code), code);
         }
         if (n == 0) {
             return false;

@@ -6,13 +6,15 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include "base/system_error.hpp"
+
 namespace stereod::mcap {
 
 namespace {
 
 std::string errnoMessage(const std::string& path, const char* action, int code)
 {
-    return path + ": " + action + ": " + std::strerror(code);
+    return path + ": " + action + ": " + errnoText(code);
 }
 
 } // namespace

@@ -16,16 +16,13 @@
 #include <opencv2/imgcodecs.hpp>
 #include <unistd.h>
 
+#include "base/system_error.hpp"
+
 namespace stereod {
 
 namespace fs = std::filesystem;
 
 namespace {
-
-std::string errnoText(int code)
-{
-    return std::error_code(code, std::generic_category()).message();
-}
 
 std::string_view trim(std::string_view text)
 {

@@ -469,14 +469,7 @@ void ReplaySource::recordDelivery(int64_t stamp_ns, int64_t skew_ns) noexcept
     }
 
     // Single writer: plain load/store suffice for the running sums.
-    const int64_t skew_abs_ns = saturatingAbsNs(skew_ns);
-    const uint64_t pairs = pairs_.load(std::memory_order_relaxed);
-    recent_skew_abs_ns_[pairs % kSkewWindow].store(skew_abs_ns, std::memory_order_relaxed);
-    skew_abs_sum_ns_.store(
-        saturatingAddNs(skew_abs_sum_ns_.load(std::memory_order_relaxed), skew_abs_ns),
-        std::memory_order_relaxed);
-    if (skew_abs_ns > skew_abs_max_ns_.load(std::memory_order_relaxed))
-        skew_abs_max_ns_.store(skew_abs_ns, std::memory_order_relaxed);
+    skew_.add(skew_ns);
     frames_[kLeft].fetch_add(1, std::memory_order_relaxed);
     frames_[kRight].fetch_add(1, std::memory_order_relaxed);
     pairs_.fetch_add(1, std::memory_order_release);
@@ -610,24 +603,10 @@ SourceStatus ReplaySource::status() const
         out.cameras.push_back(std::move(camera));
     }
 
-    if (out.pairs > 0) {
-        out.skew_mean_ms = static_cast<double>(skew_abs_sum_ns_.load(std::memory_order_relaxed)) /
-                           static_cast<double>(out.pairs) / 1e6;
-        out.skew_max_ms =
-            static_cast<double>(skew_abs_max_ns_.load(std::memory_order_relaxed)) / 1e6;
-        const std::size_t window =
-            static_cast<std::size_t>(std::min<uint64_t>(out.pairs, kSkewWindow));
-        std::vector<int64_t> recent(window);
-        for (std::size_t k = 0; k < window; ++k)
-            recent[k] = recent_skew_abs_ns_[k].load(std::memory_order_relaxed);
-        // p99 of the recent pairs: the value below which 99 % of them lie.
-        const std::size_t rank =
-            std::min(window - 1,
-                     static_cast<std::size_t>(std::ceil(0.99 * static_cast<double>(window))) - 1);
-        std::nth_element(recent.begin(), recent.begin() + static_cast<std::ptrdiff_t>(rank),
-                         recent.end());
-        out.skew_p99_ms = static_cast<double>(recent[rank]) / 1e6;
-    }
+    const RollingSummary skew = skew_.summary();
+    out.skew_mean_ms = skew.mean_abs_ns / 1e6;
+    out.skew_max_ms = static_cast<double>(skew.max_abs_ns) / 1e6;
+    out.skew_p99_ms = static_cast<double>(skew.p99_abs_ns) / 1e6;
     return out;
 }
 

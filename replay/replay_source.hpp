@@ -53,6 +53,7 @@
 #include <utility>
 #include <vector>
 
+#include "base/rolling_window.hpp"
 #include "capture/frame_pool.hpp"
 #include "capture/frame_source.hpp"
 #include "replay/mcap_recording.hpp"
@@ -189,10 +190,7 @@ class ReplaySource final : public FrameSource {
     std::atomic<uint64_t> bad_frames_[2]{};
     std::atomic<uint64_t> dropped_{0}; // pairs skipped for want of pool buffers
     std::atomic<double> fps_{0.0};
-    std::atomic<int64_t> skew_abs_sum_ns_{0};
-    std::atomic<int64_t> skew_abs_max_ns_{0};
-    static constexpr std::size_t kSkewWindow = 128; // recent pairs for the p99 skew
-    std::array<std::atomic<int64_t>, kSkewWindow> recent_skew_abs_ns_{};
+    RollingWindow<kSkewWindowPairs> skew_; // recorded right - left of recent pairs
     mutable std::mutex status_mutex_;
     std::string last_error_;      // guarded by status_mutex_
     std::string camera_error_[2]; // guarded by status_mutex_
