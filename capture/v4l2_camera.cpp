@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include "base/system_error.hpp"
+#include "base/unique_fd.hpp"
 #include "capture/frame_decoder.hpp"
 #include "capture/frame_pool.hpp"
 #include "capture/v4l2_device.hpp"
@@ -123,17 +124,15 @@ class V4l2Camera::Impl {
         stop();
         active_.reset();
         retired_.clear();
-        if (wake_fd_ >= 0)
-            ::close(wake_fd_);
     }
 
     int start(CapturedRing& ring, std::atomic<uint32_t>* wake)
     {
         if (thread_.joinable())
             return -EBUSY;
-        if (wake_fd_ < 0) {
-            wake_fd_ = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
-            if (wake_fd_ < 0) {
+        if (!wake_fd_) {
+            wake_fd_.reset(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
+            if (!wake_fd_) {
                 const int error_number = errno;
                 setState(SourceState::Failed,
                          fmt::format("{}: eventfd: {}", settings_.device, errnoText(error_number)));
@@ -155,7 +154,7 @@ class V4l2Camera::Impl {
     {
         if (thread_.joinable()) {
             stop_requested_.store(true, std::memory_order_release);
-            wakeUp(wake_fd_);
+            wakeUp(wake_fd_.get());
             thread_.join();
         }
         if (active_) {
@@ -219,7 +218,7 @@ class V4l2Camera::Impl {
     // streaming. On failure the state is Failed with the reason, and nothing stays open.
     int openDevice()
     {
-        auto set = std::make_unique<BufferSet>(wake_fd_);
+        auto set = std::make_unique<BufferSet>(wake_fd_.get());
         NegotiatedFormat format;
         std::vector<ControlReading> controls;
         int rc = set->device.open(settings_.device);
@@ -299,7 +298,7 @@ class V4l2Camera::Impl {
     // counter. Returns false when stop was asked.
     bool waitForWake(int timeout_ms) noexcept
     {
-        pollfd fd{wake_fd_, POLLIN, 0};
+        pollfd fd{wake_fd_.get(), POLLIN, 0};
         ::poll(&fd, 1, std::max(timeout_ms, 0));
         drainWake();
         return !stop_requested_.load(std::memory_order_acquire);
@@ -308,7 +307,7 @@ class V4l2Camera::Impl {
     void drainWake() noexcept
     {
         uint64_t count = 0;
-        [[maybe_unused]] const ssize_t n = ::read(wake_fd_, &count, sizeof count);
+        [[maybe_unused]] const ssize_t n = ::read(wake_fd_.get(), &count, sizeof count);
     }
 
     void run()
@@ -393,7 +392,7 @@ class V4l2Camera::Impl {
             return;
         }
 
-        pollfd fds[2] = {{set.device.fd(), POLLIN, 0}, {wake_fd_, POLLIN, 0}};
+        pollfd fds[2] = {{set.device.fd(), POLLIN, 0}, {wake_fd_.get(), POLLIN, 0}};
         const int wait_ms = static_cast<int>(std::clamp<int64_t>(
             (stalled_ ? reopen_ms : stall_timeout_ms_) - silent_ms, 1, stall_timeout_ms_));
         const int ready = ::poll(fds, 2, wait_ms);
@@ -570,7 +569,7 @@ class V4l2Camera::Impl {
 
     std::thread thread_;
     std::atomic<bool> stop_requested_{false};
-    int wake_fd_ = -1; // eventfd: stop() and returned buffers
+    UniqueFd wake_fd_; // eventfd: stop() and returned buffers
     CapturedRing* ring_ = nullptr;
     std::atomic<uint32_t>* wake_ = nullptr;
 

@@ -12,6 +12,7 @@
 #include <sys/mman.h>
 
 #include "base/system_error.hpp"
+#include "base/unique_fd.hpp"
 
 namespace stereod {
 
@@ -93,16 +94,14 @@ int V4l2Device::open(const std::string& path)
     close();
     path_ = path;
     error_.clear();
-    const int fd = ::open(path.c_str(), O_RDWR | O_NONBLOCK | O_CLOEXEC);
-    if (fd < 0)
+    UniqueFd fd(::open(path.c_str(), O_RDWR | O_NONBLOCK | O_CLOEXEC));
+    if (!fd)
         return fail("open", errno);
     // See the header: no libv4l2 format emulation, we want the camera's own formats.
-    if (v4l2_fd_open(fd, V4L2_DISABLE_CONVERSION) < 0) {
-        const int error_number = errno;
-        ::close(fd);
-        return fail("v4l2_fd_open", error_number);
-    }
-    fd_ = fd;
+    if (v4l2_fd_open(fd.get(), V4L2_DISABLE_CONVERSION) < 0)
+        return fail("v4l2_fd_open", errno);
+    // From here libv4l2 owns the descriptor: close() gives it back with v4l2_close().
+    fd_ = fd.release();
 
     v4l2_capability caps{};
     if (const int rc = xioctl(VIDIOC_QUERYCAP, &caps); rc < 0) {

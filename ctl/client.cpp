@@ -38,7 +38,7 @@ ProtocolClient::~ProtocolClient()
 
 ProtocolClient::ProtocolClient(ProtocolClient&& other) noexcept
     : socket_path_(std::move(other.socket_path_)), timeout_(other.timeout_),
-      fd_(std::exchange(other.fd_, -1)), cancel_fd_(std::exchange(other.cancel_fd_, -1)),
+      fd_(std::move(other.fd_)), cancel_fd_(std::exchange(other.cancel_fd_, -1)),
       rx_(std::move(other.rx_)), rx_begin_(std::exchange(other.rx_begin_, 0))
 {
 }
@@ -49,7 +49,7 @@ ProtocolClient& ProtocolClient::operator=(ProtocolClient&& other) noexcept
         close();
         socket_path_ = std::move(other.socket_path_);
         timeout_ = other.timeout_;
-        fd_ = std::exchange(other.fd_, -1);
+        fd_ = std::move(other.fd_);
         cancel_fd_ = std::exchange(other.cancel_fd_, -1);
         rx_ = std::move(other.rx_);
         rx_begin_ = std::exchange(other.rx_begin_, 0);
@@ -59,10 +59,7 @@ ProtocolClient& ProtocolClient::operator=(ProtocolClient&& other) noexcept
 
 void ProtocolClient::close() noexcept
 {
-    if (fd_ >= 0) {
-        ::close(fd_);
-        fd_ = -1;
-    }
+    fd_.reset();
 }
 
 void ProtocolClient::connectSocket()
@@ -77,8 +74,8 @@ void ProtocolClient::connectSocket()
     }
     std::memcpy(address.sun_path, socket_path_.data(), socket_path_.size());
 
-    fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
-    if (fd_ < 0) {
+    fd_.reset(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0));
+    if (!fd_) {
         const int error_number = errno;
         throw ClientError("cannot create a socket to connect to " + socket_path_ + ": " +
                               errnoText(error_number),
@@ -87,7 +84,8 @@ void ProtocolClient::connectSocket()
 
     const auto deadline = Clock::now() + timeout_;
     for (;;) {
-        if (::connect(fd_, reinterpret_cast<const sockaddr*>(&address), sizeof(address)) == 0) {
+        if (::connect(fd_.get(), reinterpret_cast<const sockaddr*>(&address), sizeof(address)) ==
+            0) {
             return;
         }
         const int error_number = errno;
@@ -98,7 +96,7 @@ void ProtocolClient::connectSocket()
             waitFor(POLLOUT, "connecting");
             int socket_error = 0;
             socklen_t length = sizeof(socket_error);
-            ::getsockopt(fd_, SOL_SOCKET, SO_ERROR, &socket_error, &length);
+            ::getsockopt(fd_.get(), SOL_SOCKET, SO_ERROR, &socket_error, &length);
             if (socket_error == 0) {
                 return;
             }
@@ -121,10 +119,10 @@ void ProtocolClient::connectSocket()
 
 void ProtocolClient::waitFor(short events, const char* doing)
 {
-    if (fd_ < 0) {
+    if (!fd_) {
         throw ClientError("not connected to " + socket_path_, ENOTCONN);
     }
-    pollfd fds[2] = {{fd_, events, 0}, {cancel_fd_, POLLIN, 0}};
+    pollfd fds[2] = {{fd_.get(), events, 0}, {cancel_fd_, POLLIN, 0}};
     const nfds_t count = cancel_fd_ >= 0 ? 2 : 1;
     const int timeout_ms = timeout_ < std::chrono::milliseconds::zero()
                                ? -1
@@ -171,8 +169,8 @@ void ProtocolClient::sendRaw(std::string_view bytes)
 {
     std::size_t sent = 0;
     while (sent < bytes.size()) {
-        const ssize_t n =
-            ::send(fd_, bytes.data() + sent, bytes.size() - sent, MSG_NOSIGNAL | MSG_DONTWAIT);
+        const ssize_t n = ::send(fd_.get(), bytes.data() + sent, bytes.size() - sent,
+                                 MSG_NOSIGNAL | MSG_DONTWAIT);
         if (n >= 0) {
             sent += static_cast<std::size_t>(n);
             continue;
@@ -193,7 +191,7 @@ void ProtocolClient::sendRaw(std::string_view bytes)
 std::size_t ProtocolClient::receiveSome(char* data, std::size_t capacity, const char* doing)
 {
     for (;;) {
-        const ssize_t n = ::recv(fd_, data, capacity, MSG_DONTWAIT);
+        const ssize_t n = ::recv(fd_.get(), data, capacity, MSG_DONTWAIT);
         if (n >= 0) {
             return static_cast<std::size_t>(n);
         }

@@ -15,6 +15,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "base/unique_fd.hpp"
+
 namespace stereod {
 
 // The service cannot be reached or the connection failed: what() names the socket path
@@ -104,7 +106,7 @@ class ProtocolClient {
 
     const std::string& socketPath() const noexcept { return socket_path_; }
     // The connected socket, for poll() loops of the caller; -1 after a move.
-    int fd() const noexcept { return fd_; }
+    int fd() const noexcept { return fd_.get(); }
 
   private:
     void connectSocket();
@@ -120,7 +122,7 @@ class ProtocolClient {
 
     std::string socket_path_;
     std::chrono::milliseconds timeout_;
-    int fd_ = -1;
+    UniqueFd fd_;
     int cancel_fd_ = -1;
     std::string rx_;           // bytes received and not consumed yet
     std::size_t rx_begin_ = 0; // first unconsumed byte in rx_

@@ -21,8 +21,8 @@ SignalCatcher::SignalCatcher()
     if (pthread_sigmask(SIG_BLOCK, &signals_, &previous_) != 0) {
         throw std::runtime_error("cannot block SIGINT and SIGTERM");
     }
-    fd_ = ::signalfd(-1, &signals_, SFD_CLOEXEC | SFD_NONBLOCK);
-    if (fd_ < 0) {
+    fd_.reset(::signalfd(-1, &signals_, SFD_CLOEXEC | SFD_NONBLOCK));
+    if (!fd_) {
         const int error_number = errno;
         pthread_sigmask(SIG_SETMASK, &previous_, nullptr);
         throw std::runtime_error("cannot create a signalfd: " + errnoText(error_number));
@@ -34,15 +34,15 @@ SignalCatcher::~SignalCatcher()
     // A signal that arrived is consumed first, so that unblocking does not deliver it
     // again and kill the process after it chose to end cleanly.
     signalfd_siginfo info{};
-    while (::read(fd_, &info, sizeof(info)) == static_cast<ssize_t>(sizeof(info))) {
+    while (::read(fd_.get(), &info, sizeof(info)) == static_cast<ssize_t>(sizeof(info))) {
     }
-    ::close(fd_);
+    fd_.reset();
     pthread_sigmask(SIG_SETMASK, &previous_, nullptr);
 }
 
 bool SignalCatcher::pending() const
 {
-    pollfd p = {fd_, POLLIN, 0};
+    pollfd p = {fd_.get(), POLLIN, 0};
     return ::poll(&p, 1, 0) > 0;
 }
 

@@ -6,6 +6,8 @@
 
 #include <signal.h>
 
+#include "base/unique_fd.hpp"
+
 namespace stereod {
 
 // Blocks SIGINT and SIGTERM and takes them through a signalfd instead; restores the mask
@@ -18,7 +20,7 @@ class SignalCatcher {
     SignalCatcher& operator=(const SignalCatcher&) = delete;
 
     // Readable when a signal is waiting: for ProtocolClient::setCancelFd.
-    int fd() const noexcept { return fd_; }
+    int fd() const noexcept { return fd_.get(); }
 
     // True when a signal is waiting: checked between events, because the client only
     // looks at the descriptor when it has to wait, and a busy stream may never make it.
@@ -27,7 +29,7 @@ class SignalCatcher {
   private:
     sigset_t signals_{};
     sigset_t previous_{};
-    int fd_ = -1;
+    UniqueFd fd_;
 };
 
 } // namespace stereod

@@ -9,6 +9,7 @@
 #include <sys/eventfd.h>
 #include <unistd.h>
 
+#include "base/system_error.hpp"
 #include "capture/frame.hpp"
 
 namespace stereod {
@@ -31,14 +32,11 @@ void FixedText::format(const char* format, ...) noexcept
 
 Publisher::Publisher() : event_fd_(eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC))
 {
-    if (event_fd_ < 0)
-        throw std::system_error(errno, std::generic_category(), "publisher: eventfd");
+    if (!event_fd_)
+        throw systemError(errno, "publisher: eventfd");
 }
 
-Publisher::~Publisher()
-{
-    ::close(event_fd_);
-}
+Publisher::~Publisher() = default;
 
 void Publisher::publish() noexcept
 {
@@ -53,7 +51,7 @@ void Publisher::publish() noexcept
     // The counter only wakes epoll; EAGAIN (counter at its maximum, reader far behind)
     // loses nothing, the reader takes the newest slot whatever the count.
     const uint64_t one = 1;
-    [[maybe_unused]] const ssize_t written = ::write(event_fd_, &one, sizeof one);
+    [[maybe_unused]] const ssize_t written = ::write(event_fd_.get(), &one, sizeof one);
 }
 
 const PublishedFrame* Publisher::latest() noexcept
@@ -77,7 +75,7 @@ void Publisher::wantRawUntil(int64_t deadline_ns) noexcept
 void Publisher::clearEvent() noexcept
 {
     uint64_t count = 0;
-    [[maybe_unused]] const ssize_t got = ::read(event_fd_, &count, sizeof count);
+    [[maybe_unused]] const ssize_t got = ::read(event_fd_.get(), &count, sizeof count);
 }
 
 } // namespace stereod

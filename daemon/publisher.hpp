@@ -26,6 +26,7 @@
 
 #include <opencv2/core/mat.hpp>
 
+#include "base/unique_fd.hpp"
 #include "pipeline/stereo_processor.hpp"
 #include "pipeline/zones.hpp"
 
@@ -121,7 +122,7 @@ class Publisher {
     void clearEvent() noexcept;
 
     // Readable (EPOLLIN) after every publish() until clearEvent().
-    int eventFd() const noexcept { return event_fd_; }
+    int eventFd() const noexcept { return event_fd_.get(); }
 
     // Any thread (the I/O thread): someone wants raw frames (a raw snapshot, a raw
     // subscriber) until `deadline_ns` (CLOCK_MONOTONIC); a later deadline extends it.
@@ -146,7 +147,7 @@ class Publisher {
     std::atomic<uint8_t> middle_{2}; // index of the middle slot | kFresh
     std::atomic<uint64_t> published_{0};
     std::atomic<int64_t> raw_wanted_until_ns_{0};
-    int event_fd_ = -1;
+    UniqueFd event_fd_;
 };
 
 } // namespace stereod

@@ -8,6 +8,9 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "base/system_error.hpp"
+#include "base/unique_fd.hpp"
+
 namespace stereod {
 
 namespace {
@@ -125,18 +128,18 @@ int readImageFile(const std::string& path, std::size_t max_bytes, std::vector<ui
         return code;
     };
     // O_NONBLOCK: opening a FIFO nobody writes must not wait.
-    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY);
-    if (fd < 0) {
+    const UniqueFd file(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY));
+    const int fd = file.get();
+    if (!file) {
         const int code = errno;
-        return fail(code, code == ENOENT
-                              ? std::string("missing")
-                              : "cannot be read: " + std::generic_category().message(code));
+        return fail(code,
+                    code == ENOENT ? std::string("missing") : "cannot be read: " + errnoText(code));
     }
     struct stat info {};
     int code = 0;
     if (::fstat(fd, &info) != 0) {
         code = errno;
-        reason = "cannot be read: " + std::generic_category().message(code);
+        reason = "cannot be read: " + errnoText(code);
     } else if (!S_ISREG(info.st_mode)) {
         code = EINVAL;
         reason = "is not a regular file (a device, a FIFO or a directory)";
@@ -154,7 +157,7 @@ int readImageFile(const std::string& path, std::size_t max_bytes, std::vector<ui
                 continue;
             if (n < 0) {
                 code = errno;
-                reason = "cannot be read: " + std::generic_category().message(code);
+                reason = "cannot be read: " + errnoText(code);
                 break;
             }
             if (n == 0)
@@ -168,7 +171,6 @@ int readImageFile(const std::string& path, std::size_t max_bytes, std::vector<ui
             bytes.clear();
         }
     }
-    ::close(fd);
     return code;
 }
 

@@ -22,15 +22,14 @@ std::string_view magicView()
 
 Reader::Reader(const std::string& path) : path_(path)
 {
-    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd_ < 0) {
+    fd_.reset(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+    if (!fd_.valid()) {
         const int code = errno;
         throw McapError(path + ": cannot open: " + errnoText(code), code);
     }
     struct stat st {};
-    if (::fstat(fd_, &st) != 0) {
+    if (::fstat(fd_.get(), &st) != 0) {
         const int code = errno;
-        ::close(fd_);
         throw McapError(path + ": cannot stat: " + errnoText(code), code);
     }
     const auto file_size = static_cast<uint64_t>(st.st_size);
@@ -53,17 +52,12 @@ Reader::Reader(const std::string& path) : path_(path)
             scan(file_size);
         }
     } catch (...) {
-        ::close(fd_);
+        fd_.reset();
         throw;
     }
 }
 
-Reader::~Reader()
-{
-    if (fd_ >= 0) {
-        ::close(fd_);
-    }
-}
+Reader::~Reader() = default;
 
 bool Reader::readAt(uint64_t offset, uint64_t size, std::string& out) const
 {
@@ -75,7 +69,7 @@ bool Reader::readAt(uint64_t offset, uint64_t size, std::string& out) const
     uint64_t done = 0;
     while (done < size) {
         const ssize_t n =
-            ::pread(fd_, out.data() + done, size - done, static_cast<off_t>(offset + done));
+            ::pread(fd_.get(), out.data() + done, size - done, static_cast<off_t>(offset + done));
         if (n < 0) {
             if (errno == EINTR) {
                 continue;

@@ -22,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "base/unique_fd.hpp"
 #include "replay/mcap_records.hpp"
 
 namespace stereod::mcap {
@@ -85,7 +86,7 @@ class Reader {
     const std::string& loadChunk(uint32_t i);
 
     std::string path_;
-    int fd_ = -1;
+    UniqueFd fd_;
     uint64_t file_size_ = 0; // as opened (a file still growing is read up to this)
     Header header_;
     std::map<uint16_t, Schema> schemas_;

@@ -10,6 +10,8 @@
 #include <opencv2/imgproc.hpp>
 #include <unistd.h>
 
+#include "base/unique_fd.hpp"
+
 namespace stereod {
 
 namespace {
@@ -54,13 +56,12 @@ std::string siblingInfoTopic(const std::string& image_topic)
 
 bool isMcapFile(const std::string& path)
 {
-    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd < 0) {
+    const UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+    if (!fd) {
         return false;
     }
     uint8_t start[mcap::kMagicSize] = {};
-    const ssize_t n = ::pread(fd, start, sizeof start, 0);
-    ::close(fd);
+    const ssize_t n = ::pread(fd.get(), start, sizeof start, 0);
     return n == static_cast<ssize_t>(sizeof start) &&
            std::memcmp(start, mcap::kMagic, sizeof start) == 0;
 }

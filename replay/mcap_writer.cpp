@@ -22,8 +22,8 @@ std::string errnoMessage(const std::string& path, const char* action, int code)
 Writer::Writer(const std::string& path, WriterOptions options)
     : path_(path), options_(std::move(options))
 {
-    fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-    if (fd_ < 0) {
+    fd_.reset(::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644));
+    if (!fd_.valid()) {
         const int code = errno;
         throw McapError(errnoMessage(path, "cannot create", code), code);
     }
@@ -39,9 +39,6 @@ Writer::~Writer()
         close();
     } catch (const McapError& e) {
         std::fprintf(stderr, "mcap: %s\n", e.what());
-    }
-    if (fd_ >= 0) {
-        ::close(fd_);
     }
 }
 
@@ -61,7 +58,7 @@ void Writer::append(std::string_view bytes)
     const char* p = bytes.data();
     std::size_t left = bytes.size();
     while (left > 0) {
-        const ssize_t n = ::write(fd_, p, left);
+        const ssize_t n = ::write(fd_.get(), p, left);
         if (n < 0) {
             if (errno == EINTR) {
                 continue;
@@ -211,7 +208,7 @@ void Writer::flushChunk()
 
 void Writer::close()
 {
-    if (closed_ || fd_ < 0) {
+    if (closed_ || !fd_.valid()) {
         return;
     }
     if (failed_) {
@@ -281,13 +278,12 @@ void Writer::close()
     append(out_);
 
     closed_ = true;
-    if (::fsync(fd_) != 0 && errno != EINVAL) {
+    if (::fsync(fd_.get()) != 0 && errno != EINVAL) {
         const int code = errno;
         throw McapError(errnoMessage(path_, "fsync failed", code), code);
     }
-    const int fd = fd_;
-    fd_ = -1;
-    if (::close(fd) != 0) {
+    // Closed here, not by UniqueFd, so that a failing close() is reported.
+    if (::close(fd_.release()) != 0) {
         const int code = errno;
         throw McapError(errnoMessage(path_, "close failed", code), code);
     }

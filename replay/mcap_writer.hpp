@@ -24,6 +24,7 @@
 #include <string_view>
 #include <vector>
 
+#include "base/unique_fd.hpp"
 #include "replay/mcap_records.hpp"
 
 namespace stereod::mcap {
@@ -90,7 +91,7 @@ class Writer {
 
     std::string path_;
     WriterOptions options_;
-    int fd_ = -1;
+    UniqueFd fd_;
     bool failed_ = false;
     bool closed_ = false;
     uint64_t position_ = 0; // bytes in the file

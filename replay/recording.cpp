@@ -353,26 +353,22 @@ RecordingWriter::RecordingWriter(const std::string& dir, const std::string& cali
             throw RecordingError(ec.value(), "cannot copy calibration " + calibration_path +
                                                  " to " + target.string() + ": " + ec.message());
     }
-    csv_fd_ = ::open(csv_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_APPEND | O_CLOEXEC, 0644);
-    if (csv_fd_ < 0) {
+    csv_fd_.reset(
+        ::open(csv_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_APPEND | O_CLOEXEC, 0644));
+    if (!csv_fd_.valid()) {
         const int error = errno;
         throw RecordingError(error, csv_path_ + ": cannot create: " + errnoText(error));
     }
     const std::string header = std::string(kFramesCsvHeader) + '\n';
-    if (!writeAll(csv_fd_, header.data(), header.size())) {
+    if (!writeAll(csv_fd_.get(), header.data(), header.size())) {
         const int error = errno;
-        ::close(csv_fd_);
-        csv_fd_ = -1;
+        csv_fd_.reset();
         throw RecordingError(error, csv_path_ + ": cannot write: " + errnoText(error));
     }
     csv_bytes_ = header.size();
 }
 
-RecordingWriter::~RecordingWriter()
-{
-    if (csv_fd_ >= 0)
-        ::close(csv_fd_);
-}
+RecordingWriter::~RecordingWriter() = default;
 
 void RecordingWriter::writeCalibrationText(const std::string& yaml_text)
 {
@@ -431,9 +427,9 @@ uint64_t RecordingWriter::write(const cv::Mat& left, const cv::Mat& right, int64
     const std::string row = std::to_string(next_index_) + ',' + std::to_string(left_stamp_ns) +
                             ',' + std::to_string(right_stamp_ns) + ',' + left_name + ',' +
                             right_name + '\n';
-    if (!writeAll(csv_fd_, row.data(), row.size())) {
+    if (!writeAll(csv_fd_.get(), row.data(), row.size())) {
         const int error = errno;
-        [[maybe_unused]] const int cut = ::ftruncate(csv_fd_, static_cast<off_t>(csv_bytes_));
+        [[maybe_unused]] const int cut = ::ftruncate(csv_fd_.get(), static_cast<off_t>(csv_bytes_));
         ::unlink((fs::path(dir_) / left_name).c_str());
         ::unlink((fs::path(dir_) / right_name).c_str());
         throw RecordingError(error, csv_path_ + ": cannot append pair " +

@@ -20,6 +20,8 @@
 
 #include <opencv2/core/mat.hpp>
 
+#include "base/unique_fd.hpp"
+
 namespace stereod {
 
 // A recording that cannot be read or written. what() names the file (and line) and the
@@ -111,7 +113,7 @@ class RecordingWriter {
 
     std::string dir_;
     std::string csv_path_;
-    int csv_fd_ = -1;        // frames.csv, O_APPEND
+    UniqueFd csv_fd_;        // frames.csv, O_APPEND
     uint64_t csv_bytes_ = 0; // its length after the last complete row
     cv::Size size_;          // size of the first pair; every pair must match
     uint64_t next_index_ = 0;

@@ -18,6 +18,7 @@
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include "base/unique_fd.hpp"
 #include "replay/image_file.hpp"
 
 namespace stereod {
@@ -58,20 +59,17 @@ void decodeQuietly(const std::vector<uint8_t>& bytes, cv::Mat& out, std::string&
     }
     std::lock_guard console(spdlog::details::console_mutex::mutex());
     std::fflush(stderr);
-    const int saved = ::dup(STDERR_FILENO);
-    if (saved < 0 || ::dup2(pipe_fds[1], STDERR_FILENO) < 0) {
-        if (saved >= 0)
-            ::close(saved);
+    const UniqueFd saved(::dup(STDERR_FILENO));
+    if (!saved || ::dup2(pipe_fds[1], STDERR_FILENO) < 0) {
         out = cv::imdecode(encoded, cv::IMREAD_GRAYSCALE);
         return;
     }
     struct Restore {
-        int saved;
+        const UniqueFd& saved;
         ~Restore()
         {
             std::fflush(stderr);
-            ::dup2(saved, STDERR_FILENO);
-            ::close(saved);
+            ::dup2(saved.get(), STDERR_FILENO);
         }
     };
     {
