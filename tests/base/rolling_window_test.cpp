@@ -72,8 +72,9 @@ TEST(RollingWindow, ReaderOnAnotherThreadSeesWholeSamples)
     });
     for (int i = 0; i < 1000; ++i) {
         const RollingSummary summary = window.summary();
-        if (summary.count > 0)
+        if (summary.count > 0) {
             ASSERT_EQ(summary.max_abs_ns, 5);
+        }
     }
     writer.join();
 }

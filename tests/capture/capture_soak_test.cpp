@@ -19,6 +19,7 @@
 
 #include "capture/stereo_camera_source.hpp"
 #include "tests/fake_v4l2/fake_v4l2.hpp"
+#include "tests/support/data_paths.hpp"
 
 namespace stereod {
 namespace {
@@ -51,7 +52,7 @@ TEST(CaptureSoakTest, SixtySecondsAt30FpsWithReplugsGrowNeitherMemoryNorFds)
 {
     const fs::path dir = fs::temp_directory_path() / ("capture_soak_" + std::to_string(getpid()));
     fs::create_directories(dir);
-    const std::string samples = STEREOD_OPENCV_SAMPLES_DIR;
+    const std::string samples = test::opencvSamplesDir();
     {
         std::ofstream out(dir / "devices.yaml");
         out << "devices:\n";

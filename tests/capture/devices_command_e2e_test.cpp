@@ -8,8 +8,8 @@
 #include <nlohmann/json.hpp>
 
 #include "capture/device_list.hpp"
-#include "tests/capture/fake_camera_support.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/fake_cameras.hpp"
+#include "tests/support/process.hpp"
 
 namespace stereod {
 namespace {

@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "capture/frame_decoder.hpp"
+#include "tests/support/data_paths.hpp"
 
 namespace stereod {
 namespace {
@@ -24,7 +25,7 @@ class FrameDecoderTest : public ::testing::Test {
   protected:
     void SetUp() override
     {
-        const cv::Mat aloe = cv::imread(std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/aloeL.jpg");
+        const cv::Mat aloe = cv::imread(test::opencvSamplesDir() + "/aloeL.jpg");
         ASSERT_FALSE(aloe.empty());
         cv::resize(aloe, bgr_, cv::Size(kWidth, kHeight), 0, 0, cv::INTER_AREA);
         cv::cvtColor(bgr_, gray_, cv::COLOR_BGR2GRAY);

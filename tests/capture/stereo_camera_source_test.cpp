@@ -22,7 +22,8 @@
 #include "capture/frame_pool.hpp"
 #include "capture/side_by_side_source.hpp"
 #include "capture/stereo_camera_source.hpp"
-#include "tests/capture/fake_camera_support.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/fake_cameras.hpp"
 
 namespace stereod {
 namespace {
@@ -45,7 +46,7 @@ class CameraSourceTest : public ::testing::Test {
                ("stereod_sources_" + std::to_string(::getpid()) + "_" +
                 ::testing::UnitTest::GetInstance()->current_test_info()->name());
         fs::create_directories(dir_);
-        const std::string samples = STEREOD_OPENCV_SAMPLES_DIR;
+        const std::string samples = test::opencvSamplesDir();
         for (int side = 0; side < 2; ++side) {
             const cv::Mat image = cv::imread(samples + (side == 0 ? "/aloeL.jpg" : "/aloeR.jpg"),
                                              cv::IMREAD_GRAYSCALE);

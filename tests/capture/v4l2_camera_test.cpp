@@ -17,7 +17,7 @@
 #include <opencv2/core.hpp>
 
 #include "capture/v4l2_camera.hpp"
-#include "tests/capture/fake_camera_support.hpp"
+#include "tests/support/fake_cameras.hpp"
 
 namespace stereod {
 namespace {

@@ -12,7 +12,7 @@
 
 #include "capture/device_list.hpp"
 #include "capture/v4l2_device.hpp"
-#include "tests/capture/fake_camera_support.hpp"
+#include "tests/support/fake_cameras.hpp"
 
 namespace stereod {
 namespace {

@@ -12,45 +12,12 @@
 #include <yaml-cpp/yaml.h>
 
 #include "config/service_config.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
 
 namespace fs = std::filesystem;
-
-// A fresh directory under the system's temporary directory, removed afterwards.
-class TempDir {
-  public:
-    TempDir()
-    {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        path_ = fs::temp_directory_path() /
-                ("stereod-config-" + std::to_string(::getpid()) + "-" + info->name());
-        fs::remove_all(path_);
-        fs::create_directories(path_);
-    }
-    ~TempDir()
-    {
-        std::error_code ignored;
-        fs::remove_all(path_, ignored);
-    }
-    TempDir(const TempDir&) = delete;
-    TempDir& operator=(const TempDir&) = delete;
-
-    const fs::path& path() const { return path_; }
-
-    // Writes `text` to the relative path `name`, creating directories; returns the path.
-    fs::path write(const std::string& name, const std::string& text) const
-    {
-        const fs::path file = path_ / name;
-        fs::create_directories(file.parent_path());
-        std::ofstream(file) << text;
-        return file;
-    }
-
-  private:
-    fs::path path_;
-};
 
 std::string readText(const fs::path& path)
 {
@@ -150,14 +117,14 @@ TEST(ConfigExamples, AloeDemoLoadsAgainstItsRecording)
 {
     const std::string text =
         readText(fs::path(STEREOD_SOURCE_DIR) / "config/examples/aloe-demo.yaml");
-    TempDir tree;
+    test::TempDir tree;
     const fs::path file = tree.write("config/examples/aloe-demo.yaml", text);
-    const fs::path recording = tree.path() / "build/demo/aloe";
+    const fs::path recording = fs::path(tree.path()) / "build/demo/aloe";
     tree.write("build/demo/aloe/calibration.yaml", "focal_px: 3740\n");
 
     const ServiceConfig config = loadConfig(file.string());
     EXPECT_EQ(config.source.replay.path, recording.string());
-    EXPECT_EQ(config.socket.path, (tree.path() / "build/demo/stereod.sock").string());
+    EXPECT_EQ(config.socket.path, (fs::path(tree.path()) / "build/demo/stereod.sock").string());
     EXPECT_TRUE(config.calibration_path.empty());
     EXPECT_EQ(config.processing.matcher.kind, MatcherKind::Sgbm);
     EXPECT_EQ(config.processing.matcher.sgbm_mode, SgbmMode::Sgbm);
@@ -185,7 +152,7 @@ TEST(ConfigExamples, AloeDemoWithoutItsRecordingNamesThePathAndLine)
 {
     const std::string text =
         readText(fs::path(STEREOD_SOURCE_DIR) / "config/examples/aloe-demo.yaml");
-    TempDir tree;
+    test::TempDir tree;
     const fs::path file = tree.write("config/examples/aloe-demo.yaml", text);
     try {
         loadConfig(file.string());
@@ -195,7 +162,7 @@ TEST(ConfigExamples, AloeDemoWithoutItsRecordingNamesThePathAndLine)
         const std::string expected = file.string() + ":" +
                                      std::to_string(lineOf(text, "path: ../../build/demo/aloe")) +
                                      ": source.replay.path: does not exist (got " +
-                                     (tree.path() / "build/demo/aloe").string();
+                                     (fs::path(tree.path()) / "build/demo/aloe").string();
         EXPECT_EQ(error.problems()[0].rfind(expected, 0), 0u) << error.problems()[0];
     }
 }
@@ -443,9 +410,9 @@ TEST(ConfigErrors, MissingFileIsNamed)
         EXPECT_EQ(error.problems()[0],
                   path + ": cannot read the configuration: No such file or directory");
     }
-    TempDir dir;
+    test::TempDir dir;
     try {
-        loadConfig(dir.path().string());
+        loadConfig(dir.path());
         FAIL() << "loaded a directory";
     } catch (const ConfigError& error) {
         EXPECT_NE(std::string(error.what()).find("is a directory"), std::string::npos);
@@ -481,8 +448,8 @@ TEST(ConfigValues, NumbersAreDecimalAndModesOctal)
 
 TEST(ConfigPaths, RelativePathsResolveAgainstTheFilesDirectory)
 {
-    TempDir dir;
-    fs::create_directories(dir.path() / "recordings/run1");
+    test::TempDir dir;
+    fs::create_directories(fs::path(dir.path()) / "recordings/run1");
     dir.write("calib/rig.yaml", "focal_px: 500\n");
     const fs::path file =
         dir.write("etc/robot.yaml", "source:\n  replay:\n    path: ../recordings/run1\n"
@@ -490,21 +457,21 @@ TEST(ConfigPaths, RelativePathsResolveAgainstTheFilesDirectory)
                                     "socket:\n  path: run/stereod.sock\n");
     const ServiceConfig config = loadConfig(file.string());
     EXPECT_EQ(config.origin, file.string());
-    EXPECT_EQ(config.source.replay.path, (dir.path() / "recordings/run1").string());
-    EXPECT_EQ(config.calibration_path, (dir.path() / "calib/rig.yaml").string());
-    EXPECT_EQ(config.socket.path, (dir.path() / "etc/run/stereod.sock").string());
+    EXPECT_EQ(config.source.replay.path, (fs::path(dir.path()) / "recordings/run1").string());
+    EXPECT_EQ(config.calibration_path, (fs::path(dir.path()) / "calib/rig.yaml").string());
+    EXPECT_EQ(config.socket.path, (fs::path(dir.path()) / "etc/run/stereod.sock").string());
 
     // Absolute paths stay as written.
-    const fs::path absolute =
-        dir.write("abs.yaml", "calibration: " + (dir.path() / "calib/rig.yaml").string() + "\n");
+    const fs::path absolute = dir.write(
+        "abs.yaml", "calibration: " + (fs::path(dir.path()) / "calib/rig.yaml").string() + "\n");
     EXPECT_EQ(loadConfig(absolute.string()).calibration_path,
-              (dir.path() / "calib/rig.yaml").string());
+              (fs::path(dir.path()) / "calib/rig.yaml").string());
 }
 
 TEST(ConfigPaths, ARecordingWithoutCalibrationRunsUncalibrated)
 {
-    TempDir dir;
-    fs::create_directories(dir.path() / "plain");
+    test::TempDir dir;
+    fs::create_directories(fs::path(dir.path()) / "plain");
     const fs::path file = dir.write("robot.yaml", "source:\n  replay:\n    path: plain\n");
     // No calibration anywhere is the uncalibrated mode of a robot's first start.
     EXPECT_EQ(loadConfig(file.string()).calibration_path, "");
@@ -537,8 +504,8 @@ TEST(ConfigPaths, ARecordingWithoutCalibrationRunsUncalibrated)
 
 TEST(ConfigOverrides, CommandLineValuesReplaceTheFileAndAreNamedInProblems)
 {
-    TempDir dir;
-    fs::create_directories(dir.path() / "rec");
+    test::TempDir dir;
+    fs::create_directories(fs::path(dir.path()) / "rec");
     dir.write("rec/calibration.yaml", "focal_px: 500\n");
     // The file's own recording does not exist on this machine; --replay replaces it.
     const fs::path file =
@@ -546,8 +513,8 @@ TEST(ConfigOverrides, CommandLineValuesReplaceTheFileAndAreNamedInProblems)
     EXPECT_THROW(loadConfig(file.string()), ConfigError);
 
     ConfigOverrides overrides;
-    overrides.replay_path = (dir.path() / "rec").string();
-    overrides.socket_path = (dir.path() / "s.sock").string();
+    overrides.replay_path = (fs::path(dir.path()) / "rec").string();
+    overrides.socket_path = (fs::path(dir.path()) / "s.sock").string();
     overrides.log_level = "debug";
     const ServiceConfig config = loadConfig(file.string(), overrides);
     EXPECT_EQ(config.source.replay.path, overrides.replay_path);
@@ -575,11 +542,11 @@ TEST(ConfigOverrides, CommandLineValuesReplaceTheFileAndAreNamedInProblems)
 
 TEST(ConfigOverrides, ValidateConfigChecksAnInCodeConfiguration)
 {
-    TempDir dir;
+    test::TempDir dir;
     ServiceConfig config = defaultConfig();
     ConfigOverrides overrides;
-    overrides.replay_path = (dir.path() / "missing").string();
-    overrides.calibration_path = (dir.path() / "missing.yaml").string();
+    overrides.replay_path = (fs::path(dir.path()) / "missing").string();
+    overrides.calibration_path = (fs::path(dir.path()) / "missing.yaml").string();
     applyOverrides(config, overrides);
     config.processing.nearest.percentile = -1;
     try {

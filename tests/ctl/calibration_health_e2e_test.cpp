@@ -16,7 +16,9 @@
 #include <nlohmann/json.hpp>
 
 #include "ctl/client.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
@@ -29,7 +31,7 @@ using test::runProcess;
 using test::stereoctlPath;
 using test::stereodPath;
 
-const std::string kBaumer = std::string(STEREOD_SHARED_DATA_DIR) + "/real-rig/baumer/";
+const std::string kBaumer = test::sharedDataDir() + "/real-rig/baumer/";
 
 std::string two(int i)
 {

@@ -11,7 +11,9 @@
 #include <nlohmann/json.hpp>
 
 #include "pipeline/calibration.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
@@ -20,7 +22,7 @@ using test::ProcessResult;
 using test::runProcess;
 using test::stereoctlPath;
 
-const std::string kBaumer = std::string(STEREOD_SHARED_DATA_DIR) + "/real-rig/baumer/";
+const std::string kBaumer = test::sharedDataDir() + "/real-rig/baumer/";
 
 // The rig's calibration in our format, imported from its OpenCV stereo_calib files.
 std::string importBaumer(test::TempDir& dir)

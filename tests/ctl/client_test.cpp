@@ -16,7 +16,8 @@
 #include <unistd.h>
 
 #include "ctl/client.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {

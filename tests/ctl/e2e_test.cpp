@@ -22,7 +22,9 @@
 #include "ctl/client.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/depth_io.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
@@ -37,7 +39,7 @@ using test::runProcess;
 using test::stereoctlPath;
 using test::stereodPath;
 
-const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba";
+const std::string kTsukuba = test::tsukubaDir();
 const cv::Size kTsukubaSize(384, 288);
 // A rig for which tsukuba's disparities (5..15 px) are depths of 0.5 to 1.6 m: within the
 // depth range the service sees with its default settings.

@@ -27,7 +27,9 @@
 #include "ctl/client.hpp"
 #include "pipeline/calibration.hpp"
 #include "replay/recording.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
@@ -40,7 +42,7 @@ using test::runProcess;
 using test::stereoctlPath;
 using test::stereodPath;
 
-const std::string kSamples = std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/";
+const std::string kSamples = test::opencvSamplesDir() + "/";
 const std::vector<int> kSampleIndices = {1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 12, 13, 14};
 // Liveness bound, generous for sanitizer builds: reaching it means "never happened".
 constexpr auto kStartLimit = 60s;

@@ -25,7 +25,9 @@
 #include "pipeline/calibration_formats.hpp"
 #include "replay/mcap_recording.hpp"
 #include "replay/recording.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod::record_e2e {
 
@@ -38,7 +40,7 @@ using test::stereoctlPath;
 using test::stereodPath;
 namespace fs = std::filesystem;
 
-inline const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba";
+inline const std::string kTsukuba = test::tsukubaDir();
 inline const cv::Size kSize(384, 288);
 constexpr double kFocalPx = 615.0;
 constexpr double kBaselineM = 0.013;

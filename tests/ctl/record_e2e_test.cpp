@@ -23,9 +23,9 @@
 #include "replay/mcap_recording.hpp"
 #include "replay/recording.hpp"
 #include "replay/replay_source.hpp"
-#include "tests/ctl/process.hpp"
 #include "tests/ctl/record_e2e_fixture.hpp"
-#include "tests/replay/replay_test_support.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/recordings.hpp"
 
 namespace stereod {
 namespace {

@@ -13,7 +13,9 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "pipeline/calibration.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
@@ -22,7 +24,7 @@ using test::ProcessResult;
 using test::runProcess;
 using test::stereoctlPath;
 
-const std::string kSamples = std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/";
+const std::string kSamples = test::opencvSamplesDir() + "/";
 // left01.jpg ... left14.jpg; not left.jpg, which the same directory also holds.
 const std::string kLeftGlob = kSamples + "left[0-9][0-9].jpg";
 const std::string kRightGlob = kSamples + "right[0-9][0-9].jpg";

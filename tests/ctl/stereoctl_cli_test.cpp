@@ -8,7 +8,8 @@
 #include <gtest/gtest.h>
 
 #include "pipeline/calibration.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {

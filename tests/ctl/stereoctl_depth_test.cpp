@@ -11,7 +11,9 @@
 
 #include "pipeline/calibration.hpp"
 #include "pipeline/depth_io.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
@@ -20,7 +22,7 @@ using test::ProcessResult;
 using test::runProcess;
 using test::stereoctlPath;
 
-const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba";
+const std::string kTsukuba = test::tsukubaDir();
 const std::string kLeft = kTsukuba + "/im3.png";
 const std::string kRight = kTsukuba + "/im4.png";
 constexpr double kGroundTruthScale = 16.0; // disp3.pgm holds disparity * 16
@@ -199,7 +201,7 @@ TEST(StereoctlDepth, CalibrationForAnotherImageSizeIsRefused)
 
 TEST(StereoctlDepth, PairsOfDifferentSizeAreRefusedNamingBoth)
 {
-    const std::string aloe = std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/aloeR.jpg";
+    const std::string aloe = test::opencvSamplesDir() + "/aloeR.jpg";
     const ProcessResult run = runProcess({stereoctlPath(), "depth", kLeft, aloe, "--rectified",
                                           "--focal-px", "615", "--baseline-m", "0.1"});
     EXPECT_EQ(run.exit_code, 2);

@@ -16,7 +16,9 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "ctl/client.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
@@ -29,7 +31,7 @@ using test::runProcess;
 using test::stereoctlPath;
 using test::stereodPath;
 
-const std::string kScene = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury2014/Adirondack/";
+const std::string kScene = test::sharedDataDir() + "/middlebury2014/Adirondack/";
 
 const char* kZones = R"(matcher:
   num_disparities: 160

@@ -24,8 +24,10 @@
 
 #include "ctl/client.hpp"
 #include "pipeline/calibration.hpp"
-#include "tests/ctl/process.hpp"
 #include "tests/fake_v4l2/fake_v4l2.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
@@ -36,7 +38,7 @@ using test::ChildProcess;
 using test::ProcessResult;
 using test::runProcess;
 
-const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba";
+const std::string kTsukuba = test::tsukubaDir();
 // The rig of tests/ctl/e2e_test.cpp: tsukuba's disparities are depths of 0.5 to 1.6 m.
 constexpr double kFocalPx = 615.0;
 constexpr double kBaselineM = 0.013;

@@ -9,7 +9,8 @@
 #include <sys/stat.h>
 
 #include "daemon/listening_socket.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {

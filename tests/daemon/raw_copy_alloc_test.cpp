@@ -19,11 +19,12 @@
 #include "daemon/publisher.hpp"
 #include "daemon/worker.hpp"
 #include "protocol/events.hpp"
+#include "tests/support/data_paths.hpp"
 
 namespace stereod {
 namespace {
 
-const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba";
+const std::string kTsukuba = test::tsukubaDir();
 constexpr int kWarmUpFrames = 6; // every slot of the triple buffer filled twice
 constexpr int kFrames = 20;
 

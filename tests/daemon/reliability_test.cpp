@@ -21,8 +21,10 @@
 #include <sys/wait.h>
 
 #include "pipeline/calibration.hpp"
-#include "tests/ctl/process.hpp"
-#include "tests/daemon/daemon_test_support.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/service_doubles.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
@@ -37,7 +39,7 @@ using test::TestClient;
 using test::waitUntil;
 using namespace std::chrono_literals;
 
-const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba";
+const std::string kTsukuba = test::tsukubaDir();
 const cv::Size kSize(384, 288);
 constexpr std::size_t kDepthBytes = 384 * 288 * 2;
 constexpr int kPairs = 6;

@@ -24,8 +24,10 @@
 
 #include "ctl/client.hpp"
 #include "daemon/service.hpp"
-#include "tests/ctl/process.hpp"
-#include "tests/daemon/daemon_test_support.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/service_doubles.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
@@ -37,7 +39,7 @@ using test::TestClient;
 using test::waitUntil;
 using namespace std::chrono_literals;
 
-const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba";
+const std::string kTsukuba = test::tsukubaDir();
 const cv::Size kSize(384, 288);
 // A rig for which tsukuba's disparities (5..15 px) are depths of 0.5 to 1.6 m, so that the
 // default closest depth (0.5 m) asks for the 16 disparities the scene needs.

@@ -15,8 +15,9 @@
 #include "capture/frame.hpp"
 #include "config/service_config.hpp"
 #include "daemon/socket_server.hpp"
-#include "tests/ctl/process.hpp"
-#include "tests/daemon/daemon_test_support.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/service_doubles.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {

@@ -16,8 +16,10 @@
 #include <sys/wait.h>
 
 #include "pipeline/calibration.hpp"
-#include "tests/ctl/process.hpp"
-#include "tests/daemon/daemon_test_support.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/service_doubles.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
@@ -32,7 +34,7 @@ using test::TestClient;
 using test::waitUntil;
 using namespace std::chrono_literals;
 
-const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba";
+const std::string kTsukuba = test::tsukubaDir();
 
 std::vector<std::string> lines(const std::string& text)
 {

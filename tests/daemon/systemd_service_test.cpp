@@ -36,8 +36,10 @@
 #include <unistd.h>
 
 #include "pipeline/calibration.hpp"
-#include "tests/ctl/process.hpp"
-#include "tests/daemon/daemon_test_support.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/service_doubles.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
@@ -53,8 +55,8 @@ using test::waitUntil;
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
 
-const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba";
-const std::string kSamples = STEREOD_OPENCV_SAMPLES_DIR;
+const std::string kTsukuba = test::tsukubaDir();
+const std::string kSamples = test::opencvSamplesDir();
 
 sockaddr_un unixAddress(const std::string& path)
 {

@@ -20,7 +20,8 @@
 #include <unistd.h>
 
 #include "config/service_config.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {

@@ -28,12 +28,13 @@
 #include <unistd.h>
 
 #include "tests/fake_v4l2/fake_v4l2.hpp"
+#include "tests/support/data_paths.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
 
-const std::string kSamples = STEREOD_OPENCV_SAMPLES_DIR;
+const std::string kSamples = stereod::test::opencvSamplesDir();
 constexpr const char* kLeft = "/dev/video-fake-left";
 constexpr const char* kById = "/dev/v4l/by-id/usb-Fake_Stereo_Left_0001-video-index0";
 

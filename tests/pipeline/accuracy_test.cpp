@@ -19,12 +19,13 @@
 #include "pipeline/calibration.hpp"
 #include "pipeline/nearest_object.hpp"
 #include "pipeline/stereo_processor.hpp"
+#include "tests/support/data_paths.hpp"
 
 namespace stereod {
 namespace {
 
-const std::string kMiddlebury = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/";
-const std::string kSamples = std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/";
+const std::string kMiddlebury = test::sharedDataDir() + "/middlebury/";
+const std::string kSamples = test::opencvSamplesDir() + "/";
 
 struct Metrics {
     double bad2_percent = 0.0;

@@ -16,11 +16,12 @@
 
 #include "pipeline/calibration_coverage.hpp"
 #include "pipeline/chessboard_calibration.hpp"
+#include "tests/support/data_paths.hpp"
 
 namespace stereod {
 namespace {
 
-const std::string kSamples = std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/";
+const std::string kSamples = test::opencvSamplesDir() + "/";
 const cv::Size kBoard(9, 6);
 const cv::Size kImage(640, 480);
 const std::vector<int> kSampleIndices = {1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 12, 13, 14};

@@ -19,13 +19,15 @@
 #include "pipeline/calibration_formats.hpp"
 #include "pipeline/chessboard_calibration.hpp"
 #include "pipeline/rectifier.hpp"
-#include "tests/ctl/process.hpp"
-#include "tests/pipeline/test_support.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/files.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
 
-const std::string kSamples = std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/";
+const std::string kSamples = test::opencvSamplesDir() + "/";
 constexpr double kSquareM = 0.025;
 
 void writeFile(const std::string& path, const std::string& text)
@@ -94,7 +96,7 @@ StereoCalibration* CalibrationFormatsTest::calibration_ = nullptr;
 TEST_F(CalibrationFormatsTest, RosCameraInfoPairRoundTrips)
 {
     const StereoCalibration& c = calibration();
-    test::ScratchDir dir("stereod_formats");
+    test::TempDir dir;
     const std::string left = dir.file("left.yaml"), right = dir.file("right.yaml");
     exportRosCameraInfo(c, left, right, "rig");
     const StereoCalibration back = importRosCameraInfo(left, right);
@@ -160,7 +162,7 @@ void roundNumbers(const std::string& path, int digits)
 TEST_F(CalibrationFormatsTest, RosFilesWithFewDigitsImportReOrthonormalized)
 {
     const StereoCalibration& c = calibration();
-    test::ScratchDir dir("stereod_formats");
+    test::TempDir dir;
     const std::string left = dir.file("left.yaml"), right = dir.file("right.yaml");
     exportRosCameraInfo(c, left, right, "rig");
     roundNumbers(left, 5);
@@ -194,7 +196,7 @@ TEST_F(CalibrationFormatsTest, RosOwnToolsReadOurExportAndRewriteItImportably)
     if (::access(kRosConvert.c_str(), X_OK) != 0)
         GTEST_SKIP() << kRosConvert << " missing (Debian package camera-calibration-parsers-tools)";
     const StereoCalibration& c = calibration();
-    test::ScratchDir dir("stereod_formats");
+    test::TempDir dir;
     const std::string left = dir.file("left.yaml"), right = dir.file("right.yaml");
     exportRosCameraInfo(c, left, right, "rig");
 
@@ -244,7 +246,7 @@ TEST(CalibrationFormats, ReadsARosPairAsCameraInfoWritesIt)
     // A rectified 752x480 module as a ROS driver publishes it: no distortion, identity
     // rectification, Tx = -fx * baseline (12 cm) in the right camera's projection. Left
     // file in the plain layout, right one as OpenCV's FileStorage writes it.
-    test::ScratchDir dir("stereod_formats");
+    test::TempDir dir;
     const std::string left = dir.file("left.yaml"), right = dir.file("right.yaml");
     writeFile(left, R"(image_width: 752
 image_height: 480
@@ -308,7 +310,7 @@ projection_matrix: !!opencv-matrix
 TEST(CalibrationFormats, WritesARectifiedOnlyCalibrationAsARosPair)
 {
     const StereoCalibration c = makeRectifiedCalibration({640, 480}, 500.0, 0.1, 320.0, 240.0, 4.0);
-    test::ScratchDir dir("stereod_formats");
+    test::TempDir dir;
     const std::string left = dir.file("left.yaml"), right = dir.file("right.yaml");
     exportRosCameraInfo(c, left, right);
     const StereoCalibration back = importRosCameraInfo(left, right);
@@ -321,7 +323,7 @@ TEST(CalibrationFormats, WritesARectifiedOnlyCalibrationAsARosPair)
 
 TEST(CalibrationFormats, RefusesRosFilesItCannotUseNamingFileAndKey)
 {
-    test::ScratchDir dir("stereod_formats");
+    test::TempDir dir;
     const std::string left = dir.file("left.yaml"), right = dir.file("right.yaml");
     exportRosCameraInfo(makeRectifiedCalibration({640, 480}, 500.0, 0.1), left, right);
     const std::string good_left = test::readFile(left);
@@ -379,7 +381,7 @@ void writeStereoCalibFiles(const StereoCalibration& c, const std::string& intrin
 TEST_F(CalibrationFormatsTest, ReadsOpenCvStereoCalibFilesInMetres)
 {
     const StereoCalibration& c = calibration();
-    test::ScratchDir dir("stereod_formats");
+    test::TempDir dir;
     const std::string intrinsics = dir.file("intrinsics.yml"),
                       extrinsics = dir.file("extrinsics.yml");
     writeStereoCalibFiles(c, intrinsics, extrinsics);
@@ -403,7 +405,7 @@ TEST_F(CalibrationFormatsTest, ReadsOpenCvStereoCalibFilesInMetres)
 TEST_F(CalibrationFormatsTest, RefusesOpenCvFilesItCannotUse)
 {
     const StereoCalibration& c = calibration();
-    test::ScratchDir dir("stereod_formats");
+    test::TempDir dir;
     const std::string intrinsics = dir.file("intrinsics.yml"),
                       extrinsics = dir.file("extrinsics.yml");
     writeStereoCalibFiles(c, intrinsics, extrinsics);

@@ -21,13 +21,14 @@
 #include "pipeline/calibration_health.hpp"
 #include "pipeline/chessboard_calibration.hpp"
 #include "pipeline/rectifier.hpp"
+#include "tests/support/data_paths.hpp"
 
 namespace stereod {
 namespace {
 
-const std::string kSamples = std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/";
-const std::string kBaumer = std::string(STEREOD_SHARED_DATA_DIR) + "/real-rig/baumer/";
-const std::string kData = std::string(STEREOD_SHARED_DATA_DIR) + "/";
+const std::string kSamples = test::opencvSamplesDir() + "/";
+const std::string kBaumer = test::sharedDataDir() + "/real-rig/baumer/";
+const std::string kData = test::sharedDataDir() + "/";
 
 struct RectifiedPair {
     cv::Mat left, right;

@@ -24,12 +24,13 @@
 #include "pipeline/census_sgm_matcher.hpp"
 #include "pipeline/depth_io.hpp"
 #include "pipeline/stereo_processor.hpp"
+#include "tests/support/data_paths.hpp"
 
 namespace stereod {
 namespace {
 
 namespace fs = std::filesystem;
-const std::string kData = std::string(STEREOD_SHARED_DATA_DIR) + "/";
+const std::string kData = test::sharedDataDir() + "/";
 
 struct Scene {
     std::string name;

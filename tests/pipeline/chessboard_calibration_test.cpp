@@ -24,12 +24,14 @@
 #include "pipeline/chessboard_calibration.hpp"
 #include "pipeline/rectifier.hpp"
 #include "pipeline/stereo_processor.hpp"
-#include "tests/pipeline/test_support.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/files.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
 
-const std::string kSamples = std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/";
+const std::string kSamples = test::opencvSamplesDir() + "/";
 constexpr double kSquareM = 0.025;
 const cv::TermCriteria kUndistort(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-12);
 
@@ -200,7 +202,7 @@ TEST_F(ChessboardCalibrationTest, RoundTripsThroughTheCalibrationFile)
     // Saved, loaded and saved again: the same text, so every number came back exactly
     // (the format writes the shortest text that reads back to the same double).
     const StereoCalibration& c = result().calibration;
-    test::ScratchDir dir("stereod_chessboard");
+    test::TempDir dir;
     const std::string first = dir.file("first.yaml"), second = dir.file("second.yaml");
     saveCalibration(c, first);
     const StereoCalibration loaded = loadCalibration(first);
@@ -338,7 +340,7 @@ TEST_F(ChessboardCalibrationTest, DepthOnTheBoardAgreesWithTheBoardsPose)
 
 TEST_F(ChessboardCalibrationTest, PreviewShowsTheFirstPairRectifiedWithRowLines)
 {
-    test::ScratchDir dir("stereod_chessboard");
+    test::TempDir dir;
     const std::string path = dir.file("preview.whatever");
     writeRectifiedPreview(result(), path, 40);
     const cv::Mat preview = cv::imread(path, cv::IMREAD_UNCHANGED);
@@ -430,7 +432,7 @@ TEST_F(ChessboardCalibrationTest, AlphaOneKeepsEveryRawPixel)
 
 TEST(ChessboardCalibration, ReportsAPairWithoutTheBoardAndCalibratesFromTheRest)
 {
-    test::ScratchDir dir("stereod_chessboard");
+    test::TempDir dir;
     const std::string blank = dir.file("blank.png");
     ASSERT_TRUE(cv::imwrite(blank, cv::Mat(480, 640, CV_8UC1, cv::Scalar(128))));
     std::vector<std::string> left, right;
@@ -478,7 +480,7 @@ TEST(ChessboardCalibration, SkipsAPairWithoutTheBoardWhateverItsSize)
 // odd pair, the file and both sizes.
 TEST(ChessboardCalibration, RefusesUsedPairsOfDifferingSizesNamingThem)
 {
-    test::ScratchDir dir("stereod_chessboard");
+    test::TempDir dir;
     // A border added on the right and at the bottom (700x520): the board itself is as in
     // the original pair, so it is found in both images of the odd pair.
     std::vector<std::string> large;
@@ -519,7 +521,7 @@ TEST(ChessboardCalibration, RefusesABoardSizeFoundNowhereSuggestingInnerCorners)
 
 TEST(ChessboardCalibration, RefusesUnreadableFilesNamingThem)
 {
-    test::ScratchDir dir("stereod_chessboard");
+    test::TempDir dir;
     const std::string missing = dir.file("left99.jpg");
     std::string message = refusal({missing}, {samplePath("right", 1)});
     EXPECT_TRUE(contains(message, missing)) << message;

@@ -27,11 +27,12 @@
 #include "pipeline/chessboard_calibration.hpp"
 #include "pipeline/nearest_object.hpp"
 #include "pipeline/stereo_processor.hpp"
+#include "tests/support/data_paths.hpp"
 
 namespace stereod {
 namespace {
 
-const std::string kSamples = std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/";
+const std::string kSamples = test::opencvSamplesDir() + "/";
 const std::string kDemoConfig =
     std::string(STEREOD_SOURCE_DIR) + "/config/examples/chessboard-demo.yaml";
 constexpr double kSquareM = 0.025;
@@ -69,7 +70,7 @@ class ChessboardDemoTest : public ::testing::Test {
         // The file's replay path is the demo's recording under build/, which need not
         // exist here; the processing settings are what this test is about.
         ConfigOverrides overrides;
-        overrides.replay_path = STEREOD_OPENCV_SAMPLES_DIR;
+        overrides.replay_path = test::opencvSamplesDir();
         config_ = new ServiceConfig(loadConfig(kDemoConfig, overrides));
     }
     static void TearDownTestSuite()

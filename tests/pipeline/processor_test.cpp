@@ -11,11 +11,12 @@
 
 #include "pipeline/matcher.hpp"
 #include "pipeline/stereo_processor.hpp"
+#include "tests/support/data_paths.hpp"
 
 namespace stereod {
 namespace {
 
-const std::string kTsukuba = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba/";
+const std::string kTsukuba = test::sharedDataDir() + "/middlebury/tsukuba/";
 
 RectifiedGeometry geometry(double focal_px, double baseline_m, double doffs_px)
 {

@@ -17,11 +17,12 @@
 #include "pipeline/calibration.hpp"
 #include "pipeline/rectifier.hpp"
 #include "pipeline/stereo_processor.hpp"
+#include "tests/support/data_paths.hpp"
 
 namespace stereod {
 namespace {
 
-const std::string kSamples = std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/";
+const std::string kSamples = test::opencvSamplesDir() + "/";
 const cv::Size kBoard(9, 6);
 
 bool findCorners(const cv::Mat& image, std::vector<cv::Point2f>& corners)

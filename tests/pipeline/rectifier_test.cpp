@@ -20,12 +20,13 @@
 #include "pipeline/calibration.hpp"
 #include "pipeline/chessboard_calibration.hpp"
 #include "pipeline/rectifier.hpp"
-#include "tests/pipeline/test_support.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/files.hpp"
 
 namespace stereod {
 namespace {
 
-const std::string kSamples = std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/";
+const std::string kSamples = test::opencvSamplesDir() + "/";
 
 std::string samplePath(const char* side, int index)
 {

@@ -16,11 +16,12 @@
 #include "pipeline/depth_io.hpp"
 #include "pipeline/stereo_processor.hpp"
 #include "pipeline/zones.hpp"
+#include "tests/support/data_paths.hpp"
 
 namespace stereod {
 namespace {
 
-const std::string kScene = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury2014/Adirondack/";
+const std::string kScene = test::sharedDataDir() + "/middlebury2014/Adirondack/";
 
 // calib.txt: cam0 f 1038.018 px, principal point (322.037, 243.393), doffs 53.271 px,
 // baseline 176.252 mm.

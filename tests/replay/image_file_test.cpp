@@ -12,8 +12,9 @@
 #include <sys/stat.h>
 
 #include "replay/image_file.hpp"
-#include "tests/ctl/process.hpp"
-#include "tests/replay/replay_test_support.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/recordings.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {

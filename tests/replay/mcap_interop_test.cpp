@@ -21,8 +21,9 @@
 #include "pipeline/calibration.hpp"
 #include "pipeline/calibration_formats.hpp"
 #include "replay/mcap_recording.hpp"
-#include "tests/ctl/process.hpp"
-#include "tests/replay/replay_test_support.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/recordings.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {

@@ -13,7 +13,8 @@
 #include <opencv2/core.hpp>
 
 #include "replay/mcap_recording.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {

@@ -15,7 +15,8 @@
 
 #include "replay/mcap_reader.hpp"
 #include "replay/mcap_writer.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod::mcap {
 namespace {

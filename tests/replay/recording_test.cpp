@@ -10,8 +10,10 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "replay/recording.hpp"
-#include "tests/ctl/process.hpp"
-#include "tests/replay/replay_test_support.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/recordings.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
@@ -298,7 +300,7 @@ TEST(Recording, MissingOrEmptyDirectoryIsAnErrorNamingIt)
 
 TEST(Recording, OpenCvSampleFolderReadsAsPlainFolder)
 {
-    const std::string dir = STEREOD_OPENCV_SAMPLES_DIR;
+    const std::string dir = test::opencvSamplesDir();
     if (!fs::exists(dir + "/left01.jpg"))
         GTEST_SKIP() << "opencv-doc sample data not installed in " << dir;
     // left.jpg/right.jpg plus the 13 chessboard pairs left01..left14 (no 10); the

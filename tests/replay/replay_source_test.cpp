@@ -23,8 +23,10 @@
 #include <unistd.h>
 
 #include "replay/replay_source.hpp"
-#include "tests/ctl/process.hpp"
-#include "tests/replay/replay_test_support.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/recordings.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod {
 namespace {
@@ -72,7 +74,7 @@ std::vector<StereoPair> popPairs(PairRing& ring, std::size_t count)
 
 bool haveOpenCvSamples()
 {
-    return fs::exists(std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/left01.jpg");
+    return fs::exists(test::opencvSamplesDir() + "/left01.jpg");
 }
 
 // Checks one delivered pair against the recorded pair it came from.
@@ -420,7 +422,7 @@ TEST_F(ReplaySourceTest, PlainFolderReplaysAtTheNominalRate)
 
 TEST_F(ReplaySourceTest, ChessboardSamplePairsReplayFromAFolderOfLinks)
 {
-    const std::string samples = STEREOD_OPENCV_SAMPLES_DIR;
+    const std::string samples = test::opencvSamplesDir();
     if (!haveOpenCvSamples())
         GTEST_SKIP() << "opencv-doc sample data not installed in " << samples;
     // Links, not copies, to the 13 real 640x480 pairs.
@@ -453,7 +455,7 @@ TEST_F(ReplaySourceTest, OpenCvSampleFolderSkipsPairsOfAnotherSize)
 {
     // The sample folder as it is: left.jpg/right.jpg (612x459) come first by name and fix
     // the frame size, so the 13 chessboard pairs (640x480) are skipped as bad frames.
-    const std::string samples = STEREOD_OPENCV_SAMPLES_DIR;
+    const std::string samples = test::opencvSamplesDir();
     if (!haveOpenCvSamples())
         GTEST_SKIP() << "opencv-doc sample data not installed in " << samples;
     Rig rig(lockstep(samples), 4);

@@ -1,4 +1,4 @@
-#include "tests/replay/replay_test_support.hpp"
+#include "tests/support/recordings.hpp"
 
 #include <fstream>
 #include <random>
@@ -9,12 +9,13 @@
 #include <zlib.h>
 
 #include "replay/recording.hpp"
+#include "tests/support/data_paths.hpp"
 
 namespace stereod::test {
 
 std::vector<TestPair> tsukubaPairs(int count, cv::Size size)
 {
-    const std::string dir = std::string(STEREOD_SHARED_DATA_DIR) + "/middlebury/tsukuba/";
+    const std::string dir = test::sharedDataDir() + "/middlebury/tsukuba/";
     const cv::Mat left = cv::imread(dir + "im3.png", cv::IMREAD_GRAYSCALE);
     const cv::Mat right = cv::imread(dir + "im4.png", cv::IMREAD_GRAYSCALE);
     EXPECT_FALSE(left.empty()) << dir << "im3.png missing";

@@ -1,12 +1,14 @@
 #pragma once
 // Recordings made at test time from real images (crops of the Middlebury Tsukuba pair),
-// written into a test::TempDir (tests/ctl/process.hpp) that removes itself.
+// written into a test::TempDir (tests/support/temp_dir.hpp) that removes itself.
 
 #include <cstdint>
 #include <string>
 #include <vector>
 
 #include <opencv2/core/mat.hpp>
+
+#include "tests/support/temp_dir.hpp"
 
 namespace stereod::test {
 

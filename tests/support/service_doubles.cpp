@@ -1,4 +1,4 @@
-#include "tests/daemon/daemon_test_support.hpp"
+#include "tests/support/service_doubles.hpp"
 
 #include <algorithm>
 #include <cerrno>

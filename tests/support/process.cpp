@@ -1,4 +1,4 @@
-#include "tests/ctl/process.hpp"
+#include "tests/support/process.hpp"
 
 #include <algorithm>
 #include <cerrno>
@@ -277,23 +277,6 @@ std::optional<int> ChildProcess::waitFor(std::chrono::milliseconds limit)
 bool ChildProcess::running()
 {
     return !waitFor(std::chrono::milliseconds(0)).has_value();
-}
-
-TempDir::TempDir()
-{
-    const char* base = std::getenv("TMPDIR");
-    std::string pattern =
-        std::string(base != nullptr && *base != '\0' ? base : "/tmp") + "/stereoctl-XXXXXX";
-    if (::mkdtemp(pattern.data()) == nullptr) {
-        throwErrno("mkdtemp " + pattern);
-    }
-    path_ = pattern;
-}
-
-TempDir::~TempDir()
-{
-    std::error_code ignored;
-    std::filesystem::remove_all(path_, ignored);
 }
 
 std::string stereoctlPath()

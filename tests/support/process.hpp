@@ -61,22 +61,6 @@ class ChildProcess {
     std::optional<int> status_;
 };
 
-// A fresh directory under $TMPDIR (or /tmp) that is removed with its contents on
-// destruction. Kept short: Unix socket paths are limited to 107 bytes.
-class TempDir {
-  public:
-    TempDir();
-    ~TempDir();
-    TempDir(const TempDir&) = delete;
-    TempDir& operator=(const TempDir&) = delete;
-
-    const std::string& path() const noexcept { return path_; }
-    std::string file(const std::string& name) const { return path_ + "/" + name; }
-
-  private:
-    std::string path_;
-};
-
 // The built binaries under test.
 std::string stereoctlPath();
 std::string stereodPath();

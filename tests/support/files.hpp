@@ -1,8 +1,5 @@
 #pragma once
-// Small things the pipeline tests share: a directory of their own for the files a test
-// writes, reading a file back whole, and the message of an expected refusal.
-//
-// ScratchDir is thread-bound (one per test); the functions are reentrant.
+// Reading a file back whole, and the message of an expected refusal. Reentrant.
 
 #include <filesystem>
 #include <fstream>
@@ -14,24 +11,6 @@
 #include <unistd.h>
 
 namespace stereod::test {
-
-class ScratchDir {
-  public:
-    explicit ScratchDir(const std::string& prefix)
-        : path_(std::filesystem::temp_directory_path() /
-                (prefix + "_" + std::to_string(::getpid())))
-    {
-        std::filesystem::create_directories(path_);
-    }
-    ~ScratchDir() { std::filesystem::remove_all(path_); }
-    ScratchDir(const ScratchDir&) = delete;
-    ScratchDir& operator=(const ScratchDir&) = delete;
-
-    std::string file(const std::string& name) const { return (path_ / name).string(); }
-
-  private:
-    std::filesystem::path path_;
-};
 
 // The whole content of a file; empty when it cannot be read.
 inline std::string readFile(const std::string& path)

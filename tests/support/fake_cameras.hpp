@@ -16,6 +16,7 @@
 
 #include "capture/v4l2_camera.hpp"
 #include "tests/fake_v4l2/fake_v4l2.hpp"
+#include "tests/support/data_paths.hpp"
 
 namespace stereod::test {
 
@@ -35,8 +36,8 @@ class FakeCameraTest : public ::testing::Test {
                ("stereod_capture_" + std::to_string(::getpid()) + "_" +
                 ::testing::UnitTest::GetInstance()->current_test_info()->name());
         std::filesystem::create_directories(dir_);
-        const cv::Mat aloe = cv::imread(std::string(STEREOD_OPENCV_SAMPLES_DIR) + "/aloeL.jpg",
-                                        cv::IMREAD_GRAYSCALE);
+        const cv::Mat aloe =
+            cv::imread(test::opencvSamplesDir() + "/aloeL.jpg", cv::IMREAD_GRAYSCALE);
         ASSERT_FALSE(aloe.empty()) << "OpenCV sample aloeL.jpg missing";
         cv::resize(aloe, scene_, cv::Size(kWidth, kHeight), 0, 0, cv::INTER_AREA);
         ASSERT_TRUE(cv::imwrite((dir_ / "scene.png").string(), scene_));

@@ -1,7 +1,7 @@
 #pragma once
 // Test doubles and tools for the service tests: a frame source that delivers real image
 // pairs on demand, and a blocking protocol client with time limits. (Temporary
-// directories and child processes: tests/ctl/process.hpp.)
+// directories and child processes: tests/support/.)
 
 #include <atomic>
 #include <chrono>
@@ -19,7 +19,7 @@
 
 #include "capture/frame_pool.hpp"
 #include "capture/frame_source.hpp"
-#include "tests/ctl/process.hpp"
+#include "tests/support/process.hpp"
 
 namespace stereod::test {
 
