@@ -456,6 +456,17 @@ void checkPublish(Checker& checker, const PublishConfig& publish)
                  above(0, 3600000, " ms"));
 }
 
+void checkLiveView(Checker& checker, const LiveViewConfig& live_view)
+{
+    try {
+        parseListenAddress(live_view.listen);
+    } catch (const std::invalid_argument& e) {
+        checker.fail("live_view.listen", e.what(), "HOST:PORT with an IP address, or off");
+    }
+    checker.integer("live_view.points_step", live_view.points_step, 1, 1000, "");
+    checker.real("live_view.max_rate_hz", live_view.max_rate_hz, above(0, 1000, " Hz"));
+}
+
 } // namespace
 
 std::vector<Problem> checkValues(const ServiceConfig& config, const KeyLocations& locations)
@@ -475,6 +486,7 @@ std::vector<Problem> checkValues(const ServiceConfig& config, const KeyLocations
     }
     checkSocket(checker, config.socket);
     checkPublish(checker, config.publish);
+    checkLiveView(checker, config.live_view);
     const auto& levels = logLevelNames();
     if (std::find(levels.begin(), levels.end(), config.log_level) == levels.end()) {
         checker.fail("log_level", "unknown level", expectedOneOf(levels, config.log_level));

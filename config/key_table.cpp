@@ -400,6 +400,14 @@ std::vector<KeyDef> buildKeyTable()
         "publish.max_reading_age_ms", kLive,
         [](auto& c) -> auto& { return c.publish.max_reading_age_ms; }, "ms"));
     add(textKey(
+        "live_view.listen", kRestart, [](auto& c) -> auto& { return c.live_view.listen; }, false));
+    add(integerKey(
+        "live_view.points_step", kRestart,
+        [](auto& c) -> auto& { return c.live_view.points_step; }));
+    add(realKey(
+        "live_view.max_rate_hz", kRestart, [](auto& c) -> auto& { return c.live_view.max_rate_hz; },
+        "Hz"));
+    add(textKey(
         "log_level", kLive, [](auto& c) -> auto& { return c.log_level; }, false));
     return keys;
 }

@@ -1,11 +1,13 @@
 #include "config/service_config.hpp"
 
 #include <cerrno>
+#include <charconv>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <sstream>
 
+#include <arpa/inet.h>
 #include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
@@ -54,6 +56,7 @@ void overrideKeys(ServiceConfig& config, const ConfigOverrides& overrides, KeyLo
     apply(overrides.calibration_path, config.calibration_path, "calibration", "--calib", true);
     apply(overrides.socket_path, config.socket.path, "socket.path", "--socket", true);
     apply(overrides.log_level, config.log_level, "log_level", "--log-level", false);
+    apply(overrides.live_view, config.live_view.listen, "live_view.listen", "--live-view", false);
 }
 
 // Notes where the second document of a stream starts, and ignores everything else.
@@ -261,6 +264,30 @@ std::vector<ConfigKeyInfo> configKeys()
         keys.push_back(ConfigKeyInfo{def.path, def.live});
     }
     return keys;
+}
+
+std::optional<ListenAddress> parseListenAddress(const std::string& text)
+{
+    if (text == "off")
+        return std::nullopt;
+    const std::size_t colon = text.rfind(':');
+    if (colon == std::string::npos || colon == 0 || colon + 1 == text.size())
+        throw std::invalid_argument("\"" + text + "\" is not HOST:PORT");
+    ListenAddress address;
+    address.host = text.substr(0, colon);
+    if (address.host.size() > 2 && address.host.front() == '[' && address.host.back() == ']')
+        address.host = address.host.substr(1, address.host.size() - 2); // [::1]:8765
+    const std::string port = text.substr(colon + 1);
+    unsigned value = 0;
+    const auto [end, ec] = std::from_chars(port.data(), port.data() + port.size(), value);
+    if (ec != std::errc() || end != port.data() + port.size() || value > 65535)
+        throw std::invalid_argument("port \"" + port + "\" is not a number from 0 to 65535");
+    address.port = static_cast<uint16_t>(value);
+    in6_addr scratch{};
+    if (inet_pton(AF_INET, address.host.c_str(), &scratch) != 1 &&
+        inet_pton(AF_INET6, address.host.c_str(), &scratch) != 1)
+        throw std::invalid_argument("\"" + address.host + "\" is not an IP address");
+    return address;
 }
 
 } // namespace stereod

@@ -93,6 +93,16 @@ struct PublishConfig {
     double max_reading_age_ms = 1000.0; // default for `distance` without max_age_ms
 };
 
+// The live view (docs/live-view.md): a Foxglove WebSocket server and the viewer page on
+// one address.
+struct LiveViewConfig {
+    // "HOST:PORT" (an IP address; loopback unless the network should see the cameras), or
+    // "off".
+    std::string listen = "127.0.0.1:8765";
+    int points_step = 4;       // every n-th point of the cloud is sent
+    double max_rate_hz = 10.0; // frame channels at most this often
+};
+
 // Calibration health while running (docs/configuration.md).
 struct HealthConfig {
     double interval_s = 2.0;           // between checks; 0 turns them off
@@ -110,6 +120,7 @@ struct ServiceConfig {
     ZonesSettings zones;
     SocketConfig socket;
     PublishConfig publish;
+    LiveViewConfig live_view;
     std::string log_level = "info"; // trace, debug, info, warn, error, critical, off
 };
 
@@ -129,7 +140,16 @@ struct ConfigOverrides {
     std::string calibration_path;
     std::string socket_path;
     std::string log_level;
+    std::string live_view; // --live-view ADDR:PORT|off
 };
+
+// live_view.listen split into host and port; nullopt for "off". Throws
+// std::invalid_argument naming what is wrong with the text.
+struct ListenAddress {
+    std::string host;
+    uint16_t port = 0;
+};
+std::optional<ListenAddress> parseListenAddress(const std::string& text);
 
 // Reads a file, applies the overrides, then validates the result, so that a file whose
 // replay path does not exist on this machine still runs with --replay. Problems with an

@@ -124,7 +124,13 @@ int main(int argc, char** argv)
     auto* level_option =
         app.add_option("--log-level", request.overrides.log_level, "log level")
             ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}));
-    check_option->excludes(config_option, replay_option, calib_option, socket_option, level_option);
+    auto* live_view_option =
+        app.add_option("--live-view", request.overrides.live_view,
+                       "live view address HOST:PORT (Foxglove WebSocket and the viewer page; "
+                       "default 127.0.0.1:8765), or off")
+            ->check(non_empty_path);
+    check_option->excludes(config_option, replay_option, calib_option, socket_option, level_option,
+                           live_view_option);
     auto* list_option = app.add_flag("--list-devices", list_devices,
                                      "list the V4L2 cameras (formats, sizes, frame rates, "
                                      "/dev/v4l/by-id paths) and exit: 0 found, 1 none");

@@ -150,6 +150,7 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
     } catch (const SocketError& e) {
         throw StartupError(ExitCode::Socket, e.what());
     }
+    startLiveView();
 
     stop_fd_ = UniqueFd(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
     if (!stop_fd_)
@@ -318,10 +319,45 @@ SourceHealth Service::sourceHealth(int64_t now_ns)
     return health;
 }
 
+void Service::startLiveView()
+{
+    const auto address = parseListenAddress(config_.live_view.listen); // checked by the config
+    if (!address)
+        return;
+    live_view::LiveViewSettings settings;
+    settings.host = address->host;
+    settings.port = address->port;
+    settings.points_step = config_.live_view.points_step;
+    settings.max_rate_hz = config_.live_view.max_rate_hz;
+    settings.web_root = options_.live_view_web_root;
+    live_view_ = std::make_unique<live_view::LiveView>(
+        settings, calibration_ ? calibration_->rectified : RectifiedGeometry{});
+    if (const std::string error = live_view_->start(); !error.empty()) {
+        spdlog::error("live view: cannot listen on {}: {}; running without the live view "
+                      "(live_view.listen, --live-view)",
+                      config_.live_view.listen, error);
+        return;
+    }
+    server_->setPublishObserver(live_view_.get());
+    spdlog::info("live view on http://{}/ (Foxglove: ws://{})", live_view_->counters().address,
+                 live_view_->counters().address);
+}
+
 ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceHealth& health,
                                      int64_t now_ns)
 {
     ServiceStatus status;
+    status.live_view.listen = config_.live_view.listen;
+    if (live_view_) {
+        const live_view::LiveViewCounters live = live_view_->counters();
+        status.live_view.listening = live.listening;
+        status.live_view.error = live.error;
+        status.live_view.clients = live.clients;
+        status.live_view.messages_sent = live.messages_sent;
+        status.live_view.bytes_sent = live.bytes_sent;
+        status.live_view.frames_dropped = live.frames_dropped;
+        status.live_view.clients_dropped = live.clients_dropped;
+    }
     status.uptime_s = static_cast<double>(now_ns - started_ns_) / 1e9;
     status.state = health.down         ? "source_down"
                    : !calibration_     ? "uncalibrated"
@@ -352,6 +388,7 @@ ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceH
 
     StatusPipeline& pipeline = status.pipeline;
     pipeline.range = initial_range_;
+    pipeline.region = config_.processing.nearest.roi;
     pipeline.matcher = initial_matcher_;
     if (latest != nullptr) {
         const PipelineStats& stats = latest->stats;

@@ -29,6 +29,7 @@
 #include "capture/frame_source.hpp"
 #include "config/service_config.hpp"
 #include "daemon/calibration_health_monitor.hpp"
+#include "daemon/live_view/live_view.hpp"
 #include "daemon/publisher.hpp"
 #include "daemon/socket_server.hpp"
 #include "daemon/source_counter_watch.hpp"
@@ -96,6 +97,8 @@ struct ServiceOptions {
     bool notify_systemd = false;
     // How long after the stop request the worker may take to finish the pair in hand.
     int64_t stop_timeout_ms = 700;
+    // The live view page's files (index.html, ...).
+    std::string live_view_web_root = STEREOD_LIVE_VIEW_WEB_ROOT;
 };
 
 class Service final : private ServerBackend {
@@ -153,6 +156,9 @@ class Service final : private ServerBackend {
     // The STATUS= line for systemd now.
     std::string statusText(int64_t now_ns, const SourceHealth& health);
     void onSignal();
+    // Listens for the live view when live_view.listen says so; a failure is logged and
+    // the service runs on without it.
+    void startLiveView();
     void onStopRequest();
     void shutdown() noexcept;
 
@@ -167,6 +173,7 @@ class Service final : private ServerBackend {
     std::unique_ptr<Publisher> publisher_;
     std::unique_ptr<Worker> worker_;
     std::unique_ptr<SocketServer> server_;
+    std::unique_ptr<live_view::LiveView> live_view_; // none when live_view.listen is off
     UniqueFd signal_fd_;
     UniqueFd stop_fd_; // eventfd written by requestStop(); outlives server_
 

@@ -167,6 +167,14 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle
     options.calibration_text = std::move(calibration_text);
     options.handle_signals = handle_signals;
     options.notify_systemd = true;
+    // An installed stereod finds the page next to it (PREFIX/share/stereod/live_view);
+    // one run from the build tree uses the source tree's.
+    std::error_code ec;
+    const std::filesystem::path installed =
+        std::filesystem::read_symlink("/proc/self/exe", ec).parent_path().parent_path() /
+        "share/stereod/live_view";
+    if (!ec && std::filesystem::is_regular_file(installed / "index.html", ec))
+        options.live_view_web_root = installed.string();
     return std::make_unique<Service>(std::move(config), std::move(source), std::move(calibration),
                                      std::move(options));
 }

@@ -301,6 +301,7 @@ void SocketServer::onTick()
             }
         }
     }
+    notifyObserverOfStatus(now_ns);
     backend_.onTick(now_ns);
 }
 

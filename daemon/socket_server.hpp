@@ -37,6 +37,7 @@
 #include "config/service_config.hpp"
 #include "daemon/listening_socket.hpp"
 #include "daemon/log_limiter.hpp"
+#include "daemon/publish_observer.hpp"
 #include "daemon/publisher.hpp"
 #include "daemon/server_backend.hpp"
 #include "pipeline/calibration.hpp"
@@ -82,6 +83,10 @@ class SocketServer {
     // Also watches `fd` (borrowed; it must stay open while watched) for input:
     // `on_readable` runs on the I/O thread when it is readable (level-triggered).
     void watch(int fd, std::function<void()> on_readable);
+
+    // Also hands every new result, and the status once a second, to `observer` (the live
+    // view; borrowed, it must outlive the server; nullptr: none). Before run().
+    void setPublishObserver(PublishObserver* observer) noexcept { observer_ = observer; }
 
     // New publishing settings (from a reload); take effect with the next event.
     void setPublishConfig(const PublishConfig& publish);
@@ -185,6 +190,10 @@ class SocketServer {
     ReadingReport currentReading(const PublishedFrame* latest, double max_age_ms,
                                  const SourceHealth& health, int64_t now_ns,
                                  std::string& message) const;
+    // The `status` object as of now.
+    Json statusNow(int64_t now_ns);
+    // Once a second, the status and the current reading to the observer.
+    void notifyObserverOfStatus(int64_t now_ns);
     void handle(Client& client, const HelloRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const DistanceRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const StatusRequest& request, const std::optional<Json>& id);
@@ -240,6 +249,9 @@ class SocketServer {
     std::size_t live_clients_ = 0;  // connections not closed yet
     bool listen_paused_ = false;    // out of descriptors: accept again on the next tick
     uint64_t last_dispatched_sequence_ = 0;
+    PublishObserver* observer_ = nullptr;
+    int64_t observer_status_ns_ = 0;
+    std::string observer_reading_; // the reading object handed to the observer
     bool source_was_down_ = false;
     ClientCounters counters_;
     // Per-client and accept errors: one line per kind and 5 s, the rest counted.

@@ -154,9 +154,8 @@ void SocketServer::handle(Client& client, const DistanceRequest& request,
     client.out.push_back('\n');
 }
 
-void SocketServer::handle(Client& client, const StatusRequest&, const std::optional<Json>& id)
+Json SocketServer::statusNow(int64_t now_ns)
 {
-    const int64_t now_ns = monotonicNowNs();
     const PublishedFrame* latest = publisher_.latest();
     const SourceHealth health = backend_.sourceHealth(now_ns);
     ServiceStatus status = backend_.serviceStatus(latest, health, now_ns);
@@ -165,9 +164,30 @@ void SocketServer::handle(Client& client, const StatusRequest&, const std::optio
     status.reading =
         currentReading(latest, options_.publish.max_reading_age_ms, health, now_ns, message);
     status.now_ns = now_ns;
+    return statusToJson(status);
+}
+
+void SocketServer::handle(Client& client, const StatusRequest&, const std::optional<Json>& id)
+{
     Json answer = okReply(id);
-    answer["status"] = statusToJson(status);
+    answer["status"] = statusNow(monotonicNowNs());
     reply(client, answer);
+}
+
+void SocketServer::notifyObserverOfStatus(int64_t now_ns)
+{
+    if (observer_ == nullptr || now_ns - observer_status_ns_ < 1'000'000'000)
+        return;
+    observer_status_ns_ = now_ns;
+    const PublishedFrame* latest = publisher_.latest();
+    const SourceHealth health = backend_.sourceHealth(now_ns);
+    std::string message;
+    const ReadingReport report =
+        currentReading(latest, options_.publish.max_reading_age_ms, health, now_ns, message);
+    observer_reading_.clear();
+    appendReadingJson(observer_reading_, report, now_ns);
+    observer_->onStatus(statusNow(now_ns).dump(), observer_reading_,
+                        report.has_frame ? report.reading.stamp_ns : 0);
 }
 
 void SocketServer::handle(Client& client, const SnapshotRequest& request,

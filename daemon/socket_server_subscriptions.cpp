@@ -62,8 +62,17 @@ void SocketServer::onPublished()
     const PublishedFrame* frame = publisher_.latest();
     if (frame == nullptr || frame->sequence == last_dispatched_sequence_)
         return;
-    dispatchFrame(*frame, monotonicNowNs());
+    const int64_t now_ns = monotonicNowNs();
+    dispatchFrame(*frame, now_ns);
     last_dispatched_sequence_ = frame->sequence;
+    if (observer_ != nullptr) {
+        ReadingReport report;
+        report.reading = frame->result.reading;
+        report.message = frame->reason_message.view();
+        observer_reading_.clear();
+        appendReadingJson(observer_reading_, report, now_ns);
+        observer_->onFrame(*frame, observer_reading_);
+    }
 }
 
 void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)

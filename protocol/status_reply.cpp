@@ -51,6 +51,10 @@ Json pipelineJson(const StatusPipeline& pipeline)
     out["min_disparity"] = pipeline.range.min_disparity;
     out["closest_depth_m"] = roundTo(pipeline.range.closest_depth_m, 3);
     out["disparity_range_capped"] = pipeline.range.capped;
+    out["region"] = {{"x", pipeline.region.x},
+                     {"y", pipeline.region.y},
+                     {"width", pipeline.region.width},
+                     {"height", pipeline.region.height}};
     out["bad_frames"] = pipeline.bad_frames;
     out["out_of_sync"] = pipeline.out_of_sync;
     const StageTimings& stage = pipeline.stage_mean_ms;
@@ -132,6 +136,15 @@ Json statusToJson(const ServiceStatus& status)
     out["calibration_health"] = calibrationHealthJson(status.calibration_health);
     out["calibration"] = calibrationJson(status.calibration);
     out["clients"] = clientsJson(status.clients);
+    const StatusLiveView& live = status.live_view;
+    out["live_view"] = {{"listen", live.listen},
+                        {"listening", live.listening},
+                        {"error", live.error},
+                        {"clients", live.clients},
+                        {"messages_sent", live.messages_sent},
+                        {"bytes_sent", live.bytes_sent},
+                        {"frames_dropped", live.frames_dropped},
+                        {"clients_dropped", live.clients_dropped}};
     out["reading"] = readingToJson(status.reading, status.now_ns);
     return out;
 }

@@ -72,6 +72,7 @@ struct StatusPipeline {
     double publish_mean_ms = 0.0;
     double latency_p50_ms = 0.0; // capture stamp to publication
     double latency_p99_ms = 0.0;
+    RegionOfInterest region; // nearest.roi, fractions of the image
 };
 
 // The numbers of the rig's calibration checks (daemon/calibration_health_monitor.hpp).
@@ -102,6 +103,18 @@ struct StatusCalibration {
     std::optional<double> epipolar_error_px;
 };
 
+// The live view (docs/live-view.md).
+struct StatusLiveView {
+    std::string listen; // the configured address, or "off"
+    bool listening = false;
+    std::string error; // why it is not listening, when it should be
+    uint64_t clients = 0;
+    uint64_t messages_sent = 0;
+    uint64_t bytes_sent = 0;
+    uint64_t frames_dropped = 0;  // messages slow clients did not get
+    uint64_t clients_dropped = 0; // clients closed for not reading
+};
+
 // Everything the `status` object says, as plain values. States are the protocol's names.
 struct ServiceStatus {
     double uptime_s = 0.0;
@@ -111,6 +124,7 @@ struct ServiceStatus {
     StatusCalibrationHealth calibration_health;
     StatusCalibration calibration;
     ClientCounters clients;
+    StatusLiveView live_view;
     ReadingReport reading; // its message is borrowed
     int64_t now_ns = 0;    // for the reading's age
 };

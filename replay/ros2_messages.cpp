@@ -56,6 +56,17 @@ class CdrWriter {
         put(h.stamp.nanosec);
         str(h.frame_id);
     }
+    void image(const Header& h, uint32_t height, uint32_t width, std::string_view encoding,
+               uint32_t step, const void* data, std::size_t size)
+    {
+        header(h);
+        put(height);
+        put(width);
+        str(encoding);
+        put(uint8_t{0}); // is_bigendian
+        put(step);
+        octets(data, size);
+    }
 
   private:
     void align(std::size_t n)
@@ -216,6 +227,30 @@ const std::string& cameraInfoSchemaText()
     return text;
 }
 
+const std::string& disparityImageSchemaText()
+{
+    static const std::string text =
+        "std_msgs/Header header\n"
+        "sensor_msgs/Image image\n"
+        "float32 f\n"
+        "float32 t\n"
+        "sensor_msgs/RegionOfInterest valid_window\n"
+        "float32 min_disparity\n"
+        "float32 max_disparity\n"
+        "float32 delta_d\n" +
+        kSeparator + "MSG: sensor_msgs/Image\n" +
+        imageSchemaText().substr(0, imageSchemaText().find(kSeparator)) + kSeparator +
+        "MSG: sensor_msgs/RegionOfInterest\n"
+        "uint32 x_offset\n"
+        "uint32 y_offset\n"
+        "uint32 height\n"
+        "uint32 width\n"
+        "bool do_rectify\n" +
+        kSeparator + "MSG: std_msgs/Header\n" + kHeaderText + kSeparator +
+        "MSG: builtin_interfaces/Time\n" + kTimeText;
+    return text;
+}
+
 const std::string& pointCloud2SchemaText()
 {
     static const std::string text = withHeader("std_msgs/Header header\n"
@@ -248,13 +283,25 @@ void serializeImage(const Header& header, uint32_t height, uint32_t width,
                     std::string& out)
 {
     CdrWriter w(out);
-    w.header(header);
-    w.put(height);
-    w.put(width);
-    w.str(encoding);
-    w.put(uint8_t{0}); // is_bigendian
-    w.put(step);
-    w.octets(data, size);
+    w.image(header, height, width, encoding, step, data, size);
+}
+
+void serializeDisparityImage(const DisparityImage& d, const void* data, std::size_t size,
+                             std::string& out)
+{
+    CdrWriter w(out);
+    w.header(d.header);
+    w.image(d.header, d.height, d.width, "32FC1", d.width * 4, data, size);
+    w.put(d.f);
+    w.put(d.t);
+    w.put(d.valid_window.x_offset);
+    w.put(d.valid_window.y_offset);
+    w.put(d.valid_window.height);
+    w.put(d.valid_window.width);
+    w.put(static_cast<uint8_t>(d.valid_window.do_rectify ? 1 : 0));
+    w.put(d.min_disparity);
+    w.put(d.max_disparity);
+    w.put(d.delta_d);
 }
 
 void serializeCameraInfo(const CameraInfo& info, std::string& out)

@@ -78,6 +78,21 @@ struct CameraInfo {
     RegionOfInterest roi;
 };
 
+// stereo_msgs/msg/DisparityImage without its pixels (32FC1, row after row): the disparity
+// of the rectified left image, f the focal length in px and t the baseline in m, so that
+// depth = f * t / d.
+struct DisparityImage {
+    Header header;
+    uint32_t height = 0;
+    uint32_t width = 0;
+    float f = 0.0f;
+    float t = 0.0f;
+    RegionOfInterest valid_window;
+    float min_disparity = 0.0f;
+    float max_disparity = 0.0f;
+    float delta_d = 0.0f; // smallest step of disparity the matcher resolves, px
+};
+
 struct PointField {
     enum DataType : uint8_t {
         INT8 = 1,
@@ -112,9 +127,11 @@ struct PointCloud2View {
 inline constexpr const char* kImageType = "sensor_msgs/msg/Image";
 inline constexpr const char* kCameraInfoType = "sensor_msgs/msg/CameraInfo";
 inline constexpr const char* kPointCloud2Type = "sensor_msgs/msg/PointCloud2";
+inline constexpr const char* kDisparityImageType = "stereo_msgs/msg/DisparityImage";
 const std::string& imageSchemaText();
 const std::string& cameraInfoSchemaText();
 const std::string& pointCloud2SchemaText();
+const std::string& disparityImageSchemaText();
 
 // Serializers: replace `out` with the whole message, encapsulation header included. `out`
 // keeps its capacity, so a reused buffer does not allocate per frame.
@@ -122,6 +139,9 @@ void serializeImage(const Header& header, uint32_t height, uint32_t width,
                     std::string_view encoding, uint32_t step, const void* data, std::size_t size,
                     std::string& out);
 void serializeCameraInfo(const CameraInfo& info, std::string& out);
+// `data`: height * width float32 disparities in px.
+void serializeDisparityImage(const DisparityImage& disparity, const void* data, std::size_t size,
+                             std::string& out);
 void serializePointCloud2(const Header& header, uint32_t height, uint32_t width,
                           const std::vector<PointField>& fields, uint32_t point_step,
                           uint32_t row_step, const void* data, std::size_t size, bool is_dense,

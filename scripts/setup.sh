@@ -9,6 +9,7 @@ packages=(
   libopencv-dev libv4l-dev libturbojpeg0-dev libeigen3-dev libyaml-cpp-dev libspdlog-dev libsystemd-dev
   nlohmann-json3-dev libcli11-dev
   libzstd-dev zlib1g-dev   # MCAP recordings: zstd chunks, CRC-32
+  libwebsocketpp-dev libasio-dev libjs-three   # the live view: Foxglove WebSocket server, the page's 3D view
   libhwy-dev   # Highway: portable SIMD with run-time dispatch, for the census-sgm matcher
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-dev   # scripts/fuzz.sh: clang with libFuzzer and its sanitizer runtimes

@@ -1,0 +1,148 @@
+#pragma once
+// The live view: what the robot sees, to Foxglove and to the built-in page, over the
+// Foxglove WebSocket protocol on one port (default 127.0.0.1:8765), with the page served
+// over HTTP on the same port.
+//
+// Three threads meet here, and the worker is none of them:
+//  - the socket server's I/O thread offers each new result (onFrame) and, once a
+//    second, the status (onStatus): a copy into a mailbox under a short lock, only of
+//    the channels somebody subscribed to;
+//  - the feed thread (ours) takes the newest mailbox content, serializes the channels
+//    (ROS 2 CDR, JSON) at most live_view.max_rate_hz times a second, and hands the
+//    messages to the transport;
+//  - the transport's I/O thread (WebSocketTransport) keeps the clients and their
+//    subscriptions and sends. A client whose socket holds more than kSkipBytes unsent
+//    loses frames (counted); one that stays so for kStuckMs is closed (counted).
+//
+// Thread contract: start()/stop() from the controlling thread; onFrame(),
+// onStatus() from one thread (the socket server's); counters() from any thread.
+
+#include <array>
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <string_view>
+#include <thread>
+#include <vector>
+
+#include <opencv2/core/mat.hpp>
+
+#include "daemon/live_view/foxglove_protocol.hpp"
+#include "daemon/live_view/websocket_transport.hpp"
+#include "daemon/publish_observer.hpp"
+#include "daemon/publisher.hpp"
+#include "pipeline/calibration.hpp"
+
+namespace stereod::live_view {
+
+struct LiveViewSettings {
+    std::string host = "127.0.0.1";
+    uint16_t port = 8765;      // 0: any free port (tests)
+    int points_step = 4;       // every n-th point of the cloud goes out
+    double max_rate_hz = 10.0; // frame channels; status is once a second
+    std::string web_root;      // the page's files (index.html, viewer.js, ...)
+    std::string three_root = "/usr/share/javascript/three"; // Debian's libjs-three
+};
+
+struct LiveViewCounters {
+    bool listening = false;
+    std::string address; // "127.0.0.1:8765"
+    std::string error;   // why it is not listening
+    uint64_t clients = 0;
+    uint64_t messages_sent = 0;
+    uint64_t bytes_sent = 0;
+    uint64_t frames_dropped = 0;  // messages a slow client did not get
+    uint64_t clients_dropped = 0; // clients closed for staying stuck
+};
+
+// The channels, by id (the ids advertised).
+enum Channel : uint32_t {
+    kLeftImage = 1,
+    kDepth,
+    kDisparity,
+    kConfidence,
+    kPoints,
+    kLeftInfo,
+    kRightInfo,
+    kNearest,
+    kStatus,
+    kChannelEnd
+};
+
+// What each channel is: topic, encoding and schema.
+const std::vector<ChannelSpec>& channelSpecs();
+
+class LiveView final : public PublishObserver {
+  public:
+    static constexpr std::size_t kSkipBytes = 4 * 1024 * 1024;
+    static constexpr int64_t kStuckMs = 5000;
+
+    LiveView(LiveViewSettings settings, RectifiedGeometry geometry);
+    ~LiveView() override;
+    LiveView(const LiveView&) = delete;
+    LiveView& operator=(const LiveView&) = delete;
+
+    // Listens and starts the threads; "" when listening, else the reason (the service
+    // then runs without the live view).
+    std::string start();
+    void stop();
+    uint16_t port() const noexcept;
+
+    // The socket server's I/O thread: a new result, and its reading as the protocol's
+    // reading object (the same text `stereoctl distance --json` prints).
+    void onFrame(const PublishedFrame& frame, std::string_view reading_json) override;
+    // The same thread, once a second: `status` as `stereoctl status --json` prints it,
+    // and the current reading (which says "source_down" when no frame comes any more).
+    void onStatus(std::string_view status_json, std::string_view reading_json,
+                  int64_t reading_stamp_ns) override;
+
+    LiveViewCounters counters() const;
+
+  private:
+    struct Mailbox {
+        bool frame = false;
+        cv::Mat left, depth_m, confidence, disparity;
+        std::vector<CloudPoint> cloud;
+        int64_t stamp_ns = 0;
+        float min_disparity = 0.0f;
+        float max_disparity = 0.0f;
+        std::string reading_json;
+        bool status = false;
+        std::string status_json;
+        std::string status_reading_json;
+        int64_t status_reading_stamp_ns = 0;
+    };
+    struct Client;
+    struct Sessions;
+
+    bool subscribed(Channel channel) const noexcept
+    {
+        return subscribers_[channel].load(std::memory_order_relaxed) > 0;
+    }
+    void feed();
+    void send(Channel channel, int64_t log_time_ns, std::string payload);
+    HttpResponse serveFile(const std::string& path) const;
+
+    LiveViewSettings settings_;
+    RectifiedGeometry geometry_;
+    std::unique_ptr<WebSocketTransport> transport_;
+    std::unique_ptr<Sessions> sessions_; // transport thread only
+    std::array<std::atomic<int>, kChannelEnd> subscribers_{};
+
+    std::mutex mutex_;
+    std::condition_variable wake_;
+    bool stopping_ = false;
+    Mailbox mailbox_; // guarded by mutex_
+    std::thread feed_thread_;
+
+    std::string address_;
+    std::string error_;
+    std::atomic<bool> listening_{false};
+    std::atomic<uint64_t> clients_{0}, messages_{0}, bytes_{0}, frames_dropped_{0},
+        clients_dropped_{0};
+};
+
+} // namespace stereod::live_view

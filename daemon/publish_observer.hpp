@@ -1,0 +1,24 @@
+#pragma once
+// Who else watches the results the socket server hands out (the live view), called on
+// the socket server's I/O thread. An observer must return quickly and never block: it
+// copies what it needs and does its work on its own thread.
+
+#include <cstdint>
+#include <string_view>
+
+#include "daemon/publisher.hpp"
+
+namespace stereod {
+
+class PublishObserver {
+  public:
+    virtual ~PublishObserver() = default;
+    // A new result, and its reading as the protocol's reading object.
+    virtual void onFrame(const PublishedFrame& frame, std::string_view reading_json) = 0;
+    // Once a second: the `status` object, and the current reading (which may say that
+    // no frame comes any more) with the stamp of the pair behind it (0: none).
+    virtual void onStatus(std::string_view status_json, std::string_view reading_json,
+                          int64_t reading_stamp_ns) = 0;
+};
+
+} // namespace stereod
