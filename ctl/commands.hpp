@@ -169,6 +169,9 @@ int runDistance(const DistanceOptions& options);
 // ctl/devices_command.cpp
 int runDevices(const DevicesOptions& options);
 int runStatus(const StatusOptions& options);
+// `stereoctl view`: the live view's address (from the service's status), and a browser
+// opened on it when there is a display.
+int runView(const StatusOptions& options);
 int runWatch(const WatchOptions& options);
 int runSnapshot(const SnapshotOptions& options);
 int runDepth(const DepthOptions& options);

@@ -118,6 +118,7 @@ CLI::Option* addRectifiedOptions(CLI::App* cmd, RectifiedOptions& o, const char*
 struct Options {
     DistanceOptions distance;
     StatusOptions status;
+    StatusOptions view;
     WatchOptions watch;
     SnapshotOptions snapshot;
     DepthOptions depth;
@@ -466,6 +467,11 @@ int main(int argc, char** argv)
                            o.status.service, sockets, &o.status.json,
                            "print the service's status object as JSON"),
          [&] { return runStatus(o.status); }},
+        {addServiceCommand(app, "view",
+                           "print the live view's address (Foxglove WebSocket and the viewer "
+                           "page) and open a browser on it when there is a display",
+                           o.view.service, sockets),
+         [&] { return runView(o.view); }},
         {addServiceCommand(app, "watch", "one line per new reading until interrupted (Ctrl-C)",
                            o.watch.service, sockets, &o.watch.json,
                            "print each reading event as one JSON line"),

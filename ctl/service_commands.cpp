@@ -1,10 +1,12 @@
 // The commands that talk to the running service: distance, status, watch, snapshot.
 
 #include <cstdio>
+#include <cstdlib>
 #include <vector>
 
 #include <fmt/format.h>
 #include <opencv2/core.hpp>
+#include <spawn.h>
 
 #include "ctl/client.hpp"
 #include "ctl/commands.hpp"
@@ -15,6 +17,8 @@
 #include "ctl/signal_catcher.hpp"
 #include "pipeline/depth_io.hpp"
 #include "protocol/request.hpp"
+
+extern char** environ;
 
 namespace stereod {
 
@@ -198,6 +202,34 @@ int runStatus(const StatusOptions& options)
         fmt::print("{}\n", status.dump(2));
     } else {
         printStatus(status);
+    }
+    return kExitOk;
+}
+
+int runView(const StatusOptions& options)
+{
+    ProtocolClient client = connect(options.service);
+    const json reply = client.request({{"cmd", "status"}});
+    const json& live = member(member(reply, "status"), "live_view");
+    const std::string listen = text(live, "listen");
+    if (!live.value("listening", false)) {
+        fmt::print(stderr, "stereoctl: the live view is not listening ({}){}\n",
+                   listen.empty() ? "this service has none" : "live_view.listen: " + listen,
+                   text(live, "error").empty() ? "" : ": " + text(live, "error"));
+        return kExitNoReading;
+    }
+    const std::string page = "http://" + listen + "/";
+    fmt::print("{}\nFoxglove: Open connection, Foxglove WebSocket, ws://{}\n", page, listen);
+    const char* display = std::getenv("DISPLAY");
+    const char* wayland = std::getenv("WAYLAND_DISPLAY");
+    if ((display != nullptr && *display != '\0') || (wayland != nullptr && *wayland != '\0')) {
+        // Detached: the browser outlives this command.
+        pid_t pid = 0;
+        const char* argv[] = {"xdg-open", page.c_str(), nullptr};
+        if (posix_spawnp(&pid, "xdg-open", nullptr, nullptr, const_cast<char* const*>(argv),
+                         environ) != 0)
+            fmt::print(stderr, "stereoctl: no xdg-open to open a browser; open {} yourself\n",
+                       page);
     }
     return kExitOk;
 }

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Builds the libFuzzer targets (tests/fuzz/: the protocol parser and the configuration
-# loader) with clang and runs each for a bounded time from its checked-in seed corpus.
+# Builds the libFuzzer targets (tests/fuzz/: the protocol parser, the configuration
+# loader and the live view's WebSocket message parser) with clang and runs each for a bounded time from its checked-in seed corpus.
 #   scripts/fuzz.sh [SECONDS] [TARGET...]    SECONDS per target (default 60);
-#                                            TARGET: fuzz_protocol, fuzz_config (default both)
+#                                            TARGET: fuzz_protocol, fuzz_config,
+#                                            fuzz_foxglove (default all)
 # Fails when a target crashes, hangs (one input over 10 s), leaks or runs out of memory;
 # the input that did it is kept under the build directory (artifacts/) and its path
 # printed. New inputs found go to the build directory's working corpus, never into the
@@ -16,13 +17,14 @@ case "$seconds" in
   ''|*[!0-9]*) echo "fuzz.sh: SECONDS must be a whole number, not '$seconds'" >&2; exit 2 ;;
 esac
 targets=("$@")
-[ ${#targets[@]} -eq 0 ] && targets=(fuzz_protocol fuzz_config)
+[ ${#targets[@]} -eq 0 ] && targets=(fuzz_protocol fuzz_config fuzz_foxglove)
 
-declare -A corpus=([fuzz_protocol]=protocol [fuzz_config]=config)
-declare -A dict=([fuzz_protocol]=tests/protocol/fuzz_protocol.dict [fuzz_config]=tests/config/fuzz_config.dict)
+declare -A corpus=([fuzz_protocol]=protocol [fuzz_config]=config [fuzz_foxglove]=foxglove)
+declare -A dict=([fuzz_protocol]=tests/protocol/fuzz_protocol.dict [fuzz_config]=tests/config/fuzz_config.dict
+                 [fuzz_foxglove]=tests/daemon/fuzz_foxglove.dict)
 for target in "${targets[@]}"; do
   if [ -z "${corpus[$target]:-}" ]; then
-    echo "fuzz.sh: unknown target '$target' (expected fuzz_protocol or fuzz_config)" >&2
+    echo "fuzz.sh: unknown target '$target' (expected fuzz_protocol, fuzz_config or fuzz_foxglove)" >&2
     exit 2
   fi
 done

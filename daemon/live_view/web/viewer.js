@@ -74,9 +74,18 @@ function showStatus(status) {
     `source ${s.kind} ${s.state}, pairs ${s.pairs}, ring drops ${s.ring_dropped}\n${cameras}`;
 }
 
-// The 3D view.
+// The 3D view; without WebGL (a headless browser, an old GPU) the page works without it.
 const cloudView = (() => {
   const el = $("cloud");
+  try {
+    return makeCloudView(el);
+  } catch (error) {
+    el.textContent = `no 3D view: ${error.message}`;
+    return () => {};
+  }
+})();
+
+function makeCloudView(el) {
   const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
   renderer.setSize(el.clientWidth, el.clientHeight);
   el.appendChild(renderer.domElement);
@@ -107,7 +116,7 @@ const cloudView = (() => {
     geometry.setAttribute("position", new THREE.BufferAttribute(positions, 3));
     geometry.setAttribute("color", new THREE.BufferAttribute(colours, 3));
   };
-})();
+}
 
 $("depth").addEventListener("mousemove", (event) => {
   const hover = $("hover");

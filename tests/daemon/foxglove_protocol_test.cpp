@@ -1,0 +1,74 @@
+// The Foxglove WebSocket protocol's messages, without sockets.
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "daemon/live_view/foxglove_protocol.hpp"
+#include "daemon/live_view/live_view.hpp"
+
+namespace stereod::live_view {
+namespace {
+
+using nlohmann::json;
+
+TEST(FoxgloveProtocol, SubscribeAndUnsubscribeAreRead)
+{
+    const ClientRequest sub = parseClientMessage(
+        R"({"op":"subscribe","subscriptions":[{"id":0,"channelId":3},{"id":7,"channelId":1}]})");
+    ASSERT_EQ(sub.kind, ClientRequest::Kind::Subscribe);
+    ASSERT_EQ(sub.subscriptions.size(), 2u);
+    EXPECT_EQ(sub.subscriptions[1], std::make_pair(7u, 1u));
+    const ClientRequest unsub =
+        parseClientMessage(R"({"op":"unsubscribe","subscriptionIds":[0,7]})");
+    ASSERT_EQ(unsub.kind, ClientRequest::Kind::Unsubscribe);
+    EXPECT_EQ(unsub.unsubscriptions, (std::vector<uint32_t>{0, 7}));
+}
+
+TEST(FoxgloveProtocol, MalformedRequestsSayWhatIsWrong)
+{
+    for (const char* text :
+         {"", "[]", "{", R"({"op":5})", R"({"op":"subscribe"})",
+          R"({"op":"subscribe","subscriptions":[{"id":-1,"channelId":1}]})",
+          R"({"op":"subscribe","subscriptions":[{"id":1,"channelId":4294967296}]})",
+          R"({"op":"subscribe","subscriptions":[{"id":1.5,"channelId":1}]})",
+          R"({"op":"unsubscribe","subscriptionIds":["a"]})"}) {
+        const ClientRequest request = parseClientMessage(text);
+        EXPECT_EQ(request.kind, ClientRequest::Kind::Invalid) << text;
+        EXPECT_FALSE(request.problem.empty()) << text;
+    }
+    const ClientRequest advertise = parseClientMessage(R"({"op":"advertise","channels":[]})");
+    EXPECT_EQ(advertise.kind, ClientRequest::Kind::Ignored);
+    EXPECT_NE(advertise.problem.find("advertise"), std::string::npos);
+}
+
+TEST(FoxgloveProtocol, MessageDataFrameIsOpcodeIdTimeThenPayload)
+{
+    std::string frame;
+    appendMessageData(0x01020304, 0x1122334455667788ull, "abc", frame);
+    ASSERT_EQ(frame.size(), 1u + 4 + 8 + 3);
+    EXPECT_EQ(frame[0], 0x01);
+    EXPECT_EQ(static_cast<uint8_t>(frame[1]), 0x04); // little-endian
+    EXPECT_EQ(static_cast<uint8_t>(frame[4]), 0x01);
+    EXPECT_EQ(static_cast<uint8_t>(frame[5]), 0x88);
+    EXPECT_EQ(static_cast<uint8_t>(frame[12]), 0x11);
+    EXPECT_EQ(frame.substr(13), "abc");
+}
+
+TEST(FoxgloveProtocol, AdvertiseListsEveryChannelWithItsSchema)
+{
+    const json advertise = json::parse(advertiseJson(channelSpecs()));
+    EXPECT_EQ(advertise["op"], "advertise");
+    ASSERT_EQ(advertise["channels"].size(), 9u);
+    for (const json& channel : advertise["channels"]) {
+        EXPECT_FALSE(channel["schema"].get<std::string>().empty()) << channel["topic"];
+        const bool cdr = channel["encoding"] == "cdr";
+        EXPECT_EQ(channel["schemaEncoding"], cdr ? "ros2msg" : "jsonschema");
+        if (!cdr)
+            EXPECT_TRUE(json::accept(channel["schema"].get<std::string>())) << channel["topic"];
+    }
+    const json info = json::parse(serverInfoJson("stereod", "42"));
+    EXPECT_EQ(info["op"], "serverInfo");
+    EXPECT_TRUE(info["capabilities"].empty());
+}
+
+} // namespace
+} // namespace stereod::live_view

@@ -1,0 +1,285 @@
+// The live view against real clients: Foxglove's own WebSocket client and ROS 2 CDR
+// reader (tests/live_view/client.mjs, node) connect to a replaying `stereod`, and what
+// they decode is held to the service's own snapshot and `stereoctl distance --json`.
+// Also: a port already taken leaves the service running without the live view, and the
+// HTTP side refuses what it does not serve.
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include <arpa/inet.h>
+#include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "base/unique_fd.hpp"
+#include "ctl/client.hpp"
+#include "pipeline/calibration.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
+
+namespace stereod {
+namespace {
+
+using namespace std::chrono_literals;
+using Json = nlohmann::ordered_json;
+using test::ChildProcess;
+using test::ProcessResult;
+using test::runProcess;
+
+const std::string kClientScripts = std::string(STEREOD_SOURCE_DIR) + "/tests/live_view";
+// tsukuba's disparities (5..15 px) as depths of 0.5 to 1.6 m.
+constexpr double kFocalPx = 615.0;
+constexpr double kBaselineM = 0.013;
+
+// A port nobody listens on now (bound to 0, then released).
+uint16_t freePort()
+{
+    const UniqueFd fd(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
+    sockaddr_in address{};
+    address.sin_family = AF_INET;
+    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ::bind(fd.get(), reinterpret_cast<sockaddr*>(&address), sizeof address);
+    socklen_t length = sizeof address;
+    ::getsockname(fd.get(), reinterpret_cast<sockaddr*>(&address), &length);
+    return ntohs(address.sin_port);
+}
+
+// One HTTP exchange on 127.0.0.1:port; the whole answer.
+std::string httpExchange(uint16_t port, const std::string& request)
+{
+    const UniqueFd fd(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
+    sockaddr_in address{};
+    address.sin_family = AF_INET;
+    address.sin_port = htons(port);
+    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    if (::connect(fd.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0)
+        return {};
+    ::send(fd.get(), request.data(), request.size(), MSG_NOSIGNAL);
+    std::string answer;
+    char buffer[4096];
+    ssize_t n = 0;
+    while ((n = ::recv(fd.get(), buffer, sizeof buffer, 0)) > 0)
+        answer.append(buffer, static_cast<std::size_t>(n));
+    return answer;
+}
+
+std::string httpGet(uint16_t port, const std::string& path)
+{
+    return httpExchange(port,
+                        "GET " + path + " HTTP/1.1\r\nHost: stereod\r\nConnection: close\r\n\r\n");
+}
+
+class LiveViewE2e : public ::testing::Test {
+  protected:
+    void SetUp() override
+    {
+        recording_ = dir_.file("rec");
+        std::filesystem::create_directory(recording_);
+        for (int i = 0; i < 3; ++i) {
+            std::filesystem::copy_file(test::tsukubaDir() + "/im3.png",
+                                       recording_ + "/left" + std::to_string(i) + ".png");
+            std::filesystem::copy_file(test::tsukubaDir() + "/im4.png",
+                                       recording_ + "/right" + std::to_string(i) + ".png");
+        }
+        calibration_ = dir_.file("calib.yaml");
+        saveCalibration(makeRectifiedCalibration(cv::Size(384, 288), kFocalPx, kBaselineM),
+                        calibration_);
+        socket_ = dir_.file("s.sock");
+    }
+
+    void startService(const std::string& live_view)
+    {
+        service_ = std::make_unique<ChildProcess>(
+            std::vector<std::string>{test::stereodPath(), "--replay", recording_, "--calib",
+                                     calibration_, "--socket", socket_, "--live-view", live_view},
+            dir_.file("stereod.log"));
+        const auto deadline = std::chrono::steady_clock::now() + 60s;
+        while (std::chrono::steady_clock::now() < deadline) {
+            try {
+                ProtocolClient client(socket_, 2000ms);
+                if (client.request({{"cmd", "distance"}})["reading"].value("valid", false))
+                    return;
+            } catch (const std::exception&) {
+            }
+            std::this_thread::sleep_for(100ms);
+        }
+        FAIL() << "stereod gave no valid reading within 60 s";
+    }
+
+    Json status()
+    {
+        ProtocolClient client(socket_, 10000ms);
+        return client.request({{"cmd", "status"}})["status"];
+    }
+
+    test::TempDir dir_;
+    std::string recording_, calibration_, socket_;
+    std::unique_ptr<ChildProcess> service_;
+};
+
+TEST_F(LiveViewE2e, FoxgloveClientGetsEveryChannelAndTheServicesOwnValues)
+{
+    if (std::string(STEREOD_NODE).empty())
+        GTEST_SKIP() << "node is not installed";
+    ASSERT_TRUE(std::filesystem::exists(kClientScripts + "/node_modules/@foxglove/ws-protocol"))
+        << "the live view's client packages are missing: run scripts/setup-node.sh";
+    const uint16_t port = freePort();
+    startService("127.0.0.1:" + std::to_string(port));
+    ASSERT_FALSE(HasFailure());
+
+    const ProcessResult node = runProcess({STEREOD_NODE, kClientScripts + "/client.mjs",
+                                           "ws://127.0.0.1:" + std::to_string(port), "4"});
+    ASSERT_EQ(node.exit_code, 0) << node.err;
+    const Json got = Json::parse(node.out);
+
+    // Every channel, with its schema.
+    const std::map<std::string, std::pair<std::string, std::string>> expected = {
+        {"/stereo/left/image_rect", {"cdr", "sensor_msgs/msg/Image"}},
+        {"/stereo/depth", {"cdr", "sensor_msgs/msg/Image"}},
+        {"/stereo/disparity", {"cdr", "stereo_msgs/msg/DisparityImage"}},
+        {"/stereo/confidence", {"cdr", "sensor_msgs/msg/Image"}},
+        {"/stereo/points", {"cdr", "sensor_msgs/msg/PointCloud2"}},
+        {"/stereo/left/camera_info", {"cdr", "sensor_msgs/msg/CameraInfo"}},
+        {"/stereo/right/camera_info", {"cdr", "sensor_msgs/msg/CameraInfo"}},
+        {"/stereo/nearest", {"json", "stereod.Reading"}},
+        {"/stereo/status", {"json", "stereod.Status"}}};
+    ASSERT_EQ(got["channels"].size(), expected.size()) << got["channels"].dump();
+    for (const Json& channel : got["channels"]) {
+        const auto it = expected.find(channel["topic"]);
+        ASSERT_NE(it, expected.end()) << channel.dump();
+        EXPECT_EQ(channel["encoding"], it->second.first);
+        EXPECT_EQ(channel["schemaName"], it->second.second);
+        EXPECT_EQ(channel["schemaEncoding"], it->second.first == "cdr" ? "ros2msg" : "jsonschema");
+        EXPECT_GT(channel["schemaLength"].get<int>(), 10);
+        // Frame channels: at least 5 messages in 4 s (the client decoded every CDR one).
+        if (it->second.first == "cdr" || it->first == "/stereo/nearest")
+            EXPECT_GE(got["counts"].value(it->first, 0), 5) << it->first;
+    }
+    EXPECT_GE(got["counts"].value("/stereo/status", 0), 2);
+    EXPECT_TRUE(got["statuses"].empty()) << got["statuses"].dump();
+
+    // Depth: 32FC1 metres, NaN where none, equal to the snapshot's within 1 mm. The
+    // replayed pairs are one pair three times, so every frame's depth is the same.
+    const Json& depth = got["depth"];
+    ASSERT_TRUE(depth.is_object());
+    EXPECT_EQ(depth["encoding"], "32FC1");
+    EXPECT_EQ(depth["width"], 384);
+    EXPECT_EQ(depth["height"], 288);
+    EXPECT_EQ(depth["step"], 384 * 4);
+    EXPECT_EQ(depth["frame_id"], "stereo_left_optical_frame");
+    EXPECT_EQ(depth["logTime"], depth["stamp_ns"]);
+    ProtocolClient client(socket_, 30000ms);
+    const Json snapshot = client.request({{"cmd", "snapshot"}, {"items", Json::array({"depth"})}});
+    ASSERT_EQ(snapshot["depth_valid"], true) << snapshot.dump();
+    cv::Mat depth_mm(288, 384, CV_16UC1);
+    ASSERT_EQ(snapshot["payloads"][0]["bytes"], depth_mm.total() * 2);
+    client.readPayload(depth_mm.data, depth_mm.total() * 2);
+    const Json& values = depth["data"];
+    ASSERT_EQ(values.size(), depth_mm.total());
+    std::size_t with_depth = 0, mismatched = 0;
+    for (std::size_t i = 0; i < depth_mm.total(); ++i) {
+        const uint16_t mm = depth_mm.at<uint16_t>(static_cast<int>(i));
+        const Json& value = values[i];
+        const bool same =
+            mm == 0 ? value.is_null()
+                    : value.is_number() && std::abs(value.get<double>() * 1000.0 - mm) <= 1.0;
+        mismatched += same ? 0 : 1;
+        with_depth += mm == 0 ? 0 : 1;
+    }
+    EXPECT_EQ(mismatched, 0u);
+    EXPECT_GT(with_depth, depth_mm.total() / 2);
+
+    // The nearest reading: the object `stereoctl distance --json` prints, but for the
+    // pair's stamp, frame number and age.
+    const ProcessResult distance =
+        runProcess({test::stereoctlPath(), "--socket", socket_, "distance", "--json"});
+    ASSERT_EQ(distance.exit_code, 0) << distance.err;
+    Json ours = Json::parse(distance.out);
+    Json theirs = got["nearest"];
+    for (Json* reading : {&ours, &theirs}) {
+        ASSERT_TRUE(reading->contains("stamp_ns")) << reading->dump();
+        reading->erase("stamp_ns");
+        reading->erase("frame");
+        reading->erase("age_ms");
+    }
+    EXPECT_EQ(theirs, ours);
+    EXPECT_EQ(got["status"]["live_view"]["listening"], true);
+
+    // The service counts what it sent.
+    const Json live = status()["live_view"];
+    EXPECT_EQ(live["listen"], "127.0.0.1:" + std::to_string(port));
+    EXPECT_EQ(live["listening"], true);
+    EXPECT_GT(live["messages_sent"].get<uint64_t>(), 40u);
+    EXPECT_GT(live["bytes_sent"].get<uint64_t>(), 1'000'000u);
+}
+
+TEST_F(LiveViewE2e, PortTakenLeavesTheServiceRunningAndSaysSo)
+{
+    const UniqueFd taken(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
+    sockaddr_in address{};
+    address.sin_family = AF_INET;
+    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ASSERT_EQ(::bind(taken.get(), reinterpret_cast<sockaddr*>(&address), sizeof address), 0);
+    ASSERT_EQ(::listen(taken.get(), 1), 0);
+    socklen_t length = sizeof address;
+    ::getsockname(taken.get(), reinterpret_cast<sockaddr*>(&address), &length);
+    const std::string listen = "127.0.0.1:" + std::to_string(ntohs(address.sin_port));
+
+    startService(listen); // readings flow: the service runs without its live view
+    ASSERT_FALSE(HasFailure());
+    const Json live = status()["live_view"];
+    EXPECT_EQ(live["listen"], listen);
+    EXPECT_EQ(live["listening"], false);
+    EXPECT_NE(live["error"].get<std::string>().find("in use"), std::string::npos) << live.dump();
+    const ProcessResult view = runProcess({test::stereoctlPath(), "--socket", socket_, "view"});
+    EXPECT_EQ(view.exit_code, 1);
+    EXPECT_NE(view.err.find("not listening"), std::string::npos) << view.err;
+}
+
+TEST_F(LiveViewE2e, HttpServesThePageAndRefusesEverythingElse)
+{
+    const uint16_t port = freePort();
+    startService("127.0.0.1:" + std::to_string(port));
+    ASSERT_FALSE(HasFailure());
+    // `stereoctl view` names the address (no display here: no browser is opened).
+    const ProcessResult view = runProcess({test::stereoctlPath(), "--socket", socket_, "view"},
+                                          {"DISPLAY=", "WAYLAND_DISPLAY="});
+    EXPECT_EQ(view.exit_code, 0) << view.err;
+    EXPECT_EQ(view.out.rfind("http://127.0.0.1:" + std::to_string(port) + "/\n", 0), 0u)
+        << view.out;
+    const std::string page = httpGet(port, "/");
+    EXPECT_EQ(page.rfind("HTTP/1.1 200", 0), 0u) << page.substr(0, 200);
+    EXPECT_NE(page.find("text/html"), std::string::npos);
+    EXPECT_NE(page.find("viewer.js"), std::string::npos);
+    const std::string three = httpGet(port, "/three/build/three.module.js");
+    EXPECT_EQ(three.rfind("HTTP/1.1 200", 0), 0u)
+        << three.substr(0, 200) << " (is libjs-three installed?)";
+    EXPECT_EQ(httpGet(port, "/../../etc/passwd").rfind("HTTP/1.1 400", 0), 0u);
+    EXPECT_EQ(httpGet(port, "/three/../../../etc/passwd").rfind("HTTP/1.1 400", 0), 0u);
+    EXPECT_EQ(httpGet(port, "/nothing.js").rfind("HTTP/1.1 404", 0), 0u);
+    EXPECT_EQ(
+        httpExchange(
+            port,
+            "POST / HTTP/1.1\r\nHost: stereod\r\nConnection: close\r\nContent-Length: 0\r\n\r\n")
+            .rfind("HTTP/1.1 405", 0),
+        0u);
+    // Garbage instead of HTTP: an error answer or a closed connection, and the service
+    // still serves.
+    httpExchange(port, std::string("\x16\x03\x01\x02\x00\x01\x00\x01\xfc\x03\x03", 11));
+    httpExchange(port, "GET / HTTP/1.1\r\nHost: stereod\r\nConnection: close\r\nX: " +
+                           std::string(100000, 'a') + "\r\n\r\n");
+    EXPECT_EQ(httpGet(port, "/").rfind("HTTP/1.1 200", 0), 0u);
+    ProtocolClient client(socket_, 10000ms);
+    EXPECT_TRUE(client.request({{"cmd", "distance"}})["reading"].value("valid", false));
+}
+
+} // namespace
+} // namespace stereod
