@@ -140,7 +140,7 @@ TEST(ProtocolParse, NonUtf8BytesAreBadJsonWithAValidReply)
     // The library quotes the bytes it read; the reply line must still be valid UTF-8.
     std::string reply;
     appendJsonLine(reply, errorReply(error.code, error.message, error.id));
-    EXPECT_NO_THROW(Json::parse(reply)) << reply;
+    EXPECT_TRUE(Json::accept(reply)) << reply;
 }
 
 TEST(ProtocolParse, MissingOrMistypedCmdIsBadRequest)
