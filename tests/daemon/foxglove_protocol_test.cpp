@@ -62,8 +62,9 @@ TEST(FoxgloveProtocol, AdvertiseListsEveryChannelWithItsSchema)
         EXPECT_FALSE(channel["schema"].get<std::string>().empty()) << channel["topic"];
         const bool cdr = channel["encoding"] == "cdr";
         EXPECT_EQ(channel["schemaEncoding"], cdr ? "ros2msg" : "jsonschema");
-        if (!cdr)
+        if (!cdr) {
             EXPECT_TRUE(json::accept(channel["schema"].get<std::string>())) << channel["topic"];
+        }
     }
     const json info = json::parse(serverInfoJson("stereod", "42"));
     EXPECT_EQ(info["op"], "serverInfo");

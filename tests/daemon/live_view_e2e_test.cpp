@@ -160,8 +160,9 @@ TEST_F(LiveViewE2e, FoxgloveClientGetsEveryChannelAndTheServicesOwnValues)
         EXPECT_EQ(channel["schemaEncoding"], it->second.first == "cdr" ? "ros2msg" : "jsonschema");
         EXPECT_GT(channel["schemaLength"].get<int>(), 10);
         // Frame channels: at least 5 messages in 4 s (the client decoded every CDR one).
-        if (it->second.first == "cdr" || it->first == "/stereo/nearest")
+        if (it->second.first == "cdr" || it->first == "/stereo/nearest") {
             EXPECT_GE(got["counts"].value(it->first, 0), 5) << it->first;
+        }
     }
     EXPECT_GE(got["counts"].value("/stereo/status", 0), 2);
     EXPECT_TRUE(got["statuses"].empty()) << got["statuses"].dump();

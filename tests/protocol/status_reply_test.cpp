@@ -68,7 +68,7 @@ TEST(StatusReply, MembersInTheDocumentedOrder)
     const Json status = statusToJson(runningStatus());
     EXPECT_EQ(keys(status), (std::vector<std::string>{"uptime_s", "state", "source", "pipeline",
                                                       "calibration_health", "calibration",
-                                                      "clients", "reading"}));
+                                                      "clients", "live_view", "reading"}));
     EXPECT_EQ(status["state"], "running");
     EXPECT_EQ(
         keys(status["clients"]),

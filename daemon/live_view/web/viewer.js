@@ -47,8 +47,9 @@ function drawDepth(canvas, image) {
 }
 
 function showReading(reading) {
+  // Its age: how old it was when sent (age_ms), plus the time since it arrived.
   state.reading = reading;
-  state.readingAt = performance.now();
+  state.readingAt = performance.now() - (reading.age_ms ?? 0);
   const el = $("distance");
   if (reading.valid) {
     el.textContent = `${reading.distance_m.toFixed(3)} m`;
@@ -70,7 +71,7 @@ function showStatus(status) {
   $("status").textContent =
     `state ${status.state}, up ${status.uptime_s} s\n` +
     `pipeline ${p.fps} fps (${p.matcher}), ${stages}\n` +
-    `latency p50 ${p.latency_p50_ms} ms, p99 ${p.latency_p99_ms} ms\n` +
+    `latency (capture to result) p50 ${(p.latency_ms || {}).p50} ms, p99 ${(p.latency_ms || {}).p99} ms\n` +
     `source ${s.kind} ${s.state}, pairs ${s.pairs}, ring drops ${s.ring_dropped}\n${cameras}`;
 }
 
@@ -136,7 +137,7 @@ $("depth").addEventListener("mousemove", (event) => {
 $("depth").addEventListener("mouseleave", () => { $("hover").style.display = "none"; });
 
 setInterval(() => {
-  if (state.reading) $("age").textContent = `reading ${((performance.now() - state.readingAt) / 1000).toFixed(1)} s ago`;
+  if (state.reading) $("age").textContent = `age ${((performance.now() - state.readingAt) / 1000).toFixed(2)} s`;
 }, 200);
 
 function connect() {
