@@ -10,6 +10,7 @@ packages=(
   nlohmann-json3-dev libcli11-dev
   libzstd-dev zlib1g-dev   # MCAP recordings: zstd chunks, CRC-32
   libwebsocketpp-dev libasio-dev libjs-three   # the live view: Foxglove WebSocket server, the page's 3D view
+  chromium   # the live view's page tested in a real browser (headless, tests/live_view/page.mjs)
   libhwy-dev   # Highway: portable SIMD with run-time dispatch, for the census-sgm matcher
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-dev   # scripts/fuzz.sh: clang with libFuzzer and its sanitizer runtimes

@@ -5,7 +5,9 @@
 // HTTP side refuses what it does not serve.
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <string>
 #include <thread>
@@ -95,17 +97,25 @@ class LiveViewE2e : public ::testing::Test {
         socket_ = dir_.file("s.sock");
     }
 
-    void startService(const std::string& live_view)
+    // `expect_valid`: wait for a valid reading (else for any reading).
+    void startService(const std::string& live_view, const std::string& config = {},
+                      bool expect_valid = true)
     {
-        service_ = std::make_unique<ChildProcess>(
-            std::vector<std::string>{test::stereodPath(), "--replay", recording_, "--calib",
-                                     calibration_, "--socket", socket_, "--live-view", live_view},
-            dir_.file("stereod.log"));
+        std::vector<std::string> argv = {
+            test::stereodPath(), "--replay", recording_,    "--calib", calibration_,
+            "--socket",          socket_,    "--live-view", live_view};
+        if (!config.empty()) {
+            argv.push_back("--config");
+            argv.push_back(config);
+        }
+        service_ = std::make_unique<ChildProcess>(argv, dir_.file("stereod.log"));
         const auto deadline = std::chrono::steady_clock::now() + 60s;
         while (std::chrono::steady_clock::now() < deadline) {
             try {
                 ProtocolClient client(socket_, 2000ms);
-                if (client.request({{"cmd", "distance"}})["reading"].value("valid", false))
+                const Json reading = client.request({{"cmd", "distance"}})["reading"];
+                if (reading.value("valid", false) ||
+                    (!expect_valid && reading.contains("stamp_ns")))
                     return;
             } catch (const std::exception&) {
             }
@@ -220,6 +230,71 @@ TEST_F(LiveViewE2e, FoxgloveClientGetsEveryChannelAndTheServicesOwnValues)
     EXPECT_EQ(live["listening"], true);
     EXPECT_GT(live["messages_sent"].get<uint64_t>(), 40u);
     EXPECT_GT(live["bytes_sent"].get<uint64_t>(), 1'000'000u);
+}
+
+// The page in Debian's Chromium (headless, playwright-core): the distance `stereoctl
+// distance` gives, a depth image that is not blank, a screenshot kept in the build tree;
+// and with the region aimed at nothing, NO READING and the reason.
+class LiveViewPage : public LiveViewE2e {
+  protected:
+    void SetUp() override
+    {
+        if (std::string(STEREOD_NODE).empty())
+            GTEST_SKIP() << "node is not installed";
+        if (!std::filesystem::exists(chromium()))
+            GTEST_SKIP() << chromium() << " is not installed (scripts/setup.sh installs it)";
+        ASSERT_TRUE(std::filesystem::exists(kClientScripts + "/node_modules/playwright-core"))
+            << "the live view's client packages are missing: run scripts/setup-node.sh";
+        LiveViewE2e::SetUp();
+    }
+    static std::string chromium()
+    {
+        const char* path = std::getenv("STEREOD_CHROMIUM");
+        return path != nullptr ? path : "/usr/bin/chromium";
+    }
+    Json openPage(uint16_t port, const std::string& screenshot)
+    {
+        const ProcessResult page =
+            runProcess({STEREOD_NODE, kClientScripts + "/page.mjs",
+                        "http://127.0.0.1:" + std::to_string(port) + "/", screenshot});
+        EXPECT_EQ(page.exit_code, 0) << page.err;
+        return page.exit_code == 0 ? Json::parse(page.out) : Json::object();
+    }
+};
+
+TEST_F(LiveViewPage, ShowsTheDistanceAndTheDepth)
+{
+    const uint16_t port = freePort();
+    startService("127.0.0.1:" + std::to_string(port));
+    ASSERT_FALSE(HasFailure());
+    const std::string screenshot = std::string(STEREOD_BINARY_DIR) + "/live-view-page.png";
+    const Json shown = openPage(port, screenshot);
+    ASSERT_FALSE(HasFailure());
+    EXPECT_TRUE(shown["errors"].empty()) << shown["errors"].dump();
+    const ProcessResult distance =
+        runProcess({test::stereoctlPath(), "--socket", socket_, "distance"});
+    ASSERT_EQ(distance.exit_code, 0) << distance.err;
+    // Both print three decimals and " m": the same pair gives the same text.
+    EXPECT_EQ(shown["distance"].get<std::string>() + "\n", distance.out);
+    EXPECT_EQ(shown["depth_width"], 384);
+    EXPECT_GT(shown["depth_variance"].get<double>(), 100.0) << "the depth canvas is blank";
+    EXPECT_NE(shown["status"].get<std::string>().find("state running"), std::string::npos);
+    EXPECT_TRUE(std::filesystem::file_size(screenshot) > 10000) << screenshot;
+}
+
+TEST_F(LiveViewPage, RegionAimedAtNothingShowsNoReadingAndTheReason)
+{
+    // Every depth of the scene is beyond 0.15 m: nothing in range.
+    const std::string config = dir_.file("near.yaml");
+    std::ofstream(config) << "nearest:\n  min_depth_m: 0.1\n  max_depth_m: 0.15\n";
+    const uint16_t port = freePort();
+    startService("127.0.0.1:" + std::to_string(port), config, false);
+    ASSERT_FALSE(HasFailure());
+    const Json shown =
+        openPage(port, std::string(STEREOD_BINARY_DIR) + "/live-view-no-reading.png");
+    ASSERT_FALSE(HasFailure());
+    const std::string text = shown["distance"];
+    EXPECT_EQ(text.rfind("NO READING: nothing_in_range", 0), 0u) << text;
 }
 
 TEST_F(LiveViewE2e, PortTakenLeavesTheServiceRunningAndSaysSo)
