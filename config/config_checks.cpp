@@ -465,6 +465,17 @@ void checkLiveView(Checker& checker, const LiveViewConfig& live_view)
     }
     checker.integer("live_view.points_step", live_view.points_step, 1, 1000, "");
     checker.real("live_view.max_rate_hz", live_view.max_rate_hz, above(0, 1000, " Hz"));
+    const auto& r = live_view.rate_hz;
+    const std::pair<const char*, double> rates[] = {
+        {"live_view.rate_hz.image", r.image},
+        {"live_view.rate_hz.depth", r.depth},
+        {"live_view.rate_hz.disparity", r.disparity},
+        {"live_view.rate_hz.confidence", r.confidence},
+        {"live_view.rate_hz.points", r.points},
+        {"live_view.rate_hz.camera_info", r.camera_info},
+        {"live_view.rate_hz.nearest", r.nearest}};
+    for (const auto& [key, value] : rates)
+        checker.real(key, value, closed(0, 1000, " Hz (0: live_view.max_rate_hz)"));
 }
 
 } // namespace

@@ -407,6 +407,27 @@ std::vector<KeyDef> buildKeyTable()
     add(realKey(
         "live_view.max_rate_hz", kRestart, [](auto& c) -> auto& { return c.live_view.max_rate_hz; },
         "Hz"));
+    add(realKey(
+        "live_view.rate_hz.image", kRestart,
+        [](auto& c) -> auto& { return c.live_view.rate_hz.image; }, "Hz"));
+    add(realKey(
+        "live_view.rate_hz.depth", kRestart,
+        [](auto& c) -> auto& { return c.live_view.rate_hz.depth; }, "Hz"));
+    add(realKey(
+        "live_view.rate_hz.disparity", kRestart,
+        [](auto& c) -> auto& { return c.live_view.rate_hz.disparity; }, "Hz"));
+    add(realKey(
+        "live_view.rate_hz.confidence", kRestart,
+        [](auto& c) -> auto& { return c.live_view.rate_hz.confidence; }, "Hz"));
+    add(realKey(
+        "live_view.rate_hz.points", kRestart,
+        [](auto& c) -> auto& { return c.live_view.rate_hz.points; }, "Hz"));
+    add(realKey(
+        "live_view.rate_hz.camera_info", kRestart,
+        [](auto& c) -> auto& { return c.live_view.rate_hz.camera_info; }, "Hz"));
+    add(realKey(
+        "live_view.rate_hz.nearest", kRestart,
+        [](auto& c) -> auto& { return c.live_view.rate_hz.nearest; }, "Hz"));
     add(textKey(
         "log_level", kLive, [](auto& c) -> auto& { return c.log_level; }, false));
     return keys;

@@ -101,6 +101,11 @@ struct LiveViewConfig {
     std::string listen = "127.0.0.1:8765";
     int points_step = 4;       // every n-th point of the cloud is sent
     double max_rate_hz = 10.0; // frame channels at most this often
+    // Per channel (live_view.rate_hz.*): at most this often; 0 follows max_rate_hz.
+    struct Rates {
+        double image = 0, depth = 0, disparity = 0, confidence = 0, points = 0, camera_info = 0,
+               nearest = 0;
+    } rate_hz;
 };
 
 // Calibration health while running (docs/configuration.md).

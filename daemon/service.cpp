@@ -329,6 +329,15 @@ void Service::startLiveView()
     settings.port = address->port;
     settings.points_step = config_.live_view.points_step;
     settings.max_rate_hz = config_.live_view.max_rate_hz;
+    const auto& rates = config_.live_view.rate_hz;
+    settings.rate_hz[live_view::kLeftImage] = rates.image;
+    settings.rate_hz[live_view::kDepth] = rates.depth;
+    settings.rate_hz[live_view::kDisparity] = rates.disparity;
+    settings.rate_hz[live_view::kConfidence] = rates.confidence;
+    settings.rate_hz[live_view::kPoints] = rates.points;
+    settings.rate_hz[live_view::kLeftInfo] = rates.camera_info;
+    settings.rate_hz[live_view::kRightInfo] = rates.camera_info;
+    settings.rate_hz[live_view::kNearest] = rates.nearest;
     settings.web_root = options_.live_view_web_root;
     live_view_ = std::make_unique<live_view::LiveView>(
         settings, calibration_ ? calibration_->rectified : RectifiedGeometry{});
@@ -339,25 +348,18 @@ void Service::startLiveView()
         return;
     }
     server_->setPublishObserver(live_view_.get());
-    spdlog::info("live view on http://{}/ (Foxglove: ws://{})", live_view_->counters().address,
-                 live_view_->counters().address);
+    const std::string bound = live_view_->status().listen;
+    spdlog::info("live view on http://{}/ (Foxglove: ws://{})", bound, bound);
 }
 
 ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceHealth& health,
                                      int64_t now_ns)
 {
     ServiceStatus status;
-    status.live_view.listen = config_.live_view.listen;
-    if (live_view_) {
-        const live_view::LiveViewCounters live = live_view_->counters();
-        status.live_view.listening = live.listening;
-        status.live_view.error = live.error;
-        status.live_view.clients = live.clients;
-        status.live_view.messages_sent = live.messages_sent;
-        status.live_view.bytes_sent = live.bytes_sent;
-        status.live_view.frames_dropped = live.frames_dropped;
-        status.live_view.clients_dropped = live.clients_dropped;
-    }
+    if (live_view_)
+        status.live_view = live_view_->status();
+    else
+        status.live_view.listen = config_.live_view.listen; // "off"
     status.uptime_s = static_cast<double>(now_ns - started_ns_) / 1e9;
     status.state = health.down         ? "source_down"
                    : !calibration_     ? "uncalibrated"

@@ -34,8 +34,8 @@ constexpr const char* kOfferedQos = "- history: 1\n"
                                     "    nsec: 854775807\n"
                                     "  avoid_ros_namespace_conventions: false\n";
 
-constexpr const char* kLeftFrame = "stereo_left_optical_frame";
-constexpr const char* kRightFrame = "stereo_right_optical_frame";
+using ros2::kLeftOpticalFrame;
+using ros2::kRightOpticalFrame;
 
 std::string lower(std::string s)
 {
@@ -90,8 +90,8 @@ McapRecordingWriter::McapRecordingWriter(const std::string& path, mcap::WriterOp
 void McapRecordingWriter::setCameraInfo(const ros2::CameraInfo& left, const ros2::CameraInfo& right)
 {
     camera_info_.emplace(left, right);
-    camera_info_->first.header.frame_id = kLeftFrame;
-    camera_info_->second.header.frame_id = kRightFrame;
+    camera_info_->first.header.frame_id = kLeftOpticalFrame;
+    camera_info_->second.header.frame_id = kRightOpticalFrame;
 }
 
 void McapRecordingWriter::writeImage(uint16_t channel, const cv::Mat& image, int64_t stamp_ns,
@@ -127,8 +127,8 @@ uint64_t McapRecordingWriter::write(const cv::Mat& left, const cv::Mat& right,
                               std::to_string(left.rows) + " in a recording of " +
                               std::to_string(size_.width) + "x" + std::to_string(size_.height));
     }
-    writeImage(left_channel_, left, left_stamp_ns, kLeftFrame);
-    writeImage(right_channel_, right, right_stamp_ns, kRightFrame);
+    writeImage(left_channel_, left, left_stamp_ns, kLeftOpticalFrame);
+    writeImage(right_channel_, right, right_stamp_ns, kRightOpticalFrame);
     if (camera_info_) {
         camera_info_->first.header.stamp = ros2::Time::fromNs(left_stamp_ns);
         camera_info_->second.header.stamp = ros2::Time::fromNs(right_stamp_ns);
@@ -181,7 +181,7 @@ void McapRecordingWriter::writeDepth(const cv::Mat& depth_m, int64_t stamp_ns)
         }
     }
     const auto width = static_cast<uint32_t>(depth_m.cols);
-    const ros2::Header header{ros2::Time::fromNs(stamp_ns), kLeftFrame};
+    const ros2::Header header{ros2::Time::fromNs(stamp_ns), kLeftOpticalFrame};
     ros2::serializeImage(header, static_cast<uint32_t>(depth_m.rows), width, "32FC1",
                          static_cast<uint32_t>(width * sizeof(float)), depth_nan_.data,
                          depth_nan_.total() * sizeof(float), message_);
@@ -194,17 +194,8 @@ void McapRecordingWriter::writePoints(const float* xyzi, std::size_t points, int
     if (!points_channel_) {
         throw mcap::McapError(writer_.path() + ": points written without enablePoints()", EINVAL);
     }
-    static const std::vector<ros2::PointField> fields = {
-        {"x", 0, ros2::PointField::FLOAT32, 1},
-        {"y", 4, ros2::PointField::FLOAT32, 1},
-        {"z", 8, ros2::PointField::FLOAT32, 1},
-        {"intensity", 12, ros2::PointField::FLOAT32, 1}};
-    constexpr uint32_t kPointStep = 4 * sizeof(float);
-    const auto width = static_cast<uint32_t>(points);
-    const ros2::Header header{ros2::Time::fromNs(stamp_ns), kLeftFrame};
-    // Dense: the cloud holds only points with a depth, none NaN.
-    ros2::serializePointCloud2(header, 1, width, fields, kPointStep, width * kPointStep, xyzi,
-                               points * kPointStep, true, message_);
+    const ros2::Header header{ros2::Time::fromNs(stamp_ns), kLeftOpticalFrame};
+    ros2::serializeXyziCloud(header, xyzi, points, message_);
     const auto t = static_cast<uint64_t>(stamp_ns);
     writer_.write(*points_channel_, t, t, message_, lastSequence());
 }

@@ -56,6 +56,14 @@ class CdrWriter {
         put(h.stamp.nanosec);
         str(h.frame_id);
     }
+    void roi(const RegionOfInterest& r)
+    {
+        put(r.x_offset);
+        put(r.y_offset);
+        put(r.height);
+        put(r.width);
+        put(static_cast<uint8_t>(r.do_rectify ? 1 : 0));
+    }
     void image(const Header& h, uint32_t height, uint32_t width, std::string_view encoding,
                uint32_t step, const void* data, std::size_t size)
     {
@@ -294,11 +302,7 @@ void serializeDisparityImage(const DisparityImage& d, const void* data, std::siz
     w.image(d.header, d.height, d.width, "32FC1", d.width * 4, data, size);
     w.put(d.f);
     w.put(d.t);
-    w.put(d.valid_window.x_offset);
-    w.put(d.valid_window.y_offset);
-    w.put(d.valid_window.height);
-    w.put(d.valid_window.width);
-    w.put(static_cast<uint8_t>(d.valid_window.do_rectify ? 1 : 0));
+    w.roi(d.valid_window);
     w.put(d.min_disparity);
     w.put(d.max_disparity);
     w.put(d.delta_d);
@@ -320,11 +324,7 @@ void serializeCameraInfo(const CameraInfo& info, std::string& out)
     w.array(info.p);
     w.put(info.binning_x);
     w.put(info.binning_y);
-    w.put(info.roi.x_offset);
-    w.put(info.roi.y_offset);
-    w.put(info.roi.height);
-    w.put(info.roi.width);
-    w.put(static_cast<uint8_t>(info.roi.do_rectify ? 1 : 0));
+    w.roi(info.roi);
 }
 
 void serializePointCloud2(const Header& header, uint32_t height, uint32_t width,
@@ -348,6 +348,20 @@ void serializePointCloud2(const Header& header, uint32_t height, uint32_t width,
     w.put(row_step);
     w.octets(data, size);
     w.put(static_cast<uint8_t>(is_dense ? 1 : 0));
+}
+
+void serializeXyziCloud(const Header& header, const float* xyzi, std::size_t points,
+                        std::string& out)
+{
+    static const std::vector<PointField> fields = {{"x", 0, PointField::FLOAT32, 1},
+                                                   {"y", 4, PointField::FLOAT32, 1},
+                                                   {"z", 8, PointField::FLOAT32, 1},
+                                                   {"intensity", 12, PointField::FLOAT32, 1}};
+    constexpr uint32_t kPointStep = 4 * sizeof(float);
+    const auto width = static_cast<uint32_t>(points);
+    // Dense: the cloud holds only points with a depth, none NaN.
+    serializePointCloud2(header, 1, width, fields, kPointStep, width * kPointStep, xyzi,
+                         points * kPointStep, true, out);
 }
 
 ImageView parseImage(std::string_view message)

@@ -133,6 +133,11 @@ const std::string& cameraInfoSchemaText();
 const std::string& pointCloud2SchemaText();
 const std::string& disparityImageSchemaText();
 
+// The optical frames of the rectified pair (REP 103/105: z forward, x right, y down), as
+// recordings and the live view name them.
+inline constexpr const char* kLeftOpticalFrame = "stereo_left_optical_frame";
+inline constexpr const char* kRightOpticalFrame = "stereo_right_optical_frame";
+
 // Serializers: replace `out` with the whole message, encapsulation header included. `out`
 // keeps its capacity, so a reused buffer does not allocate per frame.
 void serializeImage(const Header& header, uint32_t height, uint32_t width,
@@ -146,6 +151,11 @@ void serializePointCloud2(const Header& header, uint32_t height, uint32_t width,
                           const std::vector<PointField>& fields, uint32_t point_step,
                           uint32_t row_step, const void* data, std::size_t size, bool is_dense,
                           std::string& out);
+
+// A dense PointCloud2 of `points` points of x, y, z, intensity float32 (point_step 16),
+// `xyzi` holding them in that order: the service's point cloud.
+void serializeXyziCloud(const Header& header, const float* xyzi, std::size_t points,
+                        std::string& out);
 
 // Parsers: take the whole message (encapsulation header first). Only little-endian XCDR1
 // is accepted (what ROS 2 writes); big-endian or XCDR2 payloads are refused by name.

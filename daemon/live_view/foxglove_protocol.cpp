@@ -36,6 +36,8 @@ void putLe(std::string& out, uint64_t value, int bytes)
         out.push_back(static_cast<char>((value >> (8 * i)) & 0xff));
 }
 
+constexpr std::size_t kSubscriptionIdOffset = 1; // after the opcode
+
 } // namespace
 
 std::string serverInfoJson(std::string_view name, std::string_view session_id)
@@ -123,6 +125,12 @@ void appendMessageData(uint32_t subscription_id, uint64_t log_time_ns, std::stri
     putLe(out, subscription_id, 4);
     putLe(out, log_time_ns, 8);
     out.append(payload);
+}
+
+void setSubscriptionId(std::string& frame, uint32_t subscription_id)
+{
+    for (std::size_t i = 0; i < 4; ++i)
+        frame[kSubscriptionIdOffset + i] = static_cast<char>((subscription_id >> (8 * i)) & 0xff);
 }
 
 } // namespace stereod::live_view

@@ -47,5 +47,7 @@ ClientRequest parseClientMessage(std::string_view text);
 // (u64 LE, ns), then the payload.
 void appendMessageData(uint32_t subscription_id, uint64_t log_time_ns, std::string_view payload,
                        std::string& out);
+// Rewrites the subscription id of a frame appendMessageData() made.
+void setSubscriptionId(std::string& frame, uint32_t subscription_id);
 
 } // namespace stereod::live_view

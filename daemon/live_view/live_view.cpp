@@ -18,8 +18,8 @@ namespace stereod::live_view {
 
 namespace {
 
-constexpr const char* kLeftFrame = "stereo_left_optical_frame";
-constexpr const char* kRightFrame = "stereo_right_optical_frame";
+using ros2::kLeftOpticalFrame;
+using ros2::kRightOpticalFrame;
 
 // The JSON schema of /stereo/nearest: the reading object of docs/protocol.md.
 const char* kReadingSchema = R"({"type":"object","title":"stereod reading",)"
@@ -73,7 +73,7 @@ HttpResponse notFound(const std::string& path)
 ros2::CameraInfo rectifiedInfo(const RectifiedGeometry& g, bool right, int64_t stamp_ns)
 {
     ros2::CameraInfo info;
-    info.header = {ros2::Time::fromNs(stamp_ns), right ? kRightFrame : kLeftFrame};
+    info.header = {ros2::Time::fromNs(stamp_ns), right ? kRightOpticalFrame : kLeftOpticalFrame};
     info.width = static_cast<uint32_t>(g.image_size.width);
     info.height = static_cast<uint32_t>(g.image_size.height);
     info.distortion_model = "plumb_bob";
@@ -116,6 +116,7 @@ const std::vector<ChannelSpec>& channelSpecs()
 struct LiveView::Client {
     std::map<uint32_t, Channel> subscriptions; // subscription id -> channel
     int64_t lagging_since_ns = 0;              // 0: keeping up
+    bool closing = false;                      // closed for being stuck; gone soon
 };
 
 // The clients, on the transport's thread only.
@@ -278,14 +279,23 @@ void LiveView::feed()
     std::vector<float> depth_nan;
     std::vector<float> disparity_ros;
     int64_t last_frame_ns = 0;
-    int64_t last_frame_sent_ns = 0;
-    const int64_t min_interval_ns =
-        settings_.max_rate_hz > 0 ? static_cast<int64_t>(1e9 / settings_.max_rate_hz) : 0;
-    static const std::vector<ros2::PointField> kXyzi = {
-        {"x", 0, ros2::PointField::FLOAT32, 1},
-        {"y", 4, ros2::PointField::FLOAT32, 1},
-        {"z", 8, ros2::PointField::FLOAT32, 1},
-        {"intensity", 12, ros2::PointField::FLOAT32, 1}};
+    // Per channel: the least time between two messages, and when the last one went.
+    std::array<int64_t, kChannelEnd> interval_ns{};
+    std::array<int64_t, kChannelEnd> last_sent_ns{};
+    for (uint32_t c = kLeftImage; c < kChannelEnd; ++c) {
+        const double hz = settings_.rate_hz[c] > 0 ? settings_.rate_hz[c] : settings_.max_rate_hz;
+        interval_ns[c] = hz > 0 ? static_cast<int64_t>(1e9 / hz) : 0;
+    }
+    int64_t now_ns = 0;
+    // A frame a little early (capture jitter) still goes: otherwise a camera at exactly
+    // a channel's rate would lose every other frame it sends a hair early.
+    const auto due = [&](Channel channel) {
+        if (!subscribed(channel) ||
+            now_ns - last_sent_ns[channel] < interval_ns[channel] - interval_ns[channel] / 5)
+            return false;
+        last_sent_ns[channel] = now_ns;
+        return true;
+    };
     while (true) {
         {
             std::unique_lock lock(mutex_);
@@ -296,20 +306,17 @@ void LiveView::feed()
             mailbox_.frame = false;
             mailbox_.status = false;
         }
-        const int64_t now_ns = monotonicNowNs();
-        // A frame a little early (capture jitter) still goes: otherwise a camera at exactly
-        // the limit would lose every other frame it sends a hair early.
-        if (work.frame && now_ns - last_frame_sent_ns >= min_interval_ns - min_interval_ns / 5) {
-            last_frame_sent_ns = now_ns;
+        now_ns = monotonicNowNs();
+        if (work.frame) {
             last_frame_ns = now_ns;
             const int64_t t = work.stamp_ns;
-            const ros2::Header left_header{ros2::Time::fromNs(t), kLeftFrame};
-            if (subscribed(kLeftImage) && !work.left.empty()) {
+            const ros2::Header left_header{ros2::Time::fromNs(t), kLeftOpticalFrame};
+            if (!work.left.empty() && due(kLeftImage)) {
                 ros2::serializeImage(left_header, work.left.rows, work.left.cols, "mono8",
                                      work.left.cols, work.left.data, work.left.total(), message);
                 send(kLeftImage, t, message);
             }
-            if (subscribed(kDepth) && !work.depth_m.empty()) {
+            if (!work.depth_m.empty() && due(kDepth)) {
                 depth_nan.resize(work.depth_m.total());
                 const auto* depth = work.depth_m.ptr<float>();
                 for (std::size_t i = 0; i < depth_nan.size(); ++i)
@@ -319,13 +326,13 @@ void LiveView::feed()
                                      message);
                 send(kDepth, t, message);
             }
-            if (subscribed(kConfidence) && !work.confidence.empty()) {
+            if (!work.confidence.empty() && due(kConfidence)) {
                 ros2::serializeImage(left_header, work.confidence.rows, work.confidence.cols,
                                      "mono8", work.confidence.cols, work.confidence.data,
                                      work.confidence.total(), message);
                 send(kConfidence, t, message);
             }
-            if (subscribed(kDisparity) && !work.disparity.empty()) {
+            if (!work.disparity.empty() && due(kDisparity)) {
                 // ROS's convention: a disparity below min_disparity is invalid.
                 disparity_ros.resize(work.disparity.total());
                 const auto* d = work.disparity.ptr<float>();
@@ -345,21 +352,21 @@ void LiveView::feed()
                                               message);
                 send(kDisparity, t, message);
             }
-            if (subscribed(kPoints)) {
-                const auto width = static_cast<uint32_t>(work.cloud.size());
-                ros2::serializePointCloud2(left_header, 1, width, kXyzi, 16, width * 16,
-                                           work.cloud.data(), work.cloud.size() * 16, true,
-                                           message);
+            if (due(kPoints)) {
+                static_assert(sizeof(CloudPoint) == 4 * sizeof(float));
+                ros2::serializeXyziCloud(left_header,
+                                         reinterpret_cast<const float*>(work.cloud.data()),
+                                         work.cloud.size(), message);
                 send(kPoints, t, message);
             }
             for (const bool right : {false, true}) {
                 const Channel channel = right ? kRightInfo : kLeftInfo;
-                if (!subscribed(channel))
+                if (!due(channel))
                     continue;
                 ros2::serializeCameraInfo(rectifiedInfo(geometry_, right, t), message);
                 send(channel, t, message);
             }
-            if (subscribed(kNearest))
+            if (due(kNearest))
                 send(kNearest, t, work.reading_json);
         }
         if (work.status) {
@@ -372,14 +379,18 @@ void LiveView::feed()
     }
 }
 
-void LiveView::send(Channel channel, int64_t log_time_ns, std::string payload)
+void LiveView::send(Channel channel, int64_t log_time_ns, std::string_view payload)
 {
-    auto shared = std::make_shared<const std::string>(std::move(payload));
-    transport_->post([this, channel, log_time_ns, shared] {
+    // Framed once; each client's copy differs only in its subscription id, patched in
+    // before the transport copies the frame out.
+    auto frame = std::make_shared<std::string>();
+    appendMessageData(0, static_cast<uint64_t>(log_time_ns), payload, *frame);
+    transport_->post([this, channel, frame] {
         const int64_t now_ns = monotonicNowNs();
-        std::string frame;
         std::vector<WebSocketTransport::ConnectionId> stuck;
         for (auto& [id, client] : sessions_->clients) {
+            if (client.closing)
+                continue;
             for (const auto& [sub, subscribed_channel] : client.subscriptions) {
                 if (subscribed_channel != channel)
                     continue;
@@ -387,16 +398,17 @@ void LiveView::send(Channel channel, int64_t log_time_ns, std::string payload)
                     frames_dropped_.fetch_add(1, std::memory_order_relaxed);
                     if (client.lagging_since_ns == 0)
                         client.lagging_since_ns = now_ns;
-                    else if (now_ns - client.lagging_since_ns > kStuckMs * 1'000'000)
+                    else if (now_ns - client.lagging_since_ns > kStuckMs * 1'000'000) {
+                        client.closing = true;
                         stuck.push_back(id);
-                    continue;
+                    }
+                    break; // the client's other subscriptions to this channel wait too
                 }
                 client.lagging_since_ns = 0;
-                frame.clear();
-                appendMessageData(sub, static_cast<uint64_t>(log_time_ns), *shared, frame);
-                if (transport_->sendBinary(id, frame)) {
+                setSubscriptionId(*frame, sub);
+                if (transport_->sendBinary(id, *frame)) {
                     messages_.fetch_add(1, std::memory_order_relaxed);
-                    bytes_.fetch_add(frame.size(), std::memory_order_relaxed);
+                    bytes_.fetch_add(frame->size(), std::memory_order_relaxed);
                 }
             }
         }
@@ -429,11 +441,11 @@ HttpResponse LiveView::serveFile(const std::string& request) const
     return HttpResponse{200, contentType(file), body.str()};
 }
 
-LiveViewCounters LiveView::counters() const
+StatusLiveView LiveView::status() const
 {
-    LiveViewCounters c;
+    StatusLiveView c;
     c.listening = listening_.load(std::memory_order_acquire);
-    c.address = address_;
+    c.listen = address_;
     c.error = error_;
     c.clients = clients_.load(std::memory_order_relaxed);
     c.messages_sent = messages_.load(std::memory_order_relaxed);

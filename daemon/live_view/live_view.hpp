@@ -8,8 +8,8 @@
 //    second, the status (onStatus): a copy into a mailbox under a short lock, only of
 //    the channels somebody subscribed to;
 //  - the feed thread (ours) takes the newest mailbox content, serializes the channels
-//    (ROS 2 CDR, JSON) at most live_view.max_rate_hz times a second, and hands the
-//    messages to the transport;
+//    (ROS 2 CDR, JSON), each at most at its rate (live_view.rate_hz.*, else
+//    live_view.max_rate_hz), and hands the messages to the transport;
 //  - the transport's I/O thread (WebSocketTransport) keeps the clients and their
 //    subscriptions and sends. A client whose socket holds more than kSkipBytes unsent
 //    loses frames (counted); one that stays so for kStuckMs is closed (counted).
@@ -35,28 +35,9 @@
 #include "daemon/publish_observer.hpp"
 #include "daemon/publisher.hpp"
 #include "pipeline/calibration.hpp"
+#include "protocol/status_reply.hpp"
 
 namespace stereod::live_view {
-
-struct LiveViewSettings {
-    std::string host = "127.0.0.1";
-    uint16_t port = 8765;      // 0: any free port (tests)
-    int points_step = 4;       // every n-th point of the cloud goes out
-    double max_rate_hz = 10.0; // frame channels; status is once a second
-    std::string web_root;      // the page's files (index.html, viewer.js, ...)
-    std::string three_root = "/usr/share/javascript/three"; // Debian's libjs-three
-};
-
-struct LiveViewCounters {
-    bool listening = false;
-    std::string address; // "127.0.0.1:8765"
-    std::string error;   // why it is not listening
-    uint64_t clients = 0;
-    uint64_t messages_sent = 0;
-    uint64_t bytes_sent = 0;
-    uint64_t frames_dropped = 0;  // messages a slow client did not get
-    uint64_t clients_dropped = 0; // clients closed for staying stuck
-};
 
 // The channels, by id (the ids advertised).
 enum Channel : uint32_t {
@@ -70,6 +51,17 @@ enum Channel : uint32_t {
     kNearest,
     kStatus,
     kChannelEnd
+};
+
+struct LiveViewSettings {
+    std::string host = "127.0.0.1";
+    uint16_t port = 8765;      // 0: any free port (tests)
+    int points_step = 4;       // every n-th point of the cloud goes out
+    double max_rate_hz = 10.0; // frame channels; status is once a second
+    // Per channel, at most this often; 0 (and kStatus, once a second) follows max_rate_hz.
+    std::array<double, kChannelEnd> rate_hz{};
+    std::string web_root; // the page's files (index.html, viewer.js, ...)
+    std::string three_root = "/usr/share/javascript/three"; // Debian's libjs-three
 };
 
 // What each channel is: topic, encoding and schema.
@@ -99,7 +91,8 @@ class LiveView final : public PublishObserver {
     void onStatus(std::string_view status_json, std::string_view reading_json,
                   int64_t reading_stamp_ns) override;
 
-    LiveViewCounters counters() const;
+    // The live view's part of `status`; `listen` is the address bound (or asked for).
+    StatusLiveView status() const;
 
   private:
     struct Mailbox {
@@ -123,7 +116,7 @@ class LiveView final : public PublishObserver {
         return subscribers_[channel].load(std::memory_order_relaxed) > 0;
     }
     void feed();
-    void send(Channel channel, int64_t log_time_ns, std::string payload);
+    void send(Channel channel, int64_t log_time_ns, std::string_view payload);
     HttpResponse serveFile(const std::string& path) const;
 
     LiveViewSettings settings_;

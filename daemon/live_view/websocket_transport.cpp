@@ -204,6 +204,11 @@ void WebSocketTransport::close(ConnectionId id, const std::string& reason)
         return;
     websocketpp::lib::error_code ec;
     con->close(websocketpp::close::status::policy_violation, reason, ec);
+    // The close frame waits behind what the client has not read, maybe for ever: the
+    // socket is shut down too, which ends the connection (and calls the closed handler)
+    // whether or not the client ever reads again.
+    asio::error_code shutdown_ec;
+    con->get_raw_socket().shutdown(asio::ip::tcp::socket::shutdown_both, shutdown_ec);
 }
 
 } // namespace stereod::live_view

@@ -53,6 +53,8 @@ class WebSocketTransport {
     bool sendBinary(ConnectionId id, const std::string& bytes);
     // Bytes queued for the connection and not yet written to its socket.
     std::size_t buffered(ConnectionId id) const;
+    // Closes with `reason` and shuts the socket down: the connection ends even when the
+    // client reads nothing any more.
     void close(ConnectionId id, const std::string& reason);
 
   private:

@@ -1,6 +1,7 @@
 // The service configuration: the examples load, every rejected value is named with its
 // key and file:line, all problems come at once, paths resolve against the file.
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -670,6 +671,36 @@ TEST(ConfigDocs, EveryKeyIsDocumented)
     for (const auto& key : configKeys()) {
         EXPECT_NE(docs.find("`" + key.path + "`"), std::string::npos)
             << key.path << " is not in docs/configuration.md";
+    }
+}
+
+TEST(ConfigLiveView, ListenAddressRatesAndTheirLimits)
+{
+    const ServiceConfig defaults = defaultConfig();
+    EXPECT_EQ(defaults.live_view.listen, "127.0.0.1:8765");
+    EXPECT_EQ(defaults.live_view.rate_hz.points, 0.0); // follows max_rate_hz
+    const ServiceConfig set = parseConfig("live_view:\n  listen: off\n  max_rate_hz: 30\n  "
+                                          "rate_hz:\n    points: 2\n    nearest: 60\n",
+                                          "t.yaml");
+    EXPECT_EQ(set.live_view.listen, "off");
+    EXPECT_EQ(set.live_view.max_rate_hz, 30.0);
+    EXPECT_EQ(set.live_view.rate_hz.points, 2.0);
+    EXPECT_EQ(set.live_view.rate_hz.nearest, 60.0);
+    EXPECT_EQ(set.live_view.rate_hz.depth, 0.0);
+    const ConfigChange change = diffConfig(defaults, set);
+    EXPECT_EQ(change.restart_needed, change.changed);
+    EXPECT_NE(std::find(change.changed.begin(), change.changed.end(), "live_view.rate_hz.points"),
+              change.changed.end());
+
+    for (const auto& [yaml, expected] : std::vector<std::pair<std::string, std::string>>{
+             {"live_view:\n  rate_hz:\n    points: -1\n", "t.yaml:3: live_view.rate_hz.points: "},
+             {"live_view:\n  rate_hz:\n    depth: 1001\n", "t.yaml:3: live_view.rate_hz.depth: "},
+             {"live_view:\n  rate_hz:\n    pointz: 2\n", "live_view.rate_hz.pointz"},
+             {"live_view:\n  max_rate_hz: 0\n", "t.yaml:2: live_view.max_rate_hz: "},
+             {"live_view:\n  listen: 8765\n", "t.yaml:2: live_view.listen: "}}) {
+        const auto problems = problemsOf(yaml);
+        ASSERT_EQ(problems.size(), 1u) << yaml;
+        EXPECT_NE(problems[0].find(expected), std::string::npos) << problems[0];
     }
 }
 

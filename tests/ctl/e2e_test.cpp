@@ -41,10 +41,6 @@ using test::stereodPath;
 
 const std::string kTsukuba = test::tsukubaDir();
 const cv::Size kTsukubaSize(384, 288);
-// A rig for which tsukuba's disparities (5..15 px) are depths of 0.5 to 1.6 m: within the
-// depth range the service sees with its default settings.
-constexpr double kFocalPx = 615.0;
-constexpr double kBaselineM = 0.013;
 constexpr int kRecordedPairs = 3;
 // Liveness bounds, generous for sanitizer builds: reaching them means "never happened".
 constexpr auto kStartLimit = 60s;
@@ -81,7 +77,9 @@ class StereodE2e : public ::testing::Test {
                                        recording_ + "/right" + std::to_string(i) + ".png");
         }
         calibration_ = dir_.file("calib.yaml");
-        saveCalibration(makeRectifiedCalibration(kTsukubaSize, kFocalPx, kBaselineM), calibration_);
+        saveCalibration(
+            makeRectifiedCalibration(kTsukubaSize, test::kTsukubaFocalPx, test::kTsukubaBaselineM),
+            calibration_);
         socket_ = dir_.file("s.sock");
         log_ = dir_.file("stereod.log");
         service_ = std::make_unique<ChildProcess>(
@@ -178,8 +176,8 @@ TEST_F(StereodE2e, DistanceIsTheOfflineReadingOfTheSamePair)
     const double distance_m = *parsed;
     // The centre region's nearest objects, the lamp and the head, lie at true disparities
     // of about 10..14 px: between 0.57 and 0.80 m on this rig.
-    EXPECT_GT(distance_m, kFocalPx * kBaselineM / 16.0);
-    EXPECT_LT(distance_m, kFocalPx * kBaselineM / 9.0);
+    EXPECT_GT(distance_m, test::kTsukubaFocalPx * test::kTsukubaBaselineM / 16.0);
+    EXPECT_LT(distance_m, test::kTsukubaFocalPx * test::kTsukubaBaselineM / 9.0);
 
     // The service and `stereoctl depth` run the same processor with the same defaults.
     const ProcessResult offline =
@@ -242,8 +240,9 @@ TEST_F(StereodE2e, StatusSummaryAndJson)
     EXPECT_GT(num_disparities, 0);
     EXPECT_EQ(num_disparities % 16, 0);
     // Close enough to see tsukuba's nearest object (15 px of disparity).
-    EXPECT_LE(status["pipeline"]["closest_depth_m"].get<double>(), kFocalPx * kBaselineM / 15.0);
-    EXPECT_DOUBLE_EQ(status["calibration"]["focal_px"].get<double>(), kFocalPx);
+    EXPECT_LE(status["pipeline"]["closest_depth_m"].get<double>(),
+              test::kTsukubaFocalPx * test::kTsukubaBaselineM / 15.0);
+    EXPECT_DOUBLE_EQ(status["calibration"]["focal_px"].get<double>(), test::kTsukubaFocalPx);
     EXPECT_GE(status["clients"]["connected"].get<int>(), 1);
 }
 
@@ -271,7 +270,8 @@ TEST_F(StereodE2e, SnapshotWritesReadableFiles)
     const cv::Point probe(kTsukubaSize.width / 2, kTsukubaSize.height / 2);
     const float d = disparity_px.at<float>(probe);
     if (std::isfinite(d) && d > 0.0f) {
-        EXPECT_NEAR(depth_mm.at<uint16_t>(probe), 1000.0 * kFocalPx * kBaselineM / d, 1.0);
+        EXPECT_NEAR(depth_mm.at<uint16_t>(probe),
+                    1000.0 * test::kTsukubaFocalPx * test::kTsukubaBaselineM / d, 1.0);
     }
     const cv::Mat left_image = cv::imread(left, cv::IMREAD_UNCHANGED);
     EXPECT_EQ(left_image.type(), CV_8UC1);

@@ -15,6 +15,7 @@
 #include "replay/mcap_recording.hpp"
 #include "replay/ros2_messages.hpp"
 #include "tests/ctl/record_e2e_fixture.hpp"
+#include "tests/support/depth_values.hpp"
 
 namespace stereod {
 namespace {
@@ -211,21 +212,9 @@ TEST_F(RecordE2e, RecordedDepthAndPointsAreTheSnapshotsThroughRosmsg2Serializati
     EXPECT_EQ(image["is_bigendian"], 0);
     const Json& values = image["data"];
     ASSERT_EQ(values.size(), depth_mm.total());
-    std::size_t with_depth = 0, mismatched = 0;
-    for (int row = 0; row < depth_mm.rows; ++row) {
-        for (int col = 0; col < depth_mm.cols; ++col) {
-            const uint16_t mm = depth_mm.at<uint16_t>(row, col);
-            const Json& value = values[static_cast<std::size_t>(row) * depth_mm.cols + col];
-            // NaN (null in JSON) exactly where the snapshot has none; else within 1 mm.
-            const bool same =
-                mm == 0 ? value.is_null()
-                        : value.is_number() && std::abs(value.get<double>() * 1000.0 - mm) <= 1.0;
-            mismatched += same ? 0 : 1;
-            with_depth += mm == 0 ? 0 : 1;
-        }
-    }
-    EXPECT_EQ(mismatched, 0u);
-    EXPECT_GT(with_depth, depth_mm.total() / 2);
+    const test::DepthAgreement agreement = test::compareDepth(depth_mm, values);
+    EXPECT_EQ(agreement.mismatched, 0u);
+    EXPECT_GT(agreement.with_depth, depth_mm.total() / 2);
 
     const Json& points = got["points"];
     ASSERT_TRUE(points.is_object()) << "no points at the snapshot's stamp " << stamp_ns;

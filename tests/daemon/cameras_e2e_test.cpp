@@ -39,9 +39,6 @@ using test::ProcessResult;
 using test::runProcess;
 
 const std::string kTsukuba = test::tsukubaDir();
-// The rig of tests/ctl/e2e_test.cpp: tsukuba's disparities are depths of 0.5 to 1.6 m.
-constexpr double kFocalPx = 615.0;
-constexpr double kBaselineM = 0.013;
 constexpr const char* kLeft = "/dev/video-e2e-left";
 constexpr const char* kRight = "/dev/video-e2e-right";
 constexpr const char* kSideBySide = "/dev/video-e2e-sbs";
@@ -65,7 +62,9 @@ class StereodCamerasE2e : public ::testing::Test {
         cv::hconcat(left, right, whole);
         ASSERT_TRUE(cv::imwrite(dir_.file("sbs.png"), whole));
         calibration_ = dir_.file("calib.yaml");
-        saveCalibration(makeRectifiedCalibration(size_, kFocalPx, kBaselineM), calibration_);
+        saveCalibration(
+            makeRectifiedCalibration(size_, test::kTsukubaFocalPx, test::kTsukubaBaselineM),
+            calibration_);
         socket_ = dir_.file("s.sock");
         log_ = dir_.file("stereod.log");
         fifo_ = dir_.file("fake.fifo");

@@ -51,6 +51,11 @@ TEST(FoxgloveProtocol, MessageDataFrameIsOpcodeIdTimeThenPayload)
     EXPECT_EQ(static_cast<uint8_t>(frame[5]), 0x88);
     EXPECT_EQ(static_cast<uint8_t>(frame[12]), 0x11);
     EXPECT_EQ(frame.substr(13), "abc");
+    setSubscriptionId(frame, 0x0a0b0c0d);
+    EXPECT_EQ(static_cast<uint8_t>(frame[1]), 0x0d);
+    EXPECT_EQ(static_cast<uint8_t>(frame[4]), 0x0a);
+    EXPECT_EQ(static_cast<uint8_t>(frame[5]), 0x88); // the rest untouched
+    EXPECT_EQ(frame.substr(13), "abc");
 }
 
 TEST(FoxgloveProtocol, AdvertiseListsEveryChannelWithItsSchema)

@@ -23,7 +23,9 @@
 #include "base/unique_fd.hpp"
 #include "ctl/client.hpp"
 #include "pipeline/calibration.hpp"
+#include "tests/daemon/live_view_service.hpp"
 #include "tests/support/data_paths.hpp"
+#include "tests/support/depth_values.hpp"
 #include "tests/support/process.hpp"
 #include "tests/support/temp_dir.hpp"
 
@@ -32,108 +34,13 @@ namespace {
 
 using namespace std::chrono_literals;
 using Json = nlohmann::ordered_json;
-using test::ChildProcess;
+using test::freePort;
+using test::httpExchange;
+using test::httpGet;
+using test::kClientScripts;
+using test::LiveViewE2e;
 using test::ProcessResult;
 using test::runProcess;
-
-const std::string kClientScripts = std::string(STEREOD_SOURCE_DIR) + "/tests/live_view";
-// tsukuba's disparities (5..15 px) as depths of 0.5 to 1.6 m.
-constexpr double kFocalPx = 615.0;
-constexpr double kBaselineM = 0.013;
-
-// A port nobody listens on now (bound to 0, then released).
-uint16_t freePort()
-{
-    const UniqueFd fd(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
-    sockaddr_in address{};
-    address.sin_family = AF_INET;
-    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ::bind(fd.get(), reinterpret_cast<sockaddr*>(&address), sizeof address);
-    socklen_t length = sizeof address;
-    ::getsockname(fd.get(), reinterpret_cast<sockaddr*>(&address), &length);
-    return ntohs(address.sin_port);
-}
-
-// One HTTP exchange on 127.0.0.1:port; the whole answer.
-std::string httpExchange(uint16_t port, const std::string& request)
-{
-    const UniqueFd fd(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
-    sockaddr_in address{};
-    address.sin_family = AF_INET;
-    address.sin_port = htons(port);
-    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    if (::connect(fd.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0)
-        return {};
-    ::send(fd.get(), request.data(), request.size(), MSG_NOSIGNAL);
-    std::string answer;
-    char buffer[4096];
-    ssize_t n = 0;
-    while ((n = ::recv(fd.get(), buffer, sizeof buffer, 0)) > 0)
-        answer.append(buffer, static_cast<std::size_t>(n));
-    return answer;
-}
-
-std::string httpGet(uint16_t port, const std::string& path)
-{
-    return httpExchange(port,
-                        "GET " + path + " HTTP/1.1\r\nHost: stereod\r\nConnection: close\r\n\r\n");
-}
-
-class LiveViewE2e : public ::testing::Test {
-  protected:
-    void SetUp() override
-    {
-        recording_ = dir_.file("rec");
-        std::filesystem::create_directory(recording_);
-        for (int i = 0; i < 3; ++i) {
-            std::filesystem::copy_file(test::tsukubaDir() + "/im3.png",
-                                       recording_ + "/left" + std::to_string(i) + ".png");
-            std::filesystem::copy_file(test::tsukubaDir() + "/im4.png",
-                                       recording_ + "/right" + std::to_string(i) + ".png");
-        }
-        calibration_ = dir_.file("calib.yaml");
-        saveCalibration(makeRectifiedCalibration(cv::Size(384, 288), kFocalPx, kBaselineM),
-                        calibration_);
-        socket_ = dir_.file("s.sock");
-    }
-
-    // `expect_valid`: wait for a valid reading (else for any reading).
-    void startService(const std::string& live_view, const std::string& config = {},
-                      bool expect_valid = true)
-    {
-        std::vector<std::string> argv = {
-            test::stereodPath(), "--replay", recording_,    "--calib", calibration_,
-            "--socket",          socket_,    "--live-view", live_view};
-        if (!config.empty()) {
-            argv.push_back("--config");
-            argv.push_back(config);
-        }
-        service_ = std::make_unique<ChildProcess>(argv, dir_.file("stereod.log"));
-        const auto deadline = std::chrono::steady_clock::now() + 60s;
-        while (std::chrono::steady_clock::now() < deadline) {
-            try {
-                ProtocolClient client(socket_, 2000ms);
-                const Json reading = client.request({{"cmd", "distance"}})["reading"];
-                if (reading.value("valid", false) ||
-                    (!expect_valid && reading.contains("stamp_ns")))
-                    return;
-            } catch (const std::exception&) {
-            }
-            std::this_thread::sleep_for(100ms);
-        }
-        FAIL() << "stereod gave no valid reading within 60 s";
-    }
-
-    Json status()
-    {
-        ProtocolClient client(socket_, 10000ms);
-        return client.request({{"cmd", "status"}})["status"];
-    }
-
-    test::TempDir dir_;
-    std::string recording_, calibration_, socket_;
-    std::unique_ptr<ChildProcess> service_;
-};
 
 TEST_F(LiveViewE2e, FoxgloveClientGetsEveryChannelAndTheServicesOwnValues)
 {
@@ -195,18 +102,9 @@ TEST_F(LiveViewE2e, FoxgloveClientGetsEveryChannelAndTheServicesOwnValues)
     client.readPayload(depth_mm.data, depth_mm.total() * 2);
     const Json& values = depth["data"];
     ASSERT_EQ(values.size(), depth_mm.total());
-    std::size_t with_depth = 0, mismatched = 0;
-    for (std::size_t i = 0; i < depth_mm.total(); ++i) {
-        const uint16_t mm = depth_mm.at<uint16_t>(static_cast<int>(i));
-        const Json& value = values[i];
-        const bool same =
-            mm == 0 ? value.is_null()
-                    : value.is_number() && std::abs(value.get<double>() * 1000.0 - mm) <= 1.0;
-        mismatched += same ? 0 : 1;
-        with_depth += mm == 0 ? 0 : 1;
-    }
-    EXPECT_EQ(mismatched, 0u);
-    EXPECT_GT(with_depth, depth_mm.total() / 2);
+    const test::DepthAgreement agreement = test::compareDepth(depth_mm, values);
+    EXPECT_EQ(agreement.mismatched, 0u);
+    EXPECT_GT(agreement.with_depth, depth_mm.total() / 2);
 
     // The nearest reading: the object `stereoctl distance --json` prints, but for the
     // pair's stamp, frame number and age.

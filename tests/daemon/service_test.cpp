@@ -41,10 +41,6 @@ using namespace std::chrono_literals;
 
 const std::string kTsukuba = test::tsukubaDir();
 const cv::Size kSize(384, 288);
-// A rig for which tsukuba's disparities (5..15 px) are depths of 0.5 to 1.6 m, so that the
-// default closest depth (0.5 m) asks for the 16 disparities the scene needs.
-constexpr double kFocalPx = 615.0;
-constexpr double kBaselineM = 0.013;
 constexpr std::size_t kDepthBytes = 384 * 288 * 2;
 
 struct TsukubaPair {
@@ -79,7 +75,7 @@ double groundTruthNearestM(const NearestSettings& settings)
     for (int y = y0; y < y1; ++y) {
         for (int x = x0; x < x1; ++x) {
             const float d = truth.at<float>(y, x);
-            const double z = d > 0.0f ? kFocalPx * kBaselineM / d : 0.0;
+            const double z = d > 0.0f ? test::kTsukubaFocalPx * test::kTsukubaBaselineM / d : 0.0;
             if (z >= settings.min_depth_m && z <= settings.max_depth_m)
                 depths.push_back(z);
         }
@@ -100,9 +96,11 @@ class ServiceTest : public ::testing::Test {
         return config;
     }
 
+    // tsukuba's rig: the default closest depth (0.5 m) asks for the 16 disparities the
+    // scene needs.
     static StereoCalibration calibration()
     {
-        return makeRectifiedCalibration(kSize, kFocalPx, kBaselineM);
+        return makeRectifiedCalibration(kSize, test::kTsukubaFocalPx, test::kTsukubaBaselineM);
     }
 
     std::unique_ptr<Service> makeService(const ServiceConfig& config, ServiceOptions options = {})
@@ -550,8 +548,8 @@ TEST_F(ServiceTest, StatusReportsEveryPart)
     EXPECT_GE(p99, p50);
     EXPECT_LT(p99, 60000.0);
     EXPECT_EQ(state["calibration"]["kind"], "rectified");
-    EXPECT_DOUBLE_EQ(state["calibration"]["focal_px"].get<double>(), kFocalPx);
-    EXPECT_DOUBLE_EQ(state["calibration"]["baseline_m"].get<double>(), kBaselineM);
+    EXPECT_DOUBLE_EQ(state["calibration"]["focal_px"].get<double>(), test::kTsukubaFocalPx);
+    EXPECT_DOUBLE_EQ(state["calibration"]["baseline_m"].get<double>(), test::kTsukubaBaselineM);
     EXPECT_EQ(state["calibration"]["width"], 384);
     EXPECT_EQ(state["calibration"]["height"], 288);
     EXPECT_EQ(state["clients"]["connected"], 1);
@@ -570,7 +568,7 @@ TEST_F(ServiceTest, SnapshotPayloadsAreConsistent)
     ASSERT_EQ(reply["ok"], true) << reply.dump();
     EXPECT_EQ(reply["frame"], 0);
     EXPECT_EQ(reply["reading"]["valid"], true);
-    EXPECT_DOUBLE_EQ(reply["calibration"]["focal_px"].get<double>(), kFocalPx);
+    EXPECT_DOUBLE_EQ(reply["calibration"]["focal_px"].get<double>(), test::kTsukubaFocalPx);
     const Json& payloads = reply["payloads"];
     ASSERT_EQ(payloads.size(), 4u);
     const std::vector<std::string> names = {"depth", "disparity", "left", "cloud"};
@@ -605,7 +603,7 @@ TEST_F(ServiceTest, SnapshotPayloadsAreConsistent)
             if (mm == 0 || !std::isfinite(d) || d <= 0.0f)
                 continue;
             ++valid_depths;
-            const double expected_mm = 1000.0 * kFocalPx * kBaselineM / d;
+            const double expected_mm = 1000.0 * test::kTsukubaFocalPx * test::kTsukubaBaselineM / d;
             if (std::abs(mm - expected_mm) > 1.0 && ++checked < 5)
                 ADD_FAILURE() << "depth " << mm << " mm at (" << x << "," << y << "), disparity "
                               << d << " gives " << expected_mm;
@@ -1261,7 +1259,9 @@ TEST_F(ServiceTest, FramesNotOfTheCalibratedSizeAreACalibrationProblem)
     auto source = std::make_unique<FakeSource>(tsukuba().left, tsukuba().right);
     try {
         Service service(baseConfig(), std::move(source),
-                        makeRectifiedCalibration(cv::Size(640, 480), kFocalPx, kBaselineM), {});
+                        makeRectifiedCalibration(cv::Size(640, 480), test::kTsukubaFocalPx,
+                                                 test::kTsukubaBaselineM),
+                        {});
         FAIL() << "accepted 384x288 frames for a 640x480 calibration";
     } catch (const StartupError& e) {
         EXPECT_EQ(e.code(), ExitCode::Calibration);

@@ -1,0 +1,176 @@
+// The live view's threads in one process, against a plain WebSocket client: the channels a
+// client subscribes to arrive under its subscription ids and at their own rates, and a
+// client that never reads loses frames, is closed once and counted, while the others go
+// on. Labelled "threaded": ThreadSanitizer watches the feed and transport threads here.
+#include <atomic>
+#include <chrono>
+#include <cstring>
+#include <map>
+#include <string>
+#include <thread>
+
+#include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+
+#include "daemon/live_view/foxglove_protocol.hpp"
+#include "daemon/live_view/live_view.hpp"
+#include "tests/support/websocket_client.hpp"
+
+namespace stereod::live_view {
+namespace {
+
+using namespace std::chrono_literals;
+using Clock = std::chrono::steady_clock;
+
+RectifiedGeometry geometryOf(cv::Size size)
+{
+    RectifiedGeometry g;
+    g.image_size = size;
+    g.focal_px = 500.0;
+    g.cx_px = size.width / 2.0;
+    g.cy_px = size.height / 2.0;
+    g.baseline_m = 0.1;
+    return g;
+}
+
+PublishedFrame frameOf(cv::Size size)
+{
+    PublishedFrame frame;
+    DepthResult& r = frame.result;
+    r.left_rectified = cv::Mat(size, CV_8UC1, cv::Scalar(128));
+    r.disparity = cv::Mat(size, CV_32FC1, cv::Scalar(20.0f));
+    r.confidence = cv::Mat(size, CV_8UC1, cv::Scalar(200));
+    r.depth_m = cv::Mat(size, CV_32FC1, cv::Scalar(2.5f));
+    r.cloud.assign(1000, CloudPoint{0.1f, 0.2f, 2.5f, 128.0f});
+    frame.depth_valid = true;
+    frame.stats.range.num_disparities = 64;
+    return frame;
+}
+
+// Feeds frames from a thread of its own, as the socket server's I/O thread does.
+class Producer {
+  public:
+    Producer(LiveView& view, cv::Size size, std::chrono::milliseconds period)
+        : thread_([this, &view, size, period] {
+              PublishedFrame frame = frameOf(size);
+              while (!stop_.load()) {
+                  frame.result.stamp_ns = Clock::now().time_since_epoch().count();
+                  view.onFrame(frame, R"({"valid":true,"distance_m":2.5})");
+                  std::this_thread::sleep_for(period);
+              }
+          })
+    {
+    }
+    ~Producer()
+    {
+        stop_.store(true);
+        thread_.join();
+    }
+
+  private:
+    std::atomic<bool> stop_{false};
+    std::thread thread_;
+};
+
+uint32_t subscriptionOf(const test::WebSocketClient::Message& message)
+{
+    uint32_t id = 0;
+    std::memcpy(&id, message.payload.data() + 1, 4); // little-endian, as x86 and arm64
+    return id;
+}
+
+// Connects, reads serverInfo and advertise, subscribes (subscription id -> channel).
+std::unique_ptr<test::WebSocketClient>
+subscribe(uint16_t port, const std::map<uint32_t, Channel>& subscriptions, int receive_buffer = 0)
+{
+    auto client = std::make_unique<test::WebSocketClient>(port, kSubprotocol, receive_buffer);
+    for (const char* op : {"serverInfo", "advertise"}) {
+        const auto message = client->receive(5s);
+        EXPECT_TRUE(message && message->payload.find(op) != std::string::npos) << op;
+    }
+    std::string request = R"({"op":"subscribe","subscriptions":[)";
+    for (const auto& [id, channel] : subscriptions)
+        request += (request.back() == '[' ? "" : ",") + std::string(R"({"id":)") +
+                   std::to_string(id) + R"(,"channelId":)" + std::to_string(channel) + "}";
+    client->sendText(request + "]}");
+    return client;
+}
+
+TEST(LiveView, ChannelsArriveUnderTheirSubscriptionIdsAtTheirOwnRates)
+{
+    LiveViewSettings settings;
+    settings.port = 0;
+    settings.max_rate_hz = 40;
+    settings.rate_hz[kPoints] = 4;
+    const cv::Size size(64, 48);
+    LiveView view(settings, geometryOf(size));
+    ASSERT_EQ(view.start(), "");
+    auto client = subscribe(view.port(), {{7, kDepth}, {9, kPoints}, {11, kNearest}});
+    Producer producer(view, size, 5ms);
+
+    std::map<uint32_t, int> counts;
+    const auto start = Clock::now();
+    while (Clock::now() - start < 2500ms) {
+        const auto message = client->receive(1s);
+        ASSERT_TRUE(message) << "no message for 1 s";
+        ASSERT_EQ(message->opcode, 2);
+        ++counts[subscriptionOf(*message)];
+    }
+    const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    EXPECT_EQ(counts.size(), 3u); // only the ids this client chose
+    // Never above the rate (with the fifth of an interval allowed for capture jitter),
+    // and the points channel, at a tenth of the others' rate, far below them.
+    EXPECT_GE(counts[9], 2);
+    EXPECT_LE(counts[9], seconds * 4 * 1.25 + 1);
+    EXPECT_LE(counts[7], seconds * 40 * 1.25 + 1);
+    EXPECT_GE(counts[7], 4 * counts[9]);
+    EXPECT_GE(counts[11], 4 * counts[9]);
+    const StatusLiveView status = view.status();
+    EXPECT_TRUE(status.listening);
+    EXPECT_EQ(status.clients, 1u);
+    EXPECT_GE(status.messages_sent, static_cast<uint64_t>(counts[7] + counts[9] + counts[11]));
+    view.stop();
+}
+
+TEST(LiveView, AClientThatNeverReadsIsClosedOnceAndCountedWhileOthersGoOn)
+{
+    LiveViewSettings settings;
+    settings.port = 0;
+    settings.max_rate_hz = 30;
+    const cv::Size size(640, 480);
+    LiveView view(settings, geometryOf(size));
+    ASSERT_EQ(view.start(), "");
+    auto reader = subscribe(view.port(), {{1, kNearest}});
+    // 2.4 MB a frame it never reads, into a 4 KiB receive buffer.
+    auto stuck = subscribe(view.port(), {{1, kDepth}, {2, kDisparity}}, 4096);
+    Producer producer(view, size, 33ms);
+
+    int read_before = 0, read_after = 0;
+    const auto deadline = Clock::now() + 30s;
+    while (view.status().clients_dropped == 0 && Clock::now() < deadline)
+        if (reader->receive(1s))
+            ++read_before;
+    const StatusLiveView dropped = view.status();
+    ASSERT_EQ(dropped.clients_dropped, 1u) << "the stuck client was never closed";
+    EXPECT_GT(dropped.frames_dropped, 0u);
+    // The other client kept its messages all along, and goes on.
+    EXPECT_GE(read_before, 100); // five seconds and more of readings at 30 Hz
+    const auto after = Clock::now();
+    while (Clock::now() - after < 2s)
+        if (reader->receive(1s))
+            ++read_after;
+    EXPECT_GE(read_after, 30);
+    EXPECT_FALSE(reader->closed());
+    // The stuck one is gone (its socket ends once what was sent is read), and counted once.
+    const auto drain_deadline = Clock::now() + 20s;
+    while (!stuck->closed() && Clock::now() < drain_deadline)
+        stuck->receive(1s);
+    EXPECT_TRUE(stuck->closed());
+    const StatusLiveView later = view.status();
+    EXPECT_EQ(later.clients_dropped, 1u);
+    EXPECT_EQ(later.clients, 1u);
+    view.stop();
+}
+
+} // namespace
+} // namespace stereod::live_view

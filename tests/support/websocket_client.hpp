@@ -1,0 +1,45 @@
+#pragma once
+// A WebSocket client small enough to trust in a test (RFC 6455 over a blocking TCP socket
+// on 127.0.0.1): the opening handshake with a subprotocol, masked text frames out,
+// unfragmented frames in. It reads only when asked, so a test can also be the client
+// that never reads.
+//
+// Thread-bound: each object belongs to the thread that uses it.
+
+#include <chrono>
+#include <cstdint>
+#include <optional>
+#include <string>
+
+#include "base/unique_fd.hpp"
+
+namespace stereod::test {
+
+class WebSocketClient {
+  public:
+    struct Message {
+        int opcode = 0; // 1 text, 2 binary, 8 close
+        std::string payload;
+    };
+
+    // Connects and completes the handshake offering `subprotocol`. A `receive_buffer`
+    // above 0 sets the socket's receive buffer first (a small one makes a client that
+    // never reads fill the server's queue sooner). Throws std::runtime_error naming what
+    // failed.
+    WebSocketClient(uint16_t port, const std::string& subprotocol, int receive_buffer = 0);
+
+    void sendText(const std::string& text);
+    // The next message; nullopt when none came within `timeout` or the server closed
+    // the connection (closed() then says so).
+    std::optional<Message> receive(std::chrono::milliseconds timeout);
+    bool closed() const noexcept { return closed_; }
+
+  private:
+    bool fill(std::chrono::steady_clock::time_point deadline);
+
+    UniqueFd fd_;
+    std::string buffer_; // received, not yet parsed
+    bool closed_ = false;
+};
+
+} // namespace stereod::test
