@@ -6,8 +6,10 @@
 #include <chrono>
 #include <cstring>
 #include <map>
+#include <optional>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
@@ -169,6 +171,64 @@ TEST(LiveView, AClientThatNeverReadsIsClosedOnceAndCountedWhileOthersGoOn)
     const StatusLiveView later = view.status();
     EXPECT_EQ(later.clients_dropped, 1u);
     EXPECT_EQ(later.clients, 1u);
+    view.stop();
+}
+
+// What a client sends that is not a request this server takes: a status message with the
+// reason for a text it cannot use, a closed connection for a frame that breaks the
+// protocol; never a crash, and the other clients go on.
+TEST(LiveView, MalformedMessagesAndFramesGetAnErrorNeverACrash)
+{
+    LiveViewSettings settings;
+    settings.port = 0;
+    const cv::Size size(64, 48);
+    LiveView view(settings, geometryOf(size));
+    ASSERT_EQ(view.start(), "");
+    auto witness = subscribe(view.port(), {{1, kNearest}});
+    Producer producer(view, size, 20ms);
+
+    // Texts: each answered by a status message (level 2: error) naming the problem.
+    auto texts = subscribe(view.port(), {});
+    for (const std::string& text :
+         std::vector<std::string>{"not json", R"({"op":"subscribe"})",
+                                  R"({"op":"subscribe","subscriptions":[{"id":1}]})",
+                                  R"({"op":"subscribe","subscriptions":[{"id":1,"channelId":99}]})",
+                                  "[1,2,3]", std::string(1000, '{')}) {
+        texts->sendText(text);
+        std::optional<test::WebSocketClient::Message> reply;
+        while ((reply = texts->receive(5s)) && reply->opcode != 1) {
+        }
+        ASSERT_TRUE(reply) << "no answer to " << text.substr(0, 60);
+        EXPECT_NE(reply->payload.find(R"("op":"status")"), std::string::npos) << reply->payload;
+        EXPECT_NE(reply->payload.find(R"("level":2)"), std::string::npos) << reply->payload;
+    }
+
+    // Frames that break RFC 6455: each ends its own connection.
+    const std::string broken[] = {
+        std::string("\x81\x05hello", 7),            // a client frame without its mask
+        std::string("\x83\x80\x01\x02\x03\x04", 6), // a reserved opcode
+        // A text frame announcing 2^62 bytes.
+        std::string("\x81\xff\x40\x00\x00\x00\x00\x00\x00\x00\x01\x02\x03\x04", 14),
+        std::string("\x01\x80\x01\x02\x03\x04\x81\x80\x01\x02\x03\x04",
+                    12), // a fragment, then a new message
+    };
+    for (const std::string& frame : broken) {
+        auto client = subscribe(view.port(), {{1, kNearest}});
+        client->sendRaw(frame);
+        const auto deadline = Clock::now() + 10s;
+        while (!client->closed() && Clock::now() < deadline)
+            client->receive(1s);
+        EXPECT_TRUE(client->closed()) << "still open after a broken frame";
+    }
+
+    // The witness heard readings all along, and the server still serves.
+    int heard = 0;
+    const auto start = Clock::now();
+    while (Clock::now() - start < 1s)
+        heard += witness->receive(1s) ? 1 : 0;
+    EXPECT_GE(heard, 5);
+    EXPECT_FALSE(witness->closed());
+    EXPECT_TRUE(view.status().listening);
     view.stop();
 }
 

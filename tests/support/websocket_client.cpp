@@ -65,8 +65,13 @@ void WebSocketClient::sendText(const std::string& text)
     frame.append(reinterpret_cast<const char*>(mask), 4);
     for (std::size_t i = 0; i < n; ++i)
         frame.push_back(static_cast<char>(text[i] ^ static_cast<char>(mask[i % 4])));
-    if (::send(fd_.get(), frame.data(), frame.size(), MSG_NOSIGNAL) !=
-        static_cast<ssize_t>(frame.size()))
+    sendRaw(frame);
+}
+
+void WebSocketClient::sendRaw(const std::string& bytes)
+{
+    if (::send(fd_.get(), bytes.data(), bytes.size(), MSG_NOSIGNAL) !=
+        static_cast<ssize_t>(bytes.size()))
         throw std::runtime_error("websocket client: send: " + errnoText(errno));
 }
 

@@ -29,6 +29,9 @@ class WebSocketClient {
     WebSocketClient(uint16_t port, const std::string& subprotocol, int receive_buffer = 0);
 
     void sendText(const std::string& text);
+    // Bytes as they are, framed or not: for the tests of what a server does with
+    // malformed frames.
+    void sendRaw(const std::string& bytes);
     // The next message; nullopt when none came within `timeout` or the server closed
     // the connection (closed() then says so).
     std::optional<Message> receive(std::chrono::milliseconds timeout);
