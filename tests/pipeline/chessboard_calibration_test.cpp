@@ -21,6 +21,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "pipeline/calibration.hpp"
+#include "pipeline/census_sgm_matcher.hpp"
 #include "pipeline/chessboard_calibration.hpp"
 #include "pipeline/rectifier.hpp"
 #include "pipeline/stereo_processor.hpp"
@@ -219,31 +220,32 @@ TEST_F(ChessboardCalibrationTest, RoundTripsThroughTheCalibrationFile)
     EXPECT_EQ(loaded.valid_roi_left, c.valid_roi_left);
 }
 
-// Depth on the board against the board's pose. For each pair: solvePnP of the left
-// corners with the new calibration gives the board's plane; the processor's depth (SGBM,
-// the service's defaults) over the board region is compared with the plane's depth at
-// the same pixels. The board is a periodic texture: where fewer than a quarter of the
-// region's pixels get a depth, the pair counts as "no reading", not as a pass.
-TEST_F(ChessboardCalibrationTest, DepthOnTheBoardAgreesWithTheBoardsPose)
+// The board's plane of each pair, in the rectified left camera's frame (by its pose:
+// solvePnP on the detected corners), and the nearest corner's depth over all pairs.
+struct BoardPlane {
+    cv::Vec3d normal; // rectified left camera frame
+    double offset_m;  // normal . X = offset for points X of the board
+
+    double depthAt(const RectifiedGeometry& g, double x, double y) const
+    {
+        const cv::Vec3d ray((x - g.cx_px) / g.focal_px, (y - g.cy_px) / g.focal_px, 1.0);
+        return offset_m / normal.dot(ray);
+    }
+};
+
+std::vector<BoardPlane> boardPlanes(const ChessboardCalibrationResult& r, double& nearest_m)
 {
-    const ChessboardCalibrationResult& r = result();
     const StereoCalibration& c = r.calibration;
-    const RectifiedGeometry& g = c.rectified;
     std::vector<cv::Point3f> board;
     for (int y = 0; y < 6; ++y)
         for (int x = 0; x < 9; ++x)
             board.emplace_back(static_cast<float>(x * kSquareM), static_cast<float>(y * kSquareM),
                                0.0f);
-
-    struct Plane {
-        cv::Vec3d normal; // rectified left camera frame
-        double offset_m;  // normal . X = offset for points X of the board
-    };
-    std::vector<Plane> planes;
-    double nearest_m = HUGE_VAL;
+    std::vector<BoardPlane> planes;
+    nearest_m = HUGE_VAL;
     for (const PairReport& p : r.pairs) {
         cv::Vec3d rvec, tvec;
-        ASSERT_TRUE(cv::solvePnP(board, p.left_corners, c.left.camera_matrix, c.left.distortion,
+        EXPECT_TRUE(cv::solvePnP(board, p.left_corners, c.left.camera_matrix, c.left.distortion,
                                  rvec, tvec));
         cv::Matx33d rotation;
         cv::Rodrigues(rvec, rotation);
@@ -255,6 +257,32 @@ TEST_F(ChessboardCalibrationTest, DepthOnTheBoardAgreesWithTheBoardsPose)
             nearest_m = std::min(nearest_m, x[2]);
         }
     }
+    return planes;
+}
+
+// The board in the rectified left image: the quadrilateral of the outer inner corners.
+cv::Mat boardMask(const StereoCalibration& c, const PairReport& p, std::vector<cv::Point2f>& rect)
+{
+    cv::undistortPoints(p.left_corners, rect, c.left.camera_matrix, c.left.distortion, c.R1, c.P1,
+                        kUndistort);
+    const std::vector<cv::Point> outline = {rect[0], rect[8], rect[53], rect[45]};
+    cv::Mat mask = cv::Mat::zeros(c.rectified.image_size, CV_8UC1);
+    cv::fillConvexPoly(mask, outline, cv::Scalar(255));
+    return mask;
+}
+
+// Depth on the board against the board's pose. For each pair: solvePnP of the left
+// corners with the new calibration gives the board's plane; the processor's depth (SGBM,
+// the service's defaults) over the board region is compared with the plane's depth at
+// the same pixels. The board is a periodic texture: where fewer than a quarter of the
+// region's pixels get a depth, the pair counts as "no reading", not as a pass.
+TEST_F(ChessboardCalibrationTest, DepthOnTheBoardAgreesWithTheBoardsPose)
+{
+    const ChessboardCalibrationResult& r = result();
+    const StereoCalibration& c = r.calibration;
+    const RectifiedGeometry& g = c.rectified;
+    double nearest_m = HUGE_VAL;
+    const std::vector<BoardPlane> planes = boardPlanes(r, nearest_m);
 
     ProcessorSettings settings;
     settings.matcher.min_depth_m = 0.95 * nearest_m; // every board within the range
@@ -271,14 +299,8 @@ TEST_F(ChessboardCalibrationTest, DepthOnTheBoardAgreesWithTheBoardsPose)
         processor.process(cv::imread(p.left_path, cv::IMREAD_GRAYSCALE),
                           cv::imread(p.right_path, cv::IMREAD_GRAYSCALE), 0, i, out);
 
-        // The board region in the rectified left image: the quadrilateral of the outer
-        // inner corners.
         std::vector<cv::Point2f> rect;
-        cv::undistortPoints(p.left_corners, rect, c.left.camera_matrix, c.left.distortion, c.R1,
-                            c.P1, kUndistort);
-        const std::vector<cv::Point> outline = {rect[0], rect[8], rect[53], rect[45]};
-        cv::Mat mask = cv::Mat::zeros(g.image_size, CV_8UC1);
-        cv::fillConvexPoly(mask, outline, cv::Scalar(255));
+        const cv::Mat mask = boardMask(c, p, rect);
 
         // The corners' own disparity, matched by the detector rather than the matcher:
         // separates the calibration's share of any error from the matcher's.
@@ -288,9 +310,7 @@ TEST_F(ChessboardCalibrationTest, DepthOnTheBoardAgreesWithTheBoardsPose)
         double corner_error = 0.0;
         for (size_t k = 0; k < rect.size(); ++k) {
             const double z = g.depthFromDisparity(rect[k].x - right_rect[k].x);
-            const cv::Vec3d ray((rect[k].x - g.cx_px) / g.focal_px,
-                                (rect[k].y - g.cy_px) / g.focal_px, 1.0);
-            const double z_plane = planes[i].offset_m / planes[i].normal.dot(ray);
+            const double z_plane = planes[i].depthAt(g, rect[k].x, rect[k].y);
             corner_error = std::max(corner_error, std::abs(z - z_plane) / z_plane);
         }
         worst_corner_error = std::max(worst_corner_error, corner_error);
@@ -305,9 +325,8 @@ TEST_F(ChessboardCalibrationTest, DepthOnTheBoardAgreesWithTheBoardsPose)
                 const float z = out.depth_m.at<float>(y, x);
                 if (!(z > 0.0f))
                     continue;
-                const cv::Vec3d ray((x - g.cx_px) / g.focal_px, (y - g.cy_px) / g.focal_px, 1.0);
                 measured.push_back(z);
-                expected.push_back(planes[i].offset_m / planes[i].normal.dot(ray));
+                expected.push_back(planes[i].depthAt(g, x, y));
             }
         const double valid = static_cast<double>(measured.size()) / region;
         if (valid < 0.25) {
@@ -336,6 +355,99 @@ TEST_F(ChessboardCalibrationTest, DepthOnTheBoardAgreesWithTheBoardsPose)
                 within, r.pairs.size(), no_reading);
     EXPECT_GE(within, 9);
     EXPECT_LT(worst_corner_error, 0.01);
+}
+
+// Every pixel of the board, matcher against the board's pose: of the board, the share
+// with depth (density) and the share of those more than 5 % off its plane, split into
+// too far (an obstacle hidden) and too near.
+struct BoardPixels {
+    long board = 0, reported = 0, too_far = 0, too_near = 0;
+    double density() const { return 100.0 * reported / board; }
+    double off() const { return 100.0 * (too_far + too_near) / std::max(1L, reported); }
+    double tooFar() const { return 100.0 * too_far / std::max(1L, reported); }
+};
+
+BoardPixels boardPixels(const ChessboardCalibrationResult& r, const MatcherSettings& matcher,
+                        const char* name)
+{
+    const StereoCalibration& c = r.calibration;
+    double nearest_m = HUGE_VAL;
+    const std::vector<BoardPlane> planes = boardPlanes(r, nearest_m);
+    ProcessorSettings settings;
+    settings.matcher = matcher;
+    settings.matcher.min_depth_m = 0.95 * nearest_m;
+    settings.compute_cloud = false;
+    StereoProcessor processor(c, settings);
+    DepthResult out;
+    BoardPixels all;
+    for (size_t i = 0; i < r.pairs.size(); ++i) {
+        const PairReport& p = r.pairs[i];
+        processor.process(cv::imread(p.left_path, cv::IMREAD_GRAYSCALE),
+                          cv::imread(p.right_path, cv::IMREAD_GRAYSCALE), 0, i, out);
+        std::vector<cv::Point2f> rect;
+        const cv::Mat mask = boardMask(c, p, rect);
+        BoardPixels pair;
+        for (int y = 0; y < mask.rows; ++y)
+            for (int x = 0; x < mask.cols; ++x) {
+                if (!mask.at<uchar>(y, x))
+                    continue;
+                ++pair.board;
+                const float z = out.depth_m.at<float>(y, x);
+                if (!(z > 0.0f))
+                    continue;
+                ++pair.reported;
+                const double error = (z - planes[i].depthAt(c.rectified, x, y)) /
+                                     planes[i].depthAt(c.rectified, x, y);
+                pair.too_far += error > 0.05 ? 1 : 0;
+                pair.too_near += error < -0.05 ? 1 : 0;
+            }
+        std::printf("[board] %-10s %-11s density %5.1f %%, off %5.2f %% (too far %5.2f %%)\n", name,
+                    basename(p.left_path).c_str(), pair.density(), pair.off(), pair.tooFar());
+        all.board += pair.board;
+        all.reported += pair.reported;
+        all.too_far += pair.too_far;
+        all.too_near += pair.too_near;
+    }
+    std::printf("[board] %-10s all pairs: density %5.1f %%, off %5.2f %% (too far %5.2f %%)\n",
+                name, all.density(), all.off(), all.tooFar());
+    return all;
+}
+
+// The real rig's board, every pixel, census-sgm beside OpenCV's SGBM 3-way and 8-path
+// (MODE_HH) with the service's range (every board within it: 224 disparities, some two
+// periods of the board's pattern). The target of our matcher's issue, at least 75 % of the
+// board reported with at most 3 % of it more than 5 % off, is not met, and this test says
+// where things stand instead: census-sgm reports 16 % of the board, 4 % of it off (too
+// far: one period of the pattern off); OpenCV's 3-way reports 62 %, 24 % of it off. The
+// board's squares are uniform and repeat along the rows, so that a row matches about as
+// well one period off; what tells the periods apart is the board's border and the scene
+// around it, which paths from above and along the rows carry too weakly into the board.
+// Eight paths do not either: OpenCV's MODE_HH without any filter reports 78 % of the
+// board with 18 % of it off. census-sgm declines the ambiguous pixels rather than guess:
+// the honest one of the three, and not the default while it sees so little of a board.
+TEST_F(ChessboardCalibrationTest, CensusSgmReportsLessOfTheBoardButFarLessOfItOff)
+{
+    MatcherSettings census;
+    census.kind = MatcherKind::CensusSgm;
+    applyCensusSgmDefaults(census);
+    MatcherSettings three_way;
+    three_way.kind = MatcherKind::Sgbm;
+    three_way.sgbm_mode = SgbmMode::ThreeWay;
+    MatcherSettings eight_paths_raw;
+    eight_paths_raw.kind = MatcherKind::Sgbm;
+    eight_paths_raw.sgbm_mode = SgbmMode::Hh;
+    eight_paths_raw.uniqueness_ratio = 0;
+    eight_paths_raw.lr_max_diff_px = -1;
+    eight_paths_raw.speckle_window_px = 0;
+    const BoardPixels ours = boardPixels(result(), census, "census-sgm");
+    const BoardPixels opencv = boardPixels(result(), three_way, "sgbm-3way");
+    const BoardPixels eight = boardPixels(result(), eight_paths_raw, "sgbm-hh raw");
+    // Where it stands, as bounds a regression would cross.
+    EXPECT_LE(ours.off(), 5.0);
+    EXPECT_LE(ours.off(), opencv.off() / 4.0);
+    EXPECT_GE(ours.density(), 12.0);
+    // The issue's target is out of reach of eight paths too.
+    EXPECT_GT(eight.off(), 10.0);
 }
 
 TEST_F(ChessboardCalibrationTest, PreviewShowsTheFirstPairRectifiedWithRowLines)
