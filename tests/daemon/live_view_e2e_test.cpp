@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <regex>
 #include <string>
 #include <thread>
 
@@ -178,6 +179,27 @@ TEST_F(LiveViewPage, ShowsTheDistanceAndTheDepth)
     EXPECT_GT(shown["depth_variance"].get<double>(), 100.0) << "the depth canvas is blank";
     EXPECT_NE(shown["status"].get<std::string>().find("state running"), std::string::npos);
     EXPECT_TRUE(std::filesystem::file_size(screenshot) > 10000) << screenshot;
+
+    // The hovered pixel's depth is the service's own there (its snapshot, in mm), with
+    // the pixel's confidence.
+    const std::string hover = shown["hover"];
+    std::smatch match;
+    ASSERT_TRUE(std::regex_match(
+        hover, match, std::regex(R"(\((\d+), (\d+)\) (no depth|(\d+\.\d{3}) m), confidence (\d+))")))
+        << hover;
+    const int x = std::stoi(match[1]), y = std::stoi(match[2]);
+    ProtocolClient client(socket_, 30000ms);
+    const Json snapshot = client.request({{"cmd", "snapshot"}, {"items", Json::array({"depth"})}});
+    cv::Mat depth_mm(288, 384, CV_16UC1);
+    ASSERT_EQ(snapshot["payloads"][0]["bytes"], depth_mm.total() * 2);
+    client.readPayload(depth_mm.data, depth_mm.total() * 2);
+    const int mm = depth_mm.at<uint16_t>(y, x);
+    if (match[3] == "no depth") {
+        EXPECT_EQ(mm, 0) << hover;
+    } else {
+        EXPECT_NEAR(std::stod(match[4]) * 1000.0, mm, 1.0) << hover;
+        EXPECT_GT(std::stoi(match[5]), 0) << hover;
+    }
 }
 
 TEST_F(LiveViewPage, RegionAimedAtNothingShowsNoReadingAndTheReason)

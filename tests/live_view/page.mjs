@@ -1,5 +1,6 @@
 // Opens stereod's live view page in Debian's Chromium (headless, through playwright-core),
-// waits for the distance, and prints what the page shows as JSON; saves a screenshot:
+// waits for the distance, hovers the depth image, and prints what the page shows as JSON;
+// saves a screenshot:
 //   node page.mjs http://127.0.0.1:8765/ OUT.png
 import { chromium } from "playwright-core";
 
@@ -36,8 +37,14 @@ try {
              depth_variance: sum2 / n - mean * mean,
              status: document.getElementById("status").textContent };
   });
+  // Hovering the depth image below its centre shows that pixel's depth and confidence.
+  const box = await page.locator("#depth").boundingBox();
+  await page.mouse.move(box.x + box.width * 0.5, box.y + box.height * 0.6);
+  await page.waitForFunction(() => document.getElementById("hover").style.display === "block",
+                             null, { timeout: 5000 });
+  const hover = await page.evaluate(() => document.getElementById("hover").textContent);
   await page.screenshot({ path: screenshot });
-  process.stdout.write(JSON.stringify({ ...shown, errors }) + "\n");
+  process.stdout.write(JSON.stringify({ ...shown, hover, errors }) + "\n");
 } finally {
   await browser.close();
 }
