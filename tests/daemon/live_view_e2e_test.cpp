@@ -185,7 +185,8 @@ TEST_F(LiveViewPage, ShowsTheDistanceAndTheDepth)
     const std::string hover = shown["hover"];
     std::smatch match;
     ASSERT_TRUE(std::regex_match(
-        hover, match, std::regex(R"(\((\d+), (\d+)\) (no depth|(\d+\.\d{3}) m), confidence (\d+))")))
+        hover, match,
+        std::regex(R"(\((\d+), (\d+)\) (no depth|(\d+\.\d{3}) m), confidence (\d+))")))
         << hover;
     const int x = std::stoi(match[1]), y = std::stoi(match[2]);
     ProtocolClient client(socket_, 30000ms);
