@@ -244,8 +244,15 @@ void Worker::processPair(StereoPair& pair)
         if (health == HealthState::Degraded || health == HealthState::Failed) {
             reading.calibration_suspect = true;
             reading.calibration_row_offset_px = health_->rowOffsetPx();
+            // What the region's data said (too few matches, nothing in range, nearer than
+            // the range) follows from comparing the wrong rows: the calibration is the
+            // reason to give, not advice about the range.
+            const bool from_the_data = reading.reason == NoReadingReason::TooFewValidPixels ||
+                                       reading.reason == NoReadingReason::NothingInRange ||
+                                       reading.reason == NoReadingReason::NearerThanRange;
             if (health == HealthState::Failed &&
-                withhold_when_failed_.load(std::memory_order_relaxed) && reading.valid)
+                withhold_when_failed_.load(std::memory_order_relaxed) &&
+                (reading.valid || from_the_data))
                 refuseReading(reading, NoReadingReason::CalibrationSuspect);
         }
     }
