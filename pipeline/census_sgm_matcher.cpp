@@ -18,8 +18,32 @@ class CensusSgmMatcher final : public Matcher {
 
     void compute(const cv::Mat& left, const cv::Mat& right, MatchOutput& out) override
     {
-        CV_Assert(left.type() == CV_8UC1 && right.type() == CV_8UC1 &&
-                  left.size() == right.size() && left.step == right.step);
+        CV_Assert(left.type() == CV_8UC1 && right.type() == CV_8UC1 && left.size() == right.size());
+        // The core reads both images with one stride. Two views may differ in it (the
+        // halves of a side-by-side frame as they came, beside a rectified copy): then both
+        // are copied into kept buffers of one layout, allocated on the first such pair.
+        if (left.step != right.step) {
+            left.copyTo(left_copy_);
+            right.copyTo(right_copy_);
+            match(left_copy_, right_copy_, out);
+        } else {
+            match(left, right, out);
+        }
+    }
+
+    void configure(const MatcherSettings& settings, const DisparityRange& range) override
+    {
+        settings_ = censusSgmSettings(settings, range);
+        sgm::validateCensusSgmSettings(settings_);
+        core_.reset(); // rebuilt, with its buffers, on the next pair
+    }
+
+    std::string name() const override { return "census-sgm"; }
+    MatcherKind kind() const override { return MatcherKind::CensusSgm; }
+
+  private:
+    void match(const cv::Mat& left, const cv::Mat& right, MatchOutput& out)
+    {
         if (!core_ || core_->settings().width != left.cols ||
             core_->settings().height != left.rows) {
             sgm::CensusSgmSettings sized = settings_;
@@ -37,19 +61,9 @@ class CensusSgmMatcher final : public Matcher {
                         out.range_limit.ptr<uint8_t>()});
     }
 
-    void configure(const MatcherSettings& settings, const DisparityRange& range) override
-    {
-        settings_ = censusSgmSettings(settings, range);
-        sgm::validateCensusSgmSettings(settings_);
-        core_.reset(); // rebuilt, with its buffers, on the next pair
-    }
-
-    std::string name() const override { return "census-sgm"; }
-    MatcherKind kind() const override { return MatcherKind::CensusSgm; }
-
-  private:
     sgm::CensusSgmSettings settings_;
     std::unique_ptr<sgm::CensusSgm> core_;
+    cv::Mat left_copy_, right_copy_; // when the two views' strides differ
 };
 
 } // namespace
@@ -90,26 +104,20 @@ sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& s, const Dispari
     return c;
 }
 
-void applyCensusSgmDefaults(MatcherSettings& settings)
-{
-    const sgm::CensusSgmSettings tuned;
-    settings.uniqueness_ratio = tuned.uniqueness_percent;
-    settings.lr_max_diff_px = tuned.lr_max_diff_px;
-    settings.speckle_window_px = tuned.speckle_window_px;
-    settings.speckle_range_px = tuned.speckle_range_px;
-}
-
 void validateCensusSgm(const MatcherSettings& settings)
 {
     DisparityRange range;
     range.min_disparity = settings.min_disparity;
     // The range comes from the calibration later; any valid count checks the rest.
     range.num_disparities = settings.num_disparities > 0 ? settings.num_disparities : 16;
-    if (range.num_disparities > 256 || settings.max_num_disparities > 256)
-        throw std::invalid_argument(
-            "matcher.max_num_disparities: census-sgm searches at most "
-            "256 disparities, got " +
-            std::to_string(std::max(range.num_disparities, settings.max_num_disparities)));
+    const std::string most = "census-sgm searches at most " + std::to_string(sgm::kMaxDisparities) +
+                             " disparities, got ";
+    if (settings.num_disparities > sgm::kMaxDisparities)
+        throw std::invalid_argument("matcher.num_disparities: " + most +
+                                    std::to_string(settings.num_disparities));
+    if (settings.num_disparities == 0 && settings.max_num_disparities > sgm::kMaxDisparities)
+        throw std::invalid_argument("matcher.max_num_disparities: " + most +
+                                    std::to_string(settings.max_num_disparities));
     sgm::validateCensusSgmSettings(censusSgmSettings(settings, range));
 }
 

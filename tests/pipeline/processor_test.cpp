@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -98,8 +99,8 @@ TEST(MatcherSettings, RejectsWhatOpenCvCannotRun)
         return "";
     };
     EXPECT_EQ(message(MatcherSettings{}), "");
-    MatcherSettings opencv; // OpenCV's SGBM: its own limits
-    opencv.kind = MatcherKind::Sgbm;
+    // OpenCV's SGBM: its own limits
+    const MatcherSettings opencv = matcherDefaults(MatcherKind::Sgbm);
     EXPECT_EQ(message(opencv), "");
     MatcherSettings s = opencv;
     s.block_size = 4;
@@ -167,7 +168,7 @@ TEST_F(Processor, ProducesAReadingWithStampAndTimings)
 {
     StereoProcessor p(calibration_, settings_);
     EXPECT_EQ(p.disparityRange().num_disparities, 16);
-    EXPECT_EQ(p.matcherName(), "sgbm");
+    EXPECT_EQ(p.matcherName(), "census-sgm"); // the default
     DepthResult out;
     p.process(left_, right_, 1000, 3, out);
     ASSERT_TRUE(out.reading.valid) << reasonText(out.reading.reason);
@@ -185,6 +186,8 @@ TEST_F(Processor, ProducesAReadingWithStampAndTimings)
 TEST_F(Processor, LeftColumnsThatCannotBeMatchedAreInvalid)
 {
     // OpenCV's matchers leave the whole band invalid.
+    settings_.matcher.kind = MatcherKind::Sgbm;
+    applyMatcherDefaults(settings_.matcher);
     StereoProcessor p(calibration_, settings_);
     DepthResult out;
     p.process(left_, right_, 0, 0, out);
@@ -217,6 +220,24 @@ TEST_F(Processor, LeftBandKeepsOnlyDisparitiesWellBelowTheCut)
             ASSERT_GT(out.confidence.at<uint8_t>(y, x), 0);
         }
     EXPECT_GT(kept, 0);
+}
+
+// The two views of a pair need not share a row stride (the halves of a side-by-side
+// frame beside a copy): census-sgm gives the same disparities either way.
+TEST_F(Processor, CensusSgmTakesViewsOfDifferentStrides)
+{
+    const MatcherSettings settings = matcherDefaults(MatcherKind::CensusSgm);
+    const DisparityRange range{0, 16, 0.0, false};
+    const std::unique_ptr<Matcher> matcher = makeMatcher(settings, range);
+    MatchOutput same, mixed;
+    matcher->compute(left_, right_, same);
+    cv::Mat wide(left_.rows, left_.cols + 40, CV_8UC1, cv::Scalar(0));
+    left_.copyTo(wide(cv::Rect(0, 0, left_.cols, left_.rows)));
+    const cv::Mat left_view = wide(cv::Rect(0, 0, left_.cols, left_.rows));
+    ASSERT_NE(left_view.step, right_.step);
+    matcher->compute(left_view, right_, mixed);
+    EXPECT_EQ(cv::norm(same.disparity_px != mixed.disparity_px, cv::NORM_L1), 0.0);
+    EXPECT_EQ(cv::norm(same.confidence, mixed.confidence, cv::NORM_INF), 0.0);
 }
 
 TEST_F(Processor, DepthAndCloudFollowTheGeometry)
@@ -344,6 +365,7 @@ TEST_F(Processor, UpdateSettingsAppliesLiveAndRejectsInvalid)
 
     ProcessorSettings sgbm = settings_;
     sgbm.matcher.kind = MatcherKind::Sgbm;
+    applyMatcherDefaults(sgbm.matcher);
     p.updateSettings(sgbm);
     EXPECT_EQ(p.matcherName(), "sgbm");
     bad = sgbm;
@@ -359,6 +381,7 @@ TEST_F(Processor, UpdateSettingsAppliesLiveAndRejectsInvalid)
 
     ProcessorSettings bm = settings_;
     bm.matcher.kind = MatcherKind::Bm;
+    applyMatcherDefaults(bm.matcher);
     bm.matcher.block_size = 9;
     bm.matcher.min_depth_m = 0.45; // 22.2 - 5: 32 disparities
     p.updateSettings(bm);
@@ -387,6 +410,7 @@ TEST_F(Processor, MatcherSettingsReachOpenCv)
     };
     ProcessorSettings bm = settings_;
     bm.matcher.kind = MatcherKind::Bm;
+    applyMatcherDefaults(bm.matcher);
     bm.matcher.block_size = 9;
     const int bm_valid = validPixels(bm);
 
