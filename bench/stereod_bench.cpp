@@ -133,8 +133,7 @@ std::string key(const Case& c, const MatcherChoice& m)
 ProcessorSettings settingsFor(const Case& c, const MatcherChoice& m)
 {
     ProcessorSettings settings;
-    settings.matcher.kind = m.kind;
-    settings.matcher.sgbm_mode = m.sgbm_mode;
+    settings.matcher = matcherDefaults(m.kind, m.sgbm_mode);
     settings.matcher.num_disparities = c.num_disparities;
     settings.compute_cloud = true;
     return settings;

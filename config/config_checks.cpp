@@ -270,8 +270,8 @@ void failAsRefused(Checker& checker, const std::string& message, const std::stri
     const size_t bracket = key.find('[');
     if (bracket != std::string::npos)
         checker.fail(key.substr(0, bracket), message.substr(colon + 2), key);
-    else
-        checker.fail(key, message.substr(colon + 2), docs);
+    else // the checker shows the key's value itself: the matcher's ", got X" would repeat it
+        checker.fail(key, message.substr(colon + 2, message.rfind(", got ") - colon - 2), docs);
 }
 
 // census-sgm's own limits are the matcher's (one place): its first refusal, by key.

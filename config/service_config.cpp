@@ -138,11 +138,11 @@ ServiceConfig parseDocument(const std::string& text, const std::string& origin,
         problems.push_back(Problem{0, message + ": " + error.msg});
         throw ConfigError(inLineOrder(std::move(problems)));
     }
-    // A file that chooses census-sgm gets census-sgm's own values for the settings it
-    // shares with OpenCV's matchers, where the file does not set them.
-    if (config.processing.matcher.kind == MatcherKind::CensusSgm) {
+    // The settings every matcher shares take the chosen matcher's own values where the
+    // file does not set them.
+    {
         MatcherSettings tuned = config.processing.matcher;
-        applyCensusSgmDefaults(tuned);
+        applyMatcherDefaults(tuned);
         MatcherSettings& m = config.processing.matcher;
         const auto unset = [&](const char* key) { return locations.lines.count(key) == 0; };
         if (unset("matcher.uniqueness_ratio"))

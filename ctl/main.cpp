@@ -200,7 +200,7 @@ CLI::App* declareDepth(CLI::App& app, DepthOptions& o)
     cmd->add_option("--config", o.config_path,
                     "take the processing settings from this service configuration");
     cmd->add_option("--matcher", o.matcher,
-                    "OpenCV's sgbm (the default), sgbm-3way or bm, or our census-sgm")
+                    "our census-sgm (the default), or OpenCV's sgbm, sgbm-3way or bm")
         ->check(CLI::IsMember({"census-sgm", "bm", "sgbm", "sgbm-3way"}));
     cmd->add_option("--max-disparity", o.max_disparity,
                     "disparities searched, rounded up to a multiple of 16 (instead of deriving "

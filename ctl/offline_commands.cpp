@@ -105,10 +105,9 @@ ProcessorSettings depthSettings(const DepthOptions& options)
                                      ? defaultConfig().processing
                                      : loadConfig(options.config_path).processing;
     MatcherSettings& matcher = settings.matcher;
-    if (options.matcher == "census-sgm" && matcher.kind != MatcherKind::CensusSgm) {
-        // Switched to census-sgm here: with its own values for the shared settings.
+    const MatcherKind configured = matcher.kind;
+    if (options.matcher == "census-sgm") {
         matcher.kind = MatcherKind::CensusSgm;
-        applyCensusSgmDefaults(matcher);
     } else if (options.matcher == "bm") {
         matcher.kind = MatcherKind::Bm;
     } else if (options.matcher == "sgbm") {
@@ -118,6 +117,10 @@ ProcessorSettings depthSettings(const DepthOptions& options)
         matcher.kind = MatcherKind::Sgbm;
         matcher.sgbm_mode = SgbmMode::ThreeWay;
     }
+    // Switched from census-sgm to OpenCV's or back here: the new matcher's own values for
+    // the settings they share.
+    if ((configured == MatcherKind::CensusSgm) != (matcher.kind == MatcherKind::CensusSgm))
+        applyMatcherDefaults(matcher);
     if (options.min_depth_m) {
         matcher.min_depth_m = *options.min_depth_m;
         matcher.num_disparities = 0; // derived from the closest depth

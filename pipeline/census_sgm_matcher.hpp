@@ -16,11 +16,6 @@ namespace stereod {
 sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& settings,
                                          const DisparityRange& range);
 
-// census-sgm's own values for the settings it shares with OpenCV's matchers (uniqueness,
-// left-right tolerance, speckle window and range), tuned on the real scenes of
-// shared/data; a configuration that chooses census-sgm and does not set them gets these.
-void applyCensusSgmDefaults(MatcherSettings& settings);
-
 // Throws std::invalid_argument naming the matcher.* setting that cannot work.
 void validateCensusSgm(const MatcherSettings& settings);
 

@@ -62,8 +62,10 @@ void validateCensusSgmSettings(const CensusSgmSettings& s)
     if (sized && (s.width < 1 || s.height < 1))
         invalid("size", "the image must be at least 1x1, got " + std::to_string(s.width) + "x" +
                             std::to_string(s.height));
-    if (s.num_disparities < 16 || s.num_disparities > 256 || s.num_disparities % 16 != 0)
-        invalid("num_disparities", "must be a multiple of 16 within 16..256 for census-sgm, got " +
+    if (s.num_disparities < 16 || s.num_disparities > kMaxDisparities ||
+        s.num_disparities % 16 != 0)
+        invalid("num_disparities", "must be a multiple of 16 within 16.." +
+                                       std::to_string(kMaxDisparities) + " for census-sgm, got " +
                                        std::to_string(s.num_disparities));
     if (s.min_disparity < -1024 || s.min_disparity > 1024)
         invalid("min_disparity",

@@ -34,11 +34,14 @@
 
 namespace stereod::sgm {
 
+// The most disparities one search covers: a lane index fits a byte.
+inline constexpr int kMaxDisparities = 256;
+
 struct CensusSgmSettings {
     int width = 0; // image size in pixels
     int height = 0;
     int min_disparity = 0;    // disparities min_disparity .. + num_disparities - 1
-    int num_disparities = 64; // a multiple of 16, 16..256
+    int num_disparities = 64; // a multiple of 16, 16..kMaxDisparities
     // The defaults below were chosen on 17 real scenes with ground truth (Middlebury 2001,
     // 2005, 2014, KITTI 2012, ETH3D): fewest wrong and too-far pixels for a density close
     // to OpenCV SGBM's. An 11x3 census (32 bits: four byte planes) resists repetitive

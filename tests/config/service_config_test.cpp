@@ -127,8 +127,7 @@ TEST(ConfigExamples, AloeDemoLoadsAgainstItsRecording)
     EXPECT_EQ(config.source.replay.path, recording.string());
     EXPECT_EQ(config.socket.path, (fs::path(tree.path()) / "build/demo/stereod.sock").string());
     EXPECT_TRUE(config.calibration_path.empty());
-    EXPECT_EQ(config.processing.matcher.kind, MatcherKind::Sgbm);
-    EXPECT_EQ(config.processing.matcher.sgbm_mode, SgbmMode::Sgbm);
+    EXPECT_EQ(config.processing.matcher.kind, MatcherKind::CensusSgm);
     EXPECT_DOUBLE_EQ(config.processing.matcher.min_depth_m, 1.2);
     EXPECT_DOUBLE_EQ(config.processing.nearest.max_depth_m, 3.0);
     const RegionOfInterest& roi = config.processing.nearest.roi;
@@ -235,6 +234,10 @@ INSTANTIATE_TEST_SUITE_P(
         RejectedCase{"matcher:\n  max_num_disparities: 0\n", "matcher.max_num_disparities", 2,
                      "out of range"},
         RejectedCase{"matcher:\n  min_disparity: 2000\n", "matcher.min_disparity", 2, "got 2000"},
+        RejectedCase{"matcher:\n  num_disparities: 512\n", "matcher.num_disparities", 2,
+                     "census-sgm searches at most 256 disparities (got 512, expected"},
+        RejectedCase{"matcher:\n  max_num_disparities: 512\n", "matcher.max_num_disparities", 2,
+                     "census-sgm searches at most 256 disparities (got 512"},
         RejectedCase{"matcher:\n  algorithm: sgbm\n  block_size: 4\n", "matcher.block_size", 3,
                      "not odd"},
         RejectedCase{"matcher:\n  algorithm: sgbm\n  block_size: 33\n", "matcher.block_size", 3,
@@ -613,10 +616,11 @@ TEST(ConfigDiff, SeparatesLiveChangesFromThoseNeedingARestart)
     EXPECT_TRUE(diffConfig(proposed, bm_other_mode).changed.empty());
 }
 
-// census-sgm brings its own values for the settings it shares with OpenCV's matchers,
-// unless the file sets them.
-TEST(ConfigMatcher, CensusSgmTakesItsOwnSharedDefaultsUnlessSet)
+// Each matcher brings its own values for the settings they share, unless the file sets
+// them: census-sgm (the default) its tuned ones, OpenCV's matchers OpenCV's.
+TEST(ConfigMatcher, EachMatcherTakesItsOwnSharedDefaultsUnlessSet)
 {
+    EXPECT_EQ(defaultConfig().processing.matcher.kind, MatcherKind::CensusSgm);
     const ServiceConfig census = parseConfig("matcher:\n  algorithm: census-sgm\n", "t.yaml");
     EXPECT_EQ(census.processing.matcher.kind, MatcherKind::CensusSgm);
     EXPECT_EQ(census.processing.matcher.uniqueness_ratio, 9);
@@ -627,8 +631,22 @@ TEST(ConfigMatcher, CensusSgmTakesItsOwnSharedDefaultsUnlessSet)
         parseConfig("matcher:\n  uniqueness_ratio: 12\n  algorithm: census-sgm\n", "t.yaml");
     EXPECT_EQ(set.processing.matcher.uniqueness_ratio, 12);
     EXPECT_EQ(set.processing.matcher.lr_max_diff_px, 2);
-    // OpenCV's SGBM keeps the generic defaults.
-    EXPECT_EQ(defaultConfig().processing.matcher.uniqueness_ratio, 10);
+    EXPECT_EQ(defaultConfig().processing.matcher.uniqueness_ratio, 9);
+
+    for (const char* opencv : {"sgbm", "sgbm-3way", "bm"}) {
+        const MatcherSettings m =
+            parseConfig(std::string("matcher:\n  algorithm: ") + opencv + "\n", "t.yaml")
+                .processing.matcher;
+        EXPECT_EQ(m.uniqueness_ratio, 10) << opencv;
+        EXPECT_EQ(m.lr_max_diff_px, 1) << opencv;
+        EXPECT_EQ(m.speckle_window_px, 100) << opencv;
+        EXPECT_EQ(m.speckle_range_px, 2) << opencv;
+    }
+    const MatcherSettings sgbm_set =
+        parseConfig("matcher:\n  algorithm: sgbm\n  speckle_window_px: 50\n", "t.yaml")
+            .processing.matcher;
+    EXPECT_EQ(sgbm_set.speckle_window_px, 50);
+    EXPECT_EQ(sgbm_set.uniqueness_ratio, 10);
 }
 
 TEST(ConfigDiff, EveryKeyIsClassified)

@@ -1205,10 +1205,12 @@ TEST_F(ServiceTest, ReloadRefusesSettingsTheCalibrationCannotTakeAndKeepsAllInFo
     ASSERT_EQ(distance(client)["valid"], true);
     const Json disparities_before = status(client)["pipeline"]["num_disparities"];
 
-    // Valid as a file, but 512 disparities leave no column of a 384 px wide frame: the
-    // worker would refuse it. Refused as a whole, with the key and the reason; the safety
-    // setting beside it is not applied either.
-    write_config("nearest:\n  min_valid_fraction: 0.99\nmatcher:\n  num_disparities: 512\n");
+    // Valid as a file (for OpenCV's SGBM: census-sgm refuses more than 256 in the file),
+    // but 512 disparities leave no column of a 384 px wide frame: the worker would refuse
+    // it. Refused as a whole, with the key and the reason; the safety setting beside it is
+    // not applied either.
+    write_config("nearest:\n  min_valid_fraction: 0.99\nmatcher:\n  algorithm: sgbm\n"
+                 "  num_disparities: 512\n");
     const Json refused = client.request({{"cmd", "reload"}});
     EXPECT_EQ(refused["ok"], false) << refused.dump();
     EXPECT_EQ(refused["error"]["code"], "invalid_config");

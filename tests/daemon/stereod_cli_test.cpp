@@ -132,10 +132,11 @@ TEST_F(StereodCli, CheckConfigChecksTheSettingsAgainstTheCalibrationAsStartUpDoe
 {
     // Valid as a file; with the calibration it names, 1024 disparities leave no column of
     // the 384 px wide frames: start-up refuses it (3), and so does --check-config.
+    // (OpenCV's SGBM: census-sgm refuses more than 256 in the file already.)
     const std::string wide = dir_.file("wide.yaml");
     std::ofstream(wide) << "calibration: " << calibration_ << "\n"
                         << "nearest:\n  min_valid_fraction: 0.9\n"
-                        << "matcher:\n  num_disparities: 1024\n";
+                        << "matcher:\n  algorithm: sgbm\n  num_disparities: 1024\n";
     const ProcessResult checked = run({"--check-config", wide});
     EXPECT_EQ(checked.exit_code, 3) << checked.out << checked.err;
     EXPECT_NE(checked.err.find("matcher.num_disparities"), std::string::npos) << checked.err;

@@ -17,6 +17,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "pipeline/calibration.hpp"
+#include "pipeline/matcher.hpp"
 #include "pipeline/nearest_object.hpp"
 #include "pipeline/stereo_processor.hpp"
 #include "tests/support/data_paths.hpp"
@@ -131,8 +132,7 @@ void compareSgbm(const char* name, const Scene& s, double min_depth_m, int num_d
 {
     ASSERT_FALSE(s.left.empty() || s.right.empty() || s.gt_px.empty()) << name;
     ProcessorSettings settings;
-    settings.matcher.kind = MatcherKind::Sgbm;
-    settings.matcher.sgbm_mode = SgbmMode::Sgbm;
+    settings.matcher = matcherDefaults(MatcherKind::Sgbm, SgbmMode::Sgbm);
     settings.matcher.min_depth_m = min_depth_m;
     settings.compute_cloud = false;
     const StereoCalibration calibration = makeRectifiedCalibration(s.left.size(), 100.0, 0.1);
@@ -170,7 +170,7 @@ TEST(Accuracy, TsukubaBm)
                               kMiddlebury + "tsukuba/disp3.pgm", 16.0);
     ASSERT_FALSE(s.left.empty() || s.gt_px.empty());
     ProcessorSettings settings;
-    settings.matcher.kind = MatcherKind::Bm;
+    settings.matcher = matcherDefaults(MatcherKind::Bm);
     settings.matcher.block_size = 9;
     settings.matcher.min_depth_m = 0.7;
     settings.compute_cloud = false;
@@ -237,8 +237,7 @@ TEST(Accuracy, AloeFullSizeSgbm3WayAndNearestDistance)
     const StereoCalibration calibration = makeRectifiedCalibration(
         s.left.size(), kAloeFocalPx, kAloeBaselineM, std::nullopt, std::nullopt, kAloeDoffsPx);
     ProcessorSettings settings;
-    settings.matcher.kind = MatcherKind::Sgbm;
-    settings.matcher.sgbm_mode = SgbmMode::ThreeWay;
+    settings.matcher = matcherDefaults(MatcherKind::Sgbm, SgbmMode::ThreeWay);
     // f*B / 1.15 m - doffs = 250.3 px: the range rounds up to 256 disparities.
     settings.matcher.min_depth_m = 1.15;
     settings.nearest.min_depth_m = 0.5;

@@ -127,8 +127,7 @@ cv::Mat openCvThreeWay(const cv::Mat& left, const cv::Mat& right, int num_dispar
 cv::Mat censusSgm(const cv::Mat& left, const cv::Mat& right, int num_disparities, int threads)
 {
     ProcessorSettings settings;
-    settings.matcher.kind = MatcherKind::CensusSgm;
-    applyCensusSgmDefaults(settings.matcher); // as `matcher.algorithm: census-sgm` gives
+    settings.matcher = matcherDefaults(MatcherKind::CensusSgm);
     settings.matcher.num_disparities = num_disparities;
     settings.matcher.threads = threads;
     settings.compute_cloud = false;
