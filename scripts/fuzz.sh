@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets (tests/fuzz/: the protocol parser, the configuration
-# loader and the live view's WebSocket message parser) with clang and runs each for a bounded time from its checked-in seed corpus.
-#   scripts/fuzz.sh [SECONDS] [TARGET...]    SECONDS per target (default 60);
+# loader and the live view's WebSocket message parser) with clang and runs them side by
+# side for a bounded time, each from its checked-in seed corpus.
+#   scripts/fuzz.sh [SECONDS] [TARGET...]    SECONDS of the run (default 60);
 #                                            TARGET: fuzz_protocol, fuzz_config,
 #                                            fuzz_foxglove (default all)
 # Fails when a target crashes, hangs (one input over 10 s), leaks or runs out of memory;
@@ -40,31 +41,38 @@ cmake --build "$dir" -j "$STEREOD_JOBS" --target "${targets[@]}"
 export ASAN_OPTIONS="detect_leaks=1:abort_on_error=1"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 
-failed=0
+# The targets run side by side, one process each, so that the run takes SECONDS on a
+# machine with as many cores as targets (on fewer, each gets a share of them).
+start=$(date +%s)
+declare -A pid
 for target in "${targets[@]}"; do
   work="$dir/corpus/${corpus[$target]}"
-  artifacts="$dir/artifacts/$target/"
-  log="$dir/$target.log"
-  mkdir -p "$work" "$artifacts"
+  mkdir -p "$work" "$dir/artifacts/$target/"
   echo "== $target: ${seconds} s from tests/fuzz/corpus/${corpus[$target]}"
-  start=$(date +%s)
-  status=0
   # The first corpus directory receives new inputs; the seeds are only read.
   "$dir/$target" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -max_len=4096 \
-    -dict="$STEREOD_ROOT/${dict[$target]}" -artifact_prefix="$artifacts" \
+    -dict="$STEREOD_ROOT/${dict[$target]}" -artifact_prefix="$dir/artifacts/$target/" \
     -print_final_stats=1 "$work" "$STEREOD_ROOT/tests/fuzz/corpus/${corpus[$target]}" \
-    >"$log" 2>&1 || status=$?
+    >"$dir/$target.log" 2>&1 &
+  pid[$target]=$!
+done
+
+failed=0
+for target in "${targets[@]}"; do
+  status=0
+  wait "${pid[$target]}" || status=$?
   elapsed=$(( $(date +%s) - start ))
+  log="$dir/$target.log"
   runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -n 1)
   rate=$(sed -n 's/^stat::average_exec_per_sec: *//p' "$log" | tail -n 1)
-  inputs=$(find "$work" -type f | wc -l)
+  inputs=$(find "$dir/corpus/${corpus[$target]}" -type f | wc -l)
   if [ "$status" -ne 0 ]; then
     failed=1
-    echo "fuzz $target: FAILED (exit $status) after ${elapsed} s; log: $log"
+    echo "fuzz $target: FAILED (exit $status) within ${elapsed} s; log: $log"
     grep -E "^(==[0-9]+==ERROR|SUMMARY|.*runtime error|artifact_prefix|Test unit written|ALARM|==[0-9]+== ERROR)" "$log" | head -n 20 || true
     tail -n 40 "$log"
   else
-    echo "fuzz $target: ${runs:-?} executions in ${elapsed} s (${rate:-?}/s), no crash; working corpus: $inputs inputs"
+    echo "fuzz $target: ${runs:-?} executions within ${elapsed} s (${rate:-?}/s), no crash; working corpus: $inputs inputs"
   fi
 done
 exit "$failed"
