@@ -32,16 +32,17 @@ struct MatcherSettings {
     int max_num_disparities = 256;
     int min_disparity = 0;
     int block_size = 5; // OpenCV's matchers: odd; BM needs >= 5
-    // Settings every matcher shares. Their defaults are census-sgm's tuned values; a
+    // The next four, every matcher has. Their defaults are census-sgm's tuned values; a
     // configuration choosing one of OpenCV's matchers gets OpenCV's (applyMatcherDefaults).
-    int uniqueness_ratio = kCensusSgmTuned.uniqueness_percent; // percent margin of the best
-                                                               // cost over the second
-    int speckle_window_px = kCensusSgmTuned.speckle_window_px; // largest speckle removed, px;
-                                                               // 0 disables
-    int speckle_range_px = kCensusSgmTuned.speckle_range_px;   // disparity variation within a
-                                                               // connected component
-    int lr_max_diff_px = kCensusSgmTuned.lr_max_diff_px;       // left-right consistency tolerance;
-                                                               // < 0 disables
+    //
+    // Percent margin of the best cost over the second.
+    int uniqueness_ratio = kCensusSgmTuned.uniqueness_percent;
+    // Largest speckle removed, in pixels (0 disables), and the disparity variation within
+    // one connected component.
+    int speckle_window_px = kCensusSgmTuned.speckle_window_px;
+    int speckle_range_px = kCensusSgmTuned.speckle_range_px;
+    // Left-right consistency tolerance; < 0 disables.
+    int lr_max_diff_px = kCensusSgmTuned.lr_max_diff_px;
     // Smoothness penalties, 0: automatic. census-sgm counts them in census bits
     // (automatic: its tuned values); OpenCV's SGBM in its own cost units (8*bs^2, 32*bs^2).
     int p1 = 0;
