@@ -409,7 +409,8 @@ std::unique_ptr<CensusAlone> makeCensusAlone(const Case& c, const ImagePair& pai
     alone->disparity_px.resize(pixels);
     alone->confidence.resize(pixels);
     alone->range_limit.resize(pixels);
-    alone->core->compute(pair.left.data, pair.right.data, pair.left.step, alone->output());
+    alone->core->compute(pair.left.data, pair.left.step, pair.right.data, pair.right.step,
+                         alone->output());
     return alone;
 }
 
@@ -433,8 +434,9 @@ void benchCensusAlone(benchmark::State& state, const Case& c)
     CensusAlone& alone = *kept;
     const sgm::CensusSgmOutput out = alone.output();
     FrameTally tally;
-    timeFrames(state, tally,
-               [&] { alone.core->compute(pair.left.data, pair.right.data, pair.left.step, out); });
+    timeFrames(state, tally, [&] {
+        alone.core->compute(pair.left.data, pair.left.step, pair.right.data, pair.right.step, out);
+    });
     tally.report(state, "match_ms", false);
     state.counters["num_disparities"] = alone.core->settings().num_disparities;
     state.counters["threads"] = alone.core->settings().threads;
@@ -487,7 +489,8 @@ struct CompareRig {
         publish->run();
         const int64_t t1 = monotonicNs();
         const ImagePair& pair = inputs.rectified;
-        census->core->compute(pair.left.data, pair.right.data, pair.left.step, census->output());
+        census->core->compute(pair.left.data, pair.left.step, pair.right.data, pair.right.step,
+                              census->output());
         const int64_t t2 = monotonicNs();
         three_way->compute(pair.left, pair.right, disparity_fixed16);
         const int64_t t3 = monotonicNs();

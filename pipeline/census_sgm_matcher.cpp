@@ -19,16 +19,21 @@ class CensusSgmMatcher final : public Matcher {
     void compute(const cv::Mat& left, const cv::Mat& right, MatchOutput& out) override
     {
         CV_Assert(left.type() == CV_8UC1 && right.type() == CV_8UC1 && left.size() == right.size());
-        // The core reads both images with one stride. Two views may differ in it (the
-        // halves of a side-by-side frame as they came, beside a rectified copy): then both
-        // are copied into kept buffers of one layout, allocated on the first such pair.
-        if (left.step != right.step) {
-            left.copyTo(left_copy_);
-            right.copyTo(right_copy_);
-            match(left_copy_, right_copy_, out);
-        } else {
-            match(left, right, out);
+        if (!core_ || core_->settings().width != left.cols ||
+            core_->settings().height != left.rows) {
+            sgm::CensusSgmSettings sized = settings_;
+            sized.width = left.cols;
+            sized.height = left.rows;
+            core_ = std::make_unique<sgm::CensusSgm>(sized);
         }
+        out.disparity_px.create(left.size(), CV_32FC1);
+        out.confidence.create(left.size(), CV_8UC1);
+        out.range_limit.create(left.size(), CV_8UC1);
+        CV_Assert(out.disparity_px.isContinuous() && out.confidence.isContinuous() &&
+                  out.range_limit.isContinuous());
+        core_->compute(left.data, left.step, right.data, right.step,
+                       {out.disparity_px.ptr<float>(), out.confidence.ptr<uint8_t>(),
+                        out.range_limit.ptr<uint8_t>()});
     }
 
     void configure(const MatcherSettings& settings, const DisparityRange& range) override
@@ -42,28 +47,8 @@ class CensusSgmMatcher final : public Matcher {
     MatcherKind kind() const override { return MatcherKind::CensusSgm; }
 
   private:
-    void match(const cv::Mat& left, const cv::Mat& right, MatchOutput& out)
-    {
-        if (!core_ || core_->settings().width != left.cols ||
-            core_->settings().height != left.rows) {
-            sgm::CensusSgmSettings sized = settings_;
-            sized.width = left.cols;
-            sized.height = left.rows;
-            core_ = std::make_unique<sgm::CensusSgm>(sized);
-        }
-        out.disparity_px.create(left.size(), CV_32FC1);
-        out.confidence.create(left.size(), CV_8UC1);
-        out.range_limit.create(left.size(), CV_8UC1);
-        CV_Assert(out.disparity_px.isContinuous() && out.confidence.isContinuous() &&
-                  out.range_limit.isContinuous());
-        core_->compute(left.data, right.data, left.step,
-                       {out.disparity_px.ptr<float>(), out.confidence.ptr<uint8_t>(),
-                        out.range_limit.ptr<uint8_t>()});
-    }
-
     sgm::CensusSgmSettings settings_;
     std::unique_ptr<sgm::CensusSgm> core_;
-    cv::Mat left_copy_, right_copy_; // when the two views' strides differ
 };
 
 } // namespace

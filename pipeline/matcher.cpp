@@ -237,10 +237,10 @@ std::unique_ptr<Matcher> makeMatcher(const MatcherSettings& settings, const Disp
 
 void applyMatcherDefaults(MatcherSettings& settings)
 {
-    const MatcherSettings census; // census-sgm is the default matcher, with its values
+    const sgm::CensusSgmSettings& census = kCensusSgmTuned;
     const bool opencv = settings.kind != MatcherKind::CensusSgm;
     // OpenCV's matchers: the values of OpenCV's stereo_match sample.
-    settings.uniqueness_ratio = opencv ? 10 : census.uniqueness_ratio;
+    settings.uniqueness_ratio = opencv ? 10 : census.uniqueness_percent;
     settings.speckle_window_px = opencv ? 100 : census.speckle_window_px;
     settings.speckle_range_px = opencv ? 2 : census.speckle_range_px;
     settings.lr_max_diff_px = opencv ? 1 : census.lr_max_diff_px;

@@ -467,8 +467,8 @@ CensusSgm::CensusSgm(const CensusSgmSettings& settings)
 
 CensusSgm::~CensusSgm() = default;
 
-void CensusSgm::compute(const uint8_t* left, const uint8_t* right, size_t stride,
-                        const CensusSgmOutput& out)
+void CensusSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* right,
+                        size_t right_stride, const CensusSgmOutput& out)
 {
     Impl& m = *impl_;
     const CensusSgmSettings& s = m.settings;
@@ -478,8 +478,8 @@ void CensusSgm::compute(const uint8_t* left, const uint8_t* right, size_t stride
     m.pool.run(bands, [&](int band) {
         const int y0 = padded_rows * band / bands;
         const int y1 = padded_rows * (band + 1) / bands;
-        m.pad(left, stride, m.padded_left, y0, y1);
-        m.pad(right, stride, m.padded_right, y0, y1);
+        m.pad(left, left_stride, m.padded_left, y0, y1);
+        m.pad(right, right_stride, m.padded_right, y0, y1);
     });
     m.pool.run(bands, [&](int band) {
         const int y0 = s.height * band / bands;
@@ -488,7 +488,7 @@ void CensusSgm::compute(const uint8_t* left, const uint8_t* right, size_t stride
         m.censusRows(m.padded_right, m.census_right, y0, y1);
         m.reverseRightRows(y0, y1);
     });
-    m.pool.run(bands, [&](int band) { m.matchBand(band, left, stride, out); });
+    m.pool.run(bands, [&](int band) { m.matchBand(band, left, left_stride, out); });
 
     const auto band_start = [&](int band) { return s.height * band / bands; };
     std::vector<int16_t>* result = s.median ? &m.filtered : &m.fixed;

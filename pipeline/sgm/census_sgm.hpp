@@ -89,9 +89,10 @@ class CensusSgm {
     CensusSgm(const CensusSgm&) = delete;
     CensusSgm& operator=(const CensusSgm&) = delete;
 
-    // left, right: rectified 8-bit images of settings.width x settings.height, rows
-    // `stride` bytes apart.
-    void compute(const uint8_t* left, const uint8_t* right, size_t stride,
+    // left, right: rectified 8-bit images of settings.width x settings.height, their rows
+    // left_stride and right_stride bytes apart (two views of one frame, or copies, need
+    // not agree).
+    void compute(const uint8_t* left, size_t left_stride, const uint8_t* right, size_t right_stride,
                  const CensusSgmOutput& out);
 
     const CensusSgmSettings& settings() const;

@@ -40,8 +40,9 @@ Output match(const SyntheticPair& pair, const CensusSgmSettings& settings)
     const size_t area = pair.left.size();
     Output out{std::vector<float>(area, -1.0f), std::vector<uint8_t>(area, 77),
                std::vector<uint8_t>(area, 77)};
+    const auto stride = static_cast<size_t>(pair.width);
     matcher.compute(
-        pair.left.data(), pair.right.data(), static_cast<size_t>(pair.width),
+        pair.left.data(), stride, pair.right.data(), stride,
         CensusSgmOutput{out.disparity_px.data(), out.confidence.data(), out.range_limit.data()});
     return out;
 }
