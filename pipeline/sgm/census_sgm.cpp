@@ -15,10 +15,6 @@
 namespace stereod::sgm {
 namespace {
 
-// Disparities are kept in fixed point between the winner and the output: 16 x pixels.
-constexpr int kSubpixel = 16;
-constexpr int16_t kInvalid = std::numeric_limits<int16_t>::min();
-
 // Rows a band runs its top-down paths before its first own row. Past about 24 rows the
 // path costs no longer depend on where the path started (measured: the disparities of a
 // 2-band run equal a 1-band run's on 99.9 % of the pixels with 32 rows).
@@ -49,8 +45,9 @@ struct BandScratch {
     std::vector<uint8_t> p2_above[3];  // width, per path from above
     // width + 1: P2 onto x from x - 1 at [x], so onto x from x + 1 at [x + 1].
     std::vector<uint8_t> p2_along;
-    std::vector<Winner> winners;
-    std::vector<uint16_t> right_lane;
+    std::vector<uint16_t> winner_fields; // the five rows of WinnerRows, width each
+    WinnerRows winners{};
+    std::vector<uint16_t> right_lane; // rightLaneEntries()
     std::vector<uint16_t> winners_scratch;
 };
 
@@ -119,7 +116,7 @@ size_t censusSgmMemoryBytes(const CensusSgmSettings& s)
         w * lanes + 2 * pathBlockBytes(static_cast<int>(lanes)) +
         winnersSumScratch(static_cast<int>(lanes)) * sizeof(uint16_t) +
         (above * 2 + 1) * w * pathBlockBytes(static_cast<int>(lanes)) + w * (above + 1) + 1 +
-        w * (sizeof(Winner) + sizeof(uint16_t)) +
+        (5 * w + rightLaneEntries(s.width)) * sizeof(uint16_t) +
         winnersScratch(s.width, s.min_disparity, static_cast<int>(lanes)) * sizeof(uint16_t);
     return image + output + band * static_cast<size_t>(s.threads);
 }
@@ -143,8 +140,8 @@ struct CensusSgm::Impl {
         census_left.assign(plane_stride * static_cast<size_t>(planes), 0);
         census_right.assign(plane_stride * static_cast<size_t>(planes), 0);
         census_right_reversed.assign(plane_stride * static_cast<size_t>(planes), 0);
-        fixed.assign(area, kInvalid);
-        filtered.assign(area, kInvalid);
+        fixed.assign(area, kNoDisparity);
+        filtered.assign(area, kNoDisparity);
 
         const size_t row_cells = static_cast<size_t>(s.width) * static_cast<size_t>(lanes);
         const size_t row_blocks = static_cast<size_t>(s.width) * pathBlockBytes(lanes);
@@ -161,11 +158,16 @@ struct CensusSgm::Impl {
                 b.p2_above[i].assign(static_cast<size_t>(s.width), 0);
             }
             b.p2_along.assign(static_cast<size_t>(s.width) + 1, 0);
-            b.winners.assign(static_cast<size_t>(s.width), Winner{});
-            b.right_lane.assign(static_cast<size_t>(s.width), 0);
+            const size_t w = static_cast<size_t>(s.width);
+            b.winner_fields.assign(5 * w, 0);
+            uint16_t* f = b.winner_fields.data();
+            b.winners = WinnerRows{f, f + w, f + 2 * w, f + 3 * w, f + 4 * w};
+            b.right_lane.assign(rightLaneEntries(s.width), 0);
             b.winners_scratch.assign(winnersScratch(s.width, s.min_disparity, lanes), 0);
         }
-        inv_sharp_scale = 1.0 / (2.0 * s.p1 * s.paths);
+        decide = DecideSettings{s.min_disparity,      s.num_disparities,
+                                s.uniqueness_percent, s.lr_max_diff_px,
+                                s.edge_margin_px,     static_cast<float>(2 * s.p1 * s.paths)};
         // P2 by intensity step along the path (see CensusSgmSettings::p2_gradient_scale).
         for (int g = 0; g < 256; ++g) {
             double p2 = s.p2;
@@ -316,94 +318,15 @@ struct CensusSgm::Impl {
             kernels->paths_forward(b.cost.data(), static_cast<uint8_t>(s.p1), s.width, lanes,
                                    above_paths, b.p2_along.data(), b.forward.data());
             others[above] = b.forward.data();
-            kernels->winners_backward(
-                b.cost.data(), b.p2_along.data() + 1, static_cast<uint8_t>(s.p1), s.width, lanes,
-                PathRows{others, above + 1}, s.min_disparity, s.num_disparities,
-                b.row_scratch.data(), b.sum_scratch.data(), b.winners.data(), b.right_lane.data(),
-                b.winners_scratch.data());
-            decideRow(b, y, out);
+            kernels->winners_backward(b.cost.data(), b.p2_along.data() + 1,
+                                      static_cast<uint8_t>(s.p1), s.width, lanes,
+                                      PathRows{others, above + 1}, s.min_disparity,
+                                      s.num_disparities, b.row_scratch.data(), b.sum_scratch.data(),
+                                      b.winners, b.right_lane.data(), b.winners_scratch.data());
+            const size_t row = static_cast<size_t>(y) * static_cast<size_t>(s.width);
+            kernels->decide_row(b.winners, b.right_lane.data(), s.width, decide, fixed.data() + row,
+                                out.confidence + row, out.range_limit + row);
         }
-    }
-
-    // Turns the winners of row y into fixed-point disparities, confidences and flags.
-    void decideRow(const BandScratch& b, int y, const CensusSgmOutput& out)
-    {
-        const CensusSgmSettings& s = settings;
-        const int n = s.num_disparities;
-        const size_t row_offset = static_cast<size_t>(y) * static_cast<size_t>(s.width);
-        int16_t* disparity = fixed.data() + row_offset;
-        uint8_t* confidence = out.confidence + row_offset;
-        uint8_t* range_limit = out.range_limit + row_offset;
-        for (int x = 0; x < s.width; ++x) {
-            disparity[x] = kInvalid;
-            confidence[x] = 0;
-            range_limit[x] = 0;
-            const Winner w = b.winners[static_cast<size_t>(x)];
-            const int k = w.best_lane;
-            // The lanes this pixel could search: its right pixel x - d must be in the image.
-            const int searchable = std::min(n - 1, x - s.min_disparity);
-            if (searchable < 0)
-                continue;
-            if (searchable == n - 1 && k == n - 1) {
-                // The best match is at the near end of the range: the surface may be
-                // nearer than the range sees, and no number from the edge is trustworthy.
-                range_limit[x] = 1;
-                continue;
-            }
-            if (searchable < n - 1 && k > searchable - s.edge_margin_px)
-                continue; // its true match may lie beyond the left edge of the right image
-            const uint32_t best = w.best_sum;
-            const uint32_t second = w.second_sum;
-            if (second * 100u <= best * static_cast<uint32_t>(100 + s.uniqueness_percent))
-                continue;
-            int lr_diff = 0;
-            if (s.lr_max_diff_px >= 0) {
-                const int xr = x - s.min_disparity - k;
-                const uint16_t right = b.right_lane[static_cast<size_t>(xr)];
-                if (right == 0xFFFF)
-                    continue;
-                lr_diff = std::abs(static_cast<int>(right) - k);
-                if (lr_diff > s.lr_max_diff_px)
-                    continue;
-            }
-            int offset16 = 0;
-            int curvature = 0;
-            // The parabola needs both neighbours searched: not at either end of the range,
-            // nor at the last lane the left image edge lets this pixel search.
-            if (k > 0 && k < std::min(n - 1, searchable)) {
-                const int below = w.below_sum, at = w.best_sum, above = w.above_sum;
-                curvature = below + above - 2 * at;
-                if (curvature > 0) {
-                    // Rounded to the nearest 1/16 px: (below - above) / (2 curvature) * 16.
-                    const int numerator = (below - above) * kSubpixel;
-                    const int half = curvature; // half of the denominator 2 * curvature
-                    offset16 =
-                        (numerator >= 0 ? numerator + half : numerator - half) / (2 * curvature);
-                }
-            }
-            disparity[x] = static_cast<int16_t>((s.min_disparity + k) * kSubpixel + offset16);
-            confidence[x] = confidenceOf(best, second, curvature, lr_diff, searchable, n);
-        }
-    }
-
-    // 1..255 from the three signs of a trustworthy match: how much better the best sum is
-    // than the best non-adjacent one, how sharp the minimum is, and whether the right
-    // view agrees exactly; scaled down where the left edge cut the search.
-    uint8_t confidenceOf(uint32_t best, uint32_t second, int curvature, int lr_diff, int searchable,
-                         int n) const
-    {
-        // uniqueness = min(1, margin / 0.5), margin = (second - best) / max(1, best): a
-        // division only when it is below 1.
-        const double best_or_1 = std::max(1.0, static_cast<double>(best));
-        const double twice_gap = 2.0 * static_cast<double>(second - best);
-        const double uniqueness =
-            second == 0xFFFFu || twice_gap >= best_or_1 ? 1.0 : twice_gap / best_or_1;
-        const double sharpness = std::min(1.0, static_cast<double>(curvature) * inv_sharp_scale);
-        const double agreement = lr_diff == 0 ? 1.0 : lr_diff == 1 ? 0.7 : 0.4;
-        double c = 255.0 * uniqueness * (0.5 + 0.5 * sharpness) * agreement;
-        if (searchable < n - 1) // the left edge cut the search
-            c = c * (searchable + 1) / n;
-        return static_cast<uint8_t>(std::clamp(static_cast<int>(c + 0.5), 1, 255)); // c >= 0
     }
 
     // 3x3 median around each valid pixel, rows y0..y1-1; a missing neighbour counts as
@@ -422,7 +345,7 @@ struct CensusSgm::Impl {
             }
             dst[0] = row[0];
             dst[w - 1] = row[w - 1];
-            kernels->median_row(row - w, row, row + w, w, kInvalid, dst);
+            kernels->median_row(row - w, row, row + w, w, kNoDisparity, dst);
         }
     }
 
@@ -432,7 +355,7 @@ struct CensusSgm::Impl {
         constexpr float kNone = std::numeric_limits<float>::infinity();
         for (size_t i = static_cast<size_t>(y0) * w; i < static_cast<size_t>(y1) * w; ++i) {
             const int16_t d = source[i];
-            if (d == kInvalid) {
+            if (d == kNoDisparity) {
                 out.disparity_px[i] = kNone;
                 out.confidence[i] = 0;
             } else {
@@ -448,12 +371,12 @@ struct CensusSgm::Impl {
     int rx, ry;
     size_t padded_stride;
     uint8_t p2_by_step[256] = {};
-    double inv_sharp_scale = 0; // 1 / (2 p1 paths): full sharpness
+    DecideSettings decide;
     std::vector<uint8_t> padded_left, padded_right;
     size_t plane_margin = 0, plane_stride = 0;
     std::vector<uint8_t> census_left, census_right; // planes x (margin, height x width, margin)
     std::vector<uint8_t> census_right_reversed;     // each row backwards
-    std::vector<int16_t> fixed, filtered;           // 16 x disparity, kInvalid = none
+    std::vector<int16_t> fixed, filtered;           // 16 x disparity, kNoDisparity = none
     std::vector<BandScratch> bands;
     BandPool pool;
     SpeckleFilter speckle;
@@ -499,19 +422,19 @@ void CensusSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* 
         if (s.median)
             m.medianRows(band_start(band), band_start(band + 1));
         if (s.speckle_window_px > 0)
-            m.speckle.labelBand(result->data(), kInvalid, max_step, band_start(band),
+            m.speckle.labelBand(result->data(), kNoDisparity, max_step, band_start(band),
                                 band_start(band + 1));
     });
     if (s.speckle_window_px > 0) {
         int starts[64]; // threads <= 64 (validated)
         for (int band = 0; band < bands; ++band)
             starts[band] = band_start(band);
-        m.speckle.joinBands(result->data(), kInvalid, max_step, starts, bands);
+        m.speckle.joinBands(result->data(), kNoDisparity, max_step, starts, bands);
     }
     m.pool.run(bands, [&](int band) {
         if (s.speckle_window_px > 0)
-            m.speckle.removeBand(result->data(), kInvalid, s.speckle_window_px, band_start(band),
-                                 band_start(band + 1));
+            m.speckle.removeBand(result->data(), kNoDisparity, s.speckle_window_px,
+                                 band_start(band), band_start(band + 1));
         m.finishRows(*result, band_start(band), band_start(band + 1), out);
     });
 }

@@ -67,14 +67,35 @@ inline constexpr size_t winnersSumScratch(int lanes)
     return static_cast<size_t>(kWinnerGroup) * static_cast<size_t>(lanes + 32 + kLaneAlign);
 }
 
-// The best and second-best disparity lane of one pixel over the summed paths.
-struct Winner {
-    uint16_t best_lane; // smallest k with the smallest sum (ties: smallest k)
-    uint16_t best_sum;
-    uint16_t second_sum; // smallest sum with |k - best_lane| > 1 (0xFFFF if none)
-    uint16_t below_sum;  // the sums at best_lane - 1 and + 1, for sub-pixel
-    uint16_t above_sum;  // interpolation (0 outside 0 .. num_disparities - 1)
+// The best and second-best disparity lane of each pixel of a row over the summed paths,
+// a row of `width` entries per field, so that decide_row() loads them as vectors.
+struct WinnerRows {
+    uint16_t* best_lane; // smallest k with the smallest sum (ties: smallest k)
+    uint16_t* best_sum;
+    uint16_t* second_sum; // smallest sum with |k - best_lane| > 1 (0xFFFF if none)
+    uint16_t* below_sum;  // the sums at best_lane - 1 and + 1, for sub-pixel
+    uint16_t* above_sum;  // interpolation (0 outside 0 .. num_disparities - 1)
 };
+
+// Entries right_lane needs: one past the row, which decide_row() may read (and ignore).
+inline constexpr size_t rightLaneEntries(int width)
+{
+    return static_cast<size_t>(width) + 1;
+}
+
+// What decide_row() needs of the matcher's settings.
+struct DecideSettings {
+    int min_disparity = 0;
+    int num_disparities = 0;
+    int uniqueness_percent = 0; // the best non-adjacent sum must exceed the best by this
+    int lr_max_diff_px = 0;     // < 0: no left-right check
+    int edge_margin_px = 0;     // lanes kept clear of the last one the left edge allows
+    float sharp_curvature = 1;  // the curvature of a fully sharp minimum: 2 p1 paths
+};
+
+// Disparities leave decide_row() in fixed point, 16 x pixels, kNoDisparity where none.
+inline constexpr int kSubpixel = 16;
+inline constexpr int16_t kNoDisparity = -32768;
 
 // The paths from the previous row onto row y: path i steps from (x + dx[i], y - 1) onto
 // (x, y), dx in -1..1.
@@ -129,7 +150,25 @@ struct SgmKernels {
     void (*winners_backward)(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width,
                              int lanes, const PathRows& others, int min_disparity,
                              int num_disparities, uint8_t* path_scratch, uint16_t* sum_scratch,
-                             Winner* winners, uint16_t* right_lane, uint16_t* scratch);
+                             const WinnerRows& winners, uint16_t* right_lane, uint16_t* scratch);
+
+    // The winners of a row made into what the matcher reports, for x in 0..width-1:
+    //  - disparity[x]: 16 x (min_disparity + best lane + the parabola's sub-pixel offset
+    //    through the sums at best -1, best, best +1, rounded half away from zero), or
+    //    kNoDisparity when the pixel searched nothing, when its best lane is the range's
+    //    near end, when the left image edge cut its search within edge_margin_px of its
+    //    best lane, when the best non-adjacent sum is within uniqueness_percent of the
+    //    best, or when the right view's lane (right_lane[x - d], rightLaneEntries()
+    //    readable) differs by more than lr_max_diff_px;
+    //  - confidence[x]: 0 without a disparity, else 1..255 from the uniqueness margin,
+    //    the curvature of the minimum and the left-right agreement (confidenceOf() in the
+    //    scalar reference: single-precision operations in an order both implementations
+    //    keep, with no fused multiply-add);
+    //  - range_limit[x]: 1 when the best lane is the range's near end, with the whole range
+    //    searched (the surface may be nearer than the range sees), else 0.
+    void (*decide_row)(const WinnerRows& winners, const uint16_t* right_lane, int width,
+                       const DecideSettings& settings, int16_t* disparity, uint8_t* confidence,
+                       uint8_t* range_limit);
 
     // One row of the 3x3 median of 16-bit disparities (up, row, down: rows y-1, y, y+1),
     // for x in 1 .. width-2: `invalid` stays invalid, and an invalid neighbour counts as

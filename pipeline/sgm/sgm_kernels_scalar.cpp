@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <bit>
 #include <cstddef>
+#include <cstdlib>
 
 #include "pipeline/sgm/sgm_kernels.hpp"
 
@@ -119,8 +120,8 @@ void pathsForward(const uint8_t* cost, uint8_t p1, int width, int lanes, const A
 
 void winnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
                      const PathRows& others, int min_disparity, int num_disparities,
-                     uint8_t* path_scratch, uint16_t* s, Winner* out, uint16_t* right_lane,
-                     uint16_t* scratch)
+                     uint8_t* path_scratch, uint16_t* s, const WinnerRows& out,
+                     uint16_t* right_lane, uint16_t* scratch)
 {
     const size_t block = pathBlockBytes(lanes);
     uint8_t* a = path_scratch;
@@ -153,7 +154,11 @@ void winnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int wid
                 second = std::min(second, s[k]);
         const uint16_t below = best > 0 ? s[best - 1] : uint16_t{0};
         const uint16_t above = best < num_disparities - 1 ? s[best + 1] : uint16_t{0};
-        out[x] = Winner{static_cast<uint16_t>(best), s[best], second, below, above};
+        out.best_lane[x] = static_cast<uint16_t>(best);
+        out.best_sum[x] = s[best];
+        out.second_sum[x] = second;
+        out.below_sum[x] = below;
+        out.above_sum[x] = above;
         for (int k = 0; k < num_disparities; ++k) {
             const int xr = x - min_disparity - k;
             if (xr < 0 || xr >= width)
@@ -163,6 +168,84 @@ void winnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int wid
                 right_lane[xr] = static_cast<uint16_t>(k);
             }
         }
+    }
+}
+
+// 1..255 from the three signs of a trustworthy match: how much better the best sum is
+// than the best non-adjacent one, how sharp the minimum is (curvature: the sums at best
+// -1 and +1 less twice the best; 0 where there is no parabola), and whether the right view
+// agrees exactly (lr_diff: 0, 1, or 2 for more); scaled down where the left edge cut the
+// search to searchable + 1 of the lanes. Single-precision operations in a fixed order,
+// which the SIMD kernel repeats lane by lane (the library compiles with
+// -ffp-contract=off, so that no compiler fuses them differently).
+uint8_t confidenceOf(uint32_t best, uint32_t second, int curvature, int lr_diff, int searchable,
+                     const DecideSettings& s)
+{
+    // uniqueness = min(1, margin / 0.5), margin = (second - best) / max(1, best); with no
+    // second (0xFFFF) the margin is far above 0.5, as sums stay within 5 x 255.
+    const float uniqueness =
+        std::min(1.0f, static_cast<float>(2 * static_cast<int>(second - best)) /
+                           static_cast<float>(best > 0 ? best : 1u));
+    const float sharpness = std::min(1.0f, static_cast<float>(curvature) / s.sharp_curvature);
+    const float agreement = lr_diff == 0 ? 1.0f : lr_diff == 1 ? 0.7f : 0.4f;
+    const float reach = static_cast<float>(searchable + 1) / static_cast<float>(s.num_disparities);
+    const float c = 255.0f * uniqueness * (0.5f + 0.5f * sharpness) * agreement * reach;
+    return static_cast<uint8_t>(std::clamp(static_cast<int>(c + 0.5f), 1, 255)); // c >= 0
+}
+
+void decideRow(const WinnerRows& w, const uint16_t* right_lane, int width, const DecideSettings& s,
+               int16_t* disparity, uint8_t* confidence, uint8_t* range_limit)
+{
+    const int n = s.num_disparities;
+    for (int x = 0; x < width; ++x) {
+        disparity[x] = kNoDisparity;
+        confidence[x] = 0;
+        range_limit[x] = 0;
+        const int k = w.best_lane[x];
+        // The lanes this pixel could search: its right pixel x - d must be in the image.
+        const int searchable = std::min(n - 1, x - s.min_disparity);
+        if (searchable < 0)
+            continue;
+        if (searchable == n - 1 && k == n - 1) {
+            // The best match at the near end of the range: the surface may be nearer than
+            // the range sees, and no number from the edge is trustworthy.
+            range_limit[x] = 1;
+            continue;
+        }
+        if (searchable < n - 1 && k > searchable - s.edge_margin_px)
+            continue; // its true match may lie beyond the left edge of the right image
+        const uint32_t best = w.best_sum[x];
+        const uint32_t second = w.second_sum[x];
+        if (second * 100u <= best * static_cast<uint32_t>(100 + s.uniqueness_percent))
+            continue;
+        int lr_diff = 0;
+        if (s.lr_max_diff_px >= 0) {
+            // A lane whose right pixel is outside the row has no right view to agree.
+            const int xr = x - s.min_disparity - k;
+            const uint16_t right = xr >= 0 && xr < width ? right_lane[xr] : uint16_t{0xFFFF};
+            if (right == 0xFFFF)
+                continue;
+            lr_diff = std::abs(static_cast<int>(right) - k);
+            if (lr_diff > s.lr_max_diff_px)
+                continue;
+        }
+        int offset16 = 0;
+        int curvature = 0;
+        // The parabola needs both neighbours searched: not at either end of the range, nor
+        // at the last lane the left image edge lets this pixel search.
+        if (k > 0 && k < std::min(n - 1, searchable)) {
+            const int below = w.below_sum[x];
+            const int above = w.above_sum[x];
+            curvature = below + above - 2 * static_cast<int>(best); // >= 0: best is smallest
+            if (curvature > 0) {
+                // Rounded half away from zero: (below - above) / (2 curvature) * 16.
+                const int numerator = (below - above) * kSubpixel;
+                offset16 = (numerator >= 0 ? numerator + curvature : numerator - curvature) /
+                           (2 * curvature);
+            }
+        }
+        disparity[x] = static_cast<int16_t>((s.min_disparity + k) * kSubpixel + offset16);
+        confidence[x] = confidenceOf(best, second, curvature, std::min(lr_diff, 2), searchable, s);
     }
 }
 
@@ -211,8 +294,8 @@ void medianRow(const int16_t* up, const int16_t* row, const int16_t* down, int w
 
 const SgmKernels& scalarKernels()
 {
-    static const SgmKernels kernels{"scalar",     censusRow,       costRow,
-                                    pathsForward, winnersBackward, medianRow};
+    static const SgmKernels kernels{"scalar",        censusRow, costRow,  pathsForward,
+                                    winnersBackward, decideRow, medianRow};
     return kernels;
 }
 

@@ -45,12 +45,19 @@ void PathsForward(const uint8_t* cost, uint8_t p1, int width, int lanes, const A
 }
 void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
                      const PathRows& others, int min_disparity, int num_disparities,
-                     uint8_t* path_scratch, uint16_t* sum_scratch, Winner* winners,
+                     uint8_t* path_scratch, uint16_t* sum_scratch, const WinnerRows& winners,
                      uint16_t* right_lane, uint16_t* scratch)
 {
     scalarKernels().winners_backward(cost, p2, p1, width, lanes, others, min_disparity,
                                      num_disparities, path_scratch, sum_scratch, winners,
                                      right_lane, scratch);
+}
+void DecideRow(const WinnerRows& winners, const uint16_t* right_lane, int width,
+               const DecideSettings& settings, int16_t* disparity, uint8_t* confidence,
+               uint8_t* range_limit)
+{
+    scalarKernels().decide_row(winners, right_lane, width, settings, disparity, confidence,
+                               range_limit);
 }
 void MedianRow(const int16_t* up, const int16_t* row, const int16_t* down, int width,
                int16_t invalid, int16_t* dst)
@@ -249,7 +256,7 @@ static_assert(kWinnerGroup <= (1 << kTagBits), "a group index fits in the tag");
 
 void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
                      const PathRows& others, int min_disparity, int num_disparities,
-                     uint8_t* path_scratch, uint16_t* sum_scratch, Winner* out,
+                     uint8_t* path_scratch, uint16_t* sum_scratch, const WinnerRows& out,
                      uint16_t* right_lane, uint16_t* scratch)
 {
     const D8 d;
@@ -308,10 +315,13 @@ void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int wid
                 return k >= 0 && k < num_disparities ? static_cast<uint16_t>(key[k] >> kTagBits)
                                                      : uint16_t{0};
             };
-            out[x_first - g] =
-                Winner{static_cast<uint16_t>(best), static_cast<uint16_t>(best_key >> kTagBits),
-                       second == 0xFFFF ? second : static_cast<uint16_t>(second >> kTagBits),
-                       sum_at(best - 1), sum_at(best + 1)};
+            const int x = x_first - g;
+            out.best_lane[x] = static_cast<uint16_t>(best);
+            out.best_sum[x] = static_cast<uint16_t>(best_key >> kTagBits);
+            out.second_sum[x] =
+                second == 0xFFFF ? second : static_cast<uint16_t>(second >> kTagBits);
+            out.below_sum[x] = sum_at(best - 1);
+            out.above_sum[x] = sum_at(best + 1);
         }
         // The right view: pixel g of the group has j = j0 + g, so its lane for position
         // p0 is p0 - g. Keys of pixels past the row's ends, and margins, are 0xFFFF.
@@ -385,6 +395,130 @@ void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int wid
     }
 }
 
+// decide_row() on 32-bit lanes: the reference's tests become masks, its divisions
+// vector divisions of the same single-precision values, so that every lane computes what
+// the reference computes for its pixel.
+void DecideRow(const WinnerRows& w, const uint16_t* right_lane, int width, const DecideSettings& s,
+               int16_t* disparity, uint8_t* confidence, uint8_t* range_limit)
+{
+    constexpr size_t kMaxChunk = 8;
+    const hn::CappedTag<int32_t, kMaxChunk> d;
+    const hn::Rebind<float, decltype(d)> df;
+    const hn::Rebind<uint16_t, decltype(d)> du16;
+    const hn::Rebind<int16_t, decltype(d)> di16;
+    const hn::Rebind<uint8_t, decltype(d)> du8;
+    const int n = static_cast<int>(hn::Lanes(d));
+    const int num = s.num_disparities;
+    const bool lr_check = s.lr_max_diff_px >= 0;
+    const auto zero = hn::Zero(d);
+    const auto one = hn::Set(d, 1);
+    const auto none = hn::Set(d, 0xFFFF);
+    const auto last_lane = hn::Set(d, num - 1);
+    const auto min_disparity = hn::Set(d, s.min_disparity);
+    const auto iota = hn::Iota(d, 0);
+    // right_lane read as 32-bit words at byte offsets 2 xr: the low half is entry xr
+    // (little-endian), the high half entry xr + 1, which rightLaneEntries() allows.
+    const auto* right_words = reinterpret_cast<const int32_t*>(right_lane);
+
+    // Pixels x0 .. x0 + n - 1 from the winners at `at` (the row's, or copies of its tail).
+    const auto chunk = [&](int x0, const WinnerRows& at, size_t i, int16_t* disparity_out,
+                           uint8_t* confidence_out, uint8_t* range_out) {
+        const auto load = [&](const uint16_t* row) {
+            return hn::PromoteTo(d, hn::LoadU(du16, row + i));
+        };
+        const auto x = hn::Add(iota, hn::Set(d, x0));
+        const auto k = load(at.best_lane);
+        const auto best = load(at.best_sum);
+        const auto second = load(at.second_sum);
+        const auto below = load(at.below_sum);
+        const auto above = load(at.above_sum);
+        const auto searchable = hn::Min(last_lane, hn::Sub(x, min_disparity));
+        const auto searched = hn::Gt(searchable, hn::Set(d, -1));
+        const auto cut = hn::Lt(searchable, last_lane);
+        const auto near_end = hn::AndNot(cut, hn::Eq(k, last_lane));
+        const auto beyond_edge =
+            hn::And(cut, hn::Gt(k, hn::Sub(searchable, hn::Set(d, s.edge_margin_px))));
+        const auto unique = hn::Gt(hn::Mul(second, hn::Set(d, 100)),
+                                   hn::Mul(best, hn::Set(d, 100 + s.uniqueness_percent)));
+        auto valid = hn::AndNot(hn::Or(near_end, beyond_edge), hn::And(searched, unique));
+        auto lr_diff = zero;
+        if (lr_check) {
+            const auto xr = hn::Sub(hn::Sub(x, min_disparity), k);
+            const auto in_row = hn::And(hn::Gt(xr, hn::Set(d, -1)), hn::Lt(xr, hn::Set(d, width)));
+            const auto xr_inside = hn::Min(hn::Max(xr, zero), hn::Set(d, width - 1));
+            const auto words = hn::GatherOffset(d, right_words, hn::Add(xr_inside, xr_inside));
+            const auto right = hn::IfThenElse(in_row, hn::And(words, none), none);
+            lr_diff = hn::Abs(hn::Sub(right, k));
+            valid = hn::And(valid, hn::AndNot(hn::Gt(lr_diff, hn::Set(d, s.lr_max_diff_px)),
+                                              hn::Ne(right, none)));
+        }
+        const auto inside = hn::And(hn::Gt(k, zero), hn::Lt(k, hn::Min(last_lane, searchable)));
+        const auto curvature =
+            hn::IfThenElseZero(inside, hn::Sub(hn::Add(below, above), hn::Add(best, best)));
+        // (below - above) 16 / (2 curvature), rounded half away from zero; the quotient
+        // lies at least 1 / 5100 from any half-integer unless it is one exactly, which
+        // single precision keeps apart, so this equals the reference's integer division.
+        const auto quotient =
+            hn::Div(hn::ConvertTo(df, hn::Mul(hn::Sub(below, above), hn::Set(d, kSubpixel))),
+                    hn::ConvertTo(df, hn::Max(hn::Add(curvature, curvature), one)));
+        const auto offset = hn::IfThenElseZero(
+            hn::Gt(curvature, zero),
+            hn::ConvertTo(d, hn::Add(quotient, hn::CopySign(hn::Set(df, 0.5f), quotient))));
+        const auto fixed =
+            hn::Add(hn::Mul(hn::Add(min_disparity, k), hn::Set(d, kSubpixel)), offset);
+        hn::StoreU(hn::DemoteTo(di16, hn::IfThenElse(valid, fixed, hn::Set(d, kNoDisparity))), di16,
+                   disparity_out);
+
+        // The reference's confidenceOf(), operation for operation.
+        const auto gap = hn::Sub(second, best);
+        const auto uniqueness =
+            hn::Min(hn::Set(df, 1.0f), hn::Div(hn::ConvertTo(df, hn::Add(gap, gap)),
+                                               hn::ConvertTo(df, hn::Max(best, one))));
+        const auto sharpness = hn::Min(hn::Set(df, 1.0f), hn::Div(hn::ConvertTo(df, curvature),
+                                                                  hn::Set(df, s.sharp_curvature)));
+        const auto agreement =
+            hn::IfThenElse(hn::RebindMask(df, hn::Eq(lr_diff, zero)), hn::Set(df, 1.0f),
+                           hn::IfThenElse(hn::RebindMask(df, hn::Eq(lr_diff, one)),
+                                          hn::Set(df, 0.7f), hn::Set(df, 0.4f)));
+        const auto reach = hn::Div(hn::ConvertTo(df, hn::Add(searchable, one)),
+                                   hn::Set(df, static_cast<float>(num)));
+        const auto c = hn::Mul(
+            hn::Mul(hn::Mul(hn::Mul(hn::Set(df, 255.0f), uniqueness),
+                            hn::Add(hn::Set(df, 0.5f), hn::Mul(hn::Set(df, 0.5f), sharpness))),
+                    agreement),
+            reach);
+        const auto rounded = hn::ConvertTo(d, hn::Add(c, hn::Set(df, 0.5f)));
+        const auto level = hn::Min(hn::Max(rounded, one), hn::Set(d, 255));
+        hn::StoreU(hn::DemoteTo(du8, hn::IfThenElseZero(valid, level)), du8, confidence_out);
+        hn::StoreU(hn::DemoteTo(du8, hn::IfThenElseZero(hn::And(searched, near_end), one)), du8,
+                   range_out);
+    };
+
+    int x = 0;
+    for (; x + n <= width; x += n) {
+        const size_t at = static_cast<size_t>(x);
+        chunk(x, w, at, disparity + at, confidence + at, range_limit + at);
+    }
+    if (x == width)
+        return;
+    // The tail: its winners copied into a whole vector (the rest of it repeats the last
+    // pixel), decided, and its pixels copied out.
+    const size_t count = static_cast<size_t>(width - x);
+    uint16_t fields[5][kMaxChunk];
+    uint16_t* const rows[5] = {w.best_lane, w.best_sum, w.second_sum, w.below_sum, w.above_sum};
+    for (size_t f = 0; f < 5; ++f)
+        for (size_t i = 0; i < kMaxChunk; ++i)
+            fields[f][i] = rows[f][static_cast<size_t>(x) + std::min(i, count - 1)];
+    const WinnerRows tail{fields[0], fields[1], fields[2], fields[3], fields[4]};
+    int16_t tail_disparity[kMaxChunk];
+    uint8_t tail_confidence[kMaxChunk];
+    uint8_t tail_range[kMaxChunk];
+    chunk(x, tail, 0, tail_disparity, tail_confidence, tail_range);
+    std::copy_n(tail_disparity, count, disparity + x);
+    std::copy_n(tail_confidence, count, confidence + x);
+    std::copy_n(tail_range, count, range_limit + x);
+}
+
 void MedianRow(const int16_t* up, const int16_t* row, const int16_t* down, int width,
                int16_t invalid, int16_t* dst)
 {
@@ -454,6 +588,7 @@ HWY_EXPORT(CensusRow);
 HWY_EXPORT(CostRow);
 HWY_EXPORT(PathsForward);
 HWY_EXPORT(WinnersBackward);
+HWY_EXPORT(DecideRow);
 HWY_EXPORT(MedianRow);
 HWY_EXPORT(TargetName);
 
@@ -465,7 +600,8 @@ const SgmKernels& simdKernels()
         hwy::GetChosenTarget().Update(hwy::SupportedTargets());
         return SgmKernels{HWY_DYNAMIC_DISPATCH(TargetName)(),    HWY_DYNAMIC_DISPATCH(CensusRow),
                           HWY_DYNAMIC_DISPATCH(CostRow),         HWY_DYNAMIC_DISPATCH(PathsForward),
-                          HWY_DYNAMIC_DISPATCH(WinnersBackward), HWY_DYNAMIC_DISPATCH(MedianRow)};
+                          HWY_DYNAMIC_DISPATCH(WinnersBackward), HWY_DYNAMIC_DISPATCH(DecideRow),
+                          HWY_DYNAMIC_DISPATCH(MedianRow)};
     }();
     return kernels;
 }

@@ -98,6 +98,23 @@ struct CensusRowPair {
     }
 };
 
+// The five rows of a WinnerRows, `width` entries each and no more, set to `fill`.
+struct WinnerStorage {
+    static constexpr int kFields = 5;
+    static constexpr const char* kNames[kFields] = {"best_lane", "best_sum", "second_sum",
+                                                    "below_sum", "above_sum"};
+    std::vector<std::vector<uint16_t>> fields;
+    WinnerRows rows;
+
+    WinnerStorage(int width, uint16_t fill)
+        : fields(kFields, std::vector<uint16_t>(static_cast<size_t>(width), fill)),
+          rows{fields[0].data(), fields[1].data(), fields[2].data(), fields[3].data(),
+               fields[4].data()}
+    {
+    }
+    const std::vector<uint16_t>& field(int i) const { return fields[static_cast<size_t>(i)]; }
+};
+
 // A cost row as the matcher makes it: the scalar reference's costs of a census row pair.
 std::vector<uint8_t> costRow(int width, int min_disparity, int num_disparities,
                              const CostModel& model, Random& random)
@@ -335,10 +352,8 @@ TEST(SgmKernelsTest, WinnersBackwardMatchesScalar)
                             std::vector<uint16_t> sum_scratch(winnersSumScratch(lanes));
                             std::vector<uint16_t> scratch(
                                 winnersScratch(width, min_disparity, lanes));
-                            std::vector<Winner> expected(static_cast<size_t>(width),
-                                                         Winner{1, 2, 3, 4, 5});
-                            std::vector<Winner> actual(static_cast<size_t>(width),
-                                                       Winner{6, 7, 8, 9, 10});
+                            WinnerStorage expected(width, 1);
+                            WinnerStorage actual(width, 6);
                             std::vector<uint16_t> expected_right(static_cast<size_t>(width), 7);
                             std::vector<uint16_t> actual_right(static_cast<size_t>(width), 8);
                             fillRandom(sum_scratch, random, 0, 65535);
@@ -346,7 +361,7 @@ TEST(SgmKernelsTest, WinnersBackwardMatchesScalar)
                             scalarKernels().winners_backward(cost.data(), p2.data(), model.p1,
                                                              width, lanes, path_rows, min_disparity,
                                                              num_disparities, path_scratch.data(),
-                                                             sum_scratch.data(), expected.data(),
+                                                             sum_scratch.data(), expected.rows,
                                                              expected_right.data(), scratch.data());
                             fillRandom(sum_scratch, random, 0, 65535);
                             fillRandom(scratch, random, 0, 65535);
@@ -354,19 +369,106 @@ TEST(SgmKernelsTest, WinnersBackwardMatchesScalar)
                             simdKernels().winners_backward(cost.data(), p2.data(), model.p1, width,
                                                            lanes, path_rows, min_disparity,
                                                            num_disparities, path_scratch.data(),
-                                                           sum_scratch.data(), actual.data(),
+                                                           sum_scratch.data(), actual.rows,
                                                            actual_right.data(), scratch.data());
-                            for (int x = 0; x < width; ++x) {
-                                const Winner& e = expected[static_cast<size_t>(x)];
-                                const Winner& a = actual[static_cast<size_t>(x)];
-                                ASSERT_EQ(a.best_lane, e.best_lane) << "pixel " << x;
-                                ASSERT_EQ(a.best_sum, e.best_sum) << "pixel " << x;
-                                ASSERT_EQ(a.second_sum, e.second_sum) << "pixel " << x;
-                                ASSERT_EQ(a.below_sum, e.below_sum) << "pixel " << x;
-                                ASSERT_EQ(a.above_sum, e.above_sum) << "pixel " << x;
-                            }
+                            for (int field = 0; field < WinnerStorage::kFields; ++field)
+                                ASSERT_EQ(actual.field(field), expected.field(field))
+                                    << WinnerStorage::kNames[field];
                             ASSERT_EQ(actual_right, expected_right);
                         }
+}
+
+// Winners as winners_backward() leaves them: the best sum the smallest, the second and the
+// neighbours' sums at or above it, with ties, borderline uniqueness, best lanes at both
+// ends of the range and past the lanes the left edge allows, and a right view that agrees
+// exactly, nearly, not at all, or has no lane.
+struct DecideCase {
+    WinnerStorage winners;
+    std::vector<uint16_t> right_lane;
+
+    DecideCase(int width, int num_disparities, Random& random)
+        : winners(width, 0), right_lane(rightLaneEntries(width))
+    {
+        for (int x = 0; x < width; ++x) {
+            const auto at = static_cast<size_t>(x);
+            const int end = random.uniform(0, 9);
+            const int k = end == 0   ? 0
+                          : end == 1 ? num_disparities - 1
+                                     : random.uniform(0, num_disparities - 1);
+            const int best =
+                random.uniform(0, 3) == 0 ? random.uniform(0, 3) : random.uniform(0, 5 * 255 - 40);
+            const int form = random.uniform(0, 9);
+            const int second = form == 0   ? 0xFFFF
+                               : form == 1 ? best
+                               : form == 2 ? best + best * 9 / 100 + random.uniform(0, 1)
+                                           : best + random.uniform(0, 40);
+            const auto neighbour = [&](bool outside) {
+                return outside ? 0 : best + random.uniform(0, 3) * random.uniform(0, 12);
+            };
+            winners.fields[0][at] = static_cast<uint16_t>(k);
+            winners.fields[1][at] = static_cast<uint16_t>(best);
+            winners.fields[2][at] = static_cast<uint16_t>(second);
+            winners.fields[3][at] = static_cast<uint16_t>(neighbour(k == 0));
+            winners.fields[4][at] = static_cast<uint16_t>(neighbour(k == num_disparities - 1));
+        }
+        for (uint16_t& lane : right_lane) {
+            const int form = random.uniform(0, 5);
+            lane = form == 0 ? uint16_t{0xFFFF}
+                             : static_cast<uint16_t>(random.uniform(0, num_disparities - 1));
+        }
+    }
+};
+
+TEST(SgmKernelsTest, DecideRowMatchesScalar)
+{
+    Random random(8);
+    int reported = 0, at_range_limit = 0, sub_pixel = 0, refused = 0;
+    for (int width : kWidths)
+        for (int num_disparities : kNumDisparities)
+            for (int min_disparity : kMinDisparities)
+                for (int lr_max_diff_px : {-1, 0, 2})
+                    for (int uniqueness_percent : {0, 9}) {
+                        SCOPED_TRACE(describe(width, num_disparities, min_disparity) + ", lr " +
+                                     std::to_string(lr_max_diff_px) + ", uniqueness " +
+                                     std::to_string(uniqueness_percent));
+                        DecideCase c(width, num_disparities, random);
+                        // Right lanes near the left view's, so that the check has work.
+                        for (int x = 0; x < width; ++x) {
+                            const int xr = x - min_disparity - c.winners.fields[0][x];
+                            if (xr >= 0 && xr < width && random.uniform(0, 1) == 1)
+                                c.right_lane[static_cast<size_t>(xr)] = static_cast<uint16_t>(
+                                    std::max(0, c.winners.fields[0][x] + random.uniform(-3, 3)));
+                        }
+                        const DecideSettings settings{
+                            min_disparity,  num_disparities,      uniqueness_percent,
+                            lr_max_diff_px, random.uniform(0, 4), static_cast<float>(2 * 16 * 3)};
+                        const size_t w = static_cast<size_t>(width);
+                        std::vector<int16_t> expected_disparity(w, 1), actual_disparity(w, 2);
+                        std::vector<uint8_t> expected_confidence(w, 3), actual_confidence(w, 4);
+                        std::vector<uint8_t> expected_range(w, 5), actual_range(w, 6);
+                        scalarKernels().decide_row(c.winners.rows, c.right_lane.data(), width,
+                                                   settings, expected_disparity.data(),
+                                                   expected_confidence.data(),
+                                                   expected_range.data());
+                        simdKernels().decide_row(c.winners.rows, c.right_lane.data(), width,
+                                                 settings, actual_disparity.data(),
+                                                 actual_confidence.data(), actual_range.data());
+                        ASSERT_EQ(actual_disparity, expected_disparity);
+                        ASSERT_EQ(actual_confidence, expected_confidence);
+                        ASSERT_EQ(actual_range, expected_range);
+                        for (size_t x = 0; x < w; ++x) {
+                            const int16_t d = expected_disparity[x];
+                            reported += d != kNoDisparity ? 1 : 0;
+                            refused += d == kNoDisparity ? 1 : 0;
+                            sub_pixel += d != kNoDisparity && d % kSubpixel != 0 ? 1 : 0;
+                            at_range_limit += expected_range[x];
+                        }
+                    }
+    // Every way out of the kernel was taken, not only one.
+    EXPECT_GT(reported, 1000);
+    EXPECT_GT(refused, 1000);
+    EXPECT_GT(sub_pixel, 100);
+    EXPECT_GT(at_range_limit, 100);
 }
 
 TEST(SgmKernelsTest, MedianRowMatchesScalar)
