@@ -8,13 +8,13 @@ namespace stereod::sgm {
 size_t speckleFilterBytes(int width, int height)
 {
     const size_t area = static_cast<size_t>(width) * static_cast<size_t>(height);
-    return area * 5 * sizeof(uint32_t);
+    return area * 3 * sizeof(uint32_t);
 }
 
 SpeckleFilter::SpeckleFilter(int width, int height)
     : width_(width), height_(height),
-      label_(static_cast<size_t>(width) * static_cast<size_t>(height)), stack_(label_.size()),
-      stack_x_(label_.size()), parent_(label_.size()), size_(label_.size())
+      label_(static_cast<size_t>(width) * static_cast<size_t>(height)), parent_(label_.size()),
+      size_(label_.size())
 {
 }
 
@@ -24,55 +24,60 @@ void SpeckleFilter::apply(int16_t* disparity, int16_t invalid, int max_step, int
     removeBand(disparity, invalid, max_size, 0, height_);
 }
 
+uint32_t SpeckleFilter::rootHalving(uint32_t region)
+{
+    while (parent_[region] != region) {
+        parent_[region] = parent_[parent_[region]];
+        region = parent_[region];
+    }
+    return region;
+}
+
+uint32_t SpeckleFilter::join(uint32_t a, uint32_t b)
+{
+    // The larger index joins the smaller: the roots stay ordered, the chains short.
+    const uint32_t keep = std::min(a, b);
+    const uint32_t joined = std::max(a, b);
+    parent_[joined] = keep;
+    size_[keep] += size_[joined];
+    return keep;
+}
+
 void SpeckleFilter::labelBand(const int16_t* disparity, int16_t invalid, int max_step, int y0,
                               int y1)
 {
+    // One pass in raster order joining each pixel to its left and upper neighbours when
+    // they belong together (union-find): the same regions as a flood from every pixel,
+    // read in memory order and without a stack.
+    constexpr uint32_t kNone = UINT32_MAX;
     const size_t w = static_cast<size_t>(width_);
-    const size_t begin = static_cast<size_t>(y0) * w;
-    const size_t end = static_cast<size_t>(y1) * w;
-    std::fill(label_.begin() + static_cast<std::ptrdiff_t>(begin),
-              label_.begin() + static_cast<std::ptrdiff_t>(end), 0u);
-    uint32_t* stack = stack_.data() + begin;
-    uint32_t* stack_x = stack_x_.data() + begin;
-    size_t start_x = static_cast<size_t>(-1);
-    for (size_t start = begin; start < end; ++start) {
-        if (++start_x == w)
-            start_x = 0;
-        if (disparity[start] == invalid || label_[start] != 0)
-            continue;
-        // Flood the region from `start` within the band, counting its pixels.
-        const auto region = static_cast<uint32_t>(start);
-        const uint32_t label = region + 1;
-        size_t top = 0;
-        size_t count = 0;
-        stack[top] = region;
-        stack_x[top++] = static_cast<uint32_t>(start_x);
-        label_[start] = label;
-        while (top > 0) {
-            --top;
-            const size_t p = stack[top];
-            const size_t x = stack_x[top];
-            ++count;
-            const int d = disparity[p];
-            const auto visit = [&](size_t q, size_t qx) {
-                if (label_[q] == 0 && disparity[q] != invalid &&
-                    std::abs(disparity[q] - d) <= max_step) {
-                    label_[q] = label;
-                    stack[top] = static_cast<uint32_t>(q);
-                    stack_x[top++] = static_cast<uint32_t>(qx);
-                }
-            };
-            if (x > 0)
-                visit(p - 1, x - 1);
-            if (x + 1 < w)
-                visit(p + 1, x + 1);
-            if (p >= begin + w)
-                visit(p - w, x);
-            if (p + w < end)
-                visit(p + w, x);
+    const auto close = [max_step](int a, int b) { return std::abs(a - b) <= max_step; };
+    for (int y = y0; y < y1; ++y) {
+        const size_t row = static_cast<size_t>(y) * w;
+        const int16_t* d = disparity + row;
+        const int16_t* above = y > y0 ? d - w : nullptr;
+        uint32_t left = kNone; // root of the left neighbour's region, if it joins
+        for (size_t x = 0; x < w; ++x) {
+            const size_t i = row + x;
+            if (d[x] == invalid) {
+                label_[i] = 0;
+                left = kNone;
+                continue;
+            }
+            uint32_t region = left != kNone && close(d[x], d[x - 1]) ? rootHalving(left) : kNone;
+            if (above != nullptr && above[x] != invalid && close(d[x], above[x])) {
+                const uint32_t up = rootHalving(label_[i - w] - 1);
+                region = region == kNone ? up : region == up ? region : join(region, up);
+            }
+            if (region == kNone) {
+                region = static_cast<uint32_t>(i);
+                parent_[region] = region;
+                size_[region] = 0;
+            }
+            ++size_[region];
+            label_[i] = region + 1;
+            left = region;
         }
-        parent_[region] = region;
-        size_[region] = static_cast<uint32_t>(count);
     }
 }
 

@@ -4,7 +4,7 @@
 // max_size pixels are set invalid. The same rule as OpenCV's filterSpeckles, without
 // allocating: every buffer is sized in the constructor.
 //
-// Band-parallel: labelBand() floods the regions inside each band of rows (bands on
+// Band-parallel: labelBand() labels the regions inside each band of rows (bands on
 // different threads), joinBands() joins the regions that touch across band borders (one
 // thread, one pass over the border rows), and removeBand() clears the small ones (bands on
 // different threads again). The result does not depend on the bands.
@@ -39,15 +39,17 @@ class SpeckleFilter {
 
   private:
     uint32_t root(uint32_t region) const;
+    // root(), shortening the chain on the way (labelBand() only: it owns its band's regions).
+    uint32_t rootHalving(uint32_t region);
+    // Joins two roots into one; returns it.
+    uint32_t join(uint32_t a, uint32_t b);
 
     int width_;
     int height_;
-    // Region of each pixel: 1 + the index of the pixel its band's flood started from;
-    // 0 = not yet visited.
+    // Region of each pixel: 1 + the index of the first pixel labelled in it; 0 = none
+    // (an invalid pixel).
     std::vector<uint32_t> label_;
-    std::vector<uint32_t> stack_;   // pixels waiting to be visited, each band its rows' part
-    std::vector<uint32_t> stack_x_; // their columns (saves a division per pixel)
-    // Per region (by its start pixel): the region it was joined into (itself when none),
+    // Per region (by its first pixel): the region it was joined into (itself when none),
     // and its pixel count, whole once it is a root.
     std::vector<uint32_t> parent_;
     std::vector<uint32_t> size_;
