@@ -98,7 +98,7 @@ inline constexpr int kSubpixel = 16;
 inline constexpr int16_t kNoDisparity = -32768;
 
 // The paths from the previous row onto row y: path i steps from (x + dx[i], y - 1) onto
-// (x, y), dx in -1..1.
+// (x, y), dx in -1..1, count <= 3.
 struct AbovePaths {
     int count = 0;
     const int* dx;

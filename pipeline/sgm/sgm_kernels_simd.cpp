@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <bit>
 #include <cstring>
+#include <type_traits>
 
 #include <hwy/foreach_target.h> // IWYU pragma: keep
 #include <hwy/highway.h>
@@ -70,16 +71,27 @@ using D8 = hn::CappedTag<uint8_t, kLaneAlign>;
 using D16 = hn::Repartition<uint16_t, D8>; // same bytes, half the lanes
 using D32 = hn::Repartition<uint32_t, D8>;
 
-// Smallest byte of a vector, in every byte.
+// Smallest byte of a vector, in every byte. It lies on the path along the row's chain
+// from one pixel to the next, so its latency counts.
 HWY_INLINE hn::Vec<D8> MinOfBytes(hn::Vec<D8> v)
 {
     const D8 d;
+#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX2 // 32-byte vectors, and SSE4's phminposuw
+    // Halves, then byte pairs, then the minimum of eight 16-bit lanes in one instruction,
+    // rather than Highway's reduction over the whole 256-bit vector.
+    const hn::Full128<uint8_t> d128;
+    const hn::Full128<uint16_t> d128_16;
+    const auto m = hn::BitCast(d128_16, hn::Min(hn::LowerHalf(d128, v), hn::UpperHalf(d128, v)));
+    const auto pairs = hn::Min(hn::And(m, hn::Set(d128_16, uint16_t{0xFF})), hn::ShiftRight<8>(m));
+    return hn::Set(d, static_cast<uint8_t>(hn::GetLane(hn::MinOfLanes(d128_16, pairs))));
+#else
     const D16 d16;
     const auto wide = hn::BitCast(d16, v);
     const auto low = hn::And(wide, hn::Set(d16, uint16_t{0xFF}));
     const auto high = hn::ShiftRight<8>(wide);
     const auto m = hn::MinOfLanes(d16, hn::Min(low, high)); // in every u16 lane
     return hn::BitCast(d, hn::Or(m, hn::ShiftLeft<8>(m)));
+#endif
 }
 
 void CensusRow(const uint8_t* center, size_t stride, int width, int census_width, int census_height,
@@ -157,10 +169,15 @@ void CostRow(const CensusRows& census, int width, int min_disparity, int num_dis
         }
         // right_reversed index of lane 0: x - min_disparity = width - 1 - j.
         const std::ptrdiff_t j0 = width - 1 - x + min_disparity;
+        // The left pixel's census bytes, read once: the cost stores below may alias
+        // any byte as far as the compiler knows, so it would read them again per vector.
+        uint8_t left[8];
+        for (int p = 0; p < census.planes; ++p)
+            left[p] = census.left[p][x];
         const auto distance = [&](int k0) {
             auto sum = hn::Zero(d);
             for (int p = 0; p < census.planes; ++p) {
-                const auto l = hn::Set(d, census.left[p][x]);
+                const auto l = hn::Set(d, left[p]);
                 const auto r = hn::LoadU(d, census.right_reversed[p] + j0 + k0);
                 sum = hn::Add(sum, hn::PopulationCount(hn::Xor(l, r)));
             }
@@ -221,24 +238,50 @@ HWY_INLINE hn::Vec<D8> Step(const uint8_t* cost, const uint8_t* prev, hn::Vec<D8
     return MinOfBytes(running_min);
 }
 
-void PathsForward(const uint8_t* cost, uint8_t p1, int width, int lanes, const AbovePaths& above,
-                  const uint8_t* p2_along, uint8_t* along)
+// f(std::integral_constant<int, count>()) for count in kFirst..kLast (the last for any
+// count past it): a kernel instantiated per count, dispatched once per row.
+template <int kLast, int kFirst = 0, class F> HWY_INLINE void WithCount(int count, const F& f)
+{
+    if constexpr (kFirst < kLast) {
+        if (count != kFirst)
+            return WithCount<kLast, kFirst + 1>(count, f);
+    }
+    f(std::integral_constant<int, kFirst>());
+}
+
+// paths_forward() for kAbove paths from above: a count known to the compiler unrolls the
+// loop over them.
+template <int kAbove>
+void PathsForwardOf(const uint8_t* cost, uint8_t p1, int width, int lanes, const AbovePaths& above,
+                    const uint8_t* p2_along, uint8_t* along)
 {
     const D8 d;
     const size_t block = pathBlockBytes(lanes);
     const auto v_p1 = hn::Set(d, p1);
     const auto none = [](int, hn::Vec<D8>) {};
     auto v_min = hn::Zero(d); // min L of the along path's previous block, every byte
+    // The paths' rows, copied out of `above`: the kernel's byte stores could alias them as
+    // far as the compiler knows, which would reload them for every pixel.
+    int dx[kAbove > 0 ? kAbove : 1] = {};
+    const uint8_t* p2[kAbove > 0 ? kAbove : 1] = {};
+    const uint8_t* prev_row[kAbove > 0 ? kAbove : 1] = {};
+    uint8_t* cur_row[kAbove > 0 ? kAbove : 1] = {};
+    for (int i = 0; i < kAbove; ++i) {
+        dx[i] = above.dx[i];
+        p2[i] = above.p2[i];
+        prev_row[i] = above.prev[i];
+        cur_row[i] = above.cur[i];
+    }
     for (int x = 0; x < width; ++x) {
         const uint8_t* c = cost + static_cast<size_t>(x) * static_cast<size_t>(lanes);
-        for (int i = 0; i < above.count; ++i) {
-            const int xp = x + above.dx[i];
-            const uint8_t* from = (above.prev[i] != nullptr && xp >= 0 && xp < width)
-                                      ? above.prev[i] + static_cast<size_t>(xp) * block
+        for (int i = 0; i < kAbove; ++i) {
+            const int xp = x + dx[i];
+            const uint8_t* from = (prev_row[i] != nullptr && xp >= 0 && xp < width)
+                                      ? prev_row[i] + static_cast<size_t>(xp) * block
                                       : nullptr;
             const auto v_min_prev = hn::Set(d, from != nullptr ? from[0] : uint8_t{0});
-            uint8_t* out = above.cur[i] + static_cast<size_t>(x) * block;
-            out[0] = hn::GetLane(Step(c, from, v_min_prev, v_p1, above.p2[i][x], lanes, out, none));
+            uint8_t* out = cur_row[i] + static_cast<size_t>(x) * block;
+            out[0] = hn::GetLane(Step(c, from, v_min_prev, v_p1, p2[i][x], lanes, out, none));
         }
         if (along != nullptr) {
             const uint8_t* prev = x == 0 ? nullptr : along + static_cast<size_t>(x - 1) * block;
@@ -248,16 +291,27 @@ void PathsForward(const uint8_t* cost, uint8_t p1, int width, int lanes, const A
     }
 }
 
+void PathsForward(const uint8_t* cost, uint8_t p1, int width, int lanes, const AbovePaths& above,
+                  const uint8_t* p2_along, uint8_t* along)
+{
+    WithCount<3>(above.count, [&](auto count) { // the matcher has 1 or 3
+        PathsForwardOf<count()>(cost, p1, width, lanes, above, p2_along, along);
+    });
+}
+
 // Summed path costs are at most 5 x 255 = 1275 < 2^11, so a sum and a 5-bit tag fit in
 // 16 bits as sum << kTagBits | tag: comparing keys compares sums first, tags on ties.
 constexpr int kTagBits = 5;
 static_assert(5 * 255 < (1 << (16 - kTagBits)) - 1, "summed paths and tag fit in 16 bits");
 static_assert(kWinnerGroup <= (1 << kTagBits), "a group index fits in the tag");
 
-void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
-                     const PathRows& others, int min_disparity, int num_disparities,
-                     uint8_t* path_scratch, uint16_t* sum_scratch, const WinnerRows& out,
-                     uint16_t* right_lane, uint16_t* scratch)
+// winners_backward() for kOthers other paths: a count known to the compiler unrolls the
+// sum and keeps the rows' pointers in registers.
+template <int kOthers>
+void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
+                       const PathRows& others, int min_disparity, int num_disparities,
+                       uint8_t* path_scratch, uint16_t* sum_scratch, const WinnerRows& out,
+                       uint16_t* right_lane, uint16_t* scratch)
 {
     const D8 d;
     const D16 d16;
@@ -344,6 +398,9 @@ void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int wid
         }
     };
 
+    const uint8_t* rows[kOthers > 0 ? kOthers : 1] = {};
+    for (int i = 0; i < kOthers; ++i)
+        rows[i] = others.rows[i];
     uint8_t* a = path_scratch;
     uint8_t* b = path_scratch + block;
     const uint8_t* prev = nullptr;
@@ -362,10 +419,10 @@ void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int wid
                 return;
             auto lo = hn::PromoteTo(d16, hn::LowerHalf(dh, v));
             auto hi = hn::PromoteTo(d16, hn::UpperHalf(dh, v));
-            for (int i = 0; i < others.count; ++i) {
-                const auto o = hn::LoadU(d, others.rows[i] + block_at + k0);
-                lo = hn::Add(lo, hn::PromoteTo(d16, hn::LowerHalf(dh, o)));
-                hi = hn::Add(hi, hn::PromoteTo(d16, hn::UpperHalf(dh, o)));
+            for (int i = 0; i < kOthers; ++i) { // each half widened as it is loaded
+                const uint8_t* o = rows[i] + block_at + k0;
+                lo = hn::Add(lo, hn::PromoteTo(d16, hn::LoadU(dh, o)));
+                hi = hn::Add(hi, hn::PromoteTo(d16, hn::LoadU(dh, o + n16)));
             }
             lo = hn::ShiftLeft<kTagBits>(lo);
             hn::StoreU(hn::Or(lo, right_tag), d16, key + k0);
@@ -517,6 +574,19 @@ void DecideRow(const WinnerRows& w, const uint16_t* right_lane, int width, const
     std::copy_n(tail_disparity, count, disparity + x);
     std::copy_n(tail_confidence, count, confidence + x);
     std::copy_n(tail_range, count, range_limit + x);
+}
+
+void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
+                     const PathRows& others, int min_disparity, int num_disparities,
+                     uint8_t* path_scratch, uint16_t* sum_scratch, const WinnerRows& out,
+                     uint16_t* right_lane, uint16_t* scratch)
+{
+    // At most 4 (sgm_kernels.hpp): the summed paths and a tag fit 16 bits.
+    WithCount<4>(others.count, [&](auto count) {
+        WinnersBackwardOf<count()>(cost, p2, p1, width, lanes, others, min_disparity,
+                                   num_disparities, path_scratch, sum_scratch, out, right_lane,
+                                   scratch);
+    });
 }
 
 void MedianRow(const int16_t* up, const int16_t* row, const int16_t* down, int width,

@@ -251,7 +251,7 @@ TEST(SgmKernelsTest, PathsForwardMatchesScalar)
     constexpr int kRows = 4; // the paths' first row (no previous row), then three more
     static constexpr int kDx[3] = {0, -1, 1};
     for (const CostModel& model : kCostModels)
-        for (int above : {0, 1, 3})
+        for (int above : {0, 1, 2, 3})
             for (int width : kWidths)
                 for (int num_disparities : kNumDisparities)
                     for (int min_disparity : kMinDisparities) {
@@ -313,7 +313,7 @@ TEST(SgmKernelsTest, WinnersBackwardMatchesScalar)
 {
     Random random(6);
     for (const CostModel& model : kCostModels)
-        for (int others : {1, 2, 4})
+        for (int others : {0, 1, 2, 3, 4})
             for (int width : kWidths)
                 for (int num_disparities : kNumDisparities)
                     for (int min_disparity : kMinDisparities)
