@@ -94,6 +94,18 @@ HWY_INLINE hn::Vec<D8> MinOfBytes(hn::Vec<D8> v)
 #endif
 }
 
+// Smallest 16-bit lane of a vector: on x86, the halves' minimum and SSE4's phminposuw.
+HWY_INLINE uint16_t MinOfU16(hn::Vec<D16> v)
+{
+#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX2
+    const hn::Full128<uint16_t> d128;
+    return hn::GetLane(
+        hn::MinOfLanes(d128, hn::Min(hn::LowerHalf(d128, v), hn::UpperHalf(d128, v))));
+#else
+    return hn::GetLane(hn::MinOfLanes(D16(), v));
+#endif
+}
+
 void CensusRow(const uint8_t* center, size_t stride, int width, int census_width, int census_height,
                uint8_t* const* planes)
 {
@@ -320,6 +332,7 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
     const size_t block = pathBlockBytes(lanes);
     const auto iota16 = hn::Iota(d16, 0);
     const auto none16 = hn::Set(d16, uint16_t{0xFFFF});
+    const auto one16 = hn::Set(d16, uint16_t{1});
     const auto three16 = hn::Set(d16, uint16_t{3});
     const auto tag_mask = hn::Set(d16, uint16_t{(1u << kTagBits) - 1});
     const auto v_n16 = hn::Set(d16, static_cast<uint16_t>(n16));
@@ -352,8 +365,8 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
             const uint16_t* key = keys_of(g);
             const auto v_first = hn::LoadU(d16, lane_best + (2 * g) * n16);
             const auto v_next = hn::LoadU(d16, lane_best + (2 * g + 1) * n16);
-            const auto v_best = hn::MinOfLanes(d16, v_first);
-            const uint16_t best_key = hn::GetLane(v_best);
+            const uint16_t best_key = MinOfU16(v_first);
+            const auto v_best = hn::Set(d16, best_key);
             const int best = (best_key & ((1 << kTagBits) - 1)) * n16 +
                              static_cast<int>(hn::FindFirstTrue(d16, hn::Eq(v_first, v_best)));
             // The best sum outside best-1 .. best+1. Those three k lie in different lanes,
@@ -363,8 +376,7 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
             const auto k_first = hn::Add(hn::Mul(hn::And(v_first, tag_mask), v_n16), iota16);
             const auto near =
                 hn::Lt(hn::Sub(k_first, hn::Set(d16, static_cast<uint16_t>(best - 1))), three16);
-            const uint16_t second =
-                hn::GetLane(hn::MinOfLanes(d16, hn::IfThenElse(near, v_next, v_first)));
+            const uint16_t second = MinOfU16(hn::IfThenElse(near, v_next, v_first));
             const auto sum_at = [&](int k) {
                 return k >= 0 && k < num_disparities ? static_cast<uint16_t>(key[k] >> kTagBits)
                                                      : uint16_t{0};
@@ -411,8 +423,9 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
         const int g = (width - 1 - x) % kWinnerGroup;
         uint16_t* key = sum_scratch + static_cast<size_t>(g) * group_stride + 16;
         const auto right_tag = hn::Set(d16, static_cast<uint16_t>(kWinnerGroup - 1 - g));
-        auto best = none16; // per lane: smallest sum << kTagBits | k / n16
-        auto next = none16; // per lane: the second smallest
+        auto best = none16;            // per lane: smallest sum << kTagBits | k / n16
+        auto next = none16;            // per lane: the second smallest
+        auto lane_tag = hn::Zero(d16); // k0 / n16 of the next half vector, in every lane
         // Sums the paths for the lanes of this vector.
         const auto visit = [&](int k0, hn::Vec<D8> v) {
             if (k0 >= num_disparities)
@@ -426,13 +439,15 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
             }
             lo = hn::ShiftLeft<kTagBits>(lo);
             hn::StoreU(hn::Or(lo, right_tag), d16, key + k0);
-            lo = hn::Or(lo, hn::Set(d16, static_cast<uint16_t>(k0 / n16)));
+            lo = hn::Or(lo, lane_tag);
+            lane_tag = hn::Add(lane_tag, one16);
             next = hn::Min(next, hn::Max(best, lo));
             best = hn::Min(best, lo);
             if (k0 + n16 < num_disparities) {
                 hi = hn::ShiftLeft<kTagBits>(hi);
                 hn::StoreU(hn::Or(hi, right_tag), d16, key + k0 + n16);
-                hi = hn::Or(hi, hn::Set(d16, static_cast<uint16_t>(k0 / n16 + 1)));
+                hi = hn::Or(hi, lane_tag);
+                lane_tag = hn::Add(lane_tag, one16);
                 next = hn::Min(next, hn::Max(best, hi));
                 best = hn::Min(best, hi);
             }

@@ -123,9 +123,19 @@ void SpeckleFilter::removeBand(int16_t* disparity, int16_t invalid, int max_size
 {
     const size_t w = static_cast<size_t>(width_);
     const auto small = static_cast<uint32_t>(std::max(0, max_size));
-    for (size_t i = static_cast<size_t>(y0) * w; i < static_cast<size_t>(y1) * w; ++i)
-        if (disparity[i] != invalid && size_[root(label_[i] - 1)] < small)
+    // Neighbours along a row mostly share their label: its verdict is kept for the next.
+    uint32_t last_label = 0;
+    bool last_small = false;
+    for (size_t i = static_cast<size_t>(y0) * w; i < static_cast<size_t>(y1) * w; ++i) {
+        if (disparity[i] == invalid)
+            continue;
+        if (label_[i] != last_label) {
+            last_label = label_[i];
+            last_small = size_[root(last_label - 1)] < small;
+        }
+        if (last_small)
             disparity[i] = invalid;
+    }
 }
 
 } // namespace stereod::sgm
