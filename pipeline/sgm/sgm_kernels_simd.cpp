@@ -71,39 +71,29 @@ using D8 = hn::CappedTag<uint8_t, kLaneAlign>;
 using D16 = hn::Repartition<uint16_t, D8>; // same bytes, half the lanes
 using D32 = hn::Repartition<uint32_t, D8>;
 
-// Smallest byte of a vector, in every byte. It lies on the path along the row's chain
-// from one pixel to the next, so its latency counts.
-HWY_INLINE hn::Vec<D8> MinOfBytes(hn::Vec<D8> v)
-{
-    const D8 d;
-#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX2 // 32-byte vectors, and SSE4's phminposuw
-    // Halves, then byte pairs, then the minimum of eight 16-bit lanes in one instruction,
-    // rather than Highway's reduction over the whole 256-bit vector.
-    const hn::Full128<uint8_t> d128;
-    const hn::Full128<uint16_t> d128_16;
-    const auto m = hn::BitCast(d128_16, hn::Min(hn::LowerHalf(d128, v), hn::UpperHalf(d128, v)));
-    const auto pairs = hn::Min(hn::And(m, hn::Set(d128_16, uint16_t{0xFF})), hn::ShiftRight<8>(m));
-    return hn::Set(d, static_cast<uint8_t>(hn::GetLane(hn::MinOfLanes(d128_16, pairs))));
-#else
-    const D16 d16;
-    const auto wide = hn::BitCast(d16, v);
-    const auto low = hn::And(wide, hn::Set(d16, uint16_t{0xFF}));
-    const auto high = hn::ShiftRight<8>(wide);
-    const auto m = hn::MinOfLanes(d16, hn::Min(low, high)); // in every u16 lane
-    return hn::BitCast(d, hn::Or(m, hn::ShiftLeft<8>(m)));
-#endif
-}
-
-// Smallest 16-bit lane of a vector: on x86, the halves' minimum and SSE4's phminposuw.
+// Smallest 16-bit lane of a vector: on x86, the halves' minimum and SSE4's phminposuw
+// (one instruction), rather than Highway's reduction over the whole 256-bit vector.
 HWY_INLINE uint16_t MinOfU16(hn::Vec<D16> v)
 {
-#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX2
+#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX2 // 32-byte vectors, and SSE4's phminposuw
     const hn::Full128<uint16_t> d128;
     return hn::GetLane(
         hn::MinOfLanes(d128, hn::Min(hn::LowerHalf(d128, v), hn::UpperHalf(d128, v))));
 #else
     return hn::GetLane(hn::MinOfLanes(D16(), v));
 #endif
+}
+
+// Smallest byte of a vector, in every byte: the smaller of each byte pair, then
+// MinOfU16(). It lies on the path along the row's chain from one pixel to the next, so
+// its latency counts.
+HWY_INLINE hn::Vec<D8> MinOfBytes(hn::Vec<D8> v)
+{
+    const D16 d16;
+    const auto wide = hn::BitCast(d16, v);
+    const auto pairs =
+        hn::Min(hn::And(wide, hn::Set(d16, uint16_t{0xFF})), hn::ShiftRight<8>(wide));
+    return hn::Set(D8(), static_cast<uint8_t>(MinOfU16(pairs)));
 }
 
 void CensusRow(const uint8_t* center, size_t stride, int width, int census_width, int census_height,

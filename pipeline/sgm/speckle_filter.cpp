@@ -4,6 +4,15 @@
 #include <cstdlib>
 
 namespace stereod::sgm {
+namespace {
+
+// Two valid neighbours belong to one region when their disparities differ by at most this.
+bool together(int a, int b, int max_step)
+{
+    return std::abs(a - b) <= max_step;
+}
+
+} // namespace
 
 size_t speckleFilterBytes(int width, int height)
 {
@@ -51,7 +60,6 @@ void SpeckleFilter::labelBand(const int16_t* disparity, int16_t invalid, int max
     // read in memory order and without a stack.
     constexpr uint32_t kNone = UINT32_MAX;
     const size_t w = static_cast<size_t>(width_);
-    const auto close = [max_step](int a, int b) { return std::abs(a - b) <= max_step; };
     for (int y = y0; y < y1; ++y) {
         const size_t row = static_cast<size_t>(y) * w;
         const int16_t* d = disparity + row;
@@ -64,8 +72,9 @@ void SpeckleFilter::labelBand(const int16_t* disparity, int16_t invalid, int max
                 left = kNone;
                 continue;
             }
-            uint32_t region = left != kNone && close(d[x], d[x - 1]) ? rootHalving(left) : kNone;
-            if (above != nullptr && above[x] != invalid && close(d[x], above[x])) {
+            uint32_t region =
+                left != kNone && together(d[x], d[x - 1], max_step) ? rootHalving(left) : kNone;
+            if (above != nullptr && above[x] != invalid && together(d[x], above[x], max_step)) {
                 const uint32_t up = rootHalving(label_[i - w] - 1);
                 region = region == kNone ? up : region == up ? region : join(region, up);
             }
@@ -100,20 +109,12 @@ void SpeckleFilter::joinBands(const int16_t* disparity, int16_t invalid, int max
             const size_t q = below + x;
             const size_t p = q - w;
             if (disparity[p] == invalid || disparity[q] == invalid ||
-                std::abs(disparity[p] - disparity[q]) > max_step)
+                !together(disparity[p], disparity[q], max_step))
                 continue;
-            const uint32_t a = root(label_[p] - 1);
-            const uint32_t b = root(label_[q] - 1);
-            if (a == b)
-                continue;
-            // The larger index joins the smaller: the roots stay ordered, the chains short.
-            const uint32_t keep = std::min(a, b);
-            const uint32_t join = std::max(a, b);
-            parent_[join] = keep;
-            size_[keep] += size_[join];
-            // Shortcut the pixels' own regions to the root for the next lookups.
-            parent_[label_[p] - 1] = keep;
-            parent_[label_[q] - 1] = keep;
+            const uint32_t a = rootHalving(label_[p] - 1);
+            const uint32_t b = rootHalving(label_[q] - 1);
+            if (a != b)
+                join(a, b);
         }
     }
 }
