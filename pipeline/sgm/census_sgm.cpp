@@ -1,6 +1,8 @@
 #include "pipeline/sgm/census_sgm.hpp"
 
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -10,6 +12,7 @@
 #include <vector>
 
 #include "pipeline/sgm/band_pool.hpp"
+#include "pipeline/sgm/gap_bridge.hpp"
 #include "pipeline/sgm/speckle_filter.hpp"
 
 namespace stereod::sgm {
@@ -92,6 +95,15 @@ void validateCensusSgmSettings(const CensusSgmSettings& s)
                 "must be within 0..100, got " + std::to_string(s.uniqueness_percent));
     if (s.speckle_window_px < 0 || s.speckle_range_px < 0)
         invalid("speckle_window_px", "speckle window and range must be >= 0");
+    if (s.gap_fill_px < 0)
+        invalid("gap_fill_px", "must be >= 0, got " + std::to_string(s.gap_fill_px));
+    if (s.textured_max_cost > censusBits(s))
+        invalid("textured_max_cost", "must be at most the census's " +
+                                         std::to_string(censusBits(s)) + " bits, got " +
+                                         std::to_string(s.textured_max_cost));
+    if (s.textured_min_range < 0 || s.textured_min_range > 255)
+        invalid("textured_min_range",
+                "must be within 0..255 grey levels, got " + std::to_string(s.textured_min_range));
     if (s.edge_margin_px < 0)
         invalid("edge_margin_px", "must be >= 0, got " + std::to_string(s.edge_margin_px));
     if (s.threads < 1 || s.threads > 64)
@@ -349,6 +361,75 @@ struct CensusSgm::Impl {
         }
     }
 
+    // Rows y0..y1-1 lose the disparities of textured pixels that their census does not
+    // match (CensusSgmSettings::textured_max_cost); only those of confidence
+    // kInferredConfidence when `inferred` is given (after bridging: the others passed).
+    void dropUnmatchedTexture(std::vector<int16_t>& disparity, const uint8_t* left, size_t stride,
+                              int y0, int y1, const uint8_t* inferred)
+    {
+        const int w = settings.width, h = settings.height;
+        for (int y = y0; y < y1; ++y) {
+            const size_t row = static_cast<size_t>(y) * static_cast<size_t>(w);
+            const int ya = std::max(0, y - 1), yb = std::min(h - 1, y + 1);
+            for (int x = 0; x < w; ++x) {
+                int16_t& d = disparity[row + static_cast<size_t>(x)];
+                if (d == kNoDisparity ||
+                    (inferred != nullptr &&
+                     inferred[row + static_cast<size_t>(x)] != kInferredConfidence))
+                    continue;
+                // The whole disparities around the sub-pixel one (floor and ceiling). Most
+                // pixels match: the texture is looked at only for those that do not.
+                const int lower = d >> 4;
+                const int upper = (d + kSubpixel - 1) >> 4;
+                static_assert(kSubpixel == 16);
+                int cost = INT32_MAX;
+                for (const int whole : {lower, upper}) {
+                    const int xr = x - whole;
+                    if (xr >= 0 && xr < w)
+                        cost = std::min(cost, censusCost(x, xr, y));
+                }
+                if (cost != INT32_MAX && cost > settings.textured_max_cost &&
+                    textured(left, stride, x, ya, yb))
+                    d = kNoDisparity;
+            }
+        }
+    }
+
+    // Whether the 5x3 pixels around (x, y) (rows ya..yb) span textured_min_range grey
+    // levels or more.
+    bool textured(const uint8_t* left, size_t stride, int x, int ya, int yb) const
+    {
+        const int xa = std::max(0, x - 2), xb = std::min(settings.width - 1, x + 2);
+        int lo = 255, hi = 0;
+        for (int y = ya; y <= yb; ++y) {
+            const uint8_t* row = left + static_cast<size_t>(y) * stride;
+            for (int u = xa; u <= xb; ++u) {
+                lo = std::min<int>(lo, row[u]);
+                hi = std::max<int>(hi, row[u]);
+            }
+        }
+        return hi - lo >= settings.textured_min_range;
+    }
+
+    // Hamming distance of the census of left pixel (x, y) and right pixel (xr, y).
+    int censusCost(int x, int xr, int y)
+    {
+        int cost = 0;
+        for (int p = 0; p < planes; ++p)
+            cost += kBitsOfByte[planeRow(census_left, p, y)[x] ^ planeRow(census_right, p, y)[xr]];
+        return cost;
+    }
+
+    // A table rather than std::popcount, which the baseline x86-64 target turns into a
+    // library call.
+    static constexpr std::array<uint8_t, 256> kBitsOfByte = [] {
+        std::array<uint8_t, 256> bits{};
+        for (int i = 0; i < 256; ++i)
+            bits[static_cast<size_t>(i)] =
+                static_cast<uint8_t>(std::popcount(static_cast<unsigned>(i)));
+        return bits;
+    }();
+
     void finishRows(const std::vector<int16_t>& source, int y0, int y1, const CensusSgmOutput& out)
     {
         const size_t w = static_cast<size_t>(settings.width);
@@ -418,9 +499,15 @@ void CensusSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* 
     const int max_step = s.speckle_range_px * kSubpixel;
     // The median reads the rows around its band, which the other bands have finished;
     // the speckle labels only the band's own rows.
+    const bool checks_texture = s.textured_max_cost >= 0;
     m.pool.run(bands, [&](int band) {
         if (s.median)
             m.medianRows(band_start(band), band_start(band + 1));
+        // Before the speckle removal, which then takes what is left of a surface that the
+        // check emptied.
+        if (checks_texture)
+            m.dropUnmatchedTexture(*result, left, left_stride, band_start(band),
+                                   band_start(band + 1), nullptr);
         if (s.speckle_window_px > 0)
             m.speckle.labelBand(result->data(), kNoDisparity, max_step, band_start(band),
                                 band_start(band + 1));
@@ -431,10 +518,23 @@ void CensusSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* 
             starts[band] = band_start(band);
         m.speckle.joinBands(result->data(), kNoDisparity, max_step, starts, bands);
     }
+    // The gaps run along columns too, across the bands: bridged between the speckle
+    // removal and the last pass, on this thread.
+    const bool bridges = s.gap_fill_px > 0;
     m.pool.run(bands, [&](int band) {
         if (s.speckle_window_px > 0)
             m.speckle.removeBand(result->data(), kNoDisparity, s.speckle_window_px,
                                  band_start(band), band_start(band + 1));
+        if (!bridges)
+            m.finishRows(*result, band_start(band), band_start(band + 1), out);
+    });
+    if (!bridges)
+        return;
+    bridgeGaps(result->data(), out.confidence, out.range_limit, s.width, s.height, s.gap_fill_px);
+    m.pool.run(bands, [&](int band) {
+        if (checks_texture)
+            m.dropUnmatchedTexture(*result, left, left_stride, band_start(band),
+                                   band_start(band + 1), out.confidence);
         m.finishRows(*result, band_start(band), band_start(band + 1), out);
     });
 }

@@ -12,9 +12,11 @@
 //  3. winner-takes-all on the summed paths, a uniqueness test against the best
 //     non-adjacent disparity, parabolic sub-pixel, the right view's disparity from the
 //     same sums and a left-right check;
-//  4. a 3x3 median and speckle removal;
+//  4. a 3x3 median, where asked the disparities of textured pixels that their census does
+//     not match dropped, and speckle removal;
 //  5. a confidence per pixel, and a flag where the best match sits at the near end of the
-//     range (the surface may be nearer than the range can see).
+//     range (the surface may be nearer than the range can see);
+//  6. where asked (man-made scenes): short gaps bridged (gap_bridge.hpp).
 //
 // The core depends on the standard library and Highway only (no OpenCV), so that it
 // builds for any target Highway supports; the kernels (sgm_kernels.hpp) run on SIMD, and
@@ -62,6 +64,18 @@ struct CensusSgmSettings {
     // Pixels whose search range is cut by the left image edge (x < min_disparity +
     // num_disparities - 1) keep a disparity only when it lies this far below the cut.
     int edge_margin_px = 4;
+    // Runs of at most this many pixels without disparity, along a row or a column, between
+    // two disparities within 1 px of each other get the line between them (gap_bridge.hpp);
+    // 0: off. For man-made scenes of uniform planar surfaces.
+    int gap_fill_px = 0;
+    // Where the middle of the census window (5x3 px) has texture, an intensity range of at
+    // least textured_min_range grey levels, a disparity whose census cost exceeds
+    // textured_max_cost bits (at the whole disparity below and above it) is dropped: the
+    // census tells matches apart there, so a bad one means the disparity came from the
+    // paths alone. Without it, paths that keep P2 high across edges (p2_gradient_scale
+    // 0) carry the disparity around a surface nearer than the range into it. < 0: off.
+    int textured_max_cost = -1;
+    int textured_min_range = 20;
     int threads = 1;      // worker threads inside compute()
     bool use_simd = true; // false: the scalar reference kernels
 };

@@ -15,6 +15,7 @@
 #include <gtest/gtest.h>
 
 #include "pipeline/sgm/census_sgm.hpp"
+#include "pipeline/sgm/gap_bridge.hpp"
 #include "tests/pipeline/sgm/synthetic_pair.hpp"
 
 namespace stereod::sgm {
@@ -77,6 +78,18 @@ CensusSgmSettings sceneSettings()
     return s;
 }
 
+// The planar tuning's way (pipeline/matcher_settings.hpp): P2 at full height across
+// edges, a low uniqueness margin, the texture check and short gaps bridged.
+CensusSgmSettings planarSettings()
+{
+    CensusSgmSettings s = sceneSettings();
+    s.p2_gradient_scale = 0;
+    s.uniqueness_percent = 2;
+    s.textured_max_cost = 8;
+    s.gap_fill_px = 15;
+    return s;
+}
+
 // The default settings' output on the scene, computed once for the tests that only read it.
 const Output& sceneOutput()
 {
@@ -131,7 +144,7 @@ TEST(CensusSgmTest, SimdAndScalarGiveIdenticalOutput)
     // A smaller pair than the scene: the scalar reference is slow under the sanitizers.
     const SyntheticPair pair = makeSyntheticPair(
         160, 64, {{-1000, 0, 1160, 64, 6}, {70, 8, 120, 40, 20}, {20, 30, 60, 60, 45}}, 3);
-    for (const CensusSgmSettings& base : {sceneSettings(), narrow, wide})
+    for (const CensusSgmSettings& base : {sceneSettings(), narrow, wide, planarSettings()})
         for (int threads : {1, 2}) {
             SCOPED_TRACE("min_disparity " + std::to_string(base.min_disparity) + ", threads " +
                          std::to_string(threads));
@@ -150,6 +163,43 @@ TEST(CensusSgmTest, SimdAndScalarGiveIdenticalOutput)
             EXPECT_EQ(a.confidence, b.confidence);
             EXPECT_EQ(a.range_limit, b.range_limit);
         }
+}
+
+// Gaps bridged (gap_fill_px): the matched pixels stay as they were, the bridged ones say
+// they were inferred and lie on the surface they span: none spans a depth edge, whose
+// two sides disagree. (Next to an edge the matcher's own disparities may belong to either
+// side, and so may a line between them; the surfaces nearer than the range are held to
+// "no number deep inside" below.)
+TEST(CensusSgmTest, BridgedGapsAddOnlyInferredPixelsOnTheSurface)
+{
+    CensusSgmSettings bridging = sceneSettings();
+    bridging.gap_fill_px = 15;
+    const Output& matched = sceneOutput();
+    const Output bridged = match(scene(), bridging);
+    const SyntheticPair& pair = scene();
+    int added = 0, compared = 0, off = 0;
+    for (size_t i = 0; i < pair.truth_px.size(); ++i) {
+        if (matched.valid(i)) {
+            ASSERT_EQ(std::bit_cast<uint32_t>(bridged.disparity_px[i]),
+                      std::bit_cast<uint32_t>(matched.disparity_px[i]))
+                << "pixel " << i;
+            ASSERT_EQ(bridged.confidence[i], matched.confidence[i]) << "pixel " << i;
+            continue;
+        }
+        if (!bridged.valid(i))
+            continue;
+        ++added;
+        EXPECT_EQ(bridged.confidence[i], kInferredConfidence) << "pixel " << i;
+        const int x = static_cast<int>(i) % pair.width, y = static_cast<int>(i) / pair.width;
+        if (!comparable(pair, x, y))
+            continue;
+        ++compared;
+        off += std::abs(bridged.disparity_px[i] - static_cast<float>(pair.truth_px[i])) > 1.0f;
+    }
+    // Most gaps of a textured scene lie at its depth edges; a few inside its surfaces.
+    EXPECT_GT(added, 200);
+    EXPECT_GT(compared, 20) << "little bridged inside a surface: the test would prove little";
+    EXPECT_EQ(off, 0) << off << " of " << compared << " bridged pixels more than 1 px off";
 }
 
 TEST(CensusSgmTest, TargetNamesTheKernels)
@@ -251,12 +301,26 @@ SyntheticPair nearSurfacePair(int disparity_px)
 // carry the background's disparity some pixels in from its edges; see below).
 TEST(CensusSgmAccuracyTest, SurfaceNearerThanRangeReadsNoNumberDeepInside)
 {
-    for (int d : kNearerThanRange) {
-        SCOPED_TRACE("surface at " + std::to_string(d) + " px");
-        const SyntheticPair pair = nearSurfacePair(d);
-        const RectCount c = countInside(pair, match(pair, sceneSettings()), kNearSurface, 10);
-        EXPECT_EQ(c.valid, 0) << "valid at" << c.valid_at;
-    }
+    for (int d : kNearerThanRange)
+        for (const CensusSgmSettings& settings : {sceneSettings(), planarSettings()}) {
+            SCOPED_TRACE("surface at " + std::to_string(d) + " px, P2 adapted by " +
+                         std::to_string(settings.p2_gradient_scale));
+            const SyntheticPair pair = nearSurfacePair(d);
+            const RectCount c = countInside(pair, match(pair, settings), kNearSurface, 10);
+            EXPECT_EQ(c.valid, 0) << "valid at" << c.valid_at;
+        }
+}
+
+// P2 at full height across edges carries the disparity around a surface into it, also
+// where the surface is nearer than the range and has no match; only the texture check
+// stands in the way.
+TEST(CensusSgmAccuracyTest, WithoutTheTextureCheckFullHeightPathsReadIntoANearerSurface)
+{
+    CensusSgmSettings unchecked = planarSettings();
+    unchecked.textured_max_cost = -1;
+    const SyntheticPair pair = nearSurfacePair(kNearerThanRange[0]);
+    const RectCount c = countInside(pair, match(pair, unchecked), kNearSurface, 10);
+    EXPECT_GT(c.valid, 100);
 }
 
 TEST(CensusSgmAccuracyTest, RangeLimitFlagsOnlyInvalidPixels)
@@ -451,6 +515,23 @@ TEST(CensusSgmSettingsTest, RejectsCensusBitsPlusP2Over255)
     s.census_height = 7;
     s.p2 = 255 - 62 + 1;
     expectRejected(s, "p2");
+}
+
+TEST(CensusSgmSettingsTest, RejectsANegativeGap)
+{
+    CensusSgmSettings s = smallSettings();
+    s.gap_fill_px = -1;
+    expectRejected(s, "gap_fill_px");
+}
+
+TEST(CensusSgmSettingsTest, RejectsATextureCheckBeyondTheCensusBits)
+{
+    CensusSgmSettings s = smallSettings();
+    s.textured_max_cost = 33; // 11x3: 32 bits
+    expectRejected(s, "textured_max_cost");
+    s.textured_max_cost = 8;
+    s.textured_min_range = 256;
+    expectRejected(s, "textured_min_range");
 }
 
 TEST(CensusSgmSettingsTest, RejectsZeroThreads)
