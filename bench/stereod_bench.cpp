@@ -75,13 +75,16 @@ double peakRssMb()
 
 // One matcher as the service selects it.
 struct MatcherChoice {
-    const char* label; // the name StereoProcessor::matcherName() gives it
+    const char* label; // the name StereoProcessor::matcherName() gives it, and the tuning
     MatcherKind kind;
     SgbmMode sgbm_mode;
+    MatcherTuning tuning = MatcherTuning::Natural;
 };
 
+// census-sgm's planar tuning runs on the chessboard rig only: the man-made scene it is for.
 const std::vector<MatcherChoice> kMatchers = {
     {kOurMatcher, MatcherKind::CensusSgm, SgbmMode::Sgbm},
+    {kOurMatcherPlanar, MatcherKind::CensusSgm, SgbmMode::Sgbm, MatcherTuning::Planar},
     {kSgbm5Path, MatcherKind::Sgbm, SgbmMode::Sgbm},
     {kSgbm3Way, MatcherKind::Sgbm, SgbmMode::ThreeWay},
     {"bm", MatcherKind::Bm, SgbmMode::Sgbm},
@@ -134,6 +137,8 @@ ProcessorSettings settingsFor(const Case& c, const MatcherChoice& m)
 {
     ProcessorSettings settings;
     settings.matcher = matcherDefaults(m.kind, m.sgbm_mode);
+    settings.matcher.tuning = m.tuning;
+    applyMatcherDefaults(settings.matcher);
     settings.matcher.num_disparities = c.num_disparities;
     settings.compute_cloud = true;
     return settings;
@@ -367,9 +372,9 @@ cv::Ptr<cv::StereoMatcher> makeOpenCvMatcher(const MatcherSettings& s, const Dis
 // census-sgm's core with the settings the pipeline gives it for this case (the range is
 // fixed by num_disparities, so the calibration does not enter), but kMatcherThreads
 // threads.
-sgm::CensusSgmSettings censusAloneSettings(const Case& c)
+sgm::CensusSgmSettings censusAloneSettings(const Case& c, const MatcherChoice& m)
 {
-    const MatcherSettings settings = settingsFor(c, kMatchers.front()).matcher;
+    const MatcherSettings settings = settingsFor(c, m).matcher;
     DisparityRange range;
     range.min_disparity = settings.min_disparity;
     range.num_disparities = settings.num_disparities;
@@ -397,14 +402,15 @@ struct CensusAlone {
 
 // A census-sgm core for the case, run once on the rectified pair. Throws
 // std::invalid_argument (settings) or std::runtime_error (a pair it cannot take).
-std::unique_ptr<CensusAlone> makeCensusAlone(const Case& c, const ImagePair& pair)
+std::unique_ptr<CensusAlone> makeCensusAlone(const Case& c, const MatcherChoice& m,
+                                             const ImagePair& pair)
 {
     if (!pair.left.isContinuous() || !pair.right.isContinuous()) {
         throw std::runtime_error("the rectified pair is not continuous");
     }
     auto alone = std::make_unique<CensusAlone>();
-    alone->key = key(c);
-    alone->core = std::make_unique<sgm::CensusSgm>(censusAloneSettings(c));
+    alone->key = key(c, m);
+    alone->core = std::make_unique<sgm::CensusSgm>(censusAloneSettings(c, m));
     const size_t pixels = pair.left.total();
     alone->disparity_px.resize(pixels);
     alone->confidence.resize(pixels);
@@ -414,7 +420,7 @@ std::unique_ptr<CensusAlone> makeCensusAlone(const Case& c, const ImagePair& pai
     return alone;
 }
 
-void benchCensusAlone(benchmark::State& state, const Case& c)
+void benchCensusAlone(benchmark::State& state, const Case& c, const MatcherChoice& m)
 {
     const SceneInputs* inputs = sceneInputsOrSkip(state, *c.scene, c.size);
     if (inputs == nullptr) {
@@ -422,10 +428,10 @@ void benchCensusAlone(benchmark::State& state, const Case& c)
     }
     static std::unique_ptr<CensusAlone> kept;
     const ImagePair& pair = inputs->rectified;
-    if (!kept || kept->key != key(c)) {
+    if (!kept || kept->key != key(c, m)) {
         kept.reset();
         try {
-            kept = makeCensusAlone(c, pair);
+            kept = makeCensusAlone(c, m, pair);
         } catch (const std::exception& e) {
             state.SkipWithError(e.what());
             return;
@@ -515,7 +521,7 @@ CompareRig& compareRig(const Case& c)
         fresh->processor =
             std::make_unique<StereoProcessor>(inputs.calibration, settingsFor(c, ours));
         fresh->publish = std::make_unique<PublishStage>();
-        fresh->census = makeCensusAlone(c, inputs.rectified);
+        fresh->census = makeCensusAlone(c, ours, inputs.rectified);
         for (const MatcherChoice& m : kMatchers) {
             if (m.label != std::string(kSgbm3Way) && m.label != std::string(kSgbm5Path)) {
                 continue;
@@ -601,6 +607,9 @@ void registerBenchmarks(SummaryTable& table, LatencyLog& latency)
                 ->Unit(benchmark::kMillisecond);
         }
         for (const MatcherChoice& m : kMatchers) {
+            if (m.tuning == MatcherTuning::Planar && c.scene != &chessboardScene()) {
+                continue;
+            }
             const std::string pipeline = "pipeline/" + key(c, m);
             const std::string alone = "alone/" + key(c, m);
             latency.reserve(pipeline);
@@ -611,7 +620,7 @@ void registerBenchmarks(SummaryTable& table, LatencyLog& latency)
                 ->UseManualTime()
                 ->Unit(benchmark::kMillisecond);
             if (m.kind == MatcherKind::CensusSgm) {
-                benchmark::RegisterBenchmark(alone.c_str(), benchCensusAlone, c)
+                benchmark::RegisterBenchmark(alone.c_str(), benchCensusAlone, c, m)
                     ->UseManualTime()
                     ->Unit(benchmark::kMillisecond);
             } else {
@@ -626,7 +635,7 @@ void registerBenchmarks(SummaryTable& table, LatencyLog& latency)
             ->UseManualTime()
             ->Unit(benchmark::kMillisecond);
         summary.census_memory_bytes =
-            static_cast<double>(sgm::censusSgmMemoryBytes(censusAloneSettings(c)));
+            static_cast<double>(sgm::censusSgmMemoryBytes(censusAloneSettings(c, kMatchers[0])));
         table.addCase(std::move(summary));
     }
 }

@@ -310,6 +310,10 @@ std::vector<KeyDef> buildKeyTable()
         "matcher.p2_gradient_scale", kLive,
         [](auto& c) -> auto& { return c.processing.matcher.p2_gradient_scale; },
         "auto or grey levels"));
+    add(choiceKey(
+        "matcher.tuning", kLive, [](auto& c) -> auto& { return c.processing.matcher.tuning; },
+        Names<MatcherTuning>{{"natural", MatcherTuning::Natural},
+                             {"planar", MatcherTuning::Planar}}));
     add(autoIntegerKey(
         "matcher.threads", kLive, [](auto& c) -> auto& { return c.processing.matcher.threads; },
         "auto (the cores available) or a number of threads"));

@@ -202,6 +202,10 @@ CLI::App* declareDepth(CLI::App& app, DepthOptions& o)
     cmd->add_option("--matcher", o.matcher,
                     "our census-sgm (the default), or OpenCV's sgbm, sgbm-3way or bm")
         ->check(CLI::IsMember({"census-sgm", "bm", "sgbm", "sgbm-3way"}));
+    cmd->add_option("--tuning", o.tuning,
+                    "census-sgm's tuning: natural (textured scenes, the default) or planar "
+                    "(man-made: uniform flat surfaces, repeating patterns)")
+        ->check(CLI::IsMember({"natural", "planar"}));
     cmd->add_option("--max-disparity", o.max_disparity,
                     "disparities searched, rounded up to a multiple of 16 (instead of deriving "
                     "them from the closest depth)")

@@ -117,9 +117,14 @@ ProcessorSettings depthSettings(const DepthOptions& options)
         matcher.kind = MatcherKind::Sgbm;
         matcher.sgbm_mode = SgbmMode::ThreeWay;
     }
-    // Switched from census-sgm to OpenCV's or back here: the new matcher's own values for
-    // the settings they share.
-    if ((configured == MatcherKind::CensusSgm) != (matcher.kind == MatcherKind::CensusSgm))
+    const MatcherTuning configured_tuning = matcher.tuning;
+    if (!options.tuning.empty())
+        matcher.tuning =
+            options.tuning == "planar" ? MatcherTuning::Planar : MatcherTuning::Natural;
+    // Switched from census-sgm to OpenCV's or back here, or to another tuning: the new
+    // matcher's (tuning's) own values for the settings they share.
+    if ((configured == MatcherKind::CensusSgm) != (matcher.kind == MatcherKind::CensusSgm) ||
+        configured_tuning != matcher.tuning)
         applyMatcherDefaults(matcher);
     if (options.min_depth_m) {
         matcher.min_depth_m = *options.min_depth_m;

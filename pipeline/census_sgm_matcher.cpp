@@ -64,7 +64,7 @@ int availableCores()
 
 sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& s, const DisparityRange& range)
 {
-    sgm::CensusSgmSettings c; // its defaults are the tuned values
+    sgm::CensusSgmSettings c = censusSgmTuning(s.tuning);
     c.width = 0;
     c.height = 0;
     c.min_disparity = range.min_disparity;

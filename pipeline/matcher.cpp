@@ -237,7 +237,7 @@ std::unique_ptr<Matcher> makeMatcher(const MatcherSettings& settings, const Disp
 
 void applyMatcherDefaults(MatcherSettings& settings)
 {
-    const sgm::CensusSgmSettings& census = kCensusSgmTuned;
+    const sgm::CensusSgmSettings& census = censusSgmTuning(settings.tuning);
     const bool opencv = settings.kind != MatcherKind::CensusSgm;
     // OpenCV's matchers: the values of OpenCV's stereo_match sample.
     settings.uniqueness_ratio = opencv ? 10 : census.uniqueness_percent;

@@ -13,14 +13,50 @@ enum class MatcherKind {
 
 enum class SgbmMode { Sgbm, ThreeWay, Hh, Hh4 };
 
+// What census-sgm's automatic settings are tuned for.
+enum class MatcherTuning {
+    // Natural, textured scenes: tuned on the 17 real scenes of shared/data.
+    Natural,
+    // Man-made scenes of uniform planar surfaces and repeating patterns (walls, boxes,
+    // boards, tiles): tuned on a real rig's chessboard (opencv-doc's 13 pairs).
+    Planar,
+};
+
 // census-sgm's settings as tuned on the real scenes of shared/data.
 inline constexpr sgm::CensusSgmSettings kCensusSgmTuned{};
+
+// ... and for man-made planar scenes. On a uniform, repeating pattern (a chessboard) a row
+// matches about as well one period off; what tells the periods apart is the pattern's ends,
+// and the paths carry that along the row only if P2 keeps its full height at every edge
+// of the pattern: no gradient adaptation, which on natural scenes is what keeps depth
+// edges sharp. Those paths would also carry the disparity around a surface nearer than
+// the range into it: where the census sees texture, a disparity it does not match is
+// dropped. Short gaps between agreeing disparities (a uniform square's inside, the edge
+// between two squares) are bridged.
+inline constexpr sgm::CensusSgmSettings kCensusSgmPlanar = [] {
+    sgm::CensusSgmSettings s;
+    s.p2_gradient_scale = 0;
+    s.uniqueness_percent = 2;
+    s.speckle_window_px = 400;
+    s.speckle_range_px = 2;
+    s.gap_fill_px = 15;
+    s.textured_max_cost = 8;
+    return s;
+}();
+
+// The automatic values of census-sgm for a tuning.
+constexpr const sgm::CensusSgmSettings& censusSgmTuning(MatcherTuning tuning)
+{
+    return tuning == MatcherTuning::Planar ? kCensusSgmPlanar : kCensusSgmTuned;
+}
 
 struct MatcherSettings {
     // Ours: on the real scenes of shared/data it reports half the wrong and too-far pixels
     // of OpenCV's SGBM in half the time (docs/configuration.md).
     MatcherKind kind = MatcherKind::CensusSgm;
     SgbmMode sgbm_mode = SgbmMode::Sgbm;
+    // census-sgm: the scenes its automatic settings (and the shared ones' defaults) suit.
+    MatcherTuning tuning = MatcherTuning::Natural;
     // Closest distance the robot must see; sets the disparity range:
     // d_max = focal_px * baseline_m / min_depth_m - doffs_px.
     double min_depth_m = 0.5;
@@ -50,7 +86,7 @@ struct MatcherSettings {
     int pre_filter_cap = 31;    // OpenCV's matchers only
     int texture_threshold = 10; // BM only: minimum texture in the block
 
-    // census-sgm only.
+    // census-sgm only; 0 (automatic) takes the tuning's value.
     int census_width = 0; // census window in pixels, odd; 0: automatic
     int census_height = 0;
     int paths = 0;             // aggregation paths, 3 or 5; 0: automatic

@@ -247,6 +247,8 @@ INSTANTIATE_TEST_SUITE_P(
         RejectedCase{"matcher:\n  block_size: [5]\n", "matcher.block_size", 2, "got a list"},
         RejectedCase{"matcher:\n  algorithm: bm\n  block_size: 3\n", "matcher.block_size", 3,
                      "5 to 255 px for bm"},
+        RejectedCase{"matcher:\n  tuning: flat\n", "matcher.tuning", 2,
+                     "unknown value (got flat, expected natural or planar"},
         RejectedCase{"matcher:\n  uniqueness_ratio: 101\n", "matcher.uniqueness_ratio", 2,
                      "0 to 100 percent"},
         RejectedCase{"matcher:\n  speckle_window_px: -1\n", "matcher.speckle_window_px", 2,
@@ -647,6 +649,26 @@ TEST(ConfigMatcher, EachMatcherTakesItsOwnSharedDefaultsUnlessSet)
             .processing.matcher;
     EXPECT_EQ(sgbm_set.speckle_window_px, 50);
     EXPECT_EQ(sgbm_set.uniqueness_ratio, 10);
+}
+
+// The planar tuning brings its own shared values too (pipeline/matcher_settings.hpp),
+// and a value the file sets still wins.
+TEST(ConfigMatcher, PlanarTuningTakesItsOwnSharedDefaultsUnlessSet)
+{
+    EXPECT_EQ(defaultConfig().processing.matcher.tuning, MatcherTuning::Natural);
+    const MatcherSettings planar =
+        parseConfig("matcher:\n  tuning: planar\n", "t.yaml").processing.matcher;
+    EXPECT_EQ(planar.tuning, MatcherTuning::Planar);
+    EXPECT_EQ(planar.uniqueness_ratio, kCensusSgmPlanar.uniqueness_percent);
+    EXPECT_EQ(planar.speckle_window_px, kCensusSgmPlanar.speckle_window_px);
+    EXPECT_EQ(planar.speckle_range_px, kCensusSgmPlanar.speckle_range_px);
+    EXPECT_EQ(planar.lr_max_diff_px, kCensusSgmPlanar.lr_max_diff_px);
+    EXPECT_NE(planar.speckle_window_px, defaultConfig().processing.matcher.speckle_window_px);
+    const MatcherSettings set =
+        parseConfig("matcher:\n  tuning: planar\n  uniqueness_ratio: 9\n", "t.yaml")
+            .processing.matcher;
+    EXPECT_EQ(set.uniqueness_ratio, 9);
+    EXPECT_EQ(set.speckle_window_px, kCensusSgmPlanar.speckle_window_px);
 }
 
 TEST(ConfigDiff, EveryKeyIsClassified)

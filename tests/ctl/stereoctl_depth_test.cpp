@@ -138,6 +138,35 @@ TEST(StereoctlDepth, JsonCarriesReadingTimingsRangeAndMatcher)
     EXPECT_EQ(out["matcher"], "sgbm-3way");
 }
 
+// The planar tuning (man-made scenes) reports more of the pair, the pixels it inferred
+// rather than matched (bridged gaps) marked by the lowest confidence, 1.
+TEST(StereoctlDepth, PlanarTuningReportsMoreAndMarksWhatItInferred)
+{
+    test::TempDir dir;
+    struct Result {
+        int reported = 0, lowest = 0;
+    };
+    const auto depth = [&](const std::string& name, std::vector<std::string> extra) {
+        extra.insert(extra.end(), {"--disparity", dir.file(name + ".pfm"), "--confidence",
+                                   dir.file(name + ".png")});
+        const ProcessResult run = runProcess(depthCommand(extra));
+        EXPECT_EQ(run.exit_code, 0) << name << ": " << run.err;
+        const cv::Mat disparity = readDisparity(dir.file(name + ".pfm"));
+        const cv::Mat confidence = cv::imread(dir.file(name + ".png"), cv::IMREAD_UNCHANGED);
+        Result r;
+        for (int y = 0; y < disparity.rows; ++y)
+            for (int x = 0; x < disparity.cols; ++x) {
+                r.reported += std::isfinite(disparity.at<float>(y, x)) ? 1 : 0;
+                r.lowest += confidence.at<uint8_t>(y, x) == 1 ? 1 : 0;
+            }
+        return r;
+    };
+    const Result natural = depth("natural", {});
+    const Result planar = depth("planar", {"--tuning", "planar"});
+    EXPECT_GT(planar.reported, natural.reported);
+    EXPECT_GT(planar.lowest, natural.lowest + 100);
+}
+
 TEST(StereoctlDepth, RegionWithoutEnoughPixelsIsNoReadingWithExitOne)
 {
     // A sliver at the left edge, where no right-image match exists for 16 disparities.
@@ -153,6 +182,7 @@ TEST(StereoctlDepth, BadArgumentsExitTwoWithOneLine)
         {stereoctlPath(), "depth", kLeft, kRight, "--rectified"}, // no focal length
         {stereoctlPath(), "depth", kLeft},                        // no RIGHT
         depthCommand({"--matcher", "magic"}),
+        depthCommand({"--tuning", "flat"}),
         depthCommand({"--max-disparity", "-16"}),
         depthCommand({"--roi", "0.5,0.5,0.9,0.9"}),
         depthCommand({"--calib", "/nonexistent/calib.yaml"}),
