@@ -98,9 +98,9 @@ if [ "$scene" = chessboard ]; then
   show_service
   # One reading, and the board's pose in that reading's own frame: the frame index the
   # service reports names the recorded pair (frame % pairs: the recording loops). A second
-  # `stereoctl distance` could answer for a later frame, so there is none. The two
-  # nearest boards give no reading (too little of their uniform squares is matched): the
-  # demo shows that answer and its reason, and asks again at a later pair.
+  # `stereoctl distance` could answer for a later frame, so there is none. Every pair gives
+  # a reading with the demo's settings; should one give none (a slower machine, other
+  # settings), the demo shows that answer and its reason, and asks again at a later pair.
   echo "== stereoctl distance --json"
   for _ in $(seq 1 20); do
     set +e; reading=$("$stereoctl" distance --socket "$socket" --json); status=$?; set -e

@@ -9,8 +9,8 @@ namespace stereod::sgm {
 namespace {
 
 // One line of `count` values `step` apart: a row or a column.
-void bridgeLine(int16_t* d, uint8_t* confidence, const uint8_t* range_limit, int count,
-                size_t step, int max_gap)
+void bridgeLine(int16_t* d, uint8_t* confidence, const uint8_t* range_limit, int count, size_t step,
+                int max_gap)
 {
     int last = -1; // the last position with a disparity, -1 after a barrier
     for (int k = 0; k < count; ++k) {

@@ -458,6 +458,7 @@ TEST_F(ChessboardCalibrationTest, PlanarTuningReportsThreeQuartersOfTheBoardOnIt
     MatcherSettings planar = matcherDefaults(MatcherKind::CensusSgm);
     planar.tuning = MatcherTuning::Planar;
     applyMatcherDefaults(planar);
+    planar.threads = 2; // the bands' seams move with the thread count: the same on any machine
     const BoardPixels board = boardPixels(result(), planar, "planar");
     EXPECT_GE(board.density(), 75.0);
     EXPECT_LE(board.off(), 3.0);

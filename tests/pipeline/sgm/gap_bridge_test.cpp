@@ -39,16 +39,15 @@ struct Image {
     }
     void bridge(int max_gap)
     {
-        bridgeGaps(disparity.data(), confidence.data(), range_limit.data(), width, height,
-                   max_gap);
+        bridgeGaps(disparity.data(), confidence.data(), range_limit.data(), width, height, max_gap);
     }
 };
 
 TEST(GapBridgeTest, FillsARunBetweenAgreeingEndsWithTheLineBetweenThem)
 {
     Image image(12, 1);
-    image.set(2, 0, 10 * kSubpixel);            // 10 px
-    image.set(7, 0, 10 * kSubpixel + 8);        // 10.5 px, four pixels on
+    image.set(2, 0, 10 * kSubpixel);     // 10 px
+    image.set(7, 0, 10 * kSubpixel + 8); // 10.5 px, four pixels on
     image.bridge(5);
     // 160 + 8 j / 5 for j = 1..4, rounded: 161.6, 163.2, 164.8, 166.4.
     const int16_t expected[] = {162, 163, 165, 166};
