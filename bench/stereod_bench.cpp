@@ -75,7 +75,7 @@ double peakRssMb()
 
 // One matcher as the service selects it.
 struct MatcherChoice {
-    const char* label; // the name StereoProcessor::matcherName() gives it, and the tuning
+    const char* label; // matcherName()'s name; the planar tuning as census-sgm-planar (filters)
     MatcherKind kind;
     SgbmMode sgbm_mode;
     MatcherTuning tuning = MatcherTuning::Natural;

@@ -40,14 +40,16 @@ class CensusSgmMatcher final : public Matcher {
     {
         settings_ = censusSgmSettings(settings, range);
         sgm::validateCensusSgmSettings(settings_);
+        name_ = matcherName(settings);
         core_.reset(); // rebuilt, with its buffers, on the next pair
     }
 
-    std::string name() const override { return "census-sgm"; }
+    std::string name() const override { return name_; }
     MatcherKind kind() const override { return MatcherKind::CensusSgm; }
 
   private:
     sgm::CensusSgmSettings settings_;
+    std::string name_; // with the tuning, when it is not the default
     std::unique_ptr<sgm::CensusSgm> core_;
 };
 

@@ -258,7 +258,7 @@ MatcherSettings matcherDefaults(MatcherKind kind, SgbmMode mode)
 std::string matcherName(const MatcherSettings& settings)
 {
     if (settings.kind == MatcherKind::CensusSgm)
-        return "census-sgm";
+        return settings.tuning == MatcherTuning::Planar ? "census-sgm (planar)" : "census-sgm";
     if (settings.kind == MatcherKind::Bm)
         return "bm";
     switch (settings.sgbm_mode) {

@@ -169,6 +169,9 @@ TEST_F(Processor, ProducesAReadingWithStampAndTimings)
     StereoProcessor p(calibration_, settings_);
     EXPECT_EQ(p.disparityRange().num_disparities, 16);
     EXPECT_EQ(p.matcherName(), "census-sgm"); // the default
+    ProcessorSettings planar = settings_;
+    planar.matcher.tuning = MatcherTuning::Planar;
+    EXPECT_EQ(StereoProcessor(calibration_, planar).matcherName(), "census-sgm (planar)");
     DepthResult out;
     p.process(left_, right_, 1000, 3, out);
     ASSERT_TRUE(out.reading.valid) << reasonText(out.reading.reason);
