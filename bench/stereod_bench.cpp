@@ -136,9 +136,7 @@ std::string key(const Case& c, const MatcherChoice& m)
 ProcessorSettings settingsFor(const Case& c, const MatcherChoice& m)
 {
     ProcessorSettings settings;
-    settings.matcher = matcherDefaults(m.kind, m.sgbm_mode);
-    settings.matcher.tuning = m.tuning;
-    applyMatcherDefaults(settings.matcher);
+    settings.matcher = matcherDefaults(m.kind, m.sgbm_mode, m.tuning);
     settings.matcher.num_disparities = c.num_disparities;
     settings.compute_cloud = true;
     return settings;

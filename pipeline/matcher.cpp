@@ -246,11 +246,12 @@ void applyMatcherDefaults(MatcherSettings& settings)
     settings.lr_max_diff_px = opencv ? 1 : census.lr_max_diff_px;
 }
 
-MatcherSettings matcherDefaults(MatcherKind kind, SgbmMode mode)
+MatcherSettings matcherDefaults(MatcherKind kind, SgbmMode mode, MatcherTuning tuning)
 {
     MatcherSettings settings;
     settings.kind = kind;
     settings.sgbm_mode = mode;
+    settings.tuning = tuning;
     applyMatcherDefaults(settings);
     return settings;
 }

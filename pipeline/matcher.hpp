@@ -61,8 +61,10 @@ std::unique_ptr<Matcher> makeMatcher(const MatcherSettings& settings, const Disp
 // and does not set them gets these.
 void applyMatcherDefaults(MatcherSettings& settings);
 
-// The settings of matcher `kind` (and, for SGBM, `mode`) with that matcher's own values.
-MatcherSettings matcherDefaults(MatcherKind kind, SgbmMode mode = SgbmMode::Sgbm);
+// The settings of matcher `kind` (and, for SGBM, `mode`; for census-sgm, `tuning`) with
+// that matcher's own values.
+MatcherSettings matcherDefaults(MatcherKind kind, SgbmMode mode = SgbmMode::Sgbm,
+                                MatcherTuning tuning = MatcherTuning::Natural);
 
 // The name makeMatcher(settings, ...)->name() will have.
 std::string matcherName(const MatcherSettings& settings);

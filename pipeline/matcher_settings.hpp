@@ -25,29 +25,10 @@ enum class MatcherTuning {
 // census-sgm's settings as tuned on the real scenes of shared/data.
 inline constexpr sgm::CensusSgmSettings kCensusSgmTuned{};
 
-// ... and for man-made planar scenes. On a uniform, repeating pattern (a chessboard) a row
-// matches about as well one period off; what tells the periods apart is the pattern's ends,
-// and the paths carry that along the row only if P2 keeps its full height at every edge
-// of the pattern: no gradient adaptation, which on natural scenes is what keeps depth
-// edges sharp. Those paths would also carry the disparity around a surface nearer than
-// the range into it: where the census sees texture, a disparity it does not match is
-// dropped. Short gaps between agreeing disparities (a uniform square's inside, the edge
-// between two squares) are bridged.
-inline constexpr sgm::CensusSgmSettings kCensusSgmPlanar = [] {
-    sgm::CensusSgmSettings s;
-    s.p2_gradient_scale = 0;
-    s.uniqueness_percent = 2;
-    s.speckle_window_px = 400;
-    s.speckle_range_px = 2;
-    s.gap_fill_px = 15;
-    s.textured_max_cost = 8;
-    return s;
-}();
-
-// The automatic values of census-sgm for a tuning.
+// The automatic values of census-sgm for a tuning (the planar one: census_sgm.hpp).
 constexpr const sgm::CensusSgmSettings& censusSgmTuning(MatcherTuning tuning)
 {
-    return tuning == MatcherTuning::Planar ? kCensusSgmPlanar : kCensusSgmTuned;
+    return tuning == MatcherTuning::Planar ? sgm::kPlanarSceneSettings : kCensusSgmTuned;
 }
 
 struct MatcherSettings {

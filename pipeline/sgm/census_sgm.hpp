@@ -80,6 +80,27 @@ struct CensusSgmSettings {
     bool use_simd = true; // false: the scalar reference kernels
 };
 
+// The settings for man-made scenes of uniform flat surfaces and repeating patterns
+// (`matcher.tuning: planar`; the defaults above are those for natural scenes). On a
+// uniform, repeating pattern (a chessboard) a row matches about as well one period off;
+// what tells the periods apart is the pattern's ends, and the paths carry that along the
+// row only if P2 keeps its full height at every edge of the pattern: no gradient
+// adaptation, which on natural scenes is what keeps depth edges sharp. Those paths would
+// also carry the disparity around a surface nearer than the range into it: where the
+// census sees texture, a disparity it does not match is dropped. Short gaps between
+// agreeing disparities (a uniform square's inside, the edge between two squares) are
+// bridged. Tuned on a real rig's chessboard (opencv-doc's 13 pairs).
+inline constexpr CensusSgmSettings kPlanarSceneSettings = [] {
+    CensusSgmSettings s;
+    s.p2_gradient_scale = 0;
+    s.uniqueness_percent = 2;
+    s.speckle_window_px = 400;
+    s.speckle_range_px = 2;
+    s.gap_fill_px = 15;
+    s.textured_max_cost = 8;
+    return s;
+}();
+
 // Throws std::invalid_argument naming the setting when the settings cannot work. A size
 // of 0x0 skips the checks that need the image size.
 void validateCensusSgmSettings(const CensusSgmSettings& settings);

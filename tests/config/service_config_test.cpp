@@ -659,16 +659,16 @@ TEST(ConfigMatcher, PlanarTuningTakesItsOwnSharedDefaultsUnlessSet)
     const MatcherSettings planar =
         parseConfig("matcher:\n  tuning: planar\n", "t.yaml").processing.matcher;
     EXPECT_EQ(planar.tuning, MatcherTuning::Planar);
-    EXPECT_EQ(planar.uniqueness_ratio, kCensusSgmPlanar.uniqueness_percent);
-    EXPECT_EQ(planar.speckle_window_px, kCensusSgmPlanar.speckle_window_px);
-    EXPECT_EQ(planar.speckle_range_px, kCensusSgmPlanar.speckle_range_px);
-    EXPECT_EQ(planar.lr_max_diff_px, kCensusSgmPlanar.lr_max_diff_px);
+    EXPECT_EQ(planar.uniqueness_ratio, censusSgmTuning(MatcherTuning::Planar).uniqueness_percent);
+    EXPECT_EQ(planar.speckle_window_px, censusSgmTuning(MatcherTuning::Planar).speckle_window_px);
+    EXPECT_EQ(planar.speckle_range_px, censusSgmTuning(MatcherTuning::Planar).speckle_range_px);
+    EXPECT_EQ(planar.lr_max_diff_px, censusSgmTuning(MatcherTuning::Planar).lr_max_diff_px);
     EXPECT_NE(planar.speckle_window_px, defaultConfig().processing.matcher.speckle_window_px);
     const MatcherSettings set =
         parseConfig("matcher:\n  tuning: planar\n  uniqueness_ratio: 9\n", "t.yaml")
             .processing.matcher;
     EXPECT_EQ(set.uniqueness_ratio, 9);
-    EXPECT_EQ(set.speckle_window_px, kCensusSgmPlanar.speckle_window_px);
+    EXPECT_EQ(set.speckle_window_px, censusSgmTuning(MatcherTuning::Planar).speckle_window_px);
 }
 
 TEST(ConfigDiff, EveryKeyIsClassified)

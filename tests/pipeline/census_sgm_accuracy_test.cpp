@@ -136,9 +136,7 @@ cv::Mat censusSgm(const cv::Mat& left, const cv::Mat& right, int num_disparities
                   MatcherTuning tuning = MatcherTuning::Natural)
 {
     ProcessorSettings settings;
-    settings.matcher = matcherDefaults(MatcherKind::CensusSgm);
-    settings.matcher.tuning = tuning;
-    applyMatcherDefaults(settings.matcher);
+    settings.matcher = matcherDefaults(MatcherKind::CensusSgm, SgbmMode::Sgbm, tuning);
     settings.matcher.num_disparities = num_disparities;
     settings.matcher.threads = threads;
     settings.compute_cloud = false;
@@ -264,9 +262,7 @@ TEST_P(CensusSgmTunings, SurfaceNearerThanTheRangeReadsNearerThanRange)
     cv::resize(left, left, {}, 3.0, 3.0, cv::INTER_CUBIC);
     cv::resize(right, right, {}, 3.0, 3.0, cv::INTER_CUBIC);
     ProcessorSettings settings;
-    settings.matcher = matcherDefaults(MatcherKind::CensusSgm);
-    settings.matcher.tuning = GetParam();
-    applyMatcherDefaults(settings.matcher);
+    settings.matcher = matcherDefaults(MatcherKind::CensusSgm, SgbmMode::Sgbm, GetParam());
     settings.matcher.num_disparities = 32;
     settings.compute_cloud = false;
     settings.nearest.max_depth_m = 100.0;

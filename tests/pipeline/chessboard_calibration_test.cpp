@@ -455,9 +455,8 @@ TEST_F(ChessboardCalibrationTest, CensusSgmReportsLessOfTheBoardButFarLessOfItOf
 // target: at least 75 % of the board with at most 3 % of it more than 5 % off.
 TEST_F(ChessboardCalibrationTest, PlanarTuningReportsThreeQuartersOfTheBoardOnIt)
 {
-    MatcherSettings planar = matcherDefaults(MatcherKind::CensusSgm);
-    planar.tuning = MatcherTuning::Planar;
-    applyMatcherDefaults(planar);
+    MatcherSettings planar =
+        matcherDefaults(MatcherKind::CensusSgm, SgbmMode::Sgbm, MatcherTuning::Planar);
     planar.threads = 2; // the bands' seams move with the thread count: the same on any machine
     const BoardPixels board = boardPixels(result(), planar, "planar");
     EXPECT_GE(board.density(), 75.0);

@@ -78,15 +78,12 @@ CensusSgmSettings sceneSettings()
     return s;
 }
 
-// The planar tuning's way (pipeline/matcher_settings.hpp): P2 at full height across
-// edges, a low uniqueness margin, the texture check and short gaps bridged.
+// The planar tuning (kPlanarSceneSettings): P2 at full height across edges, a low
+// uniqueness margin, the texture check and short gaps bridged.
 CensusSgmSettings planarSettings()
 {
-    CensusSgmSettings s = sceneSettings();
-    s.p2_gradient_scale = 0;
-    s.uniqueness_percent = 2;
-    s.textured_max_cost = 8;
-    s.gap_fill_px = 15;
+    CensusSgmSettings s = kPlanarSceneSettings;
+    s.num_disparities = kNumDisparities;
     return s;
 }
 
