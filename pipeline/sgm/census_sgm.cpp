@@ -14,6 +14,7 @@
 #include "pipeline/sgm/band_pool.hpp"
 #include "pipeline/sgm/gap_bridge.hpp"
 #include "pipeline/sgm/speckle_filter.hpp"
+#include "pipeline/sgm/texture.hpp"
 
 namespace stereod::sgm {
 namespace {
@@ -52,6 +53,7 @@ struct BandScratch {
     WinnerRows winners{};
     std::vector<uint16_t> right_lane; // rightLaneEntries()
     std::vector<uint16_t> winners_scratch;
+    std::vector<uint8_t> edge_state; // width: dropFlatBetweenUnmatchedEdges()
 };
 
 } // namespace
@@ -176,6 +178,7 @@ struct CensusSgm::Impl {
             b.winners = WinnerRows{f, f + w, f + 2 * w, f + 3 * w, f + 4 * w};
             b.right_lane.assign(rightLaneEntries(s.width), 0);
             b.winners_scratch.assign(winnersScratch(s.width, s.min_disparity, lanes), 0);
+            b.edge_state.assign(static_cast<size_t>(s.width), 0);
         }
         decide = DecideSettings{s.min_disparity,      s.num_disparities,
                                 s.uniqueness_percent, s.lr_max_diff_px,
@@ -207,6 +210,11 @@ struct CensusSgm::Impl {
     }
 
     // Row y of census plane p.
+    const uint8_t* planeRow(const std::vector<uint8_t>& census, int p, int y) const
+    {
+        return census.data() + static_cast<size_t>(p) * plane_stride + plane_margin +
+               static_cast<size_t>(y) * static_cast<size_t>(settings.width);
+    }
     uint8_t* planeRow(std::vector<uint8_t>& census, int p, int y) const
     {
         return census.data() + static_cast<size_t>(p) * plane_stride + plane_margin +
@@ -365,12 +373,11 @@ struct CensusSgm::Impl {
     // match (CensusSgmSettings::textured_max_cost); only those of confidence
     // kInferredConfidence when `inferred` is given (after bridging: the others passed).
     void dropUnmatchedTexture(std::vector<int16_t>& disparity, const uint8_t* left, size_t stride,
-                              int y0, int y1, const uint8_t* inferred)
+                              int y0, int y1, const uint8_t* inferred, uint8_t* range_limit)
     {
         const int w = settings.width, h = settings.height;
         for (int y = y0; y < y1; ++y) {
             const size_t row = static_cast<size_t>(y) * static_cast<size_t>(w);
-            const int ya = std::max(0, y - 1), yb = std::min(h - 1, y + 1);
             for (int x = 0; x < w; ++x) {
                 int16_t& d = disparity[row + static_cast<size_t>(x)];
                 if (d == kNoDisparity ||
@@ -389,26 +396,75 @@ struct CensusSgm::Impl {
                         cost = std::min(cost, censusCost(x, xr, y));
                 }
                 if (cost != INT32_MAX && cost > settings.textured_max_cost &&
-                    textured(left, stride, x, ya, yb))
+                    isTextured(left, stride, w, h, x, y, settings.textured_min_range)) {
                     d = kNoDisparity;
+                    // A textured pixel that matches nothing in the range is evidence of a
+                    // surface nearer than it (pyramid_sgm.hpp), as one whose best match is
+                    // the range's near end is.
+                    if (range_limit != nullptr && !matchesInRange(x, y))
+                        range_limit[row + static_cast<size_t>(x)] = 1;
+                }
             }
         }
     }
 
-    // Whether the 5x3 pixels around (x, y) (rows ya..yb) span textured_min_range grey
-    // levels or more.
-    bool textured(const uint8_t* left, size_t stride, int x, int ya, int yb) const
+    // Whether left pixel (x, y) matches some disparity of the range within
+    // textured_max_cost bits.
+    bool matchesInRange(int x, int y)
     {
-        const int xa = std::max(0, x - 2), xb = std::min(settings.width - 1, x + 2);
-        int lo = 255, hi = 0;
-        for (int y = ya; y <= yb; ++y) {
-            const uint8_t* row = left + static_cast<size_t>(y) * stride;
-            for (int u = xa; u <= xb; ++u) {
-                lo = std::min<int>(lo, row[u]);
-                hi = std::max<int>(hi, row[u]);
+        const int first = std::max(settings.min_disparity, x - (settings.width - 1));
+        const int last = std::min(settings.min_disparity + settings.num_disparities - 1, x);
+        for (int d = first; d <= last; ++d)
+            if (censusCost(x, x - d, y) <= settings.textured_max_cost)
+                return true;
+        return false;
+    }
+
+    // Rows y0..y1-1 lose the disparities of flat stretches (no texture) whose textured
+    // ends, along the row, have no disparity and one of them matches nothing in the
+    // range: paths that keep P2 high carry a disparity across a flat patch from around it,
+    // and when the patch's own edges match nothing the range holds, the patch is nearer
+    // than the range (a uniform box would read as the wall behind it). The stretch is
+    // flagged as its edge is. Edges that match something in the range but not the
+    // disparity carried there (a periodic pattern's) leave it alone: the patch is in the
+    // range. Runs after dropUnmatchedTexture(), which flags the edges.
+    void dropFlatBetweenUnmatchedEdges(std::vector<int16_t>& disparity, const uint8_t* left,
+                                       size_t stride, int y0, int y1, uint8_t* edge_state,
+                                       uint8_t* range_limit)
+    {
+        // edge_state[x]: the nearest textured pixel at or before x, along the row: 0 none,
+        // 1 with a disparity, 2 without, 3 matching nothing in the range (flagged). A flat
+        // stretch dropped beside an edge that matches nothing in the range is flagged too:
+        // it is that edge's surface.
+        const int w = settings.width, h = settings.height;
+        for (int y = y0; y < y1; ++y) {
+            const size_t row = static_cast<size_t>(y) * static_cast<size_t>(w);
+            uint8_t state = 0;
+            const auto edge = [&](int x) -> uint8_t {
+                const size_t i = row + static_cast<size_t>(x);
+                return disparity[i] != kNoDisparity ? 1 : range_limit[i] != 0 ? 3 : 2;
+            };
+            for (int x = 0; x < w; ++x) {
+                if (isTextured(left, stride, w, h, x, y, settings.textured_min_range))
+                    state = edge(x);
+                edge_state[static_cast<size_t>(x)] = state;
+            }
+            state = 0;
+            for (int x = w - 1; x >= 0; --x) {
+                int16_t& d = disparity[row + static_cast<size_t>(x)];
+                const bool textured =
+                    isTextured(left, stride, w, h, x, y, settings.textured_min_range);
+                if (textured) {
+                    state = edge(x);
+                    continue;
+                }
+                const uint8_t before = edge_state[static_cast<size_t>(x)];
+                if (d != kNoDisparity && before != 1 && state != 1 && (before == 3 || state == 3)) {
+                    d = kNoDisparity;
+                    range_limit[row + static_cast<size_t>(x)] = 1;
+                }
             }
         }
-        return hi - lo >= settings.textured_min_range;
     }
 
     // Hamming distance of the census of left pixel (x, y) and right pixel (xr, y).
@@ -505,9 +561,13 @@ void CensusSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* 
             m.medianRows(band_start(band), band_start(band + 1));
         // Before the speckle removal, which then takes what is left of a surface that the
         // check emptied.
-        if (checks_texture)
+        if (checks_texture) {
             m.dropUnmatchedTexture(*result, left, left_stride, band_start(band),
-                                   band_start(band + 1), nullptr);
+                                   band_start(band + 1), nullptr, out.range_limit);
+            m.dropFlatBetweenUnmatchedEdges(
+                *result, left, left_stride, band_start(band), band_start(band + 1),
+                m.bands[static_cast<size_t>(band)].edge_state.data(), out.range_limit);
+        }
         if (s.speckle_window_px > 0)
             m.speckle.labelBand(result->data(), kNoDisparity, max_step, band_start(band),
                                 band_start(band + 1));
@@ -534,7 +594,7 @@ void CensusSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* 
     m.pool.run(bands, [&](int band) {
         if (checks_texture)
             m.dropUnmatchedTexture(*result, left, left_stride, band_start(band),
-                                   band_start(band + 1), out.confidence);
+                                   band_start(band + 1), out.confidence, nullptr);
         m.finishRows(*result, band_start(band), band_start(band + 1), out);
     });
 }
@@ -542,6 +602,22 @@ void CensusSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* 
 const CensusSgmSettings& CensusSgm::settings() const
 {
     return impl_->settings;
+}
+
+void CensusSgm::censusRows(int y, CensusRowPointers& out) const
+{
+    Impl& m = *impl_;
+    for (int p = 0; p < m.planes; ++p) {
+        out.left[p] = m.planeRow(m.census_left, p, y);
+        out.right[p] = m.planeRow(m.census_right, p, y);
+        out.right_reversed[p] = m.planeRow(m.census_right_reversed, p, y);
+    }
+    out.rows = CensusRows{out.left, out.right, out.right_reversed, m.planes};
+}
+
+const SgmKernels& CensusSgm::kernels() const
+{
+    return *impl_->kernels;
 }
 
 const char* CensusSgm::target() const

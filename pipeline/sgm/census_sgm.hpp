@@ -115,6 +115,15 @@ struct CensusSgmOutput {
 // Bytes of working memory a matcher with these settings allocates.
 size_t censusSgmMemoryBytes(const CensusSgmSettings& settings);
 
+// Pointers to one row of the census images of both views (CensusSgm::censusRows()), and
+// the CensusRows that the kernels take, pointing into them.
+struct CensusRowPointers {
+    const uint8_t* left[8];
+    const uint8_t* right[8];
+    const uint8_t* right_reversed[8];
+    CensusRows rows{left, right, right_reversed, 0};
+};
+
 class CensusSgm {
   public:
     // Validates (std::invalid_argument), allocates every buffer and starts the threads.
@@ -131,6 +140,10 @@ class CensusSgm {
                  const CensusSgmOutput& out);
 
     const CensusSgmSettings& settings() const;
+    // Row y of the census images the last compute() made (both views, and the right one
+    // reversed), valid until the next compute(): for the near-field probe.
+    void censusRows(int y, CensusRowPointers& out) const;
+    const SgmKernels& kernels() const;
     // The kernels' target: "AVX2", "SSE4", "NEON", ..., or "scalar".
     const char* target() const;
 

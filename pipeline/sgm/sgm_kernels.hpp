@@ -170,6 +170,17 @@ struct SgmKernels {
                        const DecideSettings& settings, int16_t* disparity, uint8_t* confidence,
                        uint8_t* range_limit);
 
+    // Adds one pixel's matching costs to a cost curve over a run of disparities: for k in
+    // 0..count-1, curve[k] += the Hamming distance of the census of left pixel x and right
+    // pixel x - (first_disparity + k). The caller keeps every right pixel inside the row
+    // (0 <= x - first_disparity - (count - 1) and x - first_disparity <= width - 1), gives
+    // a curve of count entries rounded up to a multiple of kLaneAlign, and ignores the
+    // entries past count (they may change). right_reversed is read up to kLaneAlign bytes
+    // past the run. For the near-field probe (near_field_probe.hpp), which compares the
+    // costs of whole tiles within and beyond the range a matcher searched.
+    void (*cost_curve)(const CensusRows& census, int x, int width, int first_disparity, int count,
+                       uint16_t* curve);
+
     // One row of the 3x3 median of 16-bit disparities (up, row, down: rows y-1, y, y+1),
     // for x in 1 .. width-2: `invalid` stays invalid, and an invalid neighbour counts as
     // the centre's value. dst[0] and dst[width-1] are left alone.

@@ -60,6 +60,20 @@ void costRow(const CensusRows& census, int width, int min_disparity, int num_dis
     }
 }
 
+void costCurve(const CensusRows& census, int x, int width, int first_disparity, int count,
+               uint16_t* curve)
+{
+    (void)width;
+    for (int k = 0; k < count; ++k) {
+        const int xr = x - first_disparity - k;
+        int distance = 0;
+        for (int p = 0; p < census.planes; ++p)
+            distance +=
+                std::popcount(static_cast<unsigned>(census.left[p][x] ^ census.right[p][xr]));
+        curve[k] = static_cast<uint16_t>(curve[k] + distance);
+    }
+}
+
 // One step of a path: L(k) = C(k) + min(Lp(k), Lp(k±1) + P1, min Lp + P2) - min Lp.
 // prev and out are path blocks (L at kPathPad, 255 around it); prev == nullptr starts
 // the path (L = C).
@@ -294,8 +308,8 @@ void medianRow(const int16_t* up, const int16_t* row, const int16_t* down, int w
 
 const SgmKernels& scalarKernels()
 {
-    static const SgmKernels kernels{"scalar",        censusRow, costRow,  pathsForward,
-                                    winnersBackward, decideRow, medianRow};
+    static const SgmKernels kernels{"scalar",        censusRow, costRow,   pathsForward,
+                                    winnersBackward, decideRow, costCurve, medianRow};
     return kernels;
 }
 

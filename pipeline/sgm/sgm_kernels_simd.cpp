@@ -60,6 +60,11 @@ void DecideRow(const WinnerRows& winners, const uint16_t* right_lane, int width,
     scalarKernels().decide_row(winners, right_lane, width, settings, disparity, confidence,
                                range_limit);
 }
+void CostCurve(const CensusRows& census, int x, int width, int first_disparity, int count,
+               uint16_t* curve)
+{
+    scalarKernels().cost_curve(census, x, width, first_disparity, count, curve);
+}
 void MedianRow(const int16_t* up, const int16_t* row, const int16_t* down, int width,
                int16_t invalid, int16_t* dst)
 {
@@ -594,6 +599,32 @@ void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int wid
     });
 }
 
+void CostCurve(const CensusRows& census, int x, int width, int first_disparity, int count,
+               uint16_t* curve)
+{
+    const D8 d;
+    const int n = static_cast<int>(hn::Lanes(d));
+    // right pixel x - first_disparity - k sits at right_reversed index j0 + k.
+    const std::ptrdiff_t j0 = width - 1 - x + first_disparity;
+    uint8_t left[8];
+    for (int p = 0; p < census.planes; ++p)
+        left[p] = census.left[p][x];
+    // Byte sums (at most 64 bits differ) a vector at a time, widened into the curve by a
+    // loop the compiler vectorises.
+    HWY_ALIGN uint8_t sums[kLaneAlign];
+    for (int k0 = 0; k0 < count; k0 += n) {
+        auto sum = hn::Zero(d);
+        for (int p = 0; p < census.planes; ++p) {
+            const auto r = hn::LoadU(d, census.right_reversed[p] + j0 + k0);
+            sum = hn::Add(sum, hn::PopulationCount(hn::Xor(hn::Set(d, left[p]), r)));
+        }
+        hn::Store(sum, d, sums);
+        uint16_t* c = curve + k0;
+        for (int i = 0; i < n; ++i)
+            c[i] = static_cast<uint16_t>(c[i] + sums[i]);
+    }
+}
+
 void MedianRow(const int16_t* up, const int16_t* row, const int16_t* down, int width,
                int16_t invalid, int16_t* dst)
 {
@@ -664,6 +695,7 @@ HWY_EXPORT(CostRow);
 HWY_EXPORT(PathsForward);
 HWY_EXPORT(WinnersBackward);
 HWY_EXPORT(DecideRow);
+HWY_EXPORT(CostCurve);
 HWY_EXPORT(MedianRow);
 HWY_EXPORT(TargetName);
 
@@ -676,7 +708,7 @@ const SgmKernels& simdKernels()
         return SgmKernels{HWY_DYNAMIC_DISPATCH(TargetName)(),    HWY_DYNAMIC_DISPATCH(CensusRow),
                           HWY_DYNAMIC_DISPATCH(CostRow),         HWY_DYNAMIC_DISPATCH(PathsForward),
                           HWY_DYNAMIC_DISPATCH(WinnersBackward), HWY_DYNAMIC_DISPATCH(DecideRow),
-                          HWY_DYNAMIC_DISPATCH(MedianRow)};
+                          HWY_DYNAMIC_DISPATCH(CostCurve),       HWY_DYNAMIC_DISPATCH(MedianRow)};
     }();
     return kernels;
 }

@@ -471,6 +471,38 @@ TEST(SgmKernelsTest, DecideRowMatchesScalar)
     EXPECT_GT(at_range_limit, 100);
 }
 
+// A tile's cost curve over a run of disparities: the same sums from both kernels, added to
+// what the curve already held, for runs of every length around a vector's.
+TEST(SgmKernelsTest, CostCurveMatchesScalar)
+{
+    Random random(23);
+    for (const CostModel& model : kCostModels)
+        for (int width : {33, 64, 100, 300})
+            for (int count : {1, 15, 16, 31, 32, 33, 64, 100}) {
+                if (count > width)
+                    continue;
+                SCOPED_TRACE("width " + std::to_string(width) + ", count " + std::to_string(count) +
+                             ", planes " + std::to_string(model.planes()));
+                const int lanes = lanesFor(width);
+                const CensusRowPair census(width, 0, lanes, model.planes(), random);
+                for (int trial = 0; trial < 8; ++trial) {
+                    // Every right pixel inside the row: first <= x - (count - 1) ... x.
+                    const int x = random.uniform(count - 1, width - 1);
+                    const int first = random.uniform(std::max(0, x - width + 1), x - count + 1);
+                    const size_t entries = static_cast<size_t>(lanesFor(count));
+                    std::vector<uint16_t> expected(entries), actual(entries);
+                    fillRandom(expected, random, 0, 1000);
+                    std::copy(expected.begin(), expected.end(), actual.begin());
+                    scalarKernels().cost_curve(census.rows, x, width, first, count,
+                                               expected.data());
+                    simdKernels().cost_curve(census.rows, x, width, first, count, actual.data());
+                    for (int k = 0; k < count; ++k)
+                        ASSERT_EQ(actual[static_cast<size_t>(k)], expected[static_cast<size_t>(k)])
+                            << "x " << x << ", first " << first << ", k " << k;
+                }
+            }
+}
+
 TEST(SgmKernelsTest, MedianRowMatchesScalar)
 {
     Random random(7);

@@ -1,0 +1,316 @@
+#include "pipeline/sgm/pyramid_sgm.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "pipeline/sgm/texture.hpp"
+
+namespace stereod::sgm {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double msBetween(Clock::time_point a, Clock::time_point b)
+{
+    return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+// Floor division: -3 / 2 = -2, so that the coarse range starts at or before the full one.
+int halfFloor(int value)
+{
+    return value >= 0 ? value / 2 : -((-value + 1) / 2);
+}
+
+// 2x2 means, rounded: the coarse level's image (half_width x half_height, contiguous).
+void halve(const uint8_t* image, size_t stride, int half_width, int half_height, uint8_t* half)
+{
+    for (int y = 0; y < half_height; ++y) {
+        const uint8_t* a = image + static_cast<size_t>(2 * y) * stride;
+        const uint8_t* b = a + stride;
+        uint8_t* out = half + static_cast<size_t>(y) * static_cast<size_t>(half_width);
+        for (int x = 0; x < half_width; ++x)
+            out[x] =
+                static_cast<uint8_t>((a[2 * x] + a[2 * x + 1] + b[2 * x] + b[2 * x + 1] + 2) >> 2);
+    }
+}
+
+bool hasCoarseLevel(const PyramidSgmSettings& s)
+{
+    return s.extended_range;
+}
+
+} // namespace
+
+CensusSgmSettings coarseLevelSettings(const CensusSgmSettings& full)
+{
+    // The natural scenes' tuning whatever the full level's: it declines an ambiguous
+    // match rather than resolve it from a pattern's ends, and what the coarse level
+    // reports beyond the full range is taken as measured.
+    CensusSgmSettings c;
+    c.width = full.width / 2;
+    c.height = full.height / 2;
+    c.min_disparity = halfFloor(full.min_disparity);
+    c.num_disparities = full.num_disparities;
+    c.census_width = full.census_width;
+    c.census_height = full.census_height;
+    c.paths = full.paths;
+    c.p1 = full.p1;
+    c.p2 = full.p2;
+    c.lr_max_diff_px = full.lr_max_diff_px;
+    c.edge_margin_px = full.edge_margin_px;
+    c.speckle_window_px = CensusSgmSettings{}.speckle_window_px / 4;
+    c.threads = full.threads;
+    c.use_simd = full.use_simd;
+    return c;
+}
+
+void validatePyramidSgmSettings(const PyramidSgmSettings& s)
+{
+    validateCensusSgmSettings(s.full);
+    if (hasCoarseLevel(s)) {
+        const CensusSgmSettings coarse = coarseLevelSettings(s.full);
+        const bool sized = s.full.width != 0 || s.full.height != 0;
+        if (sized &&
+            (coarse.width <= coarse.census_width / 2 || coarse.height <= coarse.census_height / 2))
+            throw std::invalid_argument(
+                "matcher.extended_range: a " + std::to_string(s.full.width) + "x" +
+                std::to_string(s.full.height) +
+                " image is too small for a half-resolution level; turn the extended range off");
+        if (sized)
+            validateCensusSgmSettings(coarse);
+    }
+}
+
+size_t pyramidSgmMemoryBytes(const PyramidSgmSettings& s)
+{
+    size_t bytes = censusSgmMemoryBytes(s.full);
+    if (hasCoarseLevel(s)) {
+        const CensusSgmSettings coarse = coarseLevelSettings(s.full);
+        const size_t area = static_cast<size_t>(coarse.width) * static_cast<size_t>(coarse.height);
+        bytes += censusSgmMemoryBytes(coarse) + area * (2 + sizeof(float) + 2);
+    }
+    if (s.near_field_probe) {
+        const int width = hasCoarseLevel(s) ? s.full.width / 2 : s.full.width;
+        bytes += static_cast<size_t>(width + 2 * kLaneAlign) * sizeof(uint16_t);
+    }
+    return bytes;
+}
+
+struct PyramidSgm::Impl {
+    explicit Impl(const PyramidSgmSettings& s)
+        : settings(s), full(s.full), full_last(s.full.min_disparity + s.full.num_disparities - 1)
+    {
+        extended_last = full_last;
+        int probe_width = s.full.width, probe_height = s.full.height;
+        if (hasCoarseLevel(s)) {
+            const CensusSgmSettings c = coarseLevelSettings(s.full);
+            coarse = std::make_unique<CensusSgm>(c);
+            const size_t area = static_cast<size_t>(c.width) * static_cast<size_t>(c.height);
+            half_left.assign(area, 0);
+            half_right.assign(area, 0);
+            coarse_disparity.assign(area, 0.0f);
+            coarse_confidence.assign(area, 0);
+            coarse_limit.assign(area, 0);
+            coarse_near.assign(area, 0);
+            extended_last = 2 * (c.min_disparity + c.num_disparities - 1);
+            probe_width = c.width;
+            probe_height = c.height;
+        }
+        if (s.near_field_probe)
+            probe = std::make_unique<NearFieldProbe>(probe_width, probe_height);
+    }
+
+    // The coarse level's result folded into the full level's (see the header).
+    void merge(const PyramidSgmOutput& out)
+    {
+        const int w = settings.full.width, h = settings.full.height;
+        const int cw = coarse->settings().width, ch = coarse->settings().height;
+        markCoarseNearSurface();
+        for (int y = 0; y < h; ++y) {
+            const int cy = std::min(y / 2, ch - 1);
+            const size_t row = static_cast<size_t>(y) * static_cast<size_t>(w);
+            for (int x = 0; x < w; ++x) {
+                const int cx = std::min(x / 2, cw - 1);
+                const size_t c =
+                    static_cast<size_t>(cy) * static_cast<size_t>(cw) + static_cast<size_t>(cx);
+                const size_t i = row + static_cast<size_t>(x);
+                if (coarse_limit[c] != 0) {
+                    out.near_field[i] = kNearerThanExtendedRange;
+                    continue;
+                }
+                if (coarse_near[c] == 0) {
+                    // The full range's near end, next to a near surface the coarse level
+                    // measured: at least as near as that surface, the nearest around.
+                    if (out.near_field[i] == kNearerThanRange) {
+                        const float around = nearestSurfaceAround(cx, cy);
+                        if (around > 0.0f) {
+                            out.near_field[i] = kNoNearEvidence;
+                            out.disparity_px[i] = around;
+                            out.confidence[i] = kExplainedConfidence;
+                        }
+                    }
+                    continue;
+                }
+                const float coarse_px = 2.0f * coarse_disparity[c];
+                const float fine = out.disparity_px[i];
+                out.near_field[i] = kNoNearEvidence;
+                if (std::isfinite(fine) &&
+                    std::abs(fine - coarse_px) <= static_cast<float>(kMergeMarginPx))
+                    continue; // the full level agrees, to a finer pixel
+                out.disparity_px[i] = coarse_px;
+                out.confidence[i] = static_cast<uint8_t>(std::max(2, coarse_confidence[c] / 2));
+            }
+        }
+    }
+
+    // coarse_near: the coarse pixels that measured a surface at or beyond the near end of
+    // the full range (within kMergeMarginPx of it), on texture: a flat patch matches any
+    // flat patch, and says nothing about nearness.
+    void markCoarseNearSurface()
+    {
+        const CensusSgmSettings& c = coarse->settings();
+        const float full_edge = static_cast<float>(full_last - kMergeMarginPx);
+        for (int y = 0; y < c.height; ++y)
+            for (int x = 0; x < c.width; ++x) {
+                const size_t i =
+                    static_cast<size_t>(y) * static_cast<size_t>(c.width) + static_cast<size_t>(x);
+                const float coarse_px = 2.0f * coarse_disparity[i];
+                coarse_near[i] = std::isfinite(coarse_px) && coarse_px >= full_edge &&
+                                 isTextured(half_left.data(), static_cast<size_t>(c.width), c.width,
+                                            c.height, x, y, c.textured_min_range);
+            }
+    }
+
+    // The largest disparity (full-resolution pixels) of the near surfaces the coarse level
+    // measured within kExplainRadius of (cx, cy); 0 when there is none.
+    float nearestSurfaceAround(int cx, int cy) const
+    {
+        const CensusSgmSettings& c = coarse->settings();
+        float nearest = 0.0f;
+        for (int y = std::max(0, cy - kExplainRadius);
+             y <= std::min(c.height - 1, cy + kExplainRadius); ++y)
+            for (int x = std::max(0, cx - kExplainRadius);
+                 x <= std::min(c.width - 1, cx + kExplainRadius); ++x) {
+                const size_t i =
+                    static_cast<size_t>(y) * static_cast<size_t>(c.width) + static_cast<size_t>(x);
+                if (coarse_near[i] != 0)
+                    nearest = std::max(nearest, 2.0f * coarse_disparity[i]);
+            }
+        return nearest;
+    }
+
+    // The probe over the region, at the level the widest range was searched at.
+    void runProbe(const uint8_t* left, size_t left_stride, PixelRect region,
+                  const PyramidSgmOutput& out)
+    {
+        if (!probe || region.width <= 0 || region.height <= 0)
+            return;
+        const bool at_coarse = coarse != nullptr;
+        const int scale = at_coarse ? 2 : 1;
+        const CensusSgm& level = at_coarse ? *coarse : full;
+        const CensusSgmSettings& ls = level.settings();
+        const PixelRect scaled{region.x / scale, region.y / scale,
+                               (region.x + region.width + scale - 1) / scale - region.x / scale,
+                               (region.y + region.height + scale - 1) / scale - region.y / scale};
+        if (at_coarse)
+            probe->run(half_left.data(), static_cast<size_t>(ls.width), level, scaled,
+                       ls.min_disparity, ls.min_disparity + ls.num_disparities - 1);
+        else
+            probe->run(left, left_stride, level, scaled, ls.min_disparity,
+                       ls.min_disparity + ls.num_disparities - 1);
+        const uint8_t mark = at_coarse ? kNearerThanExtendedRange : kNearerThanRange;
+        const int w = settings.full.width, h = settings.full.height;
+        for (const PixelRect& tile : probe->evidenceTiles()) {
+            const int x0 = tile.x * scale, x1 = std::min(w, (tile.x + tile.width) * scale);
+            const int y0 = tile.y * scale, y1 = std::min(h, (tile.y + tile.height) * scale);
+            for (int y = y0; y < y1; ++y)
+                std::fill(out.near_field + static_cast<size_t>(y) * static_cast<size_t>(w) + x0,
+                          out.near_field + static_cast<size_t>(y) * static_cast<size_t>(w) + x1,
+                          mark);
+        }
+    }
+
+    PyramidSgmSettings settings;
+    CensusSgm full;
+    int full_last;
+    int extended_last = 0;
+    std::unique_ptr<CensusSgm> coarse; // null without the extended range
+    std::vector<uint8_t> half_left, half_right;
+    std::vector<float> coarse_disparity;
+    std::vector<uint8_t> coarse_confidence, coarse_limit;
+    std::vector<uint8_t> coarse_near; // markCoarseNearSurface()
+    std::unique_ptr<NearFieldProbe> probe;
+    PyramidSgmTimings timings;
+};
+
+PyramidSgm::PyramidSgm(const PyramidSgmSettings& settings)
+{
+    validatePyramidSgmSettings(settings);
+    impl_ = std::make_unique<Impl>(settings);
+}
+
+PyramidSgm::~PyramidSgm() = default;
+
+void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* right,
+                         size_t right_stride, PixelRect probe_region, const PyramidSgmOutput& out)
+{
+    Impl& m = *impl_;
+    const Clock::time_point t0 = Clock::now();
+    m.full.compute(left, left_stride, right, right_stride,
+                   {out.disparity_px, out.confidence, out.near_field});
+    const Clock::time_point t1 = Clock::now();
+    if (m.coarse) {
+        const CensusSgmSettings& c = m.coarse->settings();
+        halve(left, left_stride, c.width, c.height, m.half_left.data());
+        halve(right, right_stride, c.width, c.height, m.half_right.data());
+        m.coarse->compute(
+            m.half_left.data(), static_cast<size_t>(c.width), m.half_right.data(),
+            static_cast<size_t>(c.width),
+            {m.coarse_disparity.data(), m.coarse_confidence.data(), m.coarse_limit.data()});
+        m.merge(out);
+    }
+    const Clock::time_point t2 = Clock::now();
+    m.runProbe(left, left_stride, probe_region, out);
+    m.timings = {msBetween(t0, t1), msBetween(t1, t2), msBetween(t2, Clock::now())};
+}
+
+const PyramidSgmTimings& PyramidSgm::timings() const
+{
+    return impl_->timings;
+}
+
+const PyramidSgmSettings& PyramidSgm::settings() const
+{
+    return impl_->settings;
+}
+
+int PyramidSgm::fullRangeLast() const
+{
+    return impl_->full_last;
+}
+
+int PyramidSgm::extendedRangeLast() const
+{
+    return impl_->extended_last;
+}
+
+int PyramidSgm::nearEvidenceTiles() const
+{
+    return impl_->probe ? static_cast<int>(impl_->probe->evidenceTiles().size()) : 0;
+}
+
+int PyramidSgm::probedTiles() const
+{
+    return impl_->probe ? impl_->probe->probedTiles() : 0;
+}
+
+const char* PyramidSgm::target() const
+{
+    return impl_->full.target();
+}
+
+} // namespace stereod::sgm

@@ -1,0 +1,213 @@
+// census-sgm with its coarse level and near-field probe (pyramid_sgm.hpp) on synthetic pairs
+// with known disparities: the extended range measures what lies beyond the full range, a
+// surface beyond the extended range is near evidence and never a number, the full level
+// alone is CensusSgm exactly, SIMD gives the scalar reference's output, and the probe marks
+// only surfaces beyond the range.
+
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "pipeline/sgm/census_sgm.hpp"
+#include "pipeline/sgm/near_field_probe.hpp"
+#include "pipeline/sgm/pyramid_sgm.hpp"
+#include "tests/pipeline/sgm/synthetic_pair.hpp"
+
+namespace stereod::sgm {
+namespace {
+
+using test::Layer;
+using test::makeSyntheticPair;
+using test::SyntheticPair;
+
+constexpr int kWidth = 400, kHeight = 160;
+// The full level searches 0..63; the coarse level 0..63 at half size, so 0..126.
+constexpr int kNumDisparities = 64;
+constexpr PixelRect kWholeImage{0, 0, kWidth, kHeight};
+
+struct Output {
+    std::vector<float> disparity_px;
+    std::vector<uint8_t> confidence;
+    std::vector<uint8_t> near_field;
+};
+
+PyramidSgmSettings settingsFor(bool extended, bool simd = true)
+{
+    PyramidSgmSettings s;
+    s.full.width = kWidth;
+    s.full.height = kHeight;
+    s.full.num_disparities = kNumDisparities;
+    s.full.use_simd = simd;
+    s.extended_range = extended;
+    return s;
+}
+
+Output match(const SyntheticPair& pair, const PyramidSgmSettings& settings,
+             PixelRect probe = kWholeImage)
+{
+    PyramidSgm matcher(settings);
+    const size_t area = pair.left.size();
+    Output out{std::vector<float>(area, -1.0f), std::vector<uint8_t>(area, 77),
+               std::vector<uint8_t>(area, 77)};
+    const auto stride = static_cast<size_t>(pair.width);
+    matcher.compute(pair.left.data(), stride, pair.right.data(), stride, probe,
+                    {out.disparity_px.data(), out.confidence.data(), out.near_field.data()});
+    return out;
+}
+
+// A background at 8 px and one rectangle in front of it at `disparity`.
+SyntheticPair sceneWith(int disparity)
+{
+    return makeSyntheticPair(kWidth, kHeight,
+                             {{0, 0, kWidth, kHeight, 8}, {230, 40, 330, 120, disparity}}, 5);
+}
+
+// The pixels deep inside the rectangle (6 px off its edges), where the right view sees it.
+template <typename Check> void forEachInside(const SyntheticPair& pair, Check check)
+{
+    for (int y = 46; y < 114; ++y)
+        for (int x = 236; x < 324; ++x)
+            if (!pair.occluded[pair.at(x, y)])
+                check(pair.at(x, y));
+}
+
+TEST(PyramidSgmTest, TheExtendedRangeMeasuresASurfaceBeyondTheFullRange)
+{
+    const SyntheticPair pair = sceneWith(100); // beyond 63, within 126
+    const Output out = match(pair, settingsFor(true));
+    int inside = 0, measured = 0, evidence = 0;
+    forEachInside(pair, [&](size_t i) {
+        ++inside;
+        const float d = out.disparity_px[i];
+        if (std::isfinite(d)) {
+            EXPECT_NEAR(d, 100.0f, 2.5f) << "pixel " << i % kWidth << "," << i / kWidth;
+            EXPECT_GE(out.confidence[i], 1);
+            ++measured;
+        }
+        evidence += out.near_field[i] != kNoNearEvidence;
+    });
+    EXPECT_GT(measured, inside * 3 / 4) << "measured " << measured << " of " << inside;
+
+    // The full level alone cannot: nearer than its range, never a number of the background.
+    const Output full = match(pair, settingsFor(false));
+    int flagged = 0;
+    forEachInside(pair, [&](size_t i) {
+        const float d = full.disparity_px[i];
+        EXPECT_FALSE(std::isfinite(d) && d < 60.0f) << "a too-far number: " << d;
+        flagged += full.near_field[i] == kNearerThanRange;
+    });
+    EXPECT_GT(flagged, inside / 4);
+    EXPECT_LT(evidence, inside / 20);
+}
+
+TEST(PyramidSgmTest, ASurfaceBeyondTheExtendedRangeIsNearEvidenceNeverANumber)
+{
+    const SyntheticPair pair = sceneWith(150); // beyond 126
+    const Output out = match(pair, settingsFor(true));
+    int inside = 0, beyond = 0;
+    forEachInside(pair, [&](size_t i) {
+        ++inside;
+        const float d = out.disparity_px[i];
+        EXPECT_FALSE(std::isfinite(d) && d < 120.0f) << "a too-far number: " << d;
+        beyond += out.near_field[i] == kNearerThanExtendedRange;
+    });
+    EXPECT_GT(beyond, inside / 2) << beyond << " of " << inside;
+}
+
+TEST(PyramidSgmTest, WithoutTheExtendedRangeTheFullLevelIsCensusSgm)
+{
+    const SyntheticPair pair = sceneWith(40);
+    const PyramidSgmSettings settings = settingsFor(false);
+    const Output pyramid = match(pair, settings, PixelRect{});
+    CensusSgm core(settings.full);
+    const size_t area = pair.left.size();
+    Output alone{std::vector<float>(area), std::vector<uint8_t>(area), std::vector<uint8_t>(area)};
+    core.compute(pair.left.data(), kWidth, pair.right.data(), kWidth,
+                 {alone.disparity_px.data(), alone.confidence.data(), alone.near_field.data()});
+    for (size_t i = 0; i < area; ++i) {
+        ASSERT_TRUE(pyramid.disparity_px[i] == alone.disparity_px[i] ||
+                    (std::isinf(pyramid.disparity_px[i]) && std::isinf(alone.disparity_px[i])))
+            << i;
+        ASSERT_EQ(pyramid.confidence[i], alone.confidence[i]) << i;
+        ASSERT_EQ(pyramid.near_field[i], alone.near_field[i]) << i;
+    }
+}
+
+TEST(PyramidSgmTest, SimdAndScalarGiveIdenticalOutput)
+{
+    for (const int disparity : {40, 100, 150}) {
+        const SyntheticPair pair = sceneWith(disparity);
+        const Output simd = match(pair, settingsFor(true, true));
+        const Output scalar = match(pair, settingsFor(true, false));
+        for (size_t i = 0; i < pair.left.size(); ++i) {
+            ASSERT_TRUE(simd.disparity_px[i] == scalar.disparity_px[i] ||
+                        (std::isinf(simd.disparity_px[i]) && std::isinf(scalar.disparity_px[i])))
+                << "disparity " << disparity << ", pixel " << i;
+            ASSERT_EQ(simd.confidence[i], scalar.confidence[i]) << disparity << ", " << i;
+            ASSERT_EQ(simd.near_field[i], scalar.near_field[i]) << disparity << ", " << i;
+        }
+    }
+}
+
+TEST(PyramidSgmTest, TheLevelsRanges)
+{
+    PyramidSgm extended(settingsFor(true));
+    EXPECT_EQ(extended.fullRangeLast(), 63);
+    EXPECT_EQ(extended.extendedRangeLast(), 126);
+    PyramidSgm full(settingsFor(false));
+    EXPECT_EQ(full.extendedRangeLast(), 63);
+    // A negative first disparity halves downwards, so the coarse range covers the full one.
+    PyramidSgmSettings negative = settingsFor(true);
+    negative.full.min_disparity = -5;
+    const CensusSgmSettings coarse = coarseLevelSettings(negative.full);
+    EXPECT_EQ(coarse.min_disparity, -3);
+    EXPECT_EQ(coarse.width, kWidth / 2);
+    EXPECT_EQ(coarse.num_disparities, kNumDisparities);
+}
+
+TEST(PyramidSgmTest, RefusesAnImageTooSmallForTheCoarseLevel)
+{
+    PyramidSgmSettings s = settingsFor(true);
+    s.full.width = 9;
+    s.full.height = 2;
+    EXPECT_THROW(validatePyramidSgmSettings(s), std::invalid_argument);
+    s.extended_range = false;
+    s.full.width = 16;
+    EXPECT_NO_THROW(validatePyramidSgmSettings(s));
+}
+
+// The probe alone, on the full level's census: a textured surface beyond the range marks
+// the tiles on it and nothing else; a scene within the range marks none.
+TEST(NearFieldProbeTest, MarksTheTilesOfASurfaceBeyondTheRangeOnly)
+{
+    for (const int disparity : {20, 90}) {
+        const SyntheticPair pair = sceneWith(disparity);
+        CensusSgmSettings s = settingsFor(false).full;
+        CensusSgm core(s);
+        const size_t area = pair.left.size();
+        std::vector<float> d(area);
+        std::vector<uint8_t> c(area), r(area);
+        core.compute(pair.left.data(), kWidth, pair.right.data(), kWidth,
+                     {d.data(), c.data(), r.data()});
+        NearFieldProbe probe(kWidth, kHeight);
+        probe.run(pair.left.data(), kWidth, core, kWholeImage, 0, kNumDisparities - 1);
+        EXPECT_GT(probe.probedTiles(), 100);
+        int on = 0, off = 0;
+        for (const PixelRect& tile : probe.evidenceTiles()) {
+            const int cx = tile.x + tile.width / 2, cy = tile.y + tile.height / 2;
+            const bool on_surface = cx >= 230 && cx < 330 && cy >= 40 && cy < 120;
+            (on_surface ? on : off) += 1;
+        }
+        if (disparity == 20) {
+            EXPECT_EQ(on + off, 0) << "a scene within the range gives no evidence";
+        } else {
+            EXPECT_GE(on, 60) << "of the 12 x 10 tiles on the surface";
+            EXPECT_EQ(off, 0);
+        }
+    }
+}
+
+} // namespace
+} // namespace stereod::sgm
