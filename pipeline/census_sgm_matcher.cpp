@@ -16,41 +16,46 @@ class CensusSgmMatcher final : public Matcher {
         configure(settings, range);
     }
 
-    void compute(const cv::Mat& left, const cv::Mat& right, MatchOutput& out) override
+    void compute(const cv::Mat& left, const cv::Mat& right, const cv::Rect& watched,
+                 MatchOutput& out) override
     {
         CV_Assert(left.type() == CV_8UC1 && right.type() == CV_8UC1 && left.size() == right.size());
-        if (!core_ || core_->settings().width != left.cols ||
-            core_->settings().height != left.rows) {
-            sgm::CensusSgmSettings sized = settings_;
-            sized.width = left.cols;
-            sized.height = left.rows;
-            core_ = std::make_unique<sgm::CensusSgm>(sized);
+        if (!core_ || core_->settings().full.width != left.cols ||
+            core_->settings().full.height != left.rows) {
+            sgm::PyramidSgmSettings sized = settings_;
+            sized.full.width = left.cols;
+            sized.full.height = left.rows;
+            core_ = std::make_unique<sgm::PyramidSgm>(sized);
         }
         out.disparity_px.create(left.size(), CV_32FC1);
         out.confidence.create(left.size(), CV_8UC1);
-        out.range_limit.create(left.size(), CV_8UC1);
+        out.near_field.create(left.size(), CV_8UC1);
         CV_Assert(out.disparity_px.isContinuous() && out.confidence.isContinuous() &&
-                  out.range_limit.isContinuous());
+                  out.near_field.isContinuous());
         core_->compute(left.data, left.step, right.data, right.step,
+                       {watched.x, watched.y, watched.width, watched.height},
                        {out.disparity_px.ptr<float>(), out.confidence.ptr<uint8_t>(),
-                        out.range_limit.ptr<uint8_t>()});
+                        out.near_field.ptr<uint8_t>()});
     }
 
     void configure(const MatcherSettings& settings, const DisparityRange& range) override
     {
-        settings_ = censusSgmSettings(settings, range);
-        sgm::validateCensusSgmSettings(settings_);
+        settings_ = pyramidSgmSettings(settings, range);
+        sgm::validatePyramidSgmSettings(settings_);
         name_ = matcherName(settings);
         core_.reset(); // rebuilt, with its buffers, on the next pair
     }
 
     std::string name() const override { return name_; }
     MatcherKind kind() const override { return MatcherKind::CensusSgm; }
+    bool nearFieldGuard() const override { return settings_.near_field_probe; }
+    double extendedRangeMs() const override { return core_ ? core_->timings().extended_ms : 0.0; }
+    double nearFieldProbeMs() const override { return core_ ? core_->timings().probe_ms : 0.0; }
 
   private:
-    sgm::CensusSgmSettings settings_;
+    sgm::PyramidSgmSettings settings_;
     std::string name_; // with the tuning, when it is not the default
-    std::unique_ptr<sgm::CensusSgm> core_;
+    std::unique_ptr<sgm::PyramidSgm> core_;
 };
 
 } // namespace
@@ -91,6 +96,16 @@ sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& s, const Dispari
     return c;
 }
 
+sgm::PyramidSgmSettings pyramidSgmSettings(const MatcherSettings& settings,
+                                           const DisparityRange& range)
+{
+    sgm::PyramidSgmSettings p;
+    p.full = censusSgmSettings(settings, range);
+    p.extended_range = settings.extended_range;
+    p.near_field_probe = true;
+    return p;
+}
+
 void validateCensusSgm(const MatcherSettings& settings)
 {
     DisparityRange range;
@@ -105,7 +120,7 @@ void validateCensusSgm(const MatcherSettings& settings)
     if (settings.num_disparities == 0 && settings.max_num_disparities > sgm::kMaxDisparities)
         throw std::invalid_argument("matcher.max_num_disparities: " + most +
                                     std::to_string(settings.max_num_disparities));
-    sgm::validateCensusSgmSettings(censusSgmSettings(settings, range));
+    sgm::validatePyramidSgmSettings(pyramidSgmSettings(settings, range));
 }
 
 std::unique_ptr<Matcher> makeCensusSgmMatcher(const MatcherSettings& settings,

@@ -1,12 +1,14 @@
 #pragma once
 // Our census + semi-global matcher (pipeline/sgm) behind the Matcher interface: the
-// service's default. The core is sized for one image size; it is set up on the first
-// pair of a size (the only allocation) and again after configure().
+// service's default, with its extended range and near-field probe (pyramid_sgm.hpp). The
+// core is sized for one image size; it is set up on the first pair of a size (the only
+// allocation) and again after configure().
 
 #include <memory>
 
 #include "pipeline/matcher.hpp"
 #include "pipeline/sgm/census_sgm.hpp"
+#include "pipeline/sgm/pyramid_sgm.hpp"
 
 namespace stereod {
 
@@ -15,6 +17,11 @@ namespace stereod {
 // process may run on.
 sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& settings,
                                          const DisparityRange& range);
+
+// The same with the levels around it: the extended range as configured, and the near-field
+// probe.
+sgm::PyramidSgmSettings pyramidSgmSettings(const MatcherSettings& settings,
+                                           const DisparityRange& range);
 
 // Throws std::invalid_argument naming the matcher.* setting that cannot work.
 void validateCensusSgm(const MatcherSettings& settings);

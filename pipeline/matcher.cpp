@@ -70,11 +70,12 @@ void fullConfidenceWhereValid(const cv::Mat& disparity_px, cv::Mat& confidence)
 // Both OpenCV matchers share the fixed-point output and its conversion.
 class FixedPointMatcher : public Matcher {
   public:
-    void compute(const cv::Mat& left, const cv::Mat& right, MatchOutput& out) override
+    void compute(const cv::Mat& left, const cv::Mat& right, const cv::Rect&,
+                 MatchOutput& out) override
     {
         CV_Assert(left.type() == CV_8UC1 && right.type() == CV_8UC1 && left.size() == right.size());
-        out.range_limit.create(left.size(), CV_8UC1);
-        out.range_limit.setTo(0);
+        out.near_field.create(left.size(), CV_8UC1);
+        out.near_field.setTo(0);
         if (left.cols <= range_.min_disparity + range_.num_disparities - 1) {
             // No column has its whole range inside the right image: nothing can be matched.
             out.disparity_px.create(left.size(), CV_32FC1);

@@ -23,9 +23,13 @@ struct MatchOutput {
     // trusted (census-sgm: from uniqueness, sharpness of the minimum and left-right
     // agreement; OpenCV's matchers give none: 255 for every reported pixel).
     cv::Mat confidence;
-    // CV_8UC1: 1 where the best match sits at the near end of the disparity range, so the
-    // surface may be nearer than the range can see (its disparity_px is invalid).
-    cv::Mat range_limit;
+    // CV_8UC1, near-field evidence: a surface may be nearer than the range sees there.
+    // 0 none; 1 nearer than the full-resolution range (the best match at its near end, not
+    // measured by the extended range); 2 nearer than the extended range (the coarse level's
+    // best match at its near end, or the near-field probe's evidence,
+    // pipeline/sgm/near_field_probe.hpp). Only census-sgm looks for it; OpenCV's matchers
+    // leave it 0 (pipeline/reading_verdict.hpp: their readings say the guard is off).
+    cv::Mat near_field;
 };
 
 class Matcher {
@@ -35,8 +39,18 @@ class Matcher {
     // left, right: rectified CV_8UC1 images of the same size. Columns whose whole search
     // range lies outside the right image (x < min_disparity + num_disparities - 1) are
     // invalid for OpenCV's matchers; census-sgm searches the part that is inside and
-    // keeps a disparity only well below where the image edge cut the search.
-    virtual void compute(const cv::Mat& left, const cv::Mat& right, MatchOutput& out) = 0;
+    // keeps a disparity only well below where the image edge cut the search. watched: the
+    // region the reading comes from (pixels), where census-sgm's near-field probe looks.
+    virtual void compute(const cv::Mat& left, const cv::Mat& right, const cv::Rect& watched,
+                         MatchOutput& out) = 0;
+
+    // Whether the matcher gives near-field evidence (MatchOutput::near_field).
+    virtual bool nearFieldGuard() const { return false; }
+
+    // Of the last compute()'s time, what census-sgm's extended range and near-field probe
+    // took (ms; 0 for the others).
+    virtual double extendedRangeMs() const { return 0.0; }
+    virtual double nearFieldProbeMs() const { return 0.0; }
 
     // Applies new parameters of the same matcher kind (and SGBM mode) without rebuilding.
     // The settings must have passed validateMatcherSettings().

@@ -73,14 +73,25 @@ struct MatcherSettings {
     int paths = 0;             // aggregation paths, 3 or 5; 0: automatic
     int p2_gradient_scale = 0; // P2 / (1 + |dI| / scale), grey levels; 0: automatic
     int threads = 0;           // threads inside matching; 0: the cores available
+    // census-sgm: a half-resolution level over twice the disparity range, merged into the
+    // full-resolution match (pipeline/sgm/pyramid_sgm.hpp): the closest depth measured
+    // halves for about a quarter more matching time.
+    bool extended_range = true;
 };
 
 // How the disparity range was chosen, for logs and `status`.
 struct DisparityRange {
     int min_disparity = 0;
-    int num_disparities = 0;      // multiple of 16
-    double closest_depth_m = 0.0; // the nearest depth this range can see
-    bool capped = false;          // true when max_num_disparities kept min_depth_m out of sight
+    int num_disparities = 0; // multiple of 16: the full-resolution search
+    // The nearest depth the matcher measures: with the extended range, twice the
+    // disparities' (about half the full-resolution range's closest depth).
+    double closest_depth_m = 0.0;
+    bool capped = false; // true when max_num_disparities kept min_depth_m out of sight
+    // The nearest depth the full-resolution search sees (closest_depth_m without the
+    // extended range).
+    double range_closest_depth_m = 0.0;
+    bool extended = false;     // census-sgm's extended range is on
+    int last_disparity_px = 0; // the largest disparity measured (extended included)
 };
 
 } // namespace stereod

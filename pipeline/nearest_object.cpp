@@ -73,29 +73,37 @@ NearestObjectFinder::NearestObjectFinder(size_t max_region_pixels)
     in_range_.reserve(max_region_pixels);
 }
 
-Reading NearestObjectFinder::find(const cv::Mat& depth_m, const cv::Mat& confidence,
-                                  const cv::Mat& range_limit, const NearestSettings& settings,
-                                  double closest_depth_m, int64_t stamp_ns, uint64_t frame)
+ReadingFacts regionFacts(const RegionMeasurement& region, const NearestSettings& settings,
+                         const NearFieldFacts& near, int64_t stamp_ns, uint64_t frame)
+{
+    ReadingFacts facts;
+    facts.pair = PairOutcome::Processed;
+    facts.stamp_ns = stamp_ns;
+    facts.frame = frame;
+    facts.region = region;
+    facts.min_valid_fraction = settings.min_valid_fraction;
+    facts.min_pixels = static_cast<uint32_t>(settings.min_pixels);
+    facts.min_in_range_fraction = settings.min_in_range_fraction;
+    facts.near_evidence_fraction = settings.range_limit_fraction;
+    facts.near_field = near;
+    return facts;
+}
+
+RegionMeasurement NearestObjectFinder::measure(const cv::Mat& depth_m, const cv::Mat& confidence,
+                                               const cv::Mat& near_field,
+                                               const NearestSettings& settings)
 {
     CV_Assert(depth_m.type() == CV_32FC1);
     CV_Assert(confidence.empty() ||
               (confidence.type() == CV_8UC1 && confidence.size() == depth_m.size()));
-    CV_Assert(range_limit.empty() ||
-              (range_limit.type() == CV_8UC1 && range_limit.size() == depth_m.size()));
-    Reading reading;
-    reading.valid = false;
-    reading.stamp_ns = stamp_ns;
-    reading.frame = frame;
-    reading.min_valid_fraction = settings.min_valid_fraction;
-    reading.min_pixels = static_cast<uint32_t>(settings.min_pixels);
-
+    CV_Assert(near_field.empty() ||
+              (near_field.type() == CV_8UC1 && near_field.size() == depth_m.size()));
+    RegionMeasurement m;
     const cv::Rect region = regionPixels(settings.roi, depth_m.size());
     const size_t region_pixels = static_cast<size_t>(region.area());
-    reading.region_pixels = static_cast<uint32_t>(region_pixels);
-    if (region_pixels == 0) {
-        reading.reason = NoReadingReason::TooFewValidPixels;
-        return reading;
-    }
+    m.region_pixels = static_cast<uint32_t>(region_pixels);
+    if (region_pixels == 0)
+        return m;
     // Grows once when the region is larger than reserved; after that clear() keeps it.
     if (in_range_.capacity() < region_pixels)
         in_range_.reserve(region_pixels);
@@ -105,15 +113,16 @@ Reading NearestObjectFinder::find(const cv::Mat& depth_m, const cv::Mat& confide
     const float hi = static_cast<float>(settings.max_depth_m);
     const uint8_t min_confidence =
         static_cast<uint8_t>(std::clamp(settings.min_confidence, 0, 255));
-    size_t valid = 0;
-    size_t at_limit = 0;
+    uint32_t valid = 0, nearer = 0, nearer_extended = 0;
     for (int y = region.y; y < region.y + region.height; ++y) {
         const float* z = depth_m.ptr<float>(y);
         const uint8_t* conf = confidence.empty() ? nullptr : confidence.ptr<uint8_t>(y);
-        const uint8_t* limit = range_limit.empty() ? nullptr : range_limit.ptr<uint8_t>(y);
+        const uint8_t* near = near_field.empty() ? nullptr : near_field.ptr<uint8_t>(y);
         for (int x = region.x; x < region.x + region.width; ++x) {
-            if (limit != nullptr && limit[x] != 0)
-                ++at_limit;
+            if (near != nullptr && near[x] != 0) {
+                ++nearer;
+                nearer_extended += near[x] >= 2;
+            }
             const float depth = z[x];
             if (!(depth > 0.0f) || !std::isfinite(depth))
                 continue;
@@ -124,37 +133,26 @@ Reading NearestObjectFinder::find(const cv::Mat& depth_m, const cv::Mat& confide
                 in_range_.push_back(depth);
         }
     }
-    const double total = static_cast<double>(region_pixels);
-    reading.valid_fraction = static_cast<double>(valid) / total;
-    reading.in_range_fraction = static_cast<double>(in_range_.size()) / total;
-    reading.range_limit_fraction = static_cast<double>(at_limit) / total;
+    m.valid_pixels = valid;
+    m.in_range_pixels = static_cast<uint32_t>(in_range_.size());
+    m.nearer_than_range_pixels = nearer;
+    m.nearer_than_extended_pixels = nearer_extended;
+    if (!in_range_.empty()) {
+        const auto nth =
+            in_range_.begin() +
+            static_cast<std::ptrdiff_t>(percentileIndex(settings.percentile, in_range_.size()));
+        std::nth_element(in_range_.begin(), nth, in_range_.end());
+        m.percentile_depth_m = static_cast<double>(*nth);
+    }
+    return m;
+}
 
-    // Checked first: a near obstacle shows up as invalid pixels at the range's edge, and
-    // a valid number from whatever lies behind it would hide it.
-    if (at_limit >= static_cast<size_t>(settings.min_pixels) &&
-        reading.range_limit_fraction >= settings.range_limit_fraction) {
-        reading.reason = NoReadingReason::NearerThanRange;
-        reading.nearer_than_m = closest_depth_m;
-        return reading;
-    }
-
-    if (reading.valid_fraction < settings.min_valid_fraction || valid == 0) {
-        reading.reason = NoReadingReason::TooFewValidPixels;
-        return reading;
-    }
-    if (in_range_.size() < static_cast<size_t>(settings.min_pixels) ||
-        reading.in_range_fraction < settings.min_in_range_fraction) {
-        reading.reason = NoReadingReason::NothingInRange;
-        return reading;
-    }
-    const auto nth =
-        in_range_.begin() +
-        static_cast<std::ptrdiff_t>(percentileIndex(settings.percentile, in_range_.size()));
-    std::nth_element(in_range_.begin(), nth, in_range_.end());
-    reading.valid = true;
-    reading.reason = NoReadingReason::None;
-    reading.distance_m = static_cast<double>(*nth);
-    return reading;
+Reading NearestObjectFinder::find(const cv::Mat& depth_m, const cv::Mat& confidence,
+                                  const cv::Mat& near_field, const NearestSettings& settings,
+                                  const NearFieldFacts& near, int64_t stamp_ns, uint64_t frame)
+{
+    return judgeReading(regionFacts(measure(depth_m, confidence, near_field, settings), settings,
+                                    near, stamp_ns, frame));
 }
 
 } // namespace stereod

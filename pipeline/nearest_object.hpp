@@ -11,6 +11,7 @@
 
 #include "pipeline/nearest_settings.hpp"
 #include "pipeline/reading.hpp"
+#include "pipeline/reading_verdict.hpp"
 
 namespace stereod {
 
@@ -27,6 +28,11 @@ cv::Rect regionPixels(const RegionOfInterest& roi, cv::Size image_size);
 // floor(percentile / 100 * (count - 1)). count must be > 0.
 size_t percentileIndex(double percentile, size_t count);
 
+// The facts of a processed pair's region for judgeReading(): the measurement and the
+// thresholds of `settings`.
+ReadingFacts regionFacts(const RegionMeasurement& region, const NearestSettings& settings,
+                         const NearFieldFacts& near, int64_t stamp_ns, uint64_t frame);
+
 // Reads the nearest object off depth maps, one after another.
 // Thread-bound: keeps a scratch buffer between calls.
 class NearestObjectFinder {
@@ -35,25 +41,26 @@ class NearestObjectFinder {
     // find() does not allocate for images up to that size.
     explicit NearestObjectFinder(size_t max_region_pixels = 0);
 
-    // depth_m: CV_32FC1, metres, invalid = 0 (NaN and +inf count as invalid too).
-    // Fills every field of the reading: stamp_ns, frame, the fractions, region_pixels and
-    // min_valid_fraction, and either distance_m or the reason there is none:
-    //  - range_limit_fraction of the region (and min_pixels) at the range's near limit
-    //    -> NearerThanRange, nearer_than_m = closest_depth_m;
-    //  - fewer than min_valid_fraction of the region valid -> TooFewValidPixels;
-    //  - fewer than min_pixels, or than min_in_range_fraction of the region, within
-    //    [min_depth_m, max_depth_m] -> NothingInRange;
-    //  - else the configured percentile of the in-range depths.
+    // What the region of a depth map holds: its valid and in-range pixels, the configured
+    // percentile of the in-range depths, and the near-field evidence.
+    // depth_m: CV_32FC1, metres, invalid = 0 (NaN and +inf count as invalid too);
     // confidence (CV_8UC1, or empty: all trusted) drops pixels below min_confidence;
-    // range_limit (CV_8UC1, or empty: none) flags pixels matched at the range's near end.
-    Reading find(const cv::Mat& depth_m, const cv::Mat& confidence, const cv::Mat& range_limit,
-                 const NearestSettings& settings, double closest_depth_m, int64_t stamp_ns,
+    // near_field (CV_8UC1, or empty: none) holds the matcher's near-field evidence
+    // (MatchOutput::near_field: 1 nearer than the range, 2 nearer than the extended range).
+    RegionMeasurement measure(const cv::Mat& depth_m, const cv::Mat& confidence,
+                              const cv::Mat& near_field, const NearestSettings& settings);
+
+    // The reading of a processed pair from its region alone (judgeReading() with the
+    // region's facts; the worker adds the rest): stamp_ns, frame, the fractions, and either
+    // distance_m or the reason there is none.
+    Reading find(const cv::Mat& depth_m, const cv::Mat& confidence, const cv::Mat& near_field,
+                 const NearestSettings& settings, const NearFieldFacts& near, int64_t stamp_ns,
                  uint64_t frame);
-    // The same without confidence or range flags (OpenCV's matchers, tests).
+    // The same without confidence or near-field evidence (OpenCV's matchers, tests).
     Reading find(const cv::Mat& depth_m, const NearestSettings& settings, int64_t stamp_ns,
                  uint64_t frame)
     {
-        return find(depth_m, cv::Mat(), cv::Mat(), settings, 0.0, stamp_ns, frame);
+        return find(depth_m, cv::Mat(), cv::Mat(), settings, NearFieldFacts{}, stamp_ns, frame);
     }
 
   private:

@@ -34,17 +34,31 @@ struct Reading {
     bool valid = false;
     double distance_m = 0.0; // meaningful only when valid
     NoReadingReason reason = NoReadingReason::NoFrameYet;
-    int64_t stamp_ns = 0;              // capture time of the pair, CLOCK_MONOTONIC
-    uint64_t frame = 0;                // pair index from the source
-    double valid_fraction = 0.0;       // of the region's pixels, those with a valid depth
-    double in_range_fraction = 0.0;    // of the region's pixels, those within the depth range
-    double min_valid_fraction = 0.0;   // the threshold in force, to explain a refusal
-    uint32_t min_pixels = 0;           // in-range pixels needed, to explain a refusal
-    uint32_t region_pixels = 0;        // size of the region of interest in pixels
-    double range_limit_fraction = 0.0; // of the region's pixels, those at the range's near limit
+    int64_t stamp_ns = 0;            // capture time of the pair, CLOCK_MONOTONIC
+    uint64_t frame = 0;              // pair index from the source
+    double valid_fraction = 0.0;     // of the region's pixels, those with a valid depth
+    double in_range_fraction = 0.0;  // of the region's pixels, those within the depth range
+    double min_valid_fraction = 0.0; // the threshold in force, to explain a refusal
+    uint32_t min_pixels = 0;         // in-range pixels needed, to explain a refusal
+    uint32_t region_pixels = 0;      // size of the region of interest in pixels
+    // Of the region's pixels, those that are near-field evidence: something there may be
+    // nearer than the disparity range sees (pipeline/reading_verdict.hpp).
+    double range_limit_fraction = 0.0;
     // NearerThanRange: the closest depth the disparity range can see, in metres; the
     // obstacle is nearer than this.
     double nearer_than_m = 0.0;
+    // The closest depth the matcher measures (with census-sgm's extended range, half the
+    // full-resolution range's), metres; 0 when no processor stands behind the reading.
+    double closest_m = 0.0;
+    // Whether the matcher looks for near-field evidence (census-sgm); OpenCV's matchers
+    // cannot, and a surface nearer than their range may read as the background behind it.
+    bool near_field_guard = false;
+    // OutOfSync: the pair's frames apart and the most allowed; Stale: the reading's age
+    // when asked and the most allowed, ms.
+    double skew_ms = 0.0;
+    double max_skew_ms = 0.0;
+    double age_ms = 0.0;
+    double max_age_ms = 0.0;
     // Set while calibration health is degraded or failed: the rows of matching points
     // are calibration_row_offset_px apart (signed median, right - left), so depth may be off.
     bool calibration_suspect = false;

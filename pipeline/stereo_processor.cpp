@@ -61,10 +61,23 @@ DisparityRange chooseDisparityRange(const MatcherSettings& settings,
             range.num_disparities = static_cast<int>(steps) * kDisparityStep;
         }
     }
-    const double largest = range.min_disparity + range.num_disparities - 1;
-    range.closest_depth_m = largest + geometry.doffs_px > 0.0
-                                ? geometry.depthFromDisparity(largest)
-                                : std::numeric_limits<double>::infinity();
+    const auto closest = [&](double largest) {
+        return largest + geometry.doffs_px > 0.0 ? geometry.depthFromDisparity(largest)
+                                                 : std::numeric_limits<double>::infinity();
+    };
+    const int full_last = range.min_disparity + range.num_disparities - 1;
+    range.extended = settings.kind == MatcherKind::CensusSgm && settings.extended_range;
+    // The coarse level searches the same count of half-resolution disparities from half
+    // the first one (pipeline/sgm/pyramid_sgm.hpp).
+    const int coarse_first =
+        range.min_disparity >= 0 ? range.min_disparity / 2 : -((-range.min_disparity + 1) / 2);
+    range.last_disparity_px =
+        range.extended ? 2 * (coarse_first + range.num_disparities - 1) : full_last;
+    range.range_closest_depth_m = closest(full_last);
+    range.closest_depth_m = closest(range.last_disparity_px);
+    // The cap keeps min_depth_m out of sight only when the extended range does not reach it.
+    if (range.capped && range.closest_depth_m <= settings.min_depth_m)
+        range.capped = false;
     return range;
 }
 
@@ -160,17 +173,23 @@ struct StereoProcessor::Impl {
         out.disparity.setTo(std::numeric_limits<float>::infinity());
         out.confidence.create(size, CV_8UC1);
         out.confidence.setTo(0);
-        out.range_limit.create(size, CV_8UC1);
-        out.range_limit.setTo(0);
+        out.near_field.create(size, CV_8UC1);
+        out.near_field.setTo(0);
         out.depth_m.create(size, CV_32FC1);
         out.depth_m.setTo(0);
         out.cloud.clear();
-        out.reading = Reading{};
-        out.reading.valid = false;
-        out.reading.reason = NoReadingReason::BadFrame;
-        out.reading.stamp_ns = out.stamp_ns;
-        out.reading.frame = out.frame;
-        out.reading.min_valid_fraction = settings.nearest.min_valid_fraction;
+        out.facts = ReadingFacts{};
+        out.facts.pair = PairOutcome::BadFrame;
+        out.facts.stamp_ns = out.stamp_ns;
+        out.facts.frame = out.frame;
+        out.facts.min_valid_fraction = settings.nearest.min_valid_fraction;
+        out.facts.near_field = nearFieldFacts();
+        out.reading = judgeReading(out.facts);
+    }
+
+    NearFieldFacts nearFieldFacts() const
+    {
+        return {matcher->nearFieldGuard(), range.range_closest_depth_m, range.closest_depth_m};
     }
 
     StereoCalibration calibration;
@@ -226,19 +245,22 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& right, int64_t
     const Clock::time_point t1 = Clock::now();
 
     // The matcher writes into the result's buffers (headers shared, nothing copied).
-    MatchOutput match{out.disparity, out.confidence, out.range_limit};
+    MatchOutput match{out.disparity, out.confidence, out.near_field};
     p.last_right = right_rectified;
-    p.matcher->compute(out.left_rectified, right_rectified, match);
+    p.matcher->compute(out.left_rectified, right_rectified,
+                       regionPixels(p.settings.nearest.roi, out.left_rectified.size()), match);
     out.disparity = match.disparity_px;
     out.confidence = match.confidence;
-    out.range_limit = match.range_limit;
+    out.near_field = match.near_field;
     const Clock::time_point t2 = Clock::now();
 
     disparityToDepth(out.disparity, p.calibration.rectified, out.depth_m);
     const Clock::time_point t3 = Clock::now();
 
-    out.reading = p.nearest.find(out.depth_m, out.confidence, out.range_limit, p.settings.nearest,
-                                 p.range.closest_depth_m, stamp_ns, frame);
+    out.facts = regionFacts(
+        p.nearest.measure(out.depth_m, out.confidence, out.near_field, p.settings.nearest),
+        p.settings.nearest, p.nearFieldFacts(), stamp_ns, frame);
+    out.reading = judgeReading(out.facts);
     const Clock::time_point t4 = Clock::now();
 
     if (p.settings.compute_cloud)
@@ -249,6 +271,8 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& right, int64_t
 
     out.timings.rectify_ms = msBetween(t0, t1);
     out.timings.match_ms = msBetween(t1, t2);
+    out.timings.extended_range_ms = p.matcher->extendedRangeMs();
+    out.timings.near_field_probe_ms = p.matcher->nearFieldProbeMs();
     out.timings.depth_ms = msBetween(t2, t3);
     out.timings.nearest_ms = msBetween(t3, t4);
     out.timings.cloud_ms = msBetween(t4, t5);

@@ -18,6 +18,7 @@
 #include "pipeline/matcher_settings.hpp"
 #include "pipeline/nearest_settings.hpp"
 #include "pipeline/reading.hpp"
+#include "pipeline/reading_verdict.hpp"
 
 namespace stereod {
 
@@ -34,6 +35,9 @@ struct StageTimings {
     double depth_ms = 0.0;
     double nearest_ms = 0.0;
     double cloud_ms = 0.0;
+    // Parts of match_ms: census-sgm's extended range and near-field probe.
+    double extended_range_ms = 0.0;
+    double near_field_probe_ms = 0.0;
     double totalMs() const { return rectify_ms + match_ms + depth_ms + nearest_ms + cloud_ms; }
 };
 
@@ -50,16 +54,20 @@ struct DepthResult {
     cv::Mat left_rectified;        // CV_8UC1
     cv::Mat disparity;             // CV_32FC1, pixels; invalid = +inf (Middlebury)
     cv::Mat confidence;            // CV_8UC1, 0 invalid, 1..255 (see MatchOutput)
-    cv::Mat range_limit;           // CV_8UC1, 1 where matched at the range's near end
+    cv::Mat near_field;            // CV_8UC1, near-field evidence (MatchOutput::near_field)
     cv::Mat depth_m;               // CV_32FC1, metres; invalid = 0
     std::vector<CloudPoint> cloud; // valid depths only; capacity kept across frames
+    // What the pair's reading is judged from (the worker adds skew and calibration health,
+    // the socket server the source and the age), and the verdict on what the chain knew.
+    ReadingFacts facts;
     Reading reading;
     StageTimings timings;
     uint64_t frame = 0;
     int64_t stamp_ns = 0; // capture time of the pair, CLOCK_MONOTONIC
 };
 
-// Works out the disparity range from the settings and the rectified geometry.
+// Works out the disparity range from the settings and the rectified geometry: the
+// full-resolution search, and what census-sgm's extended range adds.
 DisparityRange chooseDisparityRange(const MatcherSettings& settings,
                                     const RectifiedGeometry& geometry);
 
@@ -83,7 +91,8 @@ class StereoProcessor {
     StereoProcessor& operator=(const StereoProcessor&) = delete;
 
     // Runs the chain on one raw (unrectified) grayscale pair. Frames whose size does not
-    // match the calibration give a BadFrame reading, never an exception.
+    // match the calibration give a BadFrame reading, never an exception. out.facts holds
+    // the pair's facts, out.reading judgeReading() of them.
     void process(const cv::Mat& left, const cv::Mat& right, int64_t stamp_ns, uint64_t frame,
                  DepthResult& out);
 

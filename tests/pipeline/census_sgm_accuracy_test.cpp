@@ -11,7 +11,6 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -24,64 +23,13 @@
 #include "pipeline/census_sgm_matcher.hpp"
 #include "pipeline/depth_io.hpp"
 #include "pipeline/stereo_processor.hpp"
+#include "tests/pipeline/scene_truth.hpp"
 #include "tests/support/data_paths.hpp"
 
 namespace stereod {
 namespace {
 
-namespace fs = std::filesystem;
-const std::string kData = test::sharedDataDir() + "/";
-
-struct Scene {
-    std::string name;
-    std::string left, right, truth;
-    double divisor = 1.0; // ground truth value / divisor = disparity; 0 or inf unknown
-};
-
-std::vector<Scene> scenes()
-{
-    std::vector<Scene> list = {
-        {"tsukuba", "middlebury/tsukuba/im3.png", "middlebury/tsukuba/im4.png",
-         "middlebury/tsukuba/disp3.pgm", 16},
-        {"venus", "middlebury/venus/im2.png", "middlebury/venus/im6.png",
-         "middlebury/venus/disp2.pgm", 8},
-    };
-    for (const char* n : {"Art", "Books", "Dolls", "Laundry", "Moebius", "Reindeer"}) {
-        const std::string d = std::string("middlebury2005/") + n + "/";
-        list.push_back({n, d + "view1.png", d + "view5.png", d + "disp1.png", 3});
-    }
-    for (const char* n :
-         {"Adirondack", "ArtL", "Jadeplant", "Motorcycle", "Piano", "Pipes", "Playroom"}) {
-        const std::string d = std::string("middlebury2014/") + n + "/";
-        list.push_back({n, d + "im0.png", d + "im1.png", d + "disp0GT.pfm", 1});
-    }
-    list.push_back({"eth3d", "eth3d/playground_1l/im0.png", "eth3d/playground_1l/im1.png",
-                    "eth3d/playground_1l/disp0.pfm", 1});
-    const std::string kitti = "kitti2012/000070/";
-    if (fs::is_directory(kData + kitti + "disp_noc"))
-        for (const auto& entry : fs::directory_iterator(kData + kitti + "disp_noc")) {
-            const std::string file = entry.path().filename().string();
-            list.push_back({"kitti", kitti + "image_0/" + file, kitti + "image_1/" + file,
-                            kitti + "disp_noc/" + file, 256});
-        }
-    return list;
-}
-
-// Ground truth in pixels, 0 where unknown.
-cv::Mat loadTruth(const Scene& s)
-{
-    const std::string path = kData + s.truth;
-    cv::Mat truth;
-    if (path.ends_with(".pfm")) {
-        truth = readDisparity(path);
-    } else {
-        const cv::Mat raw = cv::imread(path, cv::IMREAD_UNCHANGED);
-        raw.convertTo(truth, CV_32FC1, 1.0 / s.divisor);
-    }
-    const cv::Mat known = (truth > 0) & (truth < 1e6);
-    truth.setTo(0, ~known);
-    return truth;
-}
+using test::SceneTruth;
 
 struct Metrics {
     double bad2 = 0, density = 0, too_far = 0;
@@ -110,14 +58,6 @@ Metrics score(const cv::Mat& disparity, const cv::Mat& truth)
     m.density = 100.0 * reported / std::max(1L, known);
     m.too_far = 100.0 * far / std::max(1L, reported);
     return m;
-}
-
-// The reference's range: the largest true disparity x 1.05, in steps of 16.
-int referenceRange(const cv::Mat& truth)
-{
-    double largest = 0;
-    cv::minMaxLoc(truth, nullptr, &largest);
-    return std::max(16, static_cast<int>(std::ceil(largest * 1.05 / 16.0)) * 16);
 }
 
 cv::Mat openCvThreeWay(const cv::Mat& left, const cv::Mat& right, int num_disparities)
@@ -159,18 +99,18 @@ struct SceneScores {
 // shared data are missing.
 std::vector<SceneScores> scoreEveryScene(MatcherTuning tuning)
 {
-    const std::vector<Scene> list = scenes();
-    EXPECT_GE(list.size(), 17u) << "shared data missing under " << kData;
+    const std::vector<SceneTruth> list = test::scenesWithTruth();
+    EXPECT_GE(list.size(), 17u) << "shared data missing under " << test::sharedDataDir();
     std::vector<SceneScores> scored;
-    for (const Scene& s : list) {
-        const cv::Mat left = cv::imread(kData + s.left, cv::IMREAD_GRAYSCALE);
-        const cv::Mat right = cv::imread(kData + s.right, cv::IMREAD_GRAYSCALE);
+    for (const SceneTruth& s : list) {
+        const cv::Mat left = cv::imread(s.left_path, cv::IMREAD_GRAYSCALE);
+        const cv::Mat right = cv::imread(s.right_path, cv::IMREAD_GRAYSCALE);
         if (left.empty() || right.empty()) {
             ADD_FAILURE() << s.name << ": images missing";
             continue;
         }
-        const cv::Mat truth = loadTruth(s);
-        const int n = referenceRange(truth);
+        const cv::Mat truth = test::loadTruthPx(s);
+        const int n = test::referenceRange(truth);
         const SceneScores r{s.name, n, score(censusSgm(left, right, n, 2, tuning), truth),
                             score(openCvThreeWay(left, right, n), truth)};
         std::printf("[accuracy] %s%-10s %3d disp | census-sgm bad-2 %5.2f %% density %5.1f %% "
@@ -249,15 +189,16 @@ TEST(CensusSgmAccuracy, PlanarTuningOnNaturalScenesIsAboutOpenCvThreeWay)
 }
 
 // The hostile case: Tsukuba enlarged 3x seen by a rig with f 3000 px and B 0.1 m, its
-// nearest surface at 7.13 m, searched with 32 disparities, which reach 9.4 m only. The
-// truth is nearer than the range: the reading must say so, never give a number from the
-// edge of the range (OpenCV's SGBM reads a valid 9.68 m here).
+// nearest surface at 7.13 m, searched with 32 disparities, which reach 9.4 m only (the
+// extended range, 62 disparities, 4.8 m). The reading must say that something is nearer
+// than a range, never give a number from the edge of the range (OpenCV's SGBM reads a
+// valid 9.68 m here).
 class CensusSgmTunings : public ::testing::TestWithParam<MatcherTuning> {};
 
 TEST_P(CensusSgmTunings, SurfaceNearerThanTheRangeReadsNearerThanRange)
 {
-    cv::Mat left = cv::imread(kData + "middlebury/tsukuba/im3.png", cv::IMREAD_GRAYSCALE);
-    cv::Mat right = cv::imread(kData + "middlebury/tsukuba/im4.png", cv::IMREAD_GRAYSCALE);
+    cv::Mat left = cv::imread(test::tsukubaDir() + "/im3.png", cv::IMREAD_GRAYSCALE);
+    cv::Mat right = cv::imread(test::tsukubaDir() + "/im4.png", cv::IMREAD_GRAYSCALE);
     ASSERT_FALSE(left.empty() || right.empty());
     cv::resize(left, left, {}, 3.0, 3.0, cv::INTER_CUBIC);
     cv::resize(right, right, {}, 3.0, 3.0, cv::INTER_CUBIC);
@@ -266,20 +207,32 @@ TEST_P(CensusSgmTunings, SurfaceNearerThanTheRangeReadsNearerThanRange)
     settings.matcher.num_disparities = 32;
     settings.compute_cloud = false;
     settings.nearest.max_depth_m = 100.0;
-    StereoProcessor processor(makeRectifiedCalibration(left.size(), 3000.0, 0.1), settings);
-    DepthResult out;
-    processor.process(left, right, 1, 0, out);
-    const double closest = processor.disparityRange().closest_depth_m;
-    std::printf("[accuracy] enlarged tsukuba, 32 disparities (closest %.2f m): %s, %.1f %% of "
-                "the region at the range limit\n",
-                closest, reasonCode(out.reading.reason), 100.0 * out.reading.range_limit_fraction);
-    EXPECT_FALSE(out.reading.valid);
-    EXPECT_EQ(out.reading.reason, NoReadingReason::NearerThanRange);
-    EXPECT_NEAR(out.reading.nearer_than_m, closest, 1e-9);
-    EXPECT_NEAR(closest, 3000.0 * 0.1 / 31.0, 1e-6);
+    for (const bool extended : {false, true}) {
+        settings.matcher.extended_range = extended;
+        StereoProcessor processor(makeRectifiedCalibration(left.size(), 3000.0, 0.1), settings);
+        DepthResult out;
+        processor.process(left, right, 1, 0, out);
+        const DisparityRange range = processor.disparityRange();
+        std::printf("[accuracy] enlarged tsukuba, 32 disparities%s (sees from %.2f m): %s, "
+                    "%.1f %% of the region near-field evidence\n",
+                    extended ? " and the extended range" : "", range.closest_depth_m,
+                    reasonCode(out.reading.reason), 100.0 * out.reading.range_limit_fraction);
+        EXPECT_NEAR(range.range_closest_depth_m, 3000.0 * 0.1 / 31.0, 1e-6);
+        if (out.reading.valid) {
+            // The extended range measured the nearest surface: its distance, not the edge's.
+            EXPECT_TRUE(extended);
+            EXPECT_LT(out.reading.distance_m, 7.13 * 1.05);
+            continue;
+        }
+        EXPECT_EQ(out.reading.reason, NoReadingReason::NearerThanRange);
+        EXPECT_TRUE(out.reading.nearer_than_m == range.range_closest_depth_m ||
+                    out.reading.nearer_than_m == range.closest_depth_m)
+            << out.reading.nearer_than_m;
+    }
 
     // With a range that reaches it, the same scene reads a number near the truth.
     settings.matcher.num_disparities = 64;
+    DepthResult out;
     StereoProcessor wide(makeRectifiedCalibration(left.size(), 3000.0, 0.1), settings);
     wide.process(left, right, 1, 0, out);
     ASSERT_TRUE(out.reading.valid) << reasonCode(out.reading.reason);

@@ -36,23 +36,8 @@ const std::string kSamples = test::opencvSamplesDir() + "/";
 constexpr double kSquareM = 0.025;
 const cv::TermCriteria kUndistort(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-12);
 
-std::string samplePath(const char* side, int index)
-{
-    char name[32];
-    std::snprintf(name, sizeof name, "%s%02d.jpg", side, index);
-    return kSamples + name;
-}
-
-// The 13 pairs: 01..14 without 10, which the sample set does not have.
-void samplePaths(std::vector<std::string>& left, std::vector<std::string>& right, int count = 13)
-{
-    for (int i = 1; i <= 14 && static_cast<int>(left.size()) < count; ++i) {
-        if (i == 10)
-            continue;
-        left.push_back(samplePath("left", i));
-        right.push_back(samplePath("right", i));
-    }
-}
+using test::chessboardSample;
+using test::chessboardSamples;
 
 ChessboardCalibrationOptions sampleOptions()
 {
@@ -72,7 +57,7 @@ class ChessboardCalibrationTest : public ::testing::Test {
     static void SetUpTestSuite()
     {
         std::vector<std::string> left, right;
-        samplePaths(left, right);
+        chessboardSamples(left, right);
         result_ = new ChessboardCalibrationResult(
             calibrateChessboard(left, right, sampleOptions(), [](const CornerProgress& p) {
                 ASSERT_NE(p.pair, nullptr);
@@ -488,8 +473,8 @@ TEST_F(ChessboardCalibrationTest, PreviewShowsTheFirstPairRectifiedWithRowLines)
     const StereoCalibration& c = result().calibration;
     const Rectifier rectifier(c);
     cv::Mat left, right;
-    rectifier.rectifyLeft(cv::imread(samplePath("left", 1), cv::IMREAD_GRAYSCALE), left);
-    rectifier.rectifyRight(cv::imread(samplePath("right", 1), cv::IMREAD_GRAYSCALE), right);
+    rectifier.rectifyLeft(cv::imread(chessboardSample("left", 1), cv::IMREAD_GRAYSCALE), left);
+    rectifier.rectifyRight(cv::imread(chessboardSample("right", 1), cv::IMREAD_GRAYSCALE), right);
     const cv::Rect band(0, 2, 640, 10); // above the board, no corner drawn there
     cv::Mat left_band, right_band;
     cv::extractChannel(preview(band), left_band, 0);
@@ -565,8 +550,8 @@ TEST(ChessboardCalibration, ReportsAPairWithoutTheBoardAndCalibratesFromTheRest)
     const std::string blank = dir.file("blank.png");
     ASSERT_TRUE(cv::imwrite(blank, cv::Mat(480, 640, CV_8UC1, cv::Scalar(128))));
     std::vector<std::string> left, right;
-    samplePaths(left, right, 6);
-    left.push_back(samplePath("left", 12));
+    chessboardSamples(left, right, 6);
+    left.push_back(chessboardSample("left", 12));
     right.push_back(blank);
     const ChessboardCalibrationResult r = calibrateChessboard(left, right, sampleOptions());
     EXPECT_EQ(r.pairs_used, 6);
@@ -593,7 +578,7 @@ TEST(ChessboardCalibration, SkipsAPairWithoutTheBoardWhateverItsSize)
 {
     std::vector<std::string> left = {kSamples + "left.jpg"};
     std::vector<std::string> right = {kSamples + "right.jpg"};
-    samplePaths(left, right, 7);
+    chessboardSamples(left, right, 7);
     ASSERT_EQ(cv::imread(left[0], cv::IMREAD_GRAYSCALE).size(), cv::Size(612, 459));
     int reported = 0;
     const ChessboardCalibrationResult r = calibrateChessboard(
@@ -615,22 +600,22 @@ TEST(ChessboardCalibration, RefusesUsedPairsOfDifferingSizesNamingThem)
     std::vector<std::string> large;
     for (const char* side : {"left", "right"}) {
         large.push_back(dir.file(std::string(side) + "02_large.png"));
-        cv::Mat image = cv::imread(samplePath(side, 2), cv::IMREAD_GRAYSCALE);
+        cv::Mat image = cv::imread(chessboardSample(side, 2), cv::IMREAD_GRAYSCALE);
         cv::copyMakeBorder(image, image, 0, 40, 0, 60, cv::BORDER_REPLICATE);
         ASSERT_TRUE(cv::imwrite(large.back(), image));
     }
     const std::string message =
-        refusal({samplePath("left", 1), large[0]}, {samplePath("right", 1), large[1]});
+        refusal({chessboardSample("left", 1), large[0]}, {chessboardSample("right", 1), large[1]});
     EXPECT_TRUE(contains(message, "pair " + large[0] + " / " + large[1])) << message;
     EXPECT_TRUE(contains(message, "700x520")) << message;
-    EXPECT_TRUE(contains(message, samplePath("left", 1))) << message;
+    EXPECT_TRUE(contains(message, chessboardSample("left", 1))) << message;
     EXPECT_TRUE(contains(message, "640x480")) << message;
 }
 
 TEST(ChessboardCalibration, RefusesTooFewUsablePairsSayingHowMany)
 {
     std::vector<std::string> left, right;
-    samplePaths(left, right, 3);
+    chessboardSamples(left, right, 3);
     const std::string message = refusal(left, right);
     EXPECT_TRUE(contains(message, "only 3 usable pairs of 3")) << message;
     EXPECT_TRUE(contains(message, "at least 6")) << message;
@@ -639,7 +624,7 @@ TEST(ChessboardCalibration, RefusesTooFewUsablePairsSayingHowMany)
 TEST(ChessboardCalibration, RefusesABoardSizeFoundNowhereSuggestingInnerCorners)
 {
     std::vector<std::string> left, right;
-    samplePaths(left, right, 2);
+    chessboardSamples(left, right, 2);
     ChessboardCalibrationOptions options = sampleOptions();
     options.board.cols = 10; // the squares counted, not the inner corners
     options.board.rows = 7;
@@ -652,28 +637,28 @@ TEST(ChessboardCalibration, RefusesUnreadableFilesNamingThem)
 {
     test::TempDir dir;
     const std::string missing = dir.file("left99.jpg");
-    std::string message = refusal({missing}, {samplePath("right", 1)});
+    std::string message = refusal({missing}, {chessboardSample("right", 1)});
     EXPECT_TRUE(contains(message, missing)) << message;
     EXPECT_TRUE(contains(message, "No such file or directory")) << message;
 
     const std::string text = dir.file("right01.png");
     std::ofstream(text) << "not an image\n";
-    message = refusal({samplePath("left", 1)}, {text});
+    message = refusal({chessboardSample("left", 1)}, {text});
     EXPECT_TRUE(contains(message, text)) << message;
     EXPECT_TRUE(contains(message, "not an image")) << message;
 }
 
 TEST(ChessboardCalibration, RefusesUnequalCountsOfLeftAndRightImages)
 {
-    const std::string message =
-        refusal({samplePath("left", 1), samplePath("left", 2)}, {samplePath("right", 1)});
+    const std::string message = refusal({chessboardSample("left", 1), chessboardSample("left", 2)},
+                                        {chessboardSample("right", 1)});
     EXPECT_TRUE(contains(message, "2 left images but 1 right images")) << message;
 }
 
 TEST(ChessboardCalibration, RefusesSwappedCamerasSayingSo)
 {
     std::vector<std::string> left, right;
-    samplePaths(left, right, 6);
+    chessboardSamples(left, right, 6);
     const std::string message = refusal(right, left);
     EXPECT_TRUE(contains(message, "swapped")) << message;
 }
@@ -681,7 +666,7 @@ TEST(ChessboardCalibration, RefusesSwappedCamerasSayingSo)
 TEST(ChessboardCalibration, RefusesOptionsItCannotUse)
 {
     std::vector<std::string> left, right;
-    samplePaths(left, right, 1);
+    chessboardSamples(left, right, 1);
     ChessboardCalibrationOptions options = sampleOptions();
     options.board.rows = 9;
     EXPECT_THROW(calibrateChessboard(left, right, options), std::invalid_argument);

@@ -32,19 +32,11 @@
 namespace stereod {
 namespace {
 
-const std::string kSamples = test::opencvSamplesDir() + "/";
 const std::string kDemoConfig =
     std::string(STEREOD_SOURCE_DIR) + "/config/examples/chessboard-demo.yaml";
 constexpr double kSquareM = 0.025;
 // A reading the service gives must lie this close to the board's depth.
 constexpr double kTolerance = 0.03;
-
-std::string samplePath(const char* side, int index)
-{
-    char name[32];
-    std::snprintf(name, sizeof name, "%s%02d.jpg", side, index);
-    return kSamples + name;
-}
 
 std::string fileName(const std::string& path)
 {
@@ -58,12 +50,7 @@ class ChessboardDemoTest : public ::testing::Test {
     static void SetUpTestSuite()
     {
         std::vector<std::string> left, right;
-        for (int i = 1; i <= 14; ++i) {
-            if (i == 10)
-                continue;
-            left.push_back(samplePath("left", i));
-            right.push_back(samplePath("right", i));
-        }
+        test::chessboardSamples(left, right);
         ChessboardCalibrationOptions options;
         options.board = {9, 6, kSquareM};
         result_ = new ChessboardCalibrationResult(calibrateChessboard(left, right, options));

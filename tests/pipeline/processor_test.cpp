@@ -45,8 +45,41 @@ TEST(DisparityRange, DerivedFromTheClosestDepth)
     EXPECT_EQ(r.min_disparity, 0);
     EXPECT_EQ(r.num_disparities, 176);
     EXPECT_FALSE(r.capped);
+    EXPECT_NEAR(r.range_closest_depth_m, 84.0 / 175.0, 1e-12);
+    EXPECT_LE(r.range_closest_depth_m, 0.5);
+    // census-sgm's extended range: the coarse level's 176 half-resolution disparities reach
+    // twice as far, 0..350.
+    EXPECT_TRUE(r.extended);
+    EXPECT_EQ(r.last_disparity_px, 350);
+    EXPECT_NEAR(r.closest_depth_m, 84.0 / 350.0, 1e-12);
+}
+
+TEST(DisparityRange, OnlyCensusSgmHasTheExtendedRange)
+{
+    const RectifiedGeometry g = geometry(700.0, 0.12, 0.0);
+    MatcherSettings s = matcherDefaults(MatcherKind::Sgbm, SgbmMode::ThreeWay);
+    s.min_depth_m = 0.5;
+    DisparityRange r = chooseDisparityRange(s, g);
+    EXPECT_FALSE(r.extended);
+    EXPECT_EQ(r.last_disparity_px, 175);
+    EXPECT_NEAR(r.closest_depth_m, r.range_closest_depth_m, 1e-12);
+    s = matcherDefaults(MatcherKind::CensusSgm);
+    s.min_depth_m = 0.5;
+    s.extended_range = false;
+    r = chooseDisparityRange(s, g);
+    EXPECT_FALSE(r.extended);
     EXPECT_NEAR(r.closest_depth_m, 84.0 / 175.0, 1e-12);
-    EXPECT_LE(r.closest_depth_m, 0.5);
+}
+
+// The cap keeps min_depth_m out of sight only when the extended range does not reach it.
+TEST(DisparityRange, NotCappedWhenTheExtendedRangeReaches)
+{
+    const RectifiedGeometry g = geometry(700.0, 0.12, 0.0);
+    const DisparityRange r = rangeFor(0.3, g); // wants 281: 256 searched, 510 measured
+    EXPECT_EQ(r.num_disparities, 256);
+    EXPECT_GT(r.range_closest_depth_m, 0.3);
+    EXPECT_LE(r.closest_depth_m, 0.3);
+    EXPECT_FALSE(r.capped);
 }
 
 TEST(DisparityRange, ExactMultipleBoundaries)
@@ -63,7 +96,8 @@ TEST(DisparityRange, SubtractsDoffs)
     const DisparityRange r = rangeFor(1.15, geometry(3740.0, 0.16, 270.0));
     EXPECT_EQ(r.num_disparities, 256);
     EXPECT_FALSE(r.capped);
-    EXPECT_NEAR(r.closest_depth_m, 598.4 / (255.0 + 270.0), 1e-12);
+    EXPECT_NEAR(r.range_closest_depth_m, 598.4 / (255.0 + 270.0), 1e-12);
+    EXPECT_NEAR(r.closest_depth_m, 598.4 / (510.0 + 270.0), 1e-12);
 }
 
 TEST(DisparityRange, CappedAtMaxNumDisparities)
@@ -72,7 +106,8 @@ TEST(DisparityRange, CappedAtMaxNumDisparities)
     const DisparityRange r = rangeFor(0.1, g, 128); // wants 841 disparities
     EXPECT_EQ(r.num_disparities, 128);
     EXPECT_TRUE(r.capped);
-    EXPECT_NEAR(r.closest_depth_m, 84.0 / 127.0, 1e-12);
+    EXPECT_NEAR(r.range_closest_depth_m, 84.0 / 127.0, 1e-12);
+    EXPECT_NEAR(r.closest_depth_m, 84.0 / 254.0, 1e-12);
     EXPECT_GT(r.closest_depth_m, 0.1);
 }
 
@@ -85,7 +120,9 @@ TEST(DisparityRange, FixedNumberAndMinDisparity)
     EXPECT_EQ(r.num_disparities, 64);
     EXPECT_EQ(r.min_disparity, 8);
     EXPECT_FALSE(r.capped);
-    EXPECT_NEAR(r.closest_depth_m, 84.0 / 71.0, 1e-12);
+    EXPECT_NEAR(r.range_closest_depth_m, 84.0 / 71.0, 1e-12);
+    // The coarse level searches 4..67 at half size: 8..134.
+    EXPECT_NEAR(r.closest_depth_m, 84.0 / 134.0, 1e-12);
 }
 
 TEST(MatcherSettings, RejectsWhatOpenCvCannotRun)
@@ -233,12 +270,13 @@ TEST_F(Processor, CensusSgmTakesViewsOfDifferentStrides)
     const DisparityRange range{0, 16, 0.0, false};
     const std::unique_ptr<Matcher> matcher = makeMatcher(settings, range);
     MatchOutput same, mixed;
-    matcher->compute(left_, right_, same);
+    const cv::Rect whole(0, 0, left_.cols, left_.rows);
+    matcher->compute(left_, right_, whole, same);
     cv::Mat wide(left_.rows, left_.cols + 40, CV_8UC1, cv::Scalar(0));
     left_.copyTo(wide(cv::Rect(0, 0, left_.cols, left_.rows)));
     const cv::Mat left_view = wide(cv::Rect(0, 0, left_.cols, left_.rows));
     ASSERT_NE(left_view.step, right_.step);
-    matcher->compute(left_view, right_, mixed);
+    matcher->compute(left_view, right_, whole, mixed);
     EXPECT_EQ(cv::norm(same.disparity_px != mixed.disparity_px, cv::NORM_L1), 0.0);
     EXPECT_EQ(cv::norm(same.confidence, mixed.confidence, cv::NORM_INF), 0.0);
 }
