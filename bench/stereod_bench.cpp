@@ -42,6 +42,7 @@
 #include "bench/summary_table.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/census_sgm_matcher.hpp"
+#include "pipeline/nearest_object.hpp"
 #include "pipeline/sgm/census_sgm.hpp"
 #include "pipeline/stereo_processor.hpp"
 
@@ -231,6 +232,8 @@ class FrameTally {
         stages_.depth_ms += timings.depth_ms;
         stages_.nearest_ms += timings.nearest_ms;
         stages_.cloud_ms += timings.cloud_ms;
+        stages_.extended_range_ms += timings.extended_range_ms;
+        stages_.near_field_probe_ms += timings.near_field_probe_ms;
         process_ms_ += process_ms;
         publish_ms_ += publish_ms;
     }
@@ -248,6 +251,8 @@ class FrameTally {
             state.counters["depth_ms"] = stages_.depth_ms / n;
             state.counters["nearest_ms"] = stages_.nearest_ms / n;
             state.counters["cloud_ms"] = stages_.cloud_ms / n;
+            state.counters["extended_ms"] = stages_.extended_range_ms / n;
+            state.counters["probe_ms"] = stages_.near_field_probe_ms / n;
             state.counters["stages_ms"] = stages_.totalMs() / n;
             state.counters["process_ms"] = process_ms_ / n;
             state.counters["publish_ms"] = publish_ms_ / n;
@@ -367,34 +372,41 @@ cv::Ptr<cv::StereoMatcher> makeOpenCvMatcher(const MatcherSettings& s, const Dis
                                   s.speckle_window_px, s.speckle_range_px, mode);
 }
 
-// census-sgm's core with the settings the pipeline gives it for this case (the range is
-// fixed by num_disparities, so the calibration does not enter), but kMatcherThreads
-// threads.
-sgm::CensusSgmSettings censusAloneSettings(const Case& c, const MatcherChoice& m)
+// census-sgm's core as the pipeline runs it for this case (the range is fixed by
+// num_disparities, so the calibration does not enter: its extended range and near-field
+// probe over the default region), but kMatcherThreads threads.
+sgm::PyramidSgmSettings censusAloneSettings(const Case& c, const MatcherChoice& m)
 {
     const MatcherSettings settings = settingsFor(c, m).matcher;
     DisparityRange range;
     range.min_disparity = settings.min_disparity;
     range.num_disparities = settings.num_disparities;
-    sgm::CensusSgmSettings core = censusSgmSettings(settings, range);
-    core.width = c.size.width;
-    core.height = c.size.height;
-    core.threads = kMatcherThreads;
+    sgm::PyramidSgmSettings core = pyramidSgmSettings(settings, range);
+    core.full.width = c.size.width;
+    core.full.height = c.size.height;
+    core.full.threads = kMatcherThreads;
     return core;
+}
+
+// The region the pipeline's probe looks at: the nearest object's default one.
+sgm::PixelRect probeRegion(const ImagePair& pair)
+{
+    const cv::Rect r = regionPixels(NearestSettings{}.roi, pair.left.size());
+    return {r.x, r.y, r.width, r.height};
 }
 
 // census-sgm's core alone on the rectified pair, into caller-owned arrays. Kept between
 // the calls of one benchmark (it starts its threads and allocates when built).
 struct CensusAlone {
     std::string key;
-    std::unique_ptr<sgm::CensusSgm> core;
+    std::unique_ptr<sgm::PyramidSgm> core;
     std::vector<float> disparity_px;
     std::vector<uint8_t> confidence;
-    std::vector<uint8_t> range_limit;
+    std::vector<uint8_t> near_field;
 
-    sgm::CensusSgmOutput output()
+    sgm::PyramidSgmOutput output()
     {
-        return {disparity_px.data(), confidence.data(), range_limit.data()};
+        return {disparity_px.data(), confidence.data(), near_field.data()};
     }
 };
 
@@ -408,13 +420,13 @@ std::unique_ptr<CensusAlone> makeCensusAlone(const Case& c, const MatcherChoice&
     }
     auto alone = std::make_unique<CensusAlone>();
     alone->key = key(c, m);
-    alone->core = std::make_unique<sgm::CensusSgm>(censusAloneSettings(c, m));
+    alone->core = std::make_unique<sgm::PyramidSgm>(censusAloneSettings(c, m));
     const size_t pixels = pair.left.total();
     alone->disparity_px.resize(pixels);
     alone->confidence.resize(pixels);
-    alone->range_limit.resize(pixels);
+    alone->near_field.resize(pixels);
     alone->core->compute(pair.left.data, pair.left.step, pair.right.data, pair.right.step,
-                         alone->output());
+                         probeRegion(pair), alone->output());
     return alone;
 }
 
@@ -436,16 +448,24 @@ void benchCensusAlone(benchmark::State& state, const Case& c, const MatcherChoic
         }
     }
     CensusAlone& alone = *kept;
-    const sgm::CensusSgmOutput out = alone.output();
+    const sgm::PyramidSgmOutput out = alone.output();
+    const sgm::PixelRect region = probeRegion(pair);
     FrameTally tally;
+    double extended_ms = 0.0, probe_ms = 0.0;
     timeFrames(state, tally, [&] {
-        alone.core->compute(pair.left.data, pair.left.step, pair.right.data, pair.right.step, out);
+        alone.core->compute(pair.left.data, pair.left.step, pair.right.data, pair.right.step,
+                            region, out);
+        extended_ms += alone.core->timings().extended_ms;
+        probe_ms += alone.core->timings().probe_ms;
     });
     tally.report(state, "match_ms", false);
-    state.counters["num_disparities"] = alone.core->settings().num_disparities;
-    state.counters["threads"] = alone.core->settings().threads;
+    const double frames = std::max(1.0, static_cast<double>(state.iterations()));
+    state.counters["extended_ms"] = extended_ms / frames;
+    state.counters["probe_ms"] = probe_ms / frames;
+    state.counters["num_disparities"] = alone.core->settings().full.num_disparities;
+    state.counters["threads"] = alone.core->settings().full.threads;
     state.counters["memory_mb"] =
-        static_cast<double>(sgm::censusSgmMemoryBytes(alone.core->settings())) / 1e6;
+        static_cast<double>(sgm::pyramidSgmMemoryBytes(alone.core->settings())) / 1e6;
     state.SetLabel(std::string("census-sgm ") + alone.core->target());
 }
 
@@ -494,7 +514,7 @@ struct CompareRig {
         const int64_t t1 = monotonicNs();
         const ImagePair& pair = inputs.rectified;
         census->core->compute(pair.left.data, pair.left.step, pair.right.data, pair.right.step,
-                              census->output());
+                              probeRegion(pair), census->output());
         const int64_t t2 = monotonicNs();
         three_way->compute(pair.left, pair.right, disparity_fixed16);
         const int64_t t3 = monotonicNs();
@@ -633,7 +653,7 @@ void registerBenchmarks(SummaryTable& table, LatencyLog& latency)
             ->UseManualTime()
             ->Unit(benchmark::kMillisecond);
         summary.census_memory_bytes =
-            static_cast<double>(sgm::censusSgmMemoryBytes(censusAloneSettings(c, kMatchers[0])));
+            static_cast<double>(sgm::pyramidSgmMemoryBytes(censusAloneSettings(c, kMatchers[0])));
         table.addCase(std::move(summary));
     }
 }

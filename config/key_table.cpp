@@ -317,6 +317,9 @@ std::vector<KeyDef> buildKeyTable()
     add(autoIntegerKey(
         "matcher.threads", kLive, [](auto& c) -> auto& { return c.processing.matcher.threads; },
         "auto (the cores available) or a number of threads"));
+    add(boolKey(
+        "matcher.extended_range", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.extended_range; }));
 
     add(realKey(
         "nearest.roi.x", kLive, [](auto& c) -> auto& { return c.processing.nearest.roi.x; },

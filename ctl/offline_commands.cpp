@@ -174,6 +174,8 @@ json disparityRangeToJson(const DisparityRange& range)
     return {{"min_disparity", range.min_disparity},
             {"num_disparities", range.num_disparities},
             {"closest_depth_m", range.closest_depth_m},
+            {"extended_range", range.extended},
+            {"full_resolution_closest_depth_m", range.range_closest_depth_m},
             {"capped", range.capped}};
 }
 
@@ -188,11 +190,15 @@ void printDepthReport(const DepthResult& result, const DisparityRange& range,
     }
     fmt::print("  region {} px, {:.1f} % valid, {:.1f} % in range\n", reading.region_pixels,
                100.0 * reading.valid_fraction, 100.0 * reading.in_range_fraction);
-    fmt::print("matcher {}, disparities {}..{}, closest visible depth {:.3f} m{}\n", matcher,
+    fmt::print("matcher {}, disparities {}..{}{}, closest measured depth {:.3f} m{}\n", matcher,
                range.min_disparity, range.min_disparity + range.num_disparities - 1,
+               range.extended ? fmt::format(" (extended to {})", range.last_disparity_px) : "",
                range.closest_depth_m,
                range.capped ? " (capped: the configured closest depth is out of sight)" : "");
     printStageTable(stdout, stageTimingsToJson(result.timings));
+    if (range.extended)
+        fmt::print("  of match: extended range {:.2f} ms, near-field probe {:.2f} ms\n",
+                   result.timings.extended_range_ms, result.timings.near_field_probe_ms);
 }
 
 } // namespace
@@ -248,6 +254,9 @@ int runDepth(const DepthOptions& options)
         timings["total"] = result.timings.totalMs();
         const json out = {{"reading", offlineReadingJson(result.reading)},
                           {"timings_ms", timings},
+                          {"match_parts_ms",
+                           {{"extended_range", result.timings.extended_range_ms},
+                            {"near_field_probe", result.timings.near_field_probe_ms}}},
                           {"disparity_range", disparityRangeToJson(range)},
                           {"matcher", processor.matcherName()},
                           {"image", {{"width", left.cols}, {"height", left.rows}}},

@@ -88,7 +88,9 @@ struct PublishedFrame {
     int64_t skew_ns = 0;      // right minus left capture time of the pair
     uint64_t sequence = 0;    // set by publish(): 1 for the first result, then +1
     int64_t published_ns = 0; // CLOCK_MONOTONIC when published, set by publish()
-    FixedText reason_message; // why there is no reading, with numbers; may be empty
+    // What made the pair a bad frame (its sizes, the error), for the reason's message;
+    // empty otherwise. The reading's verdict is in result.facts / result.reading.
+    FixedText reason_message;
     PipelineStats stats;
     RawPair raw; // the pair as captured, when raw frames were wanted
     // The keep-out zones of this pair (empty when none are configured); each keeps its

@@ -185,11 +185,11 @@ class SocketServer {
     void handleRequest(Client& client, std::string_view line);
     // Logs a request that threw and answers it with `internal`.
     void replyFailed(Client& client, const std::exception& error, const std::optional<Json>& id);
-    // The reading to hand out now: the newest one, or no_frame_yet / source_down / stale.
-    // `message` holds the reason sentence the report points to.
+    // The reading to hand out now: judgeReading() of the newest pair's facts with the
+    // source's health and the pair's age. The report borrows `health`'s and the frame's
+    // detail texts.
     ReadingReport currentReading(const PublishedFrame* latest, double max_age_ms,
-                                 const SourceHealth& health, int64_t now_ns,
-                                 std::string& message) const;
+                                 const SourceHealth& health, int64_t now_ns) const;
     // The `status` object as of now.
     Json statusNow(int64_t now_ns);
     // Once a second, the status and the current reading to the observer.

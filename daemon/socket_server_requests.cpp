@@ -81,51 +81,22 @@ void SocketServer::replyFailed(Client& client, const std::exception& error,
 }
 
 ReadingReport SocketServer::currentReading(const PublishedFrame* latest, double max_age_ms,
-                                           const SourceHealth& health, int64_t now_ns,
-                                           std::string& message) const
+                                           const SourceHealth& health, int64_t now_ns) const
 {
+    ReadingFacts facts = latest != nullptr ? latest->result.facts : ReadingFacts{};
+    facts.calibrated = options_.calibrated;
+    facts.source_down = health.down;
+    if (latest != nullptr) {
+        facts.age_ms = static_cast<double>(now_ns - facts.stamp_ns) / 1e6;
+        facts.max_age_ms = max_age_ms;
+    }
     ReadingReport report;
-    if (latest == nullptr) {
-        report.has_frame = false;
-        report.reading.valid = false;
-        if (!options_.calibrated && !health.down) {
-            report.reading.reason = NoReadingReason::Uncalibrated;
-            message = reasonText(NoReadingReason::Uncalibrated);
-        } else if (health.down) {
-            report.reading.reason = NoReadingReason::SourceDown;
-            message = std::string(reasonText(NoReadingReason::SourceDown)) + ": " + health.message;
-        } else {
-            report.reading.reason = NoReadingReason::NoFrameYet;
-            message = reasonText(NoReadingReason::NoFrameYet);
-        }
-        report.message = message;
-        return report;
-    }
-    report.reading = latest->result.reading;
-    report.message = latest->reason_message.view();
-    const auto refuse = [&](NoReadingReason reason) {
-        report.reading.valid = false;
-        report.reading.distance_m = 0.0;
-        report.reading.reason = reason;
-        report.message = message;
-    };
-    if (health.down) {
-        message = std::string(reasonText(NoReadingReason::SourceDown)) + ": " + health.message;
-        refuse(NoReadingReason::SourceDown);
-        return report;
-    }
-    // Without a calibration no reading will ever carry a distance: that is the reason to
-    // give, whatever the age of the frame.
-    if (report.reading.reason == NoReadingReason::Uncalibrated)
-        return report;
-    const double age_ms = static_cast<double>(now_ns - report.reading.stamp_ns) / 1e6;
-    if (age_ms > max_age_ms) {
-        std::array<char, 160> text{};
-        std::snprintf(text.data(), text.size(), "%s: %.1f ms old, %.1f ms allowed",
-                      reasonText(NoReadingReason::Stale), age_ms, max_age_ms);
-        message = text.data();
-        refuse(NoReadingReason::Stale);
-    }
+    report.reading = judgeReading(facts);
+    report.has_frame = latest != nullptr;
+    if (report.reading.reason == NoReadingReason::SourceDown)
+        report.detail = health.message;
+    else if (report.reading.reason == NoReadingReason::BadFrame && latest != nullptr)
+        report.detail = latest->reason_message.view();
     return report;
 }
 
@@ -141,10 +112,9 @@ void SocketServer::handle(Client& client, const DistanceRequest& request,
 {
     const int64_t now_ns = monotonicNowNs();
     const SourceHealth health = backend_.sourceHealth(now_ns);
-    std::string message;
     const ReadingReport report = currentReading(
         publisher_.latest(), request.max_age_ms.value_or(options_.publish.max_reading_age_ms),
-        health, now_ns, message);
+        health, now_ns);
     if (client.dead || dropIfBacklogged(client))
         return;
     // Written directly: `distance` may be polled at a high rate.
@@ -160,9 +130,7 @@ Json SocketServer::statusNow(int64_t now_ns)
     const SourceHealth health = backend_.sourceHealth(now_ns);
     ServiceStatus status = backend_.serviceStatus(latest, health, now_ns);
     status.clients = counters();
-    std::string message;
-    status.reading =
-        currentReading(latest, options_.publish.max_reading_age_ms, health, now_ns, message);
+    status.reading = currentReading(latest, options_.publish.max_reading_age_ms, health, now_ns);
     status.now_ns = now_ns;
     return statusToJson(status);
 }
@@ -181,9 +149,8 @@ void SocketServer::notifyObserverOfStatus(int64_t now_ns)
     observer_status_ns_ = now_ns;
     const PublishedFrame* latest = publisher_.latest();
     const SourceHealth health = backend_.sourceHealth(now_ns);
-    std::string message;
     const ReadingReport report =
-        currentReading(latest, options_.publish.max_reading_age_ms, health, now_ns, message);
+        currentReading(latest, options_.publish.max_reading_age_ms, health, now_ns);
     observer_reading_.clear();
     appendReadingJson(observer_reading_, report, now_ns);
     observer_->onStatus(statusNow(now_ns).dump(), observer_reading_,
@@ -234,9 +201,9 @@ void SocketServer::sendSnapshot(Client& client, const SnapshotRequest& request,
                                    " image of the result has an unexpected pixel type");
     }
 
-    std::string message;
-    const ReadingReport report = currentReading(latest, options_.publish.max_reading_age_ms,
-                                                backend_.sourceHealth(now_ns), now_ns, message);
+    const SourceHealth health = backend_.sourceHealth(now_ns); // the report borrows its message
+    const ReadingReport report =
+        currentReading(latest, options_.publish.max_reading_age_ms, health, now_ns);
     const RectifiedGeometry& geometry = options_.geometry;
     Json answer = okReply(id);
     answer["frame"] = result.frame;

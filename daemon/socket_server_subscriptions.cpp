@@ -68,7 +68,7 @@ void SocketServer::onPublished()
     if (observer_ != nullptr) {
         ReadingReport report;
         report.reading = frame->result.reading;
-        report.message = frame->reason_message.view();
+        report.detail = frame->reason_message.view();
         observer_reading_.clear();
         appendReadingJson(observer_reading_, report, now_ns);
         observer_->onFrame(*frame, observer_reading_);
@@ -79,7 +79,7 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
 {
     ReadingReport report;
     report.reading = frame.result.reading;
-    report.message = frame.reason_message.view();
+    report.detail = frame.reason_message.view();
     reading_event_.clear();
     depth_header_.clear();
     zones_event_.clear();
@@ -208,9 +208,8 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
 
 void SocketServer::broadcastSourceDown(const SourceHealth& health, int64_t now_ns)
 {
-    std::string message;
     const ReadingReport report = currentReading(
-        publisher_.latest(), std::numeric_limits<double>::infinity(), health, now_ns, message);
+        publisher_.latest(), std::numeric_limits<double>::infinity(), health, now_ns);
     for (auto& [id, client] : clients_) {
         if (client.dead || !client.readings.active || dropIfBacklogged(client))
             continue;

@@ -25,13 +25,6 @@ void clearDepth(DepthResult& result)
     result.cloud.clear();
 }
 
-void refuseReading(Reading& reading, NoReadingReason reason)
-{
-    reading.valid = false;
-    reading.distance_m = 0.0;
-    reading.reason = reason;
-}
-
 } // namespace
 
 void logDisparityRange(const DisparityRange& range, const MatcherSettings& settings,
@@ -180,39 +173,40 @@ void Worker::processPair(StereoPair& pair)
     else
         slot.raw.present = false;
 
+    // The facts of the pair; the verdict is judgeReading()'s alone.
+    ReadingFacts& facts = result.facts;
     bool processed = false;
     if (processor_ == nullptr) {
-        refuseReading(result.reading, NoReadingReason::Uncalibrated);
-        slot.reason_message.assign(
-            "uncalibrated: the service runs without a calibration (raw frames only); "
-            "calibrate with `stereoctl calibrate` and restart with it");
+        facts = ReadingFacts{};
+        facts.calibrated = false;
     } else if (!pair.left || !pair.right) {
-        refuseReading(result.reading, NoReadingReason::BadFrame);
-        slot.reason_message.assign("the frame pair could not be processed: a frame is missing");
+        facts = ReadingFacts{};
+        facts.pair = PairOutcome::BadFrame;
+        slot.reason_message.assign("a frame is missing");
     } else {
         try {
             processor_->process(pair.left->image, pair.right->image, stamp_ns, frame, result);
-            processed = true;
+            processed = facts.pair == PairOutcome::Processed;
             // Before the frames go back: with a rectified-only calibration the right image
             // the matcher saw is the frame itself.
-            if (health_ != nullptr && result.reading.reason != NoReadingReason::BadFrame &&
-                health_->due(monotonicNowNs()))
+            if (health_ != nullptr && processed && health_->due(monotonicNowNs()))
                 health_->offer(result.left_rectified, processor_->lastRightRectified(), stamp_ns);
             const cv::Size calibrated = processor_->calibration().rectified.image_size;
-            if (result.reading.reason == NoReadingReason::BadFrame &&
+            if (!processed &&
                 (pair.left->image.size() != calibrated || pair.right->image.size() != calibrated))
-                slot.reason_message.format(
-                    "the frame pair could not be processed: frames %dx%d and %dx%d, "
-                    "calibration %dx%d",
-                    pair.left->image.cols, pair.left->image.rows, pair.right->image.cols,
-                    pair.right->image.rows, calibrated.width, calibrated.height);
+                slot.reason_message.format("frames %dx%d and %dx%d, calibration %dx%d",
+                                           pair.left->image.cols, pair.left->image.rows,
+                                           pair.right->image.cols, pair.right->image.rows,
+                                           calibrated.width, calibrated.height);
         } catch (const std::exception& e) {
-            refuseReading(result.reading, NoReadingReason::BadFrame);
-            slot.reason_message.format("the frame pair could not be processed: %s", e.what());
+            facts = ReadingFacts{};
+            facts.pair = PairOutcome::BadFrame;
+            slot.reason_message.assign(e.what());
             logFailure(frame, e.what());
         } catch (...) {
-            refuseReading(result.reading, NoReadingReason::BadFrame);
-            slot.reason_message.assign("the frame pair could not be processed: unknown error");
+            facts = ReadingFacts{};
+            facts.pair = PairOutcome::BadFrame;
+            slot.reason_message.assign("unknown error");
             logFailure(frame, "unknown error");
         }
     }
@@ -220,42 +214,30 @@ void Worker::processPair(StereoPair& pair)
     pair.left.reset();
     pair.right.reset();
 
-    Reading& reading = result.reading;
-    reading.stamp_ns = stamp_ns;
-    reading.frame = frame;
-    result.stamp_ns = stamp_ns;
-    result.frame = frame;
-
-    const double skew_ms = std::abs(static_cast<double>(slot.skew_ns)) / 1e6;
-    const double max_skew_ms = max_skew_ms_.load(std::memory_order_relaxed);
-    if (skew_ms > max_skew_ms && reading.reason != NoReadingReason::BadFrame &&
-        reading.reason != NoReadingReason::Uncalibrated) {
-        refuseReading(reading, NoReadingReason::OutOfSync);
-        slot.reason_message.format("%s: %.1f ms apart, %.1f ms allowed",
-                                   reasonText(NoReadingReason::OutOfSync), skew_ms, max_skew_ms);
-        ++stats_.out_of_sync;
-    }
+    facts.stamp_ns = stamp_ns;
+    facts.frame = frame;
+    facts.skew_ms = std::abs(static_cast<double>(slot.skew_ns)) / 1e6;
+    facts.max_skew_ms = max_skew_ms_.load(std::memory_order_relaxed);
     // Calibration health: a suspect calibration marks the reading, and withholds it when it
     // failed and the configuration asks for that.
-    reading.calibration_suspect = false;
-    reading.calibration_row_offset_px = 0.0;
+    facts.calibration_suspect = false;
+    facts.calibration_failed = false;
+    facts.calibration_row_offset_px = 0.0;
+    facts.withhold_when_failed = withhold_when_failed_.load(std::memory_order_relaxed);
     if (health_ != nullptr && processed) {
         const HealthState health = health_->state();
-        if (health == HealthState::Degraded || health == HealthState::Failed) {
-            reading.calibration_suspect = true;
-            reading.calibration_row_offset_px = health_->rowOffsetPx();
-            // What the region's data said (too few matches, nothing in range, nearer than
-            // the range) follows from comparing the wrong rows: the calibration is the
-            // reason to give, not advice about the range.
-            const bool from_the_data = reading.reason == NoReadingReason::TooFewValidPixels ||
-                                       reading.reason == NoReadingReason::NothingInRange ||
-                                       reading.reason == NoReadingReason::NearerThanRange;
-            if (health == HealthState::Failed &&
-                withhold_when_failed_.load(std::memory_order_relaxed) &&
-                (reading.valid || from_the_data))
-                refuseReading(reading, NoReadingReason::CalibrationSuspect);
-        }
+        facts.calibration_suspect =
+            health == HealthState::Degraded || health == HealthState::Failed;
+        facts.calibration_failed = health == HealthState::Failed;
+        facts.calibration_row_offset_px = health_->rowOffsetPx();
     }
+    result.reading = judgeReading(facts);
+    Reading& reading = result.reading;
+    result.stamp_ns = stamp_ns;
+    result.frame = frame;
+    if (reading.reason == NoReadingReason::OutOfSync)
+        ++stats_.out_of_sync;
+
     // Depth is kept when only the region lacked data (too few valid pixels, nothing in
     // range): the picture itself is sound. It is cleared when the pair is not.
     slot.depth_valid = processed && !result.depth_m.empty();
@@ -297,6 +279,8 @@ void Worker::processPair(StereoPair& pair)
         depth_ms_.add(result.timings.depth_ms);
         nearest_ms_.add(result.timings.nearest_ms);
         cloud_ms_.add(result.timings.cloud_ms);
+        extended_ms_.add(result.timings.extended_range_ms);
+        probe_ms_.add(result.timings.near_field_probe_ms);
     }
     ++stats_.frames;
     processed_ns_.add(publish_start_ns);
@@ -306,6 +290,8 @@ void Worker::processPair(StereoPair& pair)
     stats_.stage_mean_ms.depth_ms = mean(depth_ms_);
     stats_.stage_mean_ms.nearest_ms = mean(nearest_ms_);
     stats_.stage_mean_ms.cloud_ms = mean(cloud_ms_);
+    stats_.stage_mean_ms.extended_range_ms = mean(extended_ms_);
+    stats_.stage_mean_ms.near_field_probe_ms = mean(probe_ms_);
     const int64_t published_ns = monotonicNowNs();
     publish_ms_.add(static_cast<double>(published_ns - publish_start_ns) / 1e6);
     stats_.publish_mean_ms = mean(publish_ms_);

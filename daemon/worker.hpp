@@ -2,13 +2,15 @@
 // The worker: one thread that takes stereo pairs from the ring, runs the stereo chain on
 // each into the publisher's back slot, and publishes the result.
 //
-// Per pair: a pair whose capture times differ by more than max_skew_ms gives an
-// out_of_sync reading (still published, with its stamp, so that clients see why there is
-// no distance); an exception from the chain gives a bad_frame reading and a log line
-// (rate-limited), never an exception across threads; the frames go back to their source
-// right after processing. The depth, disparity and cloud of an out_of_sync or bad_frame
-// pair are cleared (PublishedFrame::depth_valid false); those of a pair whose region
-// only lacked data (too_few_valid_pixels, nothing_in_range) are kept.
+// Per pair: the worker gathers the pair's facts (processed or bad, the capture times'
+// skew, the region's measurement from the chain, calibration health) and the reading is
+// judgeReading() of them (pipeline/reading_verdict.hpp): a pair whose capture times differ
+// by more than max_skew_ms gives an out_of_sync reading (still published, with its stamp,
+// so that clients see why there is no distance); an exception from the chain gives a
+// bad_frame reading and a log line (rate-limited), never an exception across threads; the
+// frames go back to their source right after processing. The depth, disparity and cloud of an
+// out_of_sync or bad_frame pair are cleared (PublishedFrame::depth_valid false); those of a pair
+// whose region only lacked data (too_few_valid_pixels, nothing_in_range) are kept.
 //
 // Raw frames: while the publisher says they are wanted (Publisher::rawWanted()), the pair
 // is copied as captured into the slot's RawPair before it goes back to its source.
@@ -161,7 +163,7 @@ class Worker {
     ZoneMonitor zones_{ZonesSettings{}};
     PipelineStats stats_;
     RecentValues<double, kWindow> rectify_ms_, match_ms_, depth_ms_, nearest_ms_, cloud_ms_,
-        publish_ms_;
+        publish_ms_, extended_ms_, probe_ms_;
     RecentValues<int64_t, kWindow> processed_ns_;         // when each pair was done, for the rate
     RecentValues<double, kLatencyWindow> latency_ms_;     // capture stamp to publication
     std::array<double, kLatencyWindow> latency_sorted_{}; // scratch for the percentiles

@@ -10,13 +10,28 @@ namespace stereod {
 
 namespace {
 
-// Writes the reason sentence into `buffer` without allocating; returns its length.
-std::size_t formatReasonMessage(const Reading& reading, char* buffer, std::size_t size)
+// Writes the reason sentence into `buffer` without allocating, with the detail after a
+// colon; returns its length.
+std::size_t formatReasonMessage(const Reading& reading, std::string_view detail, char* buffer,
+                                std::size_t size)
 {
     int written = 0;
     switch (reading.reason) {
     case NoReadingReason::None:
         written = 0;
+        break;
+    case NoReadingReason::OutOfSync:
+        written = std::snprintf(buffer, size, "%s: %.1f ms apart, %.1f ms allowed",
+                                reasonText(reading.reason), reading.skew_ms, reading.max_skew_ms);
+        break;
+    case NoReadingReason::Stale:
+        written = std::snprintf(buffer, size, "%s: %.1f ms old, %.1f ms allowed",
+                                reasonText(reading.reason), reading.age_ms, reading.max_age_ms);
+        break;
+    case NoReadingReason::Uncalibrated:
+        written = std::snprintf(buffer, size,
+                                "uncalibrated: the service runs without a calibration (raw frames "
+                                "only); calibrate with `stereoctl calibrate` and restart with it");
         break;
     case NoReadingReason::TooFewValidPixels:
         written = std::snprintf(buffer, size, "%s: %.1f %% valid, %.1f %% needed",
@@ -38,8 +53,8 @@ std::size_t formatReasonMessage(const Reading& reading, char* buffer, std::size_
     case NoReadingReason::NearerThanRange:
         written =
             std::snprintf(buffer, size,
-                          "%s: nearer than %.3f m (%.1f %% of the region at the range's near "
-                          "limit); raise matcher.num_disparities or lower matcher.min_depth_m "
+                          "%s: nearer than %.3f m (%.1f %% of the region is near-field "
+                          "evidence); raise matcher.num_disparities or lower matcher.min_depth_m "
                           "to measure it",
                           reasonText(reading.reason), reading.nearer_than_m,
                           100.0 * reading.range_limit_fraction);
@@ -50,7 +65,14 @@ std::size_t formatReasonMessage(const Reading& reading, char* buffer, std::size_
     }
     if (written < 0 || size == 0)
         return 0;
-    return std::min(static_cast<std::size_t>(written), size - 1);
+    std::size_t length = std::min(static_cast<std::size_t>(written), size - 1);
+    if (!detail.empty() && length > 0 && length + 3 < size) {
+        const int more = std::snprintf(buffer + length, size - length, ": %.*s",
+                                       static_cast<int>(detail.size()), detail.data());
+        if (more > 0)
+            length = std::min(length + static_cast<std::size_t>(more), size - 1);
+    }
+    return length;
 }
 
 void appendVec3(std::string& out, const cv::Vec3d& v)
@@ -66,10 +88,10 @@ void appendVec3(std::string& out, const cv::Vec3d& v)
 
 } // namespace
 
-std::string reasonMessage(const Reading& reading)
+std::string reasonMessage(const Reading& reading, std::string_view detail)
 {
-    std::array<char, 256> buffer{};
-    const std::size_t length = formatReasonMessage(reading, buffer.data(), buffer.size());
+    std::array<char, 512> buffer{};
+    const std::size_t length = formatReasonMessage(reading, detail, buffer.data(), buffer.size());
     return std::string(buffer.data(), length);
 }
 
@@ -98,21 +120,21 @@ void appendReadingJson(std::string& out, const ReadingReport& report, int64_t no
     }
     if (reading.reason == NoReadingReason::NearerThanRange)
         object.field("nearer_than_m", roundTo(reading.nearer_than_m, 4));
+    if (reading.closest_m > 0.0)
+        object.field("closest_m", roundTo(reading.closest_m, 4));
+    object.field("near_field_guard", reading.near_field_guard);
     if (!valid) {
         const NoReadingReason reason =
             reading.reason == NoReadingReason::None ? NoReadingReason::BadFrame : reading.reason;
         std::string& reason_out = object.openField("reason");
         JsonObjectWriter reason_object(reason_out);
         reason_object.field("code", reasonCode(reason));
-        if (!report.message.empty()) {
-            reason_object.field("message", report.message);
-        } else {
-            Reading explained = reading;
-            explained.reason = reason;
-            std::array<char, 256> buffer{};
-            const std::size_t length = formatReasonMessage(explained, buffer.data(), buffer.size());
-            reason_object.field("message", std::string_view(buffer.data(), length));
-        }
+        Reading explained = reading;
+        explained.reason = reason;
+        std::array<char, 512> buffer{};
+        const std::size_t length =
+            formatReasonMessage(explained, report.detail, buffer.data(), buffer.size());
+        reason_object.field("message", std::string_view(buffer.data(), length));
         reason_object.close();
     }
     object.close();

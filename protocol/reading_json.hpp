@@ -22,14 +22,16 @@ struct ReadingReport {
     // False when no pair lies behind the reading (no frame yet, or a source that failed
     // before its first pair): stamp_ns and age_ms are left out.
     bool has_frame = true;
-    // The reason as one sentence with its numbers; empty: reasonMessage(reading). Borrowed:
-    // the text must outlive the report's use.
-    std::string_view message;
+    // What only the party that saw it knows, appended to the reason's sentence: why a
+    // frame was bad (its sizes, the error), why the source is down. Borrowed: the text
+    // must outlive the report's use.
+    std::string_view detail;
 };
 
 // The reason of a reading as one sentence with the numbers the reading holds, e.g. "too
-// few valid pixels in the region: 2.0 % valid, 10.0 % needed". Empty for a valid reading.
-std::string reasonMessage(const Reading& reading);
+// few valid pixels in the region: 2.0 % valid, 10.0 % needed", and the detail after a
+// colon when there is one. Empty for a valid reading.
+std::string reasonMessage(const Reading& reading, std::string_view detail = {});
 
 // Appends the reading object of docs/protocol.md; age_ms is `now_ns` minus the stamp.
 // Allocates nothing once `out` has the capacity.

@@ -50,6 +50,8 @@ Json pipelineJson(const StatusPipeline& pipeline)
     out["num_disparities"] = pipeline.range.num_disparities;
     out["min_disparity"] = pipeline.range.min_disparity;
     out["closest_depth_m"] = roundTo(pipeline.range.closest_depth_m, 3);
+    out["extended_range"] = pipeline.range.extended;
+    out["full_resolution_closest_depth_m"] = roundTo(pipeline.range.range_closest_depth_m, 3);
     out["disparity_range_capped"] = pipeline.range.capped;
     out["region"] = {{"x", pipeline.region.x},
                      {"y", pipeline.region.y},
@@ -64,6 +66,9 @@ Json pipelineJson(const StatusPipeline& pipeline)
                        {"nearest", roundTo(stage.nearest_ms, 3)},
                        {"cloud", roundTo(stage.cloud_ms, 3)},
                        {"publish", roundTo(pipeline.publish_mean_ms, 3)}};
+    // Parts of stage_ms.match (not stages of their own: the stage table adds stage_ms up).
+    out["match_parts_ms"] = {{"extended_range", roundTo(stage.extended_range_ms, 3)},
+                             {"near_field_probe", roundTo(stage.near_field_probe_ms, 3)}};
     out["latency_ms"] = {{"p50", roundTo(pipeline.latency_p50_ms, 3)},
                          {"p99", roundTo(pipeline.latency_p99_ms, 3)}};
     return out;

@@ -135,6 +135,10 @@ class Reading:
     message: Optional[str] = None
     #: With reason ``nearer_than_range``: the obstacle is nearer than this (metres).
     nearer_than_m: Optional[float] = None
+    #: The closest depth the matcher measures, metres (``None`` from older services).
+    closest_m: Optional[float] = None
+    #: Whether the matcher looks for something nearer than its range (census-sgm).
+    near_field_guard: Optional[bool] = None
     #: The service suspects its calibration (its health check is failing).
     calibration_suspect: bool = False
     #: Subscriptions only: events the service skipped before this one.
@@ -168,6 +172,10 @@ class Reading:
                 reason=code,
                 message=message,
                 nearer_than_m=_opt_float(obj.get("nearer_than_m")),
+                closest_m=_opt_float(obj.get("closest_m")),
+                near_field_guard=(
+                    bool(obj["near_field_guard"]) if "near_field_guard" in obj else None
+                ),
                 calibration_suspect=bool(obj.get("calibration_suspect", False)),
                 skipped=int(skipped or 0),
                 raw=obj,

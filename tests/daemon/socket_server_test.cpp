@@ -117,13 +117,17 @@ class SocketServerTest : public ::testing::Test {
         PublishedFrame& slot = publisher_.writeSlot();
         slot.result.frame = frame;
         slot.result.stamp_ns = monotonicNowNs() - static_cast<int64_t>(age_ms * 1e6);
-        slot.result.reading = Reading{};
-        slot.result.reading.valid = true;
-        slot.result.reading.reason = NoReadingReason::None;
-        slot.result.reading.distance_m = distance_m;
-        slot.result.reading.frame = frame;
-        slot.result.reading.stamp_ns = slot.result.stamp_ns;
-        slot.result.reading.valid_fraction = 0.9;
+        // The facts of a processed pair whose region reads distance_m, 90 % valid.
+        ReadingFacts& facts = slot.result.facts;
+        facts = ReadingFacts{};
+        facts.pair = PairOutcome::Processed;
+        facts.frame = frame;
+        facts.stamp_ns = slot.result.stamp_ns;
+        facts.region.region_pixels = 1000;
+        facts.region.valid_pixels = 900;
+        facts.region.in_range_pixels = 900;
+        facts.region.percentile_depth_m = distance_m;
+        slot.result.reading = judgeReading(facts);
         slot.depth_mm.create(4, 6, CV_16UC1);
         slot.depth_mm.setTo(1250);
         slot.depth_valid = true;

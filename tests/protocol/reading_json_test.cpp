@@ -55,20 +55,21 @@ TEST(ProtocolReading, RefusalCarriesReasonWithNumbers)
               "(83.0 % valid, 0.0 % in range)");
 }
 
-TEST(ProtocolReading, GivenMessageWinsAndIsEscaped)
+TEST(ProtocolReading, DetailFollowsTheReasonAndIsEscaped)
 {
     ReadingReport report;
     report.reading = sampleValidReading();
     report.reading.valid = false;
     report.reading.reason = NoReadingReason::BadFrame;
     const std::string message = "cannot decode \"left.png\":\n\tbad\x01 byte \xc3 here";
-    report.message = message;
+    report.detail = message;
     std::string text;
     appendReadingJson(text, report, report.reading.stamp_ns);
     const Json reading = Json::parse(text);
     EXPECT_EQ(reading["reason"]["code"], "bad_frame");
     const std::string got = reading["reason"]["message"];
-    EXPECT_EQ(got.substr(0, 28), "cannot decode \"left.png\":\n\tb");
+    const std::string prefix = "the frame pair could not be processed: ";
+    EXPECT_EQ(got.substr(0, prefix.size() + 28), prefix + "cannot decode \"left.png\":\n\tb");
     EXPECT_NE(got.find("\x01"), std::string::npos);
     EXPECT_NE(got.find("\xEF\xBF\xBD"), std::string::npos); // the lone 0xC3 replaced
 }
@@ -86,7 +87,7 @@ TEST(ProtocolReading, NoFrameYetHasNoStampNorAge)
 
     // A source that failed before its first pair: source_down, still without a stamp.
     report.reading.reason = NoReadingReason::SourceDown;
-    report.message = "frame source down: the replay source is failed";
+    report.detail = "the replay source is failed";
     const Json down = readingToJson(report, 123);
     EXPECT_FALSE(down.contains("stamp_ns"));
     EXPECT_EQ(down["reason"]["code"], "source_down");
