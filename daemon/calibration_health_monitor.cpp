@@ -113,6 +113,7 @@ void CalibrationHealthMonitor::run()
         lock.lock();
         ready_ = false;
         busy_.store(false, std::memory_order_release);
+        checked_.notify_all();
     }
 }
 
@@ -169,6 +170,16 @@ HealthReport CalibrationHealthMonitor::report() const
 {
     std::lock_guard lock(mutex_);
     return report_;
+}
+
+bool CalibrationHealthMonitor::waitForChecks(uint64_t count,
+                                             std::chrono::milliseconds timeout) const
+{
+    std::unique_lock lock(mutex_);
+    // busy_ is cleared under mutex_ before checked_ is notified.
+    return checked_.wait_for(lock, timeout, [&] {
+        return report_.checks >= count && !busy_.load(std::memory_order_acquire);
+    });
 }
 
 } // namespace stereod

@@ -6,10 +6,11 @@
 // changes, never per frame; readings are flagged while it is degraded or failed.
 //
 // Thread contract: due() and offer() from the worker thread only (never blocking: a pair
-// offered while a measurement runs is not taken); state(), rowOffsetPx() and report() from
-// any thread; setInterval() from the controlling thread.
+// offered while a measurement runs is not taken); state(), rowOffsetPx(), report() and
+// waitForChecks() from any thread; setInterval() from the controlling thread.
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <mutex>
@@ -57,6 +58,10 @@ class CalibrationHealthMonitor {
     HealthState state() const noexcept { return state_.load(std::memory_order_acquire); }
     double rowOffsetPx() const noexcept { return row_offset_px_.load(std::memory_order_acquire); }
     HealthReport report() const;
+    // Blocks until `count` checks are done and the monitor is ready for the next pair, or
+    // `timeout` has passed; true when they are. For tools and tests that hand it pairs one
+    // after the other.
+    bool waitForChecks(uint64_t count, std::chrono::milliseconds timeout) const;
 
     void setInterval(double interval_s);
 
@@ -71,10 +76,11 @@ class CalibrationHealthMonitor {
     std::atomic<double> row_offset_px_{0.0};
 
     mutable std::mutex mutex_;
-    std::condition_variable wake_; // a pair was offered, or stop
-    bool stop_ = false;            // guarded by mutex_
-    bool ready_ = false;           // guarded by mutex_: an offered pair is copied
-    HealthReport report_;          // guarded by mutex_
+    std::condition_variable wake_;            // a pair was offered, or stop
+    mutable std::condition_variable checked_; // a check is done and busy_ cleared
+    bool stop_ = false;                       // guarded by mutex_
+    bool ready_ = false;                      // guarded by mutex_: an offered pair is copied
+    HealthReport report_;                     // guarded by mutex_
 
     // Owned by whoever holds busy_: the worker fills them, the thread measures them.
     cv::Mat left_, right_;

@@ -207,6 +207,9 @@ HealthMeasurement CalibrationHealthChecker::measure(const cv::Mat& left, const c
     p.orb->detectAndCompute(right, cv::noArray(), p.right_points, p.right_descriptors);
     std::vector<RowMatch> candidates;
     if (!p.left_descriptors.empty() && p.right_descriptors.rows >= 2) {
+        // knnMatch appends to the vector it is given: without the clear every check would
+        // also go through all earlier checks' matches, whose indices name other keypoints.
+        p.knn.clear();
         p.matcher.knnMatch(p.left_descriptors, p.right_descriptors, p.knn, 2);
         for (const std::vector<cv::DMatch>& pair : p.knn) {
             if (pair.size() < 2 || pair[0].distance >= kRatio * pair[1].distance)

@@ -34,16 +34,23 @@ struct RectifiedPair {
     cv::Mat left, right;
 };
 
+// A pair of grey images as they are on disk (empty images when they cannot be read).
+RectifiedPair readPair(const std::string& left_path, const std::string& right_path)
+{
+    RectifiedPair pair{cv::imread(left_path, cv::IMREAD_GRAYSCALE),
+                       cv::imread(right_path, cv::IMREAD_GRAYSCALE)};
+    EXPECT_FALSE(pair.left.empty()) << left_path;
+    EXPECT_FALSE(pair.right.empty()) << right_path;
+    return pair;
+}
+
 RectifiedPair rectify(const Rectifier& rectifier, const std::string& left_path,
                       const std::string& right_path)
 {
-    const cv::Mat left = cv::imread(left_path, cv::IMREAD_GRAYSCALE);
-    const cv::Mat right = cv::imread(right_path, cv::IMREAD_GRAYSCALE);
-    EXPECT_FALSE(left.empty()) << left_path;
-    EXPECT_FALSE(right.empty()) << right_path;
+    const RectifiedPair raw = readPair(left_path, right_path);
     RectifiedPair pair;
-    rectifier.rectifyLeft(left, pair.left);
-    rectifier.rectifyRight(right, pair.right);
+    rectifier.rectifyLeft(raw.left, pair.left);
+    rectifier.rectifyRight(raw.right, pair.right);
     return pair;
 }
 
@@ -171,10 +178,8 @@ TEST(CalibrationHealth, CorrectionFromSomeBaumerScenesBringsTheOthersBelowAThird
 // apart in proportion to the distance from the centre.
 TEST(CalibrationHealth, TurnedRightImageIsDetectedAtTheRightLevel)
 {
-    const cv::Mat left =
-        cv::imread(kData + "middlebury2014/Adirondack/im0.png", cv::IMREAD_GRAYSCALE);
-    const cv::Mat right =
-        cv::imread(kData + "middlebury2014/Adirondack/im1.png", cv::IMREAD_GRAYSCALE);
+    const auto [left, right] = readPair(kData + "middlebury2014/Adirondack/im0.png",
+                                        kData + "middlebury2014/Adirondack/im1.png");
     ASSERT_FALSE(left.empty() || right.empty());
     CalibrationHealthChecker checker;
     const HealthMeasurement straight = checker.measure(left, right);
@@ -192,6 +197,27 @@ TEST(CalibrationHealth, TurnedRightImageIsDetectedAtTheRightLevel)
         const HealthMeasurement m = checker.measure(left, turned);
         print("Adirondack, right turned " + std::to_string(c.degrees) + " deg", m);
         EXPECT_EQ(m.state, c.expected) << c.degrees << " degrees";
+    }
+}
+
+// A checker is reused check after check: the same pair must give the same figures every
+// time (OpenCV's knnMatch appends to the result it is given, and a checker that did not
+// empty it re-processed every earlier check's matches).
+TEST(CalibrationHealth, RepeatedChecksOfOnePairGiveTheSameFigures)
+{
+    const auto [left, right] = readPair(kData + "middlebury2014/Adirondack/im0.png",
+                                        kData + "middlebury2014/Adirondack/im1.png");
+    ASSERT_FALSE(left.empty() || right.empty());
+    CalibrationHealthChecker checker;
+    const HealthMeasurement first = checker.measure(left, right);
+    print("Adirondack, first check", first);
+    ASSERT_GT(first.matches, 100);
+    for (int i = 2; i <= 4; ++i) {
+        const HealthMeasurement again = checker.measure(left, right);
+        print("Adirondack, check " + std::to_string(i), again);
+        EXPECT_EQ(again.matches, first.matches) << "check " << i;
+        EXPECT_EQ(again.state, first.state) << "check " << i;
+        EXPECT_EQ(again.row_offset_px, first.row_offset_px) << "check " << i;
     }
 }
 
