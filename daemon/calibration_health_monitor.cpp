@@ -41,8 +41,9 @@ double trendPerMinute(const std::vector<std::pair<double, double>>& minutes_offs
 
 } // namespace
 
-CalibrationHealthMonitor::CalibrationHealthMonitor(double interval_s)
-    : interval_ns_(toNs(interval_s))
+CalibrationHealthMonitor::CalibrationHealthMonitor(const RectifiedGeometry& geometry,
+                                                   double interval_s)
+    : interval_ns_(toNs(interval_s)), checker_(geometry)
 {
     report_.enabled = interval_s > 0.0;
     if (!report_.enabled)

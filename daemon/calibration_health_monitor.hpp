@@ -42,8 +42,9 @@ struct HealthReport {
 
 class CalibrationHealthMonitor {
   public:
-    // interval_s <= 0: no checks (state unknown, reason "off").
-    explicit CalibrationHealthMonitor(double interval_s);
+    // `geometry`: the rectified images' (pipeline/calibration.hpp). interval_s <= 0: no
+    // checks (state unknown, reason "off").
+    CalibrationHealthMonitor(const RectifiedGeometry& geometry, double interval_s);
     ~CalibrationHealthMonitor();
 
     CalibrationHealthMonitor(const CalibrationHealthMonitor&) = delete;

@@ -129,7 +129,8 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
     worker_ =
         std::make_unique<Worker>(*ring_, *publisher_, processor_.get(), config_.source.max_skew_ms);
     if (processor_) {
-        health_ = std::make_unique<CalibrationHealthMonitor>(config_.calibration_health.interval_s);
+        health_ = std::make_unique<CalibrationHealthMonitor>(calibration_->rectified,
+                                                             config_.calibration_health.interval_s);
         worker_->setHealthMonitor(health_.get());
         worker_->setWithholdWhenFailed(config_.calibration_health.withhold_when_failed);
     }

@@ -48,7 +48,10 @@ TEST(CalibrationHealthMonitor, RepeatedChecksOfOnePairCostTheSame)
     const cv::Mat right =
         cv::imread(kData + "middlebury2014/Adirondack/im1.png", cv::IMREAD_GRAYSCALE);
     ASSERT_FALSE(left.empty() || right.empty());
-    CalibrationHealthMonitor monitor(1e-9);
+    // Adirondack's calib.txt: f 1038.018 px, cx 322.037, cy 243.393, doffs 53.271.
+    const StereoCalibration rig =
+        makeRectifiedCalibration(left.size(), 1038.018, 0.176252, 322.037, 243.393, 53.271);
+    CalibrationHealthMonitor monitor(rig.rectified, 1e-9);
     // A few checks first: the detector's and matcher's buffers reach their size.
     constexpr int kWarmUp = 5;
     constexpr int kChecks = 40;
