@@ -126,11 +126,12 @@ int main(int argc, char** argv)
         previous = report.state;
         flagged += bad;
         if (verbose)
-            std::printf("check %3d pair %2zu: %-8s %-18s %4d matches, offset %+.2f px, p90 "
-                        "%.2f px, %.0f ms\n",
-                        i + 1, static_cast<size_t>(i) % pairs.size() + 1,
-                        healthStateName(report.state), report.reason.c_str(), report.matches,
-                        report.row_offset_px, report.row_offset_p90_px, report.check_ms);
+            std::printf(
+                "check %3d pair %2zu: %-8s %-18s (this check %-8s) %4d matches, rows up "
+                "to %.2f px apart, %+.2f px at the centre, roll %+.3f deg, %.0f ms\n",
+                i + 1, static_cast<size_t>(i) % pairs.size() + 1, healthStateName(report.state),
+                report.reason.c_str(), healthStateName(report.last_check_state), report.matches,
+                report.max_row_error_px, report.offset_px, report.roll_deg, report.check_ms);
     }
     const double rss_end = residentMb();
     const double cpu_per_check = (cpuMs() - cpu_start) / checks;

@@ -146,12 +146,17 @@ int checkRunningService(const CheckCalibrationOptions& options)
         std::printf("%s", state.c_str());
         if (health.contains("reason"))
             std::printf(" (%s)", health["reason"].get<std::string>().c_str());
-        if (health.contains("row_offset_px"))
-            std::printf(": %d matches, row offset %+.2f px (right - left), 90 %% within %.2f px, "
-                        "trend %+.3f px/min, checked %.1f s ago",
-                        health.value("matches", 0), health.value("row_offset_px", 0.0),
-                        health.value("row_offset_p90_px", 0.0),
-                        health.value("trend_px_per_min", 0.0), health.value("checked_age_s", 0.0));
+        if (health.contains("max_row_error_px"))
+            std::printf(": %d matches, rows up to %.2f px apart (right - left %+.2f px at the "
+                        "centre, roll %+.3f deg); median %+.2f px, 90 %% within %.2f px, trend "
+                        "%+.3f px/min; last check %s, checked %.1f s ago, %llu state changes",
+                        health.value("matches", 0), health.value("max_row_error_px", 0.0),
+                        health.value("offset_px", 0.0), health.value("roll_deg", 0.0),
+                        health.value("row_offset_px", 0.0), health.value("row_offset_p90_px", 0.0),
+                        health.value("trend_px_per_min", 0.0),
+                        health.value("last_check", std::string("unknown")).c_str(),
+                        health.value("checked_age_s", 0.0),
+                        static_cast<unsigned long long>(health.value("state_changes", 0ULL)));
         std::printf("\n");
     }
     if (state == "ok")

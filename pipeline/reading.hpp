@@ -46,7 +46,8 @@ struct Reading {
     // obstacle is nearer than this.
     double nearer_than_m = 0.0;
     // Set while calibration health is degraded or failed: the rows of matching points
-    // are calibration_row_offset_px apart (signed median, right - left), so depth may be off.
+    // are up to calibration_row_offset_px apart (the fitted model's largest row error over
+    // the matches' area, signed right - left), so depth may be off.
     bool calibration_suspect = false;
     double calibration_row_offset_px = 0.0;
 };
