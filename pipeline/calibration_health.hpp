@@ -32,11 +32,15 @@
 //  - lens distortion the calibration left (higher orders in u and v): it stays in the
 //    residuals, where it shows as noise.
 // The fit is robust: matches that a repeating pattern (a chessboard's squares) puts a
-// row or a period off agree with no model of four parameters near the truth, so a RANSAC
-// search (the model that most matches agree with within 1 px) followed by iteratively
-// reweighted least squares with Tukey's redescending weight gives them no say. Before
-// that, matches must pass Lowe's ratio test on their descriptors and lie within
-// max_row_offset_px rows (the epipolar gate).
+// row or a period off agree with no model near the truth, so a RANSAC search (the offset
+// and roll that most matches agree with within 1 px; scale and yaw would let a model bend
+// through the right matches in one part of the image and a group a period off in
+// another) followed by iteratively reweighted least squares of all four terms with
+// Tukey's redescending weight gives them no say. Scale and yaw have priors (zero, 0.1 %
+// and 0.1 deg): the matches of one pair, often in a few clusters, hardly tell them from
+// roll and offset. Before the fit, matches must pass Lowe's ratio test on their
+// descriptors, lie within max_row_offset_px rows (the epipolar gate), correlate clearly,
+// and be one to one (no right point matched from two left points).
 //
 // The verdict reads the model, not single matches: its largest |dy| where the matches are
 // (measured there, not extrapolated to corners without a match), its offset at the image
