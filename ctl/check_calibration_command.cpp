@@ -1,5 +1,7 @@
 // `stereoctl check-calibration`: calibration health (pipeline/calibration_health.hpp) on a
-// rig's raw pairs, offline, and the correction when asked for.
+// rig's raw pairs, offline, and the correction when asked for. A rectified-only
+// calibration checks the pairs as they come (identity rectification), and its correction
+// is written as a full calibration.
 
 #include <chrono>
 #include <cstdio>
@@ -46,7 +48,7 @@ std::vector<PairFigures> measurePairs(const StereoCalibration& calibration,
                                       const std::vector<std::string>& right)
 {
     const Rectifier rectifier(calibration);
-    CalibrationHealthChecker checker;
+    CalibrationHealthChecker checker(calibration.rectified);
     std::vector<PairFigures> pairs;
     cv::Mat left_rect, right_rect;
     for (size_t i = 0; i < left.size(); ++i) {
@@ -68,6 +70,12 @@ json figuresJson(const HealthMeasurement& m)
     out["row_offset_p90_px"] = m.row_offset_p90_px;
     out["matches"] = m.matches;
     out["negative_disparity_fraction"] = m.negative_disparity_fraction;
+    out["offset_px"] = m.model.offset_px;
+    out["roll_deg"] = m.model.roll_deg;
+    out["max_row_error_px"] = m.model.max_row_error_px;
+    out["yaw_deg"] = m.model.yaw_deg;
+    out["vertical_scale"] = m.model.vertical_scale;
+    out["residual_px"] = m.model.residual_px;
     return out;
 }
 
@@ -76,9 +84,11 @@ std::string figuresLine(const HealthMeasurement& m)
     std::string line = healthStateName(m.state);
     if (!m.reason.empty())
         line += " (" + m.reason + ")";
-    return line + fmt::format(": {} matches, row offset {:+.2f} px (right - left), 90 % within "
+    return line + fmt::format(": {} matches, rows up to {:.2f} px apart (right - left {:+.2f} px "
+                              "at the centre, roll {:+.3f} deg); median {:+.2f} px, 90 % within "
                               "{:.2f} px",
-                              m.matches, m.row_offset_px, m.row_offset_p90_px);
+                              m.matches, m.model.max_row_error_px, m.model.offset_px,
+                              m.model.roll_deg, m.row_offset_px, m.row_offset_p90_px);
 }
 
 // What the figures mean for depth, in one sentence.
@@ -88,8 +98,13 @@ std::string meaning(const HealthMeasurement& m)
     case HealthState::Ok:
         return "matching points lie on the same rows: the calibration still rectifies this rig";
     case HealthState::Degraded:
-        return "the rows of matching points have drifted apart: the matcher compares the wrong "
-               "rows, finds fewer matches and wronger depths; recalibrate, or try --fix";
+        return m.reason == "roll"
+                   ? "the right image is turned against the left: the rows drift apart towards "
+                     "the sides, the matcher compares the wrong rows there; recalibrate, or try "
+                     "--fix"
+                   : "the rows of matching points have drifted apart: the matcher compares the "
+                     "wrong rows, finds fewer matches and wronger depths; recalibrate, or try "
+                     "--fix";
     case HealthState::Failed:
         return m.reason == "cameras_swapped"
                    ? "most matches have a negative disparity: the left and right cameras are "
@@ -131,12 +146,17 @@ int checkRunningService(const CheckCalibrationOptions& options)
         std::printf("%s", state.c_str());
         if (health.contains("reason"))
             std::printf(" (%s)", health["reason"].get<std::string>().c_str());
-        if (health.contains("row_offset_px"))
-            std::printf(": %d matches, row offset %+.2f px (right - left), 90 %% within %.2f px, "
-                        "trend %+.3f px/min, checked %.1f s ago",
-                        health.value("matches", 0), health.value("row_offset_px", 0.0),
-                        health.value("row_offset_p90_px", 0.0),
-                        health.value("trend_px_per_min", 0.0), health.value("checked_age_s", 0.0));
+        if (health.contains("max_row_error_px"))
+            std::printf(": %d matches, rows up to %.2f px apart (right - left %+.2f px at the "
+                        "centre, roll %+.3f deg); median %+.2f px, 90 %% within %.2f px, trend "
+                        "%+.3f px/min; last check %s, checked %.1f s ago, %llu state changes",
+                        health.value("matches", 0), health.value("max_row_error_px", 0.0),
+                        health.value("offset_px", 0.0), health.value("roll_deg", 0.0),
+                        health.value("row_offset_px", 0.0), health.value("row_offset_p90_px", 0.0),
+                        health.value("trend_px_per_min", 0.0),
+                        health.value("last_check", std::string("unknown")).c_str(),
+                        health.value("checked_age_s", 0.0),
+                        static_cast<unsigned long long>(health.value("state_changes", 0ULL)));
         std::printf("\n");
     }
     if (state == "ok")
@@ -168,17 +188,14 @@ int runCheckCalibration(const CheckCalibrationOptions& options)
             throw UsageError("--out must not be the checked calibration");
     }
     const StereoCalibration calibration = loadCalibration(options.calib_path);
-    if (calibration.kind != StereoCalibration::Kind::Full)
-        throw UsageError(fmt::format("{}: a rectified-only calibration has no rectification to "
-                                     "check; the pairs are taken as rectified already",
-                                     options.calib_path));
+    const bool rectified_only = calibration.kind == StereoCalibration::Kind::RectifiedOnly;
 
     const std::vector<PairFigures> pairs = measurePairs(calibration, left, right);
     std::vector<HealthMeasurement> all;
     for (const PairFigures& p : pairs)
         all.push_back(p.measurement);
-    const HealthSettings settings;
-    const HealthMeasurement overall = poolMeasurements(all, settings);
+    const CalibrationHealthChecker pooler(calibration.rectified);
+    const HealthMeasurement overall = pooler.pool(all);
 
     json out = figuresJson(overall);
     json per_pair = json::array();
@@ -204,10 +221,11 @@ int runCheckCalibration(const CheckCalibrationOptions& options)
         std::vector<HealthMeasurement> after_all;
         for (const PairFigures& p : measurePairs(corrected, left, right))
             after_all.push_back(p.measurement);
-        const HealthMeasurement after = poolMeasurements(after_all, settings);
+        const HealthMeasurement after = pooler.pool(after_all);
         saveCalibration(corrected, options.out_path);
         json fix;
         fix["out"] = options.out_path;
+        fix["kind"] = "full";
         fix["pitch_deg"] = degrees[0];
         fix["roll_deg"] = degrees[1];
         fix["before"] = figuresJson(overall);
@@ -215,10 +233,14 @@ int runCheckCalibration(const CheckCalibrationOptions& options)
         out["fix"] = fix;
         if (!options.json)
             std::printf("correction: right camera turned %+.4f deg about x (pitch), %+.4f deg "
-                        "about z (roll); depth unchanged\nrow offset before %+.2f px (90 %% within "
-                        "%.2f px), after %+.2f px (90 %% within %.2f px)\nwrote %s\n",
-                        degrees[0], degrees[1], overall.row_offset_px, overall.row_offset_p90_px,
-                        after.row_offset_px, after.row_offset_p90_px, options.out_path.c_str());
+                        "about z (roll); depth unchanged\nrows up to %.2f px apart before (roll "
+                        "%+.3f deg), %.2f px after (roll %+.3f deg): %s\nwrote %s%s\n",
+                        degrees[0], degrees[1], overall.model.max_row_error_px,
+                        overall.model.roll_deg, after.model.max_row_error_px, after.model.roll_deg,
+                        healthStateName(after.state), options.out_path.c_str(),
+                        rectified_only ? " (a full calibration: the rectified-only form has no "
+                                         "rotation to correct)"
+                                       : "");
     }
     if (options.json)
         std::printf("%s\n", out.dump(2).c_str());

@@ -388,13 +388,16 @@ CLI::App* declareCheckCalibration(CLI::App& app, CheckCalibrationOptions& o,
         "check-calibration",
         "how well a calibration still rectifies the rig's pairs, or (without --left) the "
         "running service's cameras: the row offset of matching features after "
-        "rectification (exit 0 ok, 1 degraded or failed, 2 no verdict, 3 no service)");
+        "rectification, a model of it over the image fitted to them, offset and roll "
+        "(exit 0 ok, 1 degraded or failed, 2 no verdict, 3 no service)");
     CLI::Option* left =
         cmd->add_option("--left", o.left_glob, "raw left images: a glob, quoted, sorted");
     CLI::Option* right =
         cmd->add_option("--right", o.right_glob, "raw right images, paired in sorted order");
     CLI::Option* calib =
-        cmd->add_option("--calib", o.calib_path, "the full calibration to check (YAML)");
+        cmd->add_option("--calib", o.calib_path,
+                        "the calibration to check (YAML): full, or rectified-only for a camera "
+                        "that delivers rectified pairs (they are checked as they come)");
     CLI::Option* socket =
         addSocketOption(cmd, o.service,
                         "without --left/--right/--calib: the running service's figures (its "
@@ -407,7 +410,8 @@ CLI::App* declareCheckCalibration(CLI::App& app, CheckCalibrationOptions& o,
     CLI::Option* fix = cmd->add_flag(
         "--fix", o.fix,
         "estimate the small turn of the right camera that brings the rows back, and write "
-        "the corrected calibration to --out (never to the checked file)");
+        "the corrected calibration to --out (never to the checked file; a full calibration "
+        "also when the checked one is rectified-only)");
     cmd->add_option("--out", o.out_path, "where --fix writes the corrected calibration (new file)")
         ->needs(fix);
     fix->needs(cmd->get_option("--out"));

@@ -144,10 +144,10 @@ void printStatus(const json& status)
         const std::string reason = text(health, "reason");
         fmt::print("calibration health: {}{}", text(health, "state"),
                    reason.empty() ? std::string() : " (" + reason + ")");
-        if (health.contains("row_offset_px"))
-            fmt::print(", rows {} px apart (90 % within {} px, {} matches)",
-                       number(health, "row_offset_px", 2), number(health, "row_offset_p90_px", 2),
-                       number(health, "matches", 0));
+        if (health.contains("max_row_error_px"))
+            fmt::print(", rows up to {} px apart, {} px at the centre, roll {} deg ({} matches)",
+                       number(health, "max_row_error_px", 2), number(health, "offset_px", 2),
+                       number(health, "roll_deg", 3), number(health, "matches", 0));
         fmt::print("\n");
     }
 

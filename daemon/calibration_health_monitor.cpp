@@ -41,8 +41,9 @@ double trendPerMinute(const std::vector<std::pair<double, double>>& minutes_offs
 
 } // namespace
 
-CalibrationHealthMonitor::CalibrationHealthMonitor(double interval_s)
-    : interval_ns_(toNs(interval_s))
+CalibrationHealthMonitor::CalibrationHealthMonitor(const RectifiedGeometry& geometry,
+                                                   double interval_s)
+    : interval_ns_(toNs(interval_s)), checker_(geometry)
 {
     report_.enabled = interval_s > 0.0;
     if (!report_.enabled)
@@ -69,6 +70,7 @@ void CalibrationHealthMonitor::setInterval(double interval_s)
     if (!report_.enabled) {
         report_.reason = "off";
         report_.state = HealthState::Unknown;
+        hysteresis_.reset();
         state_.store(HealthState::Unknown, std::memory_order_release);
     }
 }
@@ -113,6 +115,7 @@ void CalibrationHealthMonitor::run()
         lock.lock();
         ready_ = false;
         busy_.store(false, std::memory_order_release);
+        checked_.notify_all();
     }
 }
 
@@ -136,31 +139,42 @@ void CalibrationHealthMonitor::measureOffered()
     const bool spans =
         recent.size() >= 3 && (recent.back().first - recent.front().first) * 60.0 >= 10.0;
 
-    HealthState previous;
+    HealthState previous, now;
+    bool changed;
+    std::string reason;
     {
         std::lock_guard lock(mutex_);
-        previous = report_.state;
-        report_.state = m.state;
-        report_.reason = m.reason;
+        previous = hysteresis_.state();
+        changed = hysteresis_.update(m);
+        now = hysteresis_.state();
+        // Before the first verdict the state's reason is the checks' own (too few matches).
+        reason = now == HealthState::Unknown ? m.reason : hysteresis_.reason();
+        report_.state = now;
+        report_.reason = reason;
+        report_.last_check_state = m.state;
+        report_.state_changes += changed && previous != HealthState::Unknown;
         report_.matches = m.matches;
         report_.row_offset_px = m.row_offset_px;
         report_.row_offset_p90_px = m.row_offset_p90_px;
+        report_.offset_px = m.model.offset_px;
+        report_.roll_deg = m.model.roll_deg;
+        report_.max_row_error_px = m.model.max_row_error_px;
+        report_.row_error_px = m.model.row_error_px;
         report_.trend_px_per_min = spans ? trendPerMinute(recent) : 0.0;
         report_.checked_stamp_ns = stamp_ns_;
         report_.check_ms = check_ms;
         ++report_.checks;
     }
-    row_offset_px_.store(m.row_offset_px, std::memory_order_release);
-    state_.store(m.state, std::memory_order_release);
-    if (m.state != previous) {
-        const auto level = m.state == HealthState::Ok || m.state == HealthState::Unknown
-                               ? spdlog::level::info
-                               : spdlog::level::warn;
+    if (m.state != HealthState::Unknown)
+        row_offset_px_.store(m.model.row_error_px, std::memory_order_release);
+    state_.store(now, std::memory_order_release);
+    if (changed) {
+        const auto level = now == HealthState::Ok ? spdlog::level::info : spdlog::level::warn;
         spdlog::log(level,
-                    "calibration health: {} -> {}{}{}: rows of matching points {:+.2f} px apart "
-                    "(90 % within {:.2f} px, {} matches)",
-                    healthStateName(previous), healthStateName(m.state),
-                    m.reason.empty() ? "" : ", ", m.reason, m.row_offset_px, m.row_offset_p90_px,
+                    "calibration health: {} -> {}{}{}: rows of matching points up to {:.2f} px "
+                    "apart, {:+.2f} px at the centre, roll {:+.3f} deg ({} matches)",
+                    healthStateName(previous), healthStateName(now), reason.empty() ? "" : ", ",
+                    reason, m.model.max_row_error_px, m.model.offset_px, m.model.roll_deg,
                     m.matches);
     }
 }
@@ -169,6 +183,16 @@ HealthReport CalibrationHealthMonitor::report() const
 {
     std::lock_guard lock(mutex_);
     return report_;
+}
+
+bool CalibrationHealthMonitor::waitForChecks(uint64_t count,
+                                             std::chrono::milliseconds timeout) const
+{
+    std::unique_lock lock(mutex_);
+    // busy_ is cleared under mutex_ before checked_ is notified.
+    return checked_.wait_for(lock, timeout, [&] {
+        return report_.checks >= count && !busy_.load(std::memory_order_acquire);
+    });
 }
 
 } // namespace stereod

@@ -129,7 +129,8 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
     worker_ =
         std::make_unique<Worker>(*ring_, *publisher_, processor_.get(), config_.source.max_skew_ms);
     if (processor_) {
-        health_ = std::make_unique<CalibrationHealthMonitor>(config_.calibration_health.interval_s);
+        health_ = std::make_unique<CalibrationHealthMonitor>(calibration_->rectified,
+                                                             config_.calibration_health.interval_s);
         worker_->setHealthMonitor(health_.get());
         worker_->setWithholdWhenFailed(config_.calibration_health.withhold_when_failed);
     }
@@ -415,8 +416,13 @@ ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceH
         rig_health.state = healthStateName(report.state);
         rig_health.reason = report.reason;
         StatusHealthChecks& checks = rig_health.checks.emplace();
+        checks.last_check = healthStateName(report.last_check_state);
+        checks.state_changes = report.state_changes;
         checks.row_offset_px = report.row_offset_px;
         checks.row_offset_p90_px = report.row_offset_p90_px;
+        checks.offset_px = report.offset_px;
+        checks.roll_deg = report.roll_deg;
+        checks.max_row_error_px = report.max_row_error_px;
         checks.matches = report.matches;
         checks.trend_px_per_min = report.trend_px_per_min;
         checks.checks = report.checks;

@@ -443,6 +443,17 @@ void exportRosCameraInfo(const StereoCalibration& calibration, const std::string
     writeText(right_path, rosCameraText(camera_name + "/right", pair.second));
 }
 
+StereoCalibration fullFromRectified(const StereoCalibration& rectified)
+{
+    if (rectified.kind != StereoCalibration::Kind::RectifiedOnly)
+        throw CalibrationError("the calibration is a full one already");
+    // The camera_info pair of a rectified rig says exactly this; read back, it is the full
+    // form.
+    const auto [left, right] = rosCameraInfoPair(rectified);
+    return calibrationFromRosCameraInfo(left, right, "rectified calibration (left)",
+                                        "rectified calibration (right)");
+}
+
 StereoCalibration importOpenCvStereoCalib(const std::string& intrinsics_path,
                                           const std::string& extrinsics_path, cv::Size image_size,
                                           double metres_per_unit)

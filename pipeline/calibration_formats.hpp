@@ -67,6 +67,13 @@ StereoCalibration importRosCameraInfo(const std::string& left_path, const std::s
 void exportRosCameraInfo(const StereoCalibration& calibration, const std::string& left_path,
                          const std::string& right_path, const std::string& camera_name = "stereo");
 
+// The full form of a rectified-only calibration: both cameras undistorted already (the
+// rectified camera matrices, no distortion), identity rectification (R1 = R2 = I), R the
+// identity and T the baseline along x; the same geometry and depth. What a correction of
+// the right camera's rotation (pipeline/calibration_health.hpp) starts from. Throws
+// CalibrationError when `rectified` is not rectified-only.
+StereoCalibration fullFromRectified(const StereoCalibration& rectified);
+
 // Reads the files of OpenCV's stereo_calib sample. They do not hold the image size; and
 // T (hence P2's last column and Q) is in the unit of the square size given to the sample
 // (-s, 1 by default: squares): `metres_per_unit` converts it to metres.

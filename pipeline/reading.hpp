@@ -60,7 +60,8 @@ struct Reading {
     double age_ms = 0.0;
     double max_age_ms = 0.0;
     // Set while calibration health is degraded or failed: the rows of matching points
-    // are calibration_row_offset_px apart (signed median, right - left), so depth may be off.
+    // are up to calibration_row_offset_px apart (the fitted model's largest row error over
+    // the matches' area, signed right - left), so depth may be off.
     bool calibration_suspect = false;
     double calibration_row_offset_px = 0.0;
 };

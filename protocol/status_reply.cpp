@@ -85,6 +85,11 @@ Json calibrationHealthJson(const StatusCalibrationHealth& health)
     const StatusHealthChecks& checks = *health.checks;
     out["row_offset_px"] = roundTo(checks.row_offset_px, 3);
     out["row_offset_p90_px"] = roundTo(checks.row_offset_p90_px, 3);
+    out["offset_px"] = roundTo(checks.offset_px, 3);
+    out["roll_deg"] = roundTo(checks.roll_deg, 4);
+    out["max_row_error_px"] = roundTo(checks.max_row_error_px, 3);
+    out["last_check"] = checks.last_check;
+    out["state_changes"] = checks.state_changes;
     out["matches"] = checks.matches;
     out["trend_px_per_min"] = roundTo(checks.trend_px_per_min, 4);
     out["checks"] = checks.checks;

@@ -77,8 +77,13 @@ struct StatusPipeline {
 
 // The numbers of the rig's calibration checks (daemon/calibration_health_monitor.hpp).
 struct StatusHealthChecks {
-    double row_offset_px = 0.0;
+    std::string last_check;     // the last check's own verdict, healthStateName()
+    uint64_t state_changes = 0; // after the first verdict
+    double row_offset_px = 0.0; // signed median of the matches, right - left
     double row_offset_p90_px = 0.0;
+    double offset_px = 0.0;        // the fitted model's rows apart at the principal point
+    double roll_deg = 0.0;         // its roll of the right image
+    double max_row_error_px = 0.0; // its largest |row error| over the matches' area
     int matches = 0;
     double trend_px_per_min = 0.0;
     uint64_t checks = 0;

@@ -123,11 +123,16 @@ TEST(CalibrationHealthE2e, DriftedRigTurnsDegradedAndReadingsCarryTheFlag)
     std::printf("[health] service on the drifted rig: %s\n", health.dump().c_str());
     EXPECT_EQ(health["state"], "degraded");
     EXPECT_GT(std::abs(health["row_offset_px"].get<double>()), 0.6);
+    EXPECT_GT(health["max_row_error_px"].get<double>(), 0.8);
+    EXPECT_GT(health["offset_px"].get<double>(), 0.6);
+    EXPECT_LT(std::abs(health["roll_deg"].get<double>()), 0.2);
+    EXPECT_EQ(health["state_changes"], 0);
     EXPECT_GT(health["check_ms"].get<double>(), 0.0);
     const Json reading = service.distance();
     EXPECT_EQ(reading.value("calibration_suspect", false), true) << reading.dump();
-    EXPECT_NEAR(reading["calibration_row_offset_px"].get<double>(),
-                health["row_offset_px"].get<double>(), 0.5);
+    // The reading carries the largest row error of a recent check (signed).
+    EXPECT_NEAR(std::abs(reading["calibration_row_offset_px"].get<double>()),
+                health["max_row_error_px"].get<double>(), 0.5);
 
     const ProcessResult ask =
         runProcess({stereoctlPath(), "check-calibration", "--socket", service.socket()});

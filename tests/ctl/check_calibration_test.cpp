@@ -2,6 +2,9 @@
 // own calibration views read ok (exit 0); the scenes taken after the rig moved read
 // degraded (exit 1) with the figures in JSON; --fix writes a correction that brings other
 // scenes back, never over an existing file; a pattern that matches nothing exits 2.
+// And on a factory-rectified pair (Middlebury's Aloe with its published geometry as a
+// rectified-only calibration) whose right image has turned: checked as it comes, degraded
+// by its roll, and --fix writes a full calibration that turns it back.
 
 #include <filesystem>
 #include <string>
@@ -9,6 +12,8 @@
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "pipeline/calibration.hpp"
 #include "tests/support/data_paths.hpp"
@@ -70,6 +75,11 @@ TEST(StereoctlCheckCalibration, DriftedRigIsDegradedWithItsFigures)
     EXPECT_GT(std::abs(out["row_offset_px"].get<double>()), 0.8);
     EXPECT_GT(out["row_offset_p90_px"].get<double>(), 0.9);
     EXPECT_GT(out["matches"].get<int>(), 100);
+    // The fitted model: rows apart by about a pixel all over, no roll to speak of.
+    EXPECT_GT(out["offset_px"].get<double>(), 0.6);
+    EXPECT_GT(out["max_row_error_px"].get<double>(), 0.8);
+    EXPECT_LT(out["max_row_error_px"].get<double>(), 1.6);
+    EXPECT_LT(std::abs(out["roll_deg"].get<double>()), 0.2);
     ASSERT_EQ(out["pairs"].size(), 4u);
     for (const auto& pair : out["pairs"])
         EXPECT_EQ(pair["state"], "degraded") << pair["left"];
@@ -97,6 +107,54 @@ TEST(StereoctlCheckCalibration, FixWritesACorrectionThatHoldsOnOtherScenes)
     const ProcessResult again = runProcess(argv);
     EXPECT_EQ(again.exit_code, 2);
     EXPECT_NE(again.err.find("exists already"), std::string::npos) << again.err;
+}
+
+TEST(StereoctlCheckCalibration, RectifiedOnlyCalibrationIsCheckedAndFixed)
+{
+    test::TempDir dir;
+    const std::string samples = test::opencvSamplesDir() + "/";
+    const std::string rectified = dir.file("aloe.yaml");
+    const ProcessResult made = runProcess({stereoctlPath(), "calibrate", "--rectified",
+                                           "--focal-px", "3740", "--baseline-m", "0.16", "--size",
+                                           "1282x1110", "--doffs-px", "270", "--out", rectified});
+    ASSERT_EQ(made.exit_code, 0) << made.err;
+    // The right camera turned by 0.3 deg about the image centre.
+    const cv::Mat right = cv::imread(samples + "aloeR.jpg", cv::IMREAD_GRAYSCALE);
+    ASSERT_FALSE(right.empty());
+    cv::Mat turned;
+    cv::warpAffine(
+        right, turned,
+        cv::getRotationMatrix2D({(right.cols - 1) / 2.0f, (right.rows - 1) / 2.0f}, 0.3, 1.0),
+        right.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+    const std::string turned_path = dir.file("aloeR-turned.png");
+    ASSERT_TRUE(cv::imwrite(turned_path, turned));
+
+    const ProcessResult straight =
+        runProcess({stereoctlPath(), "check-calibration", "--left", samples + "aloeL.jpg",
+                    "--right", samples + "aloeR.jpg", "--calib", rectified});
+    EXPECT_EQ(straight.exit_code, 0) << straight.out << straight.err;
+
+    const std::string fixed = dir.file("aloe-fixed.yaml");
+    const ProcessResult run = runProcess({stereoctlPath(), "check-calibration", "--left",
+                                          samples + "aloeL.jpg", "--right", turned_path, "--calib",
+                                          rectified, "--fix", "--out", fixed, "--json"});
+    EXPECT_EQ(run.exit_code, 1) << run.err;
+    const auto out = nlohmann::json::parse(run.out);
+    EXPECT_EQ(out["state"], "degraded");
+    EXPECT_EQ(out["reason"], "roll");
+    EXPECT_NEAR(out["roll_deg"].get<double>(), 0.3, 0.05);
+    EXPECT_EQ(out["fix"]["kind"], "full");
+    EXPECT_NEAR(out["fix"]["roll_deg"].get<double>(), 0.3, 0.05);
+    EXPECT_EQ(out["fix"]["after"]["state"], "ok");
+
+    const StereoCalibration correction = loadCalibration(fixed);
+    EXPECT_EQ(correction.kind, StereoCalibration::Kind::Full);
+    EXPECT_DOUBLE_EQ(correction.rectified.focal_px, 3740.0);
+    EXPECT_DOUBLE_EQ(correction.rectified.doffs_px, 270.0);
+    const ProcessResult again =
+        runProcess({stereoctlPath(), "check-calibration", "--left", samples + "aloeL.jpg",
+                    "--right", turned_path, "--calib", fixed});
+    EXPECT_EQ(again.exit_code, 0) << again.out << again.err;
 }
 
 TEST(StereoctlCheckCalibration, PatternMatchingNothingIsABadArgument)

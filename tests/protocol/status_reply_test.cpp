@@ -36,6 +36,11 @@ ServiceStatus runningStatus()
     status.calibration_health.state = "ok";
     StatusHealthChecks& checks = status.calibration_health.checks.emplace();
     checks.row_offset_px = 0.12345;
+    checks.offset_px = -0.23456;
+    checks.roll_deg = 0.312345;
+    checks.max_row_error_px = 1.23456;
+    checks.last_check = "degraded";
+    checks.state_changes = 2;
     checks.matches = 210;
     checks.checks = 6;
     checks.interval_s = 2.0;
@@ -102,6 +107,11 @@ TEST(StatusReply, NumbersAreRoundedForPeople)
     EXPECT_DOUBLE_EQ(pipeline["latency_ms"]["p99"].get<double>(), 40.0);
     const Json& health = status["calibration_health"];
     EXPECT_DOUBLE_EQ(health["row_offset_px"].get<double>(), 0.123);
+    EXPECT_DOUBLE_EQ(health["offset_px"].get<double>(), -0.235);
+    EXPECT_DOUBLE_EQ(health["roll_deg"].get<double>(), 0.3123);
+    EXPECT_DOUBLE_EQ(health["max_row_error_px"].get<double>(), 1.235);
+    EXPECT_EQ(health["last_check"], "degraded");
+    EXPECT_EQ(health["state_changes"], 2);
     EXPECT_EQ(health["matches"], 210);
     EXPECT_DOUBLE_EQ(health["checked_age_s"].get<double>(), 1.23);
     const Json& calibration = status["calibration"];
