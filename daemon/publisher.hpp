@@ -60,8 +60,10 @@ struct PipelineStats {
     // From a pair's capture stamp to its result's publication, over the last pairs, ms.
     double latency_p50_ms = 0.0;
     double latency_p99_ms = 0.0;
-    DisparityRange range;           // the disparity range in force
-    std::array<char, 16> matcher{}; // StereoProcessor::matcherName(), NUL-terminated
+    DisparityRange range; // the disparity range in force
+    // StereoProcessor::matcherName() ("census-sgm (planar)"), kept in place: copied with
+    // the stats into every result without allocating.
+    FixedText matcher;
 };
 
 // A pair as captured, before rectification: copies of the source's frames, made only

@@ -396,7 +396,7 @@ ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceH
         const PipelineStats& stats = latest->stats;
         pipeline.frames = stats.frames;
         pipeline.fps = currentFps(*latest, now_ns);
-        pipeline.matcher = stats.matcher.data();
+        pipeline.matcher = stats.matcher.view();
         pipeline.range = stats.range;
         pipeline.bad_frames = stats.bad_frames;
         pipeline.out_of_sync = stats.out_of_sync;
