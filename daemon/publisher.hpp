@@ -60,7 +60,8 @@ struct PipelineStats {
     // From a pair's capture stamp to its result's publication, over the last pairs, ms.
     double latency_p50_ms = 0.0;
     double latency_p99_ms = 0.0;
-    DisparityRange range; // the disparity range in force
+    DisparityRange range;            // the disparity range in force
+    double max_output_depth_m = 0.0; // StereoProcessor::maxOutputDepth(), metres
     // StereoProcessor::matcherName() ("census-sgm (planar)"), kept in place: copied with
     // the stats into every result without allocating.
     FixedText matcher;

@@ -105,6 +105,7 @@ void Worker::updateZones(const ZonesSettings& zones)
 void Worker::refreshRange()
 {
     stats_.range = processor_ != nullptr ? processor_->disparityRange() : DisparityRange{};
+    stats_.max_output_depth_m = processor_ != nullptr ? processor_->maxOutputDepth() : 0.0;
     stats_.matcher.assign(processor_ != nullptr ? processor_->matcherName() : "none");
 }
 

@@ -51,6 +51,8 @@ Json pipelineJson(const StatusPipeline& pipeline)
     out["min_disparity"] = pipeline.range.min_disparity;
     out["closest_depth_m"] = roundTo(pipeline.range.closest_depth_m, 3);
     out["disparity_range_capped"] = pipeline.range.capped;
+    if (pipeline.max_output_depth_m)
+        out["max_output_depth_m"] = roundTo(*pipeline.max_output_depth_m, 3);
     out["region"] = {{"x", pipeline.region.x},
                      {"y", pipeline.region.y},
                      {"width", pipeline.region.width},

@@ -73,6 +73,8 @@ struct StatusPipeline {
     double latency_p50_ms = 0.0; // capture stamp to publication
     double latency_p99_ms = 0.0;
     RegionOfInterest region; // nearest.roi, fractions of the image
+    // The outputs' depth cap in force (output.max_depth_m), metres; none uncalibrated.
+    std::optional<double> max_output_depth_m;
 };
 
 // The numbers of the rig's calibration checks (daemon/calibration_health_monitor.hpp).

@@ -69,11 +69,26 @@ TEST_F(RecordE2e, DepthAndPointsCarryTheStampsOfTheirPairs)
         EXPECT_EQ(results.log_times, left.log_times) << topic;
     }
 
+    // Depths beyond the outputs' cap (output.max_depth_m, by default f*B / 4 px: 2.0 m for
+    // this rig) are not in the bag: NaN in the depth, no point.
+    const float cap_m = static_cast<float>(kFocalPx * kBaselineM / 4.0);
+    const auto within_cap = [cap_m](std::string_view data, std::size_t stride, std::size_t offset) {
+        std::size_t beyond = 0, depths = 0;
+        for (std::size_t at = offset; at + sizeof(float) <= data.size(); at += stride) {
+            float z = 0;
+            std::memcpy(&z, data.data() + at, sizeof z);
+            depths += std::isfinite(z) ? 1 : 0;
+            beyond += std::isfinite(z) && z > cap_m ? 1 : 0;
+        }
+        EXPECT_GT(depths, 10000u);
+        return beyond;
+    };
     mcap::Reader reader(out);
     reader.forEachMessage([&](const mcap::MessageView& message, const mcap::MessageRef&) {
         const std::string& topic = reader.channels().at(message.channel_id).topic;
         if (topic == kMcapDepthTopic) {
             const ros2::ImageView depth = ros2::parseImage(message.data);
+            EXPECT_EQ(within_cap(depth.data, 4, 0), 0u) << "depths beyond the cap";
             EXPECT_EQ(depth.encoding, "32FC1");
             EXPECT_EQ(depth.width, static_cast<uint32_t>(kSize.width));
             EXPECT_EQ(depth.height, static_cast<uint32_t>(kSize.height));
@@ -81,6 +96,7 @@ TEST_F(RecordE2e, DepthAndPointsCarryTheStampsOfTheirPairs)
             EXPECT_EQ(depth.header.frame_id, "stereo_left_optical_frame");
         } else if (topic == kMcapPointsTopic) {
             const ros2::PointCloud2View cloud = ros2::parsePointCloud2(message.data);
+            EXPECT_EQ(within_cap(cloud.data, 16, 8), 0u) << "points beyond the cap";
             EXPECT_EQ(cloud.header.frame_id, "stereo_left_optical_frame");
             EXPECT_GT(cloud.width, 1000u);
         }

@@ -218,6 +218,63 @@ TEST_F(LiveViewPage, RegionAimedAtNothingShowsNoReadingAndTheReason)
     EXPECT_EQ(text.rfind("NO READING: nothing_in_range", 0), 0u) << text;
 }
 
+// output.max_depth_m: depths beyond the cap are left out of the snapshot's depth, the
+// cloud and the live view's depth and points; the reading is the one without the cap.
+TEST_F(LiveViewE2e, DepthsBeyondTheOutputCapAreLeftOut)
+{
+    if (std::string(STEREOD_NODE).empty())
+        GTEST_SKIP() << "node is not installed";
+    // Tsukuba here: f*B = 8 px*m, its depths 0.57 .. 1.6 m; the default cap is f*B / 4 px.
+    {
+        const uint16_t port = freePort();
+        startService("127.0.0.1:" + std::to_string(port));
+        ASSERT_FALSE(HasFailure());
+        EXPECT_NEAR(status()["pipeline"]["max_output_depth_m"].get<double>(), 615.0 * 0.013 / 4,
+                    1e-3);
+        service_.reset();
+        socket_ = dir_.file("capped.sock");
+    }
+    const std::string config = dir_.file("cap.yaml");
+    std::ofstream(config) << "output:\n  max_depth_m: 0.8\n";
+    const uint16_t port = freePort();
+    startService("127.0.0.1:" + std::to_string(port), config);
+    ASSERT_FALSE(HasFailure());
+    EXPECT_EQ(status()["pipeline"]["max_output_depth_m"].get<double>(), 0.8);
+    const ProcessResult text = runProcess({test::stereoctlPath(), "--socket", socket_, "status"});
+    EXPECT_NE(text.out.find("depth out to 0.8 m"), std::string::npos) << text.out;
+
+    ProtocolClient client(socket_, 30000ms);
+    const Json snapshot =
+        client.request({{"cmd", "snapshot"}, {"items", Json::array({"depth", "cloud"})}});
+    ASSERT_EQ(snapshot["payloads"].size(), 2u) << snapshot.dump();
+    cv::Mat depth_mm(288, 384, CV_16UC1);
+    client.readPayload(depth_mm.data, depth_mm.total() * 2);
+    std::vector<float> cloud(snapshot["payloads"][1]["bytes"].get<std::size_t>() / 4);
+    client.readPayload(cloud.data(), cloud.size() * 4);
+    double most_mm = 0;
+    cv::minMaxLoc(depth_mm, nullptr, &most_mm);
+    EXPECT_LE(most_mm, 800.0);
+    EXPECT_GT(cv::countNonZero(depth_mm), 10000);
+    for (std::size_t i = 2; i < cloud.size(); i += 4)
+        ASSERT_LE(cloud[i], 0.8f) << "point " << i / 4;
+    // The reading comes from the whole depth: tsukuba's nearest objects, within the cap.
+    EXPECT_TRUE(snapshot["reading"]["valid"].get<bool>()) << snapshot["reading"].dump();
+
+    const ProcessResult node = runProcess({STEREOD_NODE, kClientScripts + "/client.mjs",
+                                           "ws://127.0.0.1:" + std::to_string(port), "2"});
+    ASSERT_EQ(node.exit_code, 0) << node.err;
+    const Json got = Json::parse(node.out);
+    ASSERT_TRUE(got["depth"].is_object());
+    std::size_t with_depth = 0;
+    for (const Json& z : got["depth"]["data"]) {
+        if (z.is_null())
+            continue;
+        ++with_depth;
+        ASSERT_LE(z.get<double>(), 0.8);
+    }
+    EXPECT_GT(with_depth, 10000u);
+}
+
 TEST_F(LiveViewE2e, PortTakenLeavesTheServiceRunningAndSaysSo)
 {
     const UniqueFd taken(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
