@@ -573,7 +573,8 @@ int runRecord(const RecordOptions& options)
     const std::string write_error = pair_writer.failed() ? pair_writer.error() : close_error;
     const uint64_t dropped = counts.service_skipped + counts.queue_dropped;
     if (options.json) {
-        json summary = {{"dir", options.out_dir},
+        // A bag is a file, a CSV+PNG recording a directory: the key says which.
+        json summary = {{mcap ? "file" : "dir", options.out_dir},
                         {"pairs", written},
                         {"dropped", dropped},
                         {"service_skipped", counts.service_skipped},
