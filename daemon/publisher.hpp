@@ -26,6 +26,7 @@
 
 #include <opencv2/core/mat.hpp>
 
+#include "base/clock.hpp"
 #include "base/unique_fd.hpp"
 #include "pipeline/stereo_processor.hpp"
 #include "pipeline/zones.hpp"
@@ -91,6 +92,9 @@ struct PublishedFrame {
     int64_t skew_ns = 0;      // right minus left capture time of the pair
     uint64_t sequence = 0;    // set by publish(): 1 for the first result, then +1
     int64_t published_ns = 0; // CLOCK_MONOTONIC when published, set by publish()
+    // CLOCK_REALTIME minus CLOCK_MONOTONIC when published, set by publish(): the one
+    // conversion of this pair's stamps to the wall clock (realtimeNs()).
+    int64_t realtime_offset_ns = 0;
     FixedText reason_message; // why there is no reading, with numbers; may be empty
     PipelineStats stats;
     RawPair raw; // the pair as captured, when raw frames were wanted
@@ -98,6 +102,15 @@ struct PublishedFrame {
     // name's buffer from frame to frame.
     std::vector<ZoneReading> zones;
     CameraPose camera_pose; // robot.camera_pose in force for this pair
+
+    // A CLOCK_MONOTONIC stamp of this pair (result.stamp_ns, or its right frame's) as the
+    // same instant on CLOCK_REALTIME, ns since the Unix epoch: the time base of readings'
+    // stamp_realtime_ns, the live view, bags and anything a robot merges with its other
+    // data (ROS's header.stamp). The one place such a stamp is made.
+    int64_t realtimeNs(int64_t monotonic_ns) const noexcept
+    {
+        return saturatingAddNs(monotonic_ns, realtime_offset_ns);
+    }
 };
 
 class Publisher {

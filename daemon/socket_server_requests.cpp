@@ -103,6 +103,7 @@ ReadingReport SocketServer::currentReading(const PublishedFrame* latest, double 
     }
     report.reading = latest->result.reading;
     report.message = latest->reason_message.view();
+    report.realtime_offset_ns = latest->realtime_offset_ns;
     const auto refuse = [&](NoReadingReason reason) {
         report.reading.valid = false;
         report.reading.distance_m = 0.0;
@@ -186,8 +187,9 @@ void SocketServer::notifyObserverOfStatus(int64_t now_ns)
         currentReading(latest, options_.publish.max_reading_age_ms, health, now_ns, message);
     observer_reading_.clear();
     appendReadingJson(observer_reading_, report, now_ns);
-    observer_->onStatus(statusNow(now_ns).dump(), observer_reading_,
-                        report.has_frame ? report.reading.stamp_ns : 0);
+    observer_->onStatus(
+        statusNow(now_ns).dump(), observer_reading_,
+        report.has_frame && latest != nullptr ? latest->realtimeNs(report.reading.stamp_ns) : 0);
 }
 
 void SocketServer::handle(Client& client, const SnapshotRequest& request,
@@ -241,6 +243,7 @@ void SocketServer::sendSnapshot(Client& client, const SnapshotRequest& request,
     Json answer = okReply(id);
     answer["frame"] = result.frame;
     answer["stamp_ns"] = result.stamp_ns;
+    answer["stamp_realtime_ns"] = latest->realtimeNs(result.stamp_ns);
     answer["depth_valid"] = latest->depth_valid;
     answer["reading"] = readingToJson(report, now_ns);
     answer["calibration"] = {{"focal_px", geometry.focal_px},
@@ -290,6 +293,7 @@ void SocketServer::handle(Client& client, const ZonesRequest&, const std::option
     } else {
         object.field("frame", latest->result.frame);
         object.field("stamp_ns", latest->result.stamp_ns);
+        object.field("stamp_realtime_ns", latest->realtimeNs(latest->result.stamp_ns));
         object.field("age_ms",
                      roundTo(static_cast<double>(now_ns - latest->result.stamp_ns) / 1e6, 3));
         appendZonesJson(object.openField("zones"), latest->zones);

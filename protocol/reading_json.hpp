@@ -6,6 +6,7 @@
 // Reentrant: every function here is pure or writes only into the caller's buffer.
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -25,6 +26,10 @@ struct ReadingReport {
     // The reason as one sentence with its numbers; empty: reasonMessage(reading). Borrowed:
     // the text must outlive the report's use.
     std::string_view message;
+    // CLOCK_REALTIME minus CLOCK_MONOTONIC for the pair behind the reading
+    // (PublishedFrame::realtime_offset_ns): with it the object carries stamp_realtime_ns.
+    // None where no service clock lies behind the stamp (`stereoctl depth`).
+    std::optional<int64_t> realtime_offset_ns;
 };
 
 // The reason of a reading as one sentence with the numbers the reading holds, e.g. "too
