@@ -165,6 +165,28 @@ void printStatus(const json& status)
                number(clients, "connected", 0), number(clients, "subscribers", 0),
                number(clients, "frames_dropped", 0), number(clients, "disconnected_slow", 0));
 
+    const json& live = member(status, "live_view");
+    if (live.is_object()) {
+        if (live.value("listening", false)) {
+            fmt::print("live view: http://{}/, {} clients, {} messages ({} MB), {} readings sent, "
+                       "{} readings dropped, {} frames dropped for slow clients, {} clients "
+                       "closed as not reading\n",
+                       text(live, "listen"), number(live, "clients", 0),
+                       number(live, "messages_sent", 0),
+                       live.value("bytes_sent", 0.0) > 0
+                           ? fmt::format("{:.1f}", live.value("bytes_sent", 0.0) / 1e6)
+                           : std::string("0"),
+                       number(live, "readings_sent", 0), number(live, "readings_dropped", 0),
+                       number(live, "frames_dropped", 0), number(live, "clients_dropped", 0));
+        } else {
+            const std::string error = optionalText(live, "error");
+            fmt::print("live view: {}{}\n",
+                       text(live, "listen") == "off" ? std::string("off")
+                                                     : "not listening on " + text(live, "listen"),
+                       error.empty() ? std::string() : ": " + error);
+        }
+    }
+
     if (const json& reading = member(status, "reading"); reading.is_object()) {
         fmt::print("reading: {}\n", formatWatchLine(reading));
     }

@@ -68,7 +68,8 @@ TEST_F(LiveViewE2e, FoxgloveClientGetsEveryChannelAndTheServicesOwnValues)
         {"/stereo/left/camera_info", {"cdr", "sensor_msgs/msg/CameraInfo"}},
         {"/stereo/right/camera_info", {"cdr", "sensor_msgs/msg/CameraInfo"}},
         {"/stereo/nearest", {"json", "stereod.Reading"}},
-        {"/stereo/status", {"json", "stereod.Status"}}};
+        {"/stereo/status", {"json", "stereod.Status"}},
+        {"/stereo/zones", {"json", "stereod.Zones"}}};
     ASSERT_EQ(got["channels"].size(), expected.size()) << got["channels"].dump();
     for (const Json& channel : got["channels"]) {
         const auto it = expected.find(channel["topic"]);
@@ -78,7 +79,8 @@ TEST_F(LiveViewE2e, FoxgloveClientGetsEveryChannelAndTheServicesOwnValues)
         EXPECT_EQ(channel["schemaEncoding"], it->second.first == "cdr" ? "ros2msg" : "jsonschema");
         EXPECT_GT(channel["schemaLength"].get<int>(), 10);
         // Frame channels: at least 5 messages in 4 s (the client decoded every CDR one).
-        if (it->second.first == "cdr" || it->first == "/stereo/nearest") {
+        if (it->second.first == "cdr" || it->first == "/stereo/nearest" ||
+            it->first == "/stereo/zones") {
             EXPECT_GE(got["counts"].value(it->first, 0), 5) << it->first;
         }
     }
@@ -95,6 +97,28 @@ TEST_F(LiveViewE2e, FoxgloveClientGetsEveryChannelAndTheServicesOwnValues)
     EXPECT_EQ(depth["step"], 384 * 4);
     EXPECT_EQ(depth["frame_id"], "stereo_left_optical_frame");
     EXPECT_EQ(depth["logTime"], depth["stamp_ns"]);
+    // One time base: header stamps and log times on the wall clock (CLOCK_REALTIME), the
+    // reading's stamp_realtime_ns its CLOCK_MONOTONIC stamp_ns moved by the clocks' offset,
+    // and its log time that very stamp.
+    const auto wall_now_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                 std::chrono::system_clock::now().time_since_epoch())
+                                 .count();
+    const int64_t depth_stamp = std::stoll(depth["stamp_ns"].get<std::string>());
+    EXPECT_LT(depth_stamp, wall_now_ns);
+    EXPECT_GT(depth_stamp, wall_now_ns - 60'000'000'000LL) << "not the wall clock";
+    // The reading as it came (as text: its realtime stamp is too large for a JavaScript
+    // number to hold exactly).
+    const Json nearest = Json::parse(got["nearest_text"].get<std::string>());
+    ASSERT_TRUE(nearest.contains("stamp_realtime_ns")) << nearest.dump();
+    EXPECT_EQ(std::to_string(nearest["stamp_realtime_ns"].get<int64_t>()),
+              got["nearest_log_time"].get<std::string>());
+    EXPECT_NEAR(static_cast<double>(nearest["stamp_realtime_ns"].get<int64_t>() -
+                                    nearest["stamp_ns"].get<int64_t>()),
+                std::stod(got["clock_offset_ns"].get<std::string>()), 5e6);
+    // The zones channel: none configured here, the pair's frame and stamps all the same.
+    ASSERT_TRUE(got["zones"].is_object());
+    EXPECT_TRUE(got["zones"]["zones"].empty());
+    EXPECT_TRUE(got["zones"].contains("stamp_realtime_ns"));
     ProtocolClient client(socket_, 30000ms);
     const Json snapshot = client.request({{"cmd", "snapshot"}, {"items", Json::array({"depth"})}});
     ASSERT_EQ(snapshot["depth_valid"], true) << snapshot.dump();
@@ -113,10 +137,11 @@ TEST_F(LiveViewE2e, FoxgloveClientGetsEveryChannelAndTheServicesOwnValues)
         runProcess({test::stereoctlPath(), "--socket", socket_, "distance", "--json"});
     ASSERT_EQ(distance.exit_code, 0) << distance.err;
     Json ours = Json::parse(distance.out);
-    Json theirs = got["nearest"];
+    Json theirs = nearest;
     for (Json* reading : {&ours, &theirs}) {
         ASSERT_TRUE(reading->contains("stamp_ns")) << reading->dump();
         reading->erase("stamp_ns");
+        reading->erase("stamp_realtime_ns");
         reading->erase("frame");
         reading->erase("age_ms");
     }
@@ -216,6 +241,38 @@ TEST_F(LiveViewPage, RegionAimedAtNothingShowsNoReadingAndTheReason)
     ASSERT_FALSE(HasFailure());
     const std::string text = shown["distance"];
     EXPECT_EQ(text.rfind("NO READING: nothing_in_range", 0), 0u) << text;
+}
+
+// The matcher's whole name, longer than the 15 characters it was once cut to, read back
+// through `status` (JSON and text) and the live view's /stereo/status; the text status
+// also gives the live view's counters.
+TEST_F(LiveViewE2e, TheMatchersWholeNameReadsBackThroughStatusAndTheLiveView)
+{
+    if (std::string(STEREOD_NODE).empty())
+        GTEST_SKIP() << "node is not installed";
+    const std::string config = dir_.file("planar.yaml");
+    std::ofstream(config) << "matcher:\n  tuning: planar\n";
+    const uint16_t port = freePort();
+    startService("127.0.0.1:" + std::to_string(port), config, false);
+    ASSERT_FALSE(HasFailure());
+    EXPECT_EQ(status()["pipeline"]["matcher"], "census-sgm (planar)");
+    const ProcessResult text = runProcess({test::stereoctlPath(), "--socket", socket_, "status"});
+    ASSERT_EQ(text.exit_code, 0) << text.err;
+    EXPECT_NE(text.out.find(", matcher census-sgm (planar), "), std::string::npos) << text.out;
+
+    const ProcessResult node = runProcess({STEREOD_NODE, kClientScripts + "/client.mjs",
+                                           "ws://127.0.0.1:" + std::to_string(port), "3"});
+    ASSERT_EQ(node.exit_code, 0) << node.err;
+    const Json got = Json::parse(node.out);
+    ASSERT_TRUE(got["status"].is_object()) << node.out.substr(0, 300);
+    EXPECT_EQ(got["status"]["pipeline"]["matcher"], "census-sgm (planar)");
+
+    const ProcessResult after = runProcess({test::stereoctlPath(), "--socket", socket_, "status"});
+    EXPECT_NE(after.out.find("live view: http://127.0.0.1:" + std::to_string(port) + "/, "),
+              std::string::npos)
+        << after.out;
+    EXPECT_NE(after.out.find(" readings sent, 0 readings dropped, "), std::string::npos)
+        << after.out;
 }
 
 // output.max_depth_m: depths beyond the cap are left out of the snapshot's depth, the
