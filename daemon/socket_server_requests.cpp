@@ -165,6 +165,7 @@ Json SocketServer::statusNow(int64_t now_ns)
     status.reading =
         currentReading(latest, options_.publish.max_reading_age_ms, health, now_ns, message);
     status.now_ns = now_ns;
+    status.max_reading_age_ms = options_.publish.max_reading_age_ms;
     return statusToJson(status);
 }
 

@@ -150,6 +150,7 @@ Json statusToJson(const ServiceStatus& status)
                         {"frames_dropped", live.frames_dropped},
                         {"clients_dropped", live.clients_dropped}};
     out["reading"] = readingToJson(status.reading, status.now_ns);
+    out["max_reading_age_ms"] = status.max_reading_age_ms;
     return out;
 }
 

@@ -131,6 +131,9 @@ struct ServiceStatus {
     StatusLiveView live_view;
     ReadingReport reading; // its message is borrowed
     int64_t now_ns = 0;    // for the reading's age
+    // publish.max_reading_age_ms: a reading older than this is stale (how a viewer that
+    // holds a reading knows when to stop showing it as current).
+    double max_reading_age_ms = 0.0;
 };
 
 // The `status` object (the reply's "status" member). Numbers meant to be read by people

@@ -5,9 +5,12 @@
 // HTTP side refuses what it does not serve.
 #include <chrono>
 #include <cmath>
+#include <csignal>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <memory>
 #include <regex>
 #include <string>
@@ -18,6 +21,8 @@
 #include <netinet/in.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -156,9 +161,9 @@ TEST_F(LiveViewE2e, FoxgloveClientGetsEveryChannelAndTheServicesOwnValues)
     EXPECT_GT(live["bytes_sent"].get<uint64_t>(), 1'000'000u);
 }
 
-// The page in Debian's Chromium (headless, playwright-core): the distance `stereoctl
-// distance` gives, a depth image that is not blank, a screenshot kept in the build tree;
-// and with the region aimed at nothing, NO READING and the reason.
+// The page in Debian's Chromium (headless, playwright-core), followed through the states
+// of the reading (tests/live_view/page.mjs): each shown as such, with a screenshot in the
+// build tree (build/tests/daemon/live-view/).
 class LiveViewPage : public LiveViewE2e {
   protected:
     void SetUp() override
@@ -176,34 +181,82 @@ class LiveViewPage : public LiveViewE2e {
         const char* path = std::getenv("STEREOD_CHROMIUM");
         return path != nullptr ? path : "/usr/bin/chromium";
     }
-    Json openPage(uint16_t port, const std::string& screenshot)
+    static std::string screenshots() { return std::string(STEREOD_BINARY_DIR) + "/live-view"; }
+    // The page opened by page.mjs, going through `states`; read each with next().
+    void openPage(uint16_t port, const std::string& name, const std::vector<std::string>& states)
     {
-        const ProcessResult page =
-            runProcess({STEREOD_NODE, kClientScripts + "/page.mjs",
-                        "http://127.0.0.1:" + std::to_string(port) + "/", screenshot});
-        EXPECT_EQ(page.exit_code, 0) << page.err;
-        return page.exit_code == 0 ? Json::parse(page.out) : Json::object();
+        std::vector<std::string> argv = {STEREOD_NODE, kClientScripts + "/page.mjs",
+                                         "http://127.0.0.1:" + std::to_string(port) + "/",
+                                         screenshots(), name};
+        argv.insert(argv.end(), states.begin(), states.end());
+        page_ = std::make_unique<test::ChildProcess>(argv, dir_.file("page.log"));
     }
+    // What the page showed in its next state.
+    Json next()
+    {
+        const auto line = page_->readLine(90s);
+        if (!line) {
+            ADD_FAILURE() << "the page never showed the state: " << readText(dir_.file("page.log"));
+            return Json::object();
+        }
+        Json shown = Json::parse(*line);
+        std::printf("[page] %s: \"%s\" / \"%s\", %s\n", shown["state"].get<std::string>().c_str(),
+                    shown["distance"].get<std::string>().c_str(),
+                    shown["detail"].get<std::string>().c_str(),
+                    shown["screenshot"].get<std::string>().c_str());
+        EXPECT_TRUE(shown["errors"].empty()) << shown["errors"].dump();
+        EXPECT_TRUE(shown["failed_requests"].empty()) << shown["failed_requests"].dump();
+        EXPECT_GT(std::filesystem::file_size(shown["screenshot"].get<std::string>()), 10000u);
+        return shown;
+    }
+    static std::string readText(const std::string& path)
+    {
+        std::ifstream in(path);
+        return std::string(std::istreambuf_iterator<char>(in), {});
+    }
+
+    std::unique_ptr<test::ChildProcess> page_;
 };
 
-TEST_F(LiveViewPage, ShowsTheDistanceAndTheDepth)
+// The distance `stereoctl distance` gives, connected, the depth in colours that follow the
+// data with a colour bar in metres, the status with calibration health and zones; then,
+// with the service stopped (SIGSTOP: the connection stays, nothing comes), the distance
+// greys out as STALE once it is older than publish.max_reading_age_ms.
+TEST_F(LiveViewPage, ShowsTheDistanceThenStaleWhenNothingComes)
 {
+    const std::string config = dir_.file("zones.yaml");
+    std::ofstream(config)
+        << "zones:\n  - {name: ahead, min: [0.3, -0.5, -0.5], max: [1.0, 0.5, 0.5]}\n";
     const uint16_t port = freePort();
-    startService("127.0.0.1:" + std::to_string(port));
+    startService("127.0.0.1:" + std::to_string(port), config);
     ASSERT_FALSE(HasFailure());
-    const std::string screenshot = std::string(STEREOD_BINARY_DIR) + "/live-view-page.png";
-    const Json shown = openPage(port, screenshot);
+    openPage(port, "distance", {"valid", "stale"});
+    const Json shown = next();
     ASSERT_FALSE(HasFailure());
-    EXPECT_TRUE(shown["errors"].empty()) << shown["errors"].dump();
     const ProcessResult distance =
         runProcess({test::stereoctlPath(), "--socket", socket_, "distance"});
     ASSERT_EQ(distance.exit_code, 0) << distance.err;
     // Both print three decimals and " m": the same pair gives the same text.
     EXPECT_EQ(shown["distance"].get<std::string>() + "\n", distance.out);
+    EXPECT_EQ(shown["detail"], "");
+    EXPECT_EQ(shown["connected"], "true");
+    EXPECT_EQ(shown["connection"], "● connected to 127.0.0.1:" + std::to_string(port));
     EXPECT_EQ(shown["depth_width"], 384);
     EXPECT_GT(shown["depth_variance"].get<double>(), 100.0) << "the depth canvas is blank";
+    // The colour bar: metres from the frame's own 1st to 99th percentile (tsukuba, f*B
+    // 8 px*m: 0.5 to 1.7 m or so).
+    const std::string bar = shown["colourbar"];
+    std::smatch ends;
+    ASSERT_TRUE(std::regex_match(bar, ends, std::regex(R"((\d+\.\d+) m .* (\d+\.\d+) m)"))) << bar;
+    EXPECT_GT(std::stod(ends[1]), 0.9); // the far end first (blue, left)
+    EXPECT_LT(std::stod(ends[2]), 0.7); // the near end last (red, right)
     EXPECT_NE(shown["status"].get<std::string>().find("state running"), std::string::npos);
-    EXPECT_TRUE(std::filesystem::file_size(screenshot) > 10000) << screenshot;
+    EXPECT_EQ(shown["health"].get<std::string>().rfind("calibration health: ", 0), 0u)
+        << shown["health"];
+    ASSERT_EQ(shown["zones"].size(), 1u) << shown["zones"].dump();
+    EXPECT_EQ(shown["zones"][0]["text"].get<std::string>().rfind("zone ahead: ", 0), 0u)
+        << shown["zones"].dump();
+    EXPECT_NE(shown["zones"][0]["text"].get<std::string>().find("% in sight"), std::string::npos);
 
     // The hovered pixel's depth is the service's own there (its snapshot, in mm), with
     // the pixel's confidence.
@@ -214,33 +267,134 @@ TEST_F(LiveViewPage, ShowsTheDistanceAndTheDepth)
         std::regex(R"(\((\d+), (\d+)\) (no depth|(\d+\.\d{3}) m), confidence (\d+))")))
         << hover;
     const int x = std::stoi(match[1]), y = std::stoi(match[2]);
-    ProtocolClient client(socket_, 30000ms);
-    const Json snapshot = client.request({{"cmd", "snapshot"}, {"items", Json::array({"depth"})}});
-    cv::Mat depth_mm(288, 384, CV_16UC1);
-    ASSERT_EQ(snapshot["payloads"][0]["bytes"], depth_mm.total() * 2);
-    client.readPayload(depth_mm.data, depth_mm.total() * 2);
-    const int mm = depth_mm.at<uint16_t>(y, x);
-    if (match[3] == "no depth") {
-        EXPECT_EQ(mm, 0) << hover;
-    } else {
-        EXPECT_NEAR(std::stod(match[4]) * 1000.0, mm, 1.0) << hover;
-        EXPECT_GT(std::stoi(match[5]), 0) << hover;
+    {
+        ProtocolClient client(socket_, 30000ms);
+        const Json snapshot =
+            client.request({{"cmd", "snapshot"}, {"items", Json::array({"depth"})}});
+        cv::Mat depth_mm(288, 384, CV_16UC1);
+        ASSERT_EQ(snapshot["payloads"][0]["bytes"], depth_mm.total() * 2);
+        client.readPayload(depth_mm.data, depth_mm.total() * 2);
+        const int mm = depth_mm.at<uint16_t>(y, x);
+        if (match[3] == "no depth") {
+            EXPECT_EQ(mm, 0) << hover;
+        } else {
+            EXPECT_NEAR(std::stod(match[4]) * 1000.0, mm, 1.0) << hover;
+            EXPECT_GT(std::stoi(match[5]), 0) << hover;
+        }
     }
+
+    // Stopped: the reading ages on the page's clock past max_reading_age_ms (1000 ms).
+    service_->sendSignal(SIGSTOP);
+    const Json stale = next();
+    service_->sendSignal(SIGCONT);
+    EXPECT_EQ(stale["distance"], "STALE " + shown["distance"].get<std::string>());
+    EXPECT_EQ(stale["detail"].get<std::string>().rfind("no fresh reading: ", 0), 0u)
+        << stale["detail"];
+    EXPECT_NE(stale["detail"].get<std::string>().find("1.0 s allowed"), std::string::npos)
+        << stale["detail"];
+    EXPECT_NE(stale["distance_colour"], shown["distance_colour"]) << "not greyed out";
+    EXPECT_EQ(stale["connected"], "true"); // still connected: the reading is what is old
 }
 
 TEST_F(LiveViewPage, RegionAimedAtNothingShowsNoReadingAndTheReason)
 {
     // Every depth of the scene is beyond 0.15 m: nothing in range.
     const std::string config = dir_.file("near.yaml");
-    std::ofstream(config) << "nearest:\n  min_depth_m: 0.1\n  max_depth_m: 0.15\n";
+    std::ofstream(config) << "nearest:\n  min_depth_m: 0.1\n  max_depth_m: 0.15\n"
+                          << "publish:\n  max_reading_age_ms: 10000\n";
     const uint16_t port = freePort();
     startService("127.0.0.1:" + std::to_string(port), config, false);
     ASSERT_FALSE(HasFailure());
-    const Json shown =
-        openPage(port, std::string(STEREOD_BINARY_DIR) + "/live-view-no-reading.png");
+    openPage(port, "no-reading", {"none"});
+    const Json shown = next();
+    EXPECT_EQ(shown["distance"], "NO READING: nothing_in_range");
+    EXPECT_EQ(shown["detail"].get<std::string>().rfind("nothing within the depth range", 0), 0u)
+        << shown["detail"];
+}
+
+// Something nearer than the disparity range can see (tsukuba enlarged three times, as
+// census-sgm's accuracy test has it, with 32 disparities): NEARER THAN the bound, never a
+// distance.
+TEST_F(LiveViewPage, SomethingNearerThanTheRangeShowsTheBound)
+{
+    for (int i = 0; i < 3; ++i) {
+        for (const char* side : {"left", "right"}) {
+            const std::string file = recording_ + "/" + side + std::to_string(i) + ".png";
+            cv::Mat image = cv::imread(file, cv::IMREAD_GRAYSCALE);
+            cv::resize(image, image, {}, 3.0, 3.0, cv::INTER_CUBIC);
+            cv::imwrite(file, image);
+        }
+    }
+    saveCalibration(makeRectifiedCalibration(cv::Size(1152, 864), 3000.0, 0.1), calibration_);
+    // The readings of 1152x864 pairs may come slower than the default 1 s of age allows.
+    const std::string config = dir_.file("narrow.yaml");
+    std::ofstream(config) << "matcher:\n  num_disparities: 32\nnearest:\n  max_depth_m: 100\n"
+                          << "publish:\n  max_reading_age_ms: 10000\n";
+    const uint16_t port = freePort();
+    startService("127.0.0.1:" + std::to_string(port), config, false);
     ASSERT_FALSE(HasFailure());
-    const std::string text = shown["distance"];
-    EXPECT_EQ(text.rfind("NO READING: nothing_in_range", 0), 0u) << text;
+    openPage(port, "nearer", {"nearer"});
+    const Json shown = next();
+    // The closest the range sees: f*B / 31 px = 9.68 m.
+    EXPECT_EQ(shown["distance"], "NEARER THAN 9.68 m");
+    EXPECT_EQ(shown["detail"].get<std::string>().rfind("something in the region is nearer", 0), 0u)
+        << shown["detail"];
+}
+
+// A rig whose calibration no longer holds (the Baumer rig after it moved, checked every
+// half second; its scenes 1, 2, 3 and 7, which give a distance with 64 disparities): the
+// distance, in amber, with CALIBRATION SUSPECT and the row offset; the status panel says
+// degraded; `stereoctl distance` prints the flag and exits 4.
+TEST_F(LiveViewPage, ASuspectCalibrationIsShownWithTheDistance)
+{
+    const std::string baumer = test::sharedDataDir() + "/real-rig/baumer/";
+    std::filesystem::remove_all(recording_);
+    std::filesystem::create_directories(recording_ + "/left");
+    std::filesystem::create_directories(recording_ + "/right");
+    std::ofstream csv(recording_ + "/frames.csv");
+    csv << "index,left_stamp_ns,right_stamp_ns,left,right\n";
+    const int scenes[] = {1, 2, 3, 7};
+    for (int i = 0; i < 4; ++i) {
+        char number[8];
+        std::snprintf(number, sizeof number, "%02d", scenes[i]);
+        const std::string name = std::string(number) + ".png";
+        // The scenes' files named "right" come from the calibration's left camera.
+        std::filesystem::create_symlink(baumer + "samples_baumer/right" + name,
+                                        recording_ + "/left/" + name);
+        std::filesystem::create_symlink(baumer + "samples_baumer/left" + name,
+                                        recording_ + "/right/" + name);
+        csv << i << "," << 200'000'000LL * i << "," << 200'000'000LL * i << ",left/" << name
+            << ",right/" << name << "\n";
+    }
+    csv.close();
+    const ProcessResult imported = runProcess({test::stereoctlPath(), "calibrate", "--from-opencv",
+                                               baumer + "Checkerboard_Baumer/intrinsics.yml",
+                                               baumer + "Checkerboard_Baumer/extrinsics.yml",
+                                               "--size", "696x524", "--out", calibration_});
+    ASSERT_EQ(imported.exit_code, 0) << imported.err;
+    const std::string config = dir_.file("health.yaml");
+    std::ofstream(config)
+        << "calibration_health:\n  interval_s: 0.5\nmatcher:\n  num_disparities: 64\n"
+        << "publish:\n  max_reading_age_ms: 10000\n";
+    const uint16_t port = freePort();
+    startService("127.0.0.1:" + std::to_string(port), config, false);
+    ASSERT_FALSE(HasFailure());
+    openPage(port, "suspect", {"suspect"});
+    const Json shown = next();
+    EXPECT_TRUE(
+        std::regex_match(shown["distance"].get<std::string>(), std::regex(R"(\d+\.\d{3} m)")))
+        << shown["distance"];
+    EXPECT_EQ(shown["detail"].get<std::string>().rfind("CALIBRATION SUSPECT: rows ", 0), 0u)
+        << shown["detail"];
+    EXPECT_EQ(shown["health_state"], "degraded") << shown["health"];
+    // And stereoctl says so too, with its own exit code.
+    const ProcessResult distance =
+        runProcess({test::stereoctlPath(), "--socket", socket_, "distance"});
+    EXPECT_EQ(distance.exit_code, 4) << distance.out << distance.err;
+    EXPECT_TRUE(std::regex_match(
+        distance.out,
+        std::regex(R"(\d+\.\d{3} m  CALIBRATION SUSPECT: rows [+-]\d+\.\d\d px apart\n)")))
+        << distance.out;
 }
 
 // The matcher's whole name, longer than the 15 characters it was once cut to, read back
@@ -370,6 +524,11 @@ TEST_F(LiveViewE2e, HttpServesThePageAndRefusesEverythingElse)
     EXPECT_EQ(page.rfind("HTTP/1.1 200", 0), 0u) << page.substr(0, 200);
     EXPECT_NE(page.find("text/html"), std::string::npos);
     EXPECT_NE(page.find("viewer.js"), std::string::npos);
+    // The page's icon, which it names (no 404 in the browser's console).
+    EXPECT_NE(page.find(R"(rel="icon" href="favicon.svg")"), std::string::npos);
+    const std::string icon = httpGet(port, "/favicon.svg");
+    EXPECT_EQ(icon.rfind("HTTP/1.1 200", 0), 0u) << icon.substr(0, 200);
+    EXPECT_NE(icon.find("image/svg+xml"), std::string::npos);
     const std::string three = httpGet(port, "/three/build/three.module.js");
     EXPECT_EQ(three.rfind("HTTP/1.1 200", 0), 0u)
         << three.substr(0, 200) << " (is libjs-three installed?)";
