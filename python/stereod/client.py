@@ -135,8 +135,15 @@ class Reading:
     message: Optional[str] = None
     #: With reason ``nearer_than_range``: the obstacle is nearer than this (metres).
     nearer_than_m: Optional[float] = None
-    #: The service suspects its calibration (its health check is failing).
+    #: The capture time of the pair on the service machine's CLOCK_REALTIME (ns since the
+    #: Unix epoch): the stamp to merge with other robot data; ``stamp_ns`` is the same
+    #: instant on CLOCK_MONOTONIC.
+    stamp_realtime_ns: Optional[int] = None
+    #: The service suspects its calibration (its health check finds the rows of the two
+    #: images apart): a valid distance may be wrong. ``stereoctl distance`` exits 4 for it.
     calibration_suspect: bool = False
+    #: With ``calibration_suspect``: how far apart the rows are (pixels).
+    calibration_row_offset_px: Optional[float] = None
     #: Subscriptions only: events the service skipped before this one.
     skipped: int = 0
     #: The JSON object as received, with any fields this class does not name.
@@ -168,7 +175,9 @@ class Reading:
                 reason=code,
                 message=message,
                 nearer_than_m=_opt_float(obj.get("nearer_than_m")),
+                stamp_realtime_ns=_opt_int(obj.get("stamp_realtime_ns")),
                 calibration_suspect=bool(obj.get("calibration_suspect", False)),
+                calibration_row_offset_px=_opt_float(obj.get("calibration_row_offset_px")),
                 skipped=int(skipped or 0),
                 raw=obj,
             )
