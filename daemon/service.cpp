@@ -339,6 +339,7 @@ void Service::startLiveView()
     settings.rate_hz[live_view::kLeftInfo] = rates.camera_info;
     settings.rate_hz[live_view::kRightInfo] = rates.camera_info;
     settings.rate_hz[live_view::kNearest] = rates.nearest;
+    settings.rate_hz[live_view::kZones] = rates.nearest; // the zones come with the reading
     settings.web_root = options_.live_view_web_root;
     live_view_ = std::make_unique<live_view::LiveView>(
         settings, calibration_ ? calibration_->rectified : RectifiedGeometry{});
