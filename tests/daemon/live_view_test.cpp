@@ -179,8 +179,9 @@ TEST(LiveView, ASlowClientGetsEveryReadingAndFewerFrames)
                 readings.push_back(*frame);
         } else {
             ++frames;
-            // A client that takes its time over each image (a browser drawing it).
-            std::this_thread::sleep_for(60ms);
+            // A client that takes its time over each image (a browser drawing it): far
+            // slower than four channels of frames come, however fast they are made.
+            std::this_thread::sleep_for(150ms);
         }
         return true;
     };
@@ -196,13 +197,16 @@ TEST(LiveView, ASlowClientGetsEveryReadingAndFewerFrames)
     for (std::size_t i = 1; i < readings.size(); ++i)
         ASSERT_EQ(readings[i], readings[i - 1] + 1) << "a reading was lost or reordered";
     EXPECT_EQ(readings.back() + 1, producer.frames());
-    EXPECT_GE(readings.size(), 80u);
+    EXPECT_GE(readings.size(), 20u);
     const StatusLiveView status = view.status();
     EXPECT_EQ(status.readings_sent, readings.size());
     EXPECT_EQ(status.readings_dropped, 0u);
-    // The frames were decimated, not the client closed.
-    EXPECT_GT(status.frames_dropped, 0u);
-    EXPECT_GE(frames, 10);
+    // Frames are what the slow client loses (replaced while waiting for its socket, or
+    // already in the mailbox when the feed thread is the slower one, as under TSan), and
+    // it is not closed for being slow.
+    EXPECT_GE(frames, 5);
+    EXPECT_LT(static_cast<uint64_t>(frames), 4 * producer.frames())
+        << status.frames_dropped << " frames dropped";
     EXPECT_EQ(status.clients_dropped, 0u);
     EXPECT_FALSE(client->closed());
     view.stop();
