@@ -115,8 +115,15 @@ def test_snapshot_arrays(client):
     known = np.isfinite(depth)
     assert known.sum() > depth.size // 2
     assert np.all(depth[known] > 0)
-    # NaN only where there is no depth: never where the disparity gives a depth in range.
-    assert not np.any(np.isnan(depth) & np.isfinite(disparity) & (disparity > FB / 65.535))
+    # The outputs leave out depths beyond their cap (output.max_depth_m; here the default,
+    # f*B / 4 px = 2.5 m).
+    cap_m = client.status()["pipeline"]["max_output_depth_m"]
+    assert cap_m == pytest.approx(FB / 4)
+    assert np.all(depth[known] <= cap_m)
+    # NaN only where there is no depth: never where the disparity gives a depth in range
+    # (above the payload's millimetre floor, within the cap).
+    in_range = np.isfinite(disparity) & (disparity > FB / 65.535) & (disparity >= FB / cap_m * 1.0001)
+    assert not np.any(np.isnan(depth) & in_range)
     # Depth and disparity of one frame agree: Z = f*B/d, to the millimetre.
     both = known & np.isfinite(disparity) & (disparity > 0)
     np.testing.assert_allclose(depth[both], FB / disparity[both], atol=0.0011)
