@@ -169,15 +169,14 @@ void printStatus(const json& status)
     if (live.is_object()) {
         if (live.value("listening", false)) {
             fmt::print("live view: http://{}/, {} clients, {} messages ({} MB), {} readings sent, "
-                       "{} readings dropped, {} frames dropped for slow clients, {} clients "
-                       "closed as not reading\n",
+                       "{} frames dropped for slow clients, {} clients closed as not reading\n",
                        text(live, "listen"), number(live, "clients", 0),
                        number(live, "messages_sent", 0),
                        live.value("bytes_sent", 0.0) > 0
                            ? fmt::format("{:.1f}", live.value("bytes_sent", 0.0) / 1e6)
                            : std::string("0"),
-                       number(live, "readings_sent", 0), number(live, "readings_dropped", 0),
-                       number(live, "frames_dropped", 0), number(live, "clients_dropped", 0));
+                       number(live, "readings_sent", 0), number(live, "frames_dropped", 0),
+                       number(live, "clients_dropped", 0));
         } else {
             const std::string error = optionalText(live, "error");
             fmt::print("live view: {}{}\n",

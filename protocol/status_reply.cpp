@@ -146,7 +146,6 @@ Json statusToJson(const ServiceStatus& status)
                         {"messages_sent", live.messages_sent},
                         {"bytes_sent", live.bytes_sent},
                         {"readings_sent", live.readings_sent},
-                        {"readings_dropped", live.readings_dropped},
                         {"frames_dropped", live.frames_dropped},
                         {"clients_dropped", live.clients_dropped}};
     out["reading"] = readingToJson(status.reading, status.now_ns);

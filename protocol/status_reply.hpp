@@ -113,10 +113,9 @@ struct StatusLiveView {
     uint64_t clients = 0;
     uint64_t messages_sent = 0;
     uint64_t bytes_sent = 0;
-    uint64_t readings_sent = 0;    // /stereo/nearest messages handed to clients' sockets
-    uint64_t readings_dropped = 0; // readings the live view could not keep (its thread stalled)
-    uint64_t frames_dropped = 0;   // frame messages slow clients did not get
-    uint64_t clients_dropped = 0;  // clients closed for not reading
+    uint64_t readings_sent = 0;   // /stereo/nearest messages handed to clients' sockets
+    uint64_t frames_dropped = 0;  // frame messages slow clients did not get
+    uint64_t clients_dropped = 0; // clients closed for not reading
 };
 
 // Everything the `status` object says, as plain values. States are the protocol's names.

@@ -251,17 +251,20 @@ uint16_t LiveView::port() const noexcept
     return transport_->port();
 }
 
-void LiveView::queueJson(Channel channel, int64_t log_time_ns, std::string_view text)
+void LiveView::sendJson(Channel channel, int64_t log_time_ns, std::string_view text, int64_t now_ns)
 {
-    std::vector<JsonMessage>& queue = mailbox_.json;
-    if (queue.size() >= kMaxQueuedReadings) {
-        queue.erase(queue.begin());
-        readings_dropped_.fetch_add(1, std::memory_order_relaxed);
+    if (!subscribed(channel))
+        return;
+    // kZones follows kNearest's rate: the zones come with the reading.
+    const double hz = settings_.rate_hz[channel];
+    if (hz > 0 && channel != kStatus) {
+        const auto interval_ns = static_cast<int64_t>(1e9 / hz);
+        // A reading a little early (capture jitter) still goes, as in feed().
+        if (now_ns - json_sent_ns_[channel] < interval_ns - interval_ns / 5)
+            return;
+        json_sent_ns_[channel] = now_ns;
     }
-    JsonMessage& message = queue.emplace_back();
-    message.channel = channel;
-    message.log_time_ns = log_time_ns;
-    message.text.assign(text);
+    send(channel, log_time_ns, text);
 }
 
 void LiveView::onFrame(const PublishedFrame& frame, std::string_view reading_json)
@@ -272,8 +275,9 @@ void LiveView::onFrame(const PublishedFrame& frame, std::string_view reading_jso
         return;
     const DepthResult& r = frame.result;
     const int64_t stamp_ns = frame.realtimeNs(r.stamp_ns);
-    const bool zones = subscribed(kZones);
-    if (zones) {
+    // Readings first: on their way before the images are even copied.
+    sendJson(kNearest, stamp_ns, reading_json, last_frame_ns_);
+    if (subscribed(kZones)) {
         zones_json_.clear();
         JsonObjectWriter object(zones_json_);
         object.field("frame", r.frame);
@@ -281,14 +285,11 @@ void LiveView::onFrame(const PublishedFrame& frame, std::string_view reading_jso
         object.field("stamp_realtime_ns", stamp_ns);
         appendZonesJson(object.openField("zones"), frame.zones);
         object.close();
+        sendJson(kZones, stamp_ns, zones_json_, last_frame_ns_);
     }
     {
         std::lock_guard lock(mutex_);
         Mailbox& m = mailbox_;
-        if (subscribed(kNearest))
-            queueJson(kNearest, stamp_ns, reading_json);
-        if (zones)
-            queueJson(kZones, stamp_ns, zones_json_);
         m.frame = true;
         m.stamp_ns = stamp_ns;
         if (subscribed(kLeftImage))
@@ -326,16 +327,11 @@ void LiveView::onStatus(std::string_view status_json, std::string_view reading_j
         clients_.load(std::memory_order_relaxed) == 0)
         return;
     const int64_t now_ns = monotonicNowNs();
-    {
-        std::lock_guard lock(mutex_);
-        // The status is of now: logged at the wall clock's now.
-        if (subscribed(kStatus))
-            queueJson(kStatus, saturatingAddNs(now_ns, realtimeOffsetNs()), status_json);
-        // No frame for a second: the reading says why (source down, stale).
-        if (subscribed(kNearest) && now_ns - last_frame_ns_ > 1'000'000'000)
-            queueJson(kNearest, reading_realtime_ns, reading_json);
-    }
-    wake_.notify_one();
+    // The status is of now: logged at the wall clock's now.
+    sendJson(kStatus, saturatingAddNs(now_ns, realtimeOffsetNs()), status_json, now_ns);
+    // No frame for a second: the reading says why (source down, stale).
+    if (now_ns - last_frame_ns_ > 1'000'000'000)
+        sendJson(kNearest, reading_realtime_ns, reading_json, now_ns);
 }
 
 void LiveView::feed()
@@ -348,11 +344,8 @@ void LiveView::feed()
     std::array<int64_t, kChannelEnd> interval_ns{};
     std::array<int64_t, kChannelEnd> last_sent_ns{};
     for (uint32_t c = kLeftImage; c < kChannelEnd; ++c) {
-        const auto channel = static_cast<Channel>(c);
-        double hz = settings_.rate_hz[c];
-        if (hz <= 0 && !isPriorityChannel(channel))
-            hz = settings_.max_rate_hz;
-        interval_ns[c] = hz > 0 && channel != kStatus ? static_cast<int64_t>(1e9 / hz) : 0;
+        const double hz = settings_.rate_hz[c] > 0 ? settings_.rate_hz[c] : settings_.max_rate_hz;
+        interval_ns[c] = hz > 0 ? static_cast<int64_t>(1e9 / hz) : 0;
     }
     int64_t now_ns = 0;
     // A frame a little early (capture jitter) still goes: otherwise a camera at exactly
@@ -370,17 +363,13 @@ void LiveView::feed()
             std::unique_lock lock(mutex_);
             // While clients are connected, their waiting frames are offered to their
             // sockets every kPumpIntervalMs even when nothing new comes.
-            const auto ready = [this] {
-                return stopping_ || mailbox_.frame || !mailbox_.json.empty();
-            };
+            const auto ready = [this] { return stopping_ || mailbox_.frame; };
             if (clients_.load(std::memory_order_relaxed) > 0)
                 wake_.wait_for(lock, std::chrono::milliseconds(kPumpIntervalMs), ready);
             else
                 wake_.wait(lock, ready);
             if (stopping_)
                 return;
-            std::swap(work.json, mailbox_.json);
-            mailbox_.json.clear();
             // The buffers swap: the mailbox gets the ones this thread is done with, which
             // the next result is copied into without allocating.
             work.frame = mailbox_.frame;
@@ -397,12 +386,6 @@ void LiveView::feed()
             }
         }
         now_ns = monotonicNowNs();
-        // Readings first: they go to the sockets before this result's frames are made.
-        for (const JsonMessage& json : work.json) {
-            if (!subscribed(json.channel) || (interval_ns[json.channel] > 0 && !due(json.channel)))
-                continue;
-            send(json.channel, json.log_time_ns, json.text);
-        }
         if (work.frame) {
             const int64_t t = work.stamp_ns;
             const ros2::Header left_header{ros2::Time::fromNs(t), kLeftOpticalFrame};
@@ -607,7 +590,6 @@ StatusLiveView LiveView::status() const
     c.frames_dropped = frames_dropped_.load(std::memory_order_relaxed);
     c.clients_dropped = clients_dropped_.load(std::memory_order_relaxed);
     c.readings_sent = readings_sent_.load(std::memory_order_relaxed);
-    c.readings_dropped = readings_dropped_.load(std::memory_order_relaxed);
     return c;
 }
 

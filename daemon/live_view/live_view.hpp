@@ -5,19 +5,20 @@
 //
 // Three threads meet here, and the worker is none of them:
 //  - the socket server's I/O thread offers each new result (onFrame) and, once a
-//    second, the status (onStatus): a copy into a mailbox under a short lock, only of
-//    the channels somebody subscribed to. The readings (and zones, status) queue there,
-//    a bounded number of them; the frame channels keep only the newest result;
-//  - the feed thread (ours) takes the mailbox's content, serializes the channels (ROS 2
-//    CDR, JSON), the frame channels each at most at its rate (live_view.rate_hz.*, else
+//    second, the status (onStatus). The reading, the zones and the status are JSON
+//    already: it frames them and posts them to the transport at once. The frame
+//    channels it copies into a mailbox under a short lock, only those somebody
+//    subscribed to, the newest result replacing one not taken yet;
+//  - the feed thread (ours) takes the mailbox's content, serializes the frame channels
+//    (ROS 2 CDR), each at most at its rate (live_view.rate_hz.*, else
 //    live_view.max_rate_hz), and hands the messages to the transport;
 //  - the transport's I/O thread (WebSocketTransport) keeps the clients and their
 //    subscriptions and sends.
 //
 // Readings first: the reading, zones and status channels go to a client's socket the
-// moment they are made, outside its byte budget. A frame message waits in the client's
-// own slot for its channel until the client's socket holds less than kFrameBudgetBytes
-// unsent, and a newer frame of the channel replaces one still waiting (counted in
+// moment they are made, outside its byte budget, never behind the serializing of images. A frame
+// message waits in the client's own slot for its channel until the client's socket holds less than
+// kFrameBudgetBytes unsent, and a newer frame of the channel replaces one still waiting (counted in
 // frames_dropped): a slow client gets fewer frames, never fewer readings, and a reading
 // waits behind at most the budget and one frame. A client that reads nothing for
 // kStuckMs while data waits for it is closed (counted in clients_dropped).
@@ -92,11 +93,6 @@ class LiveView final : public PublishObserver {
     static constexpr std::size_t kFrameBudgetBytes = 2 * 1024 * 1024;
     // A client that reads nothing this long while data waits for it is closed.
     static constexpr int64_t kStuckMs = 5000;
-    // Readings (and zones, status) waiting in the mailbox for the feed thread, at most;
-    // the oldest goes when a newer one finds the queue full (counted in
-    // readings_dropped). Ten seconds of a 30 fps camera, were the feed thread ever
-    // stalled that long.
-    static constexpr std::size_t kMaxQueuedReadings = 300;
     // How often waiting frames are offered again to the clients' sockets, and a client
     // that reads nothing is looked at, ms.
     static constexpr int64_t kPumpIntervalMs = 10;
@@ -125,12 +121,6 @@ class LiveView final : public PublishObserver {
     StatusLiveView status() const;
 
   private:
-    // A JSON message of a priority channel, as it waits for the feed thread.
-    struct JsonMessage {
-        Channel channel = kNearest;
-        int64_t log_time_ns = 0;
-        std::string text;
-    };
     struct Mailbox {
         bool frame = false; // the frame channels below hold a result not sent yet
         cv::Mat left, depth_m, confidence, disparity;
@@ -138,7 +128,6 @@ class LiveView final : public PublishObserver {
         int64_t stamp_ns = 0; // the pair's realtime stamp
         float min_disparity = 0.0f;
         float max_disparity = 0.0f;
-        std::vector<JsonMessage> json; // in the order they came, at most kMaxQueuedReadings
     };
     struct Client;
     struct Sessions;
@@ -147,8 +136,9 @@ class LiveView final : public PublishObserver {
     {
         return subscribers_[channel].load(std::memory_order_relaxed) > 0;
     }
-    // The socket server's thread, mutex_ held: queues a JSON message for the feed thread.
-    void queueJson(Channel channel, int64_t log_time_ns, std::string_view text);
+    // The socket server's thread: a JSON message to its subscribers now, unless its
+    // channel's own rate (live_view.rate_hz.nearest) says it is too soon.
+    void sendJson(Channel channel, int64_t log_time_ns, std::string_view text, int64_t now_ns);
     void feed();
     void send(Channel channel, int64_t log_time_ns, std::string_view payload);
     // Transport thread: false when the client is closed or closing; closes one that has
@@ -181,10 +171,13 @@ class LiveView final : public PublishObserver {
     std::string address_;
     std::string error_;
     std::atomic<bool> listening_{false};
-    int64_t last_frame_ns_ = 0; // the socket server's thread: when the last frame came
-    std::string zones_json_;    // the socket server's thread: scratch
+    // The socket server's thread only: when the last frame came, when each JSON channel
+    // last went, and the zones' text.
+    int64_t last_frame_ns_ = 0;
+    std::array<int64_t, kChannelEnd> json_sent_ns_{};
+    std::string zones_json_;
     std::atomic<uint64_t> clients_{0}, messages_{0}, bytes_{0}, frames_dropped_{0},
-        clients_dropped_{0}, readings_sent_{0}, readings_dropped_{0};
+        clients_dropped_{0}, readings_sent_{0};
 };
 
 } // namespace stereod::live_view

