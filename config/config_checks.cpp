@@ -486,6 +486,8 @@ std::vector<Problem> checkValues(const ServiceConfig& config, const KeyLocations
     checkSource(checker, config.source, config.calibration_path);
     checkMatcher(checker, config.processing.matcher);
     checkNearest(checker, config.processing.nearest);
+    if (const auto& cap = config.processing.output.max_depth_m)
+        checker.real("output.max_depth_m", *cap, above(0, 1e6, " m"));
     checker.real("calibration_health.interval_s", config.calibration_health.interval_s,
                  closed(0, 3600, " s"));
     checker.real("robot.min_visible_fraction", config.zones.min_visible_fraction,

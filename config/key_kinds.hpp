@@ -123,6 +123,31 @@ KeyDef autoIntegerKey(std::string path, bool live, Access access, std::string ex
     return def;
 }
 
+// "auto" (std::nullopt) or a number, in `unit`; its range is checked by validation.
+template <class Access>
+KeyDef autoRealKey(std::string path, bool live, Access access, std::string unit)
+{
+    KeyDef def{std::move(path), live, {}, {}};
+    const std::string expected = "auto or a number, in " + unit;
+    def.read = [access, expected](const YAML::Node& node, ServiceConfig& config,
+                                  const ReadContext&) -> ReadResult {
+        if (node.IsScalar() && node.Scalar() == "auto") {
+            access(config) = std::nullopt;
+            return std::nullopt;
+        }
+        const auto value = node.IsScalar() ? parseReal(node.Scalar()) : std::nullopt;
+        if (!value) {
+            return ReadFailure{"not auto or a number", expected};
+        }
+        access(config) = *value;
+        return std::nullopt;
+    };
+    def.show = [access](const ServiceConfig& config) {
+        return access(config) ? formatNumber(*access(config)) : std::string("auto");
+    };
+    return def;
+}
+
 template <class Access> KeyDef boolKey(std::string path, bool live, Access access)
 {
     KeyDef def{std::move(path), live, {}, {}};

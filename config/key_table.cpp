@@ -339,6 +339,9 @@ std::vector<KeyDef> buildKeyTable()
     add(realKey(
         "nearest.max_depth_m", kLive,
         [](auto& c) -> auto& { return c.processing.nearest.max_depth_m; }, "m"));
+    add(autoRealKey(
+        "output.max_depth_m", kLive,
+        [](auto& c) -> auto& { return c.processing.output.max_depth_m; }, "m"));
     add(realKey(
         "nearest.percentile", kLive,
         [](auto& c) -> auto& { return c.processing.nearest.percentile; }, "percent"));

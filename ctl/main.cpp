@@ -161,7 +161,7 @@ CLI::App* declareDistance(CLI::App& app, DistanceOptions& o, CommandSockets& soc
     CLI::App* cmd = addServiceCommand(
         app, "distance",
         "the nearest-object distance now (exit 0 valid, 1 no reading in range, 2 stale or not "
-        "producing, 3 service unreachable)",
+        "producing, 3 service unreachable, 4 valid but the calibration is suspect)",
         o.service, sockets, &o.json, "print the reading object as JSON");
     cmd->add_option("--max-age-ms", o.max_age_ms, "refuse a reading older than this (ms)")
         ->check(kPositive);

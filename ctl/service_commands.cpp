@@ -128,13 +128,13 @@ void printStatus(const json& status)
 
     const json& pipeline = member(status, "pipeline");
     const json& extended = member(pipeline, "extended_range");
-    fmt::print(
-        "pipeline: {} frames, {} fps, matcher {}, {} disparities from {}{}, closest depth {} "
-        "m\n",
-        number(pipeline, "frames", 0), number(pipeline, "fps", 1), text(pipeline, "matcher"),
-        number(pipeline, "num_disparities", 0), number(pipeline, "min_disparity", 0),
-        extended.is_boolean() && extended.get<bool>() ? " and the extended range" : "",
-        number(pipeline, "closest_depth_m", 2));
+    fmt::print("pipeline: {} frames, {} fps, matcher {}, {} disparities from {}{}, closest depth {} "
+               "m, depth out to {} m
+",
+               number(pipeline, "frames", 0), number(pipeline, "fps", 1), text(pipeline, "matcher"),
+               number(pipeline, "num_disparities", 0), number(pipeline, "min_disparity", 0),
+               extended.is_boolean() && extended.get<bool>() ? " and the extended range" : "",
+               number(pipeline, "closest_depth_m", 2), number(pipeline, "max_output_depth_m", 1));
     printStageTable(stdout, member(pipeline, "stage_ms"));
     const json& latency = member(pipeline, "latency_ms");
     fmt::print("latency from capture to reading: p50 {} ms, p99 {} ms\n", number(latency, "p50", 1),
@@ -167,6 +167,27 @@ void printStatus(const json& status)
                "slow\n",
                number(clients, "connected", 0), number(clients, "subscribers", 0),
                number(clients, "frames_dropped", 0), number(clients, "disconnected_slow", 0));
+
+    const json& live = member(status, "live_view");
+    if (live.is_object()) {
+        if (live.value("listening", false)) {
+            fmt::print("live view: http://{}/, {} clients, {} messages ({} MB), {} readings sent, "
+                       "{} frames dropped for slow clients, {} clients closed as not reading\n",
+                       text(live, "listen"), number(live, "clients", 0),
+                       number(live, "messages_sent", 0),
+                       live.value("bytes_sent", 0.0) > 0
+                           ? fmt::format("{:.1f}", live.value("bytes_sent", 0.0) / 1e6)
+                           : std::string("0"),
+                       number(live, "readings_sent", 0), number(live, "frames_dropped", 0),
+                       number(live, "clients_dropped", 0));
+        } else {
+            const std::string error = optionalText(live, "error");
+            fmt::print("live view: {}{}\n",
+                       text(live, "listen") == "off" ? std::string("off")
+                                                     : "not listening on " + text(live, "listen"),
+                       error.empty() ? std::string() : ": " + error);
+        }
+    }
 
     if (const json& reading = member(status, "reading"); reading.is_object()) {
         fmt::print("reading: {}\n", formatWatchLine(reading));

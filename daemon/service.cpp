@@ -117,6 +117,7 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
     if (processor_) {
         initial_range_ = processor_->disparityRange();
         initial_matcher_ = processor_->matcherName();
+        initial_max_output_depth_m_ = processor_->maxOutputDepth();
         logDisparityRange(initial_range_, config_.processing.matcher, initial_matcher_);
     } else {
         initial_matcher_ = "none";
@@ -339,6 +340,7 @@ void Service::startLiveView()
     settings.rate_hz[live_view::kLeftInfo] = rates.camera_info;
     settings.rate_hz[live_view::kRightInfo] = rates.camera_info;
     settings.rate_hz[live_view::kNearest] = rates.nearest;
+    settings.rate_hz[live_view::kZones] = rates.nearest; // the zones come with the reading
     settings.web_root = options_.live_view_web_root;
     live_view_ = std::make_unique<live_view::LiveView>(
         settings, calibration_ ? calibration_->rectified : RectifiedGeometry{});
@@ -393,12 +395,15 @@ ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceH
     pipeline.range = initial_range_;
     pipeline.region = config_.processing.nearest.roi;
     pipeline.matcher = initial_matcher_;
+    pipeline.max_output_depth_m = initial_max_output_depth_m_;
     if (latest != nullptr) {
         const PipelineStats& stats = latest->stats;
         pipeline.frames = stats.frames;
         pipeline.fps = currentFps(*latest, now_ns);
-        pipeline.matcher = stats.matcher.data();
+        pipeline.matcher = stats.matcher.view();
         pipeline.range = stats.range;
+        if (stats.max_output_depth_m > 0.0)
+            pipeline.max_output_depth_m = stats.max_output_depth_m;
         pipeline.bad_frames = stats.bad_frames;
         pipeline.out_of_sync = stats.out_of_sync;
         pipeline.stage_mean_ms = stats.stage_mean_ms;

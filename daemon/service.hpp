@@ -179,6 +179,7 @@ class Service final : private ServerBackend {
 
     DisparityRange initial_range_; // for `status` before the first frame
     std::string initial_matcher_;
+    std::optional<double> initial_max_output_depth_m_; // none uncalibrated
     int64_t started_ns_ = 0;
     bool running_ = false;
     // Stall detection: when the ring's push count last changed, as seen by this thread.

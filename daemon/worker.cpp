@@ -98,10 +98,8 @@ void Worker::updateZones(const ZonesSettings& zones)
 void Worker::refreshRange()
 {
     stats_.range = processor_ != nullptr ? processor_->disparityRange() : DisparityRange{};
-    const std::string name = processor_ != nullptr ? processor_->matcherName() : "none";
-    stats_.matcher.fill('\0');
-    std::memcpy(stats_.matcher.data(), name.data(),
-                std::min(name.size(), stats_.matcher.size() - 1));
+    stats_.max_output_depth_m = processor_ != nullptr ? processor_->maxOutputDepth() : 0.0;
+    stats_.matcher.assign(processor_ != nullptr ? processor_->matcherName() : "none");
 }
 
 void Worker::applyPendingSettings()
@@ -124,7 +122,7 @@ void Worker::applyPendingSettings()
         processor_->updateSettings(*settings);
         refreshRange();
         spdlog::info("new processing settings in force");
-        logDisparityRange(stats_.range, settings->matcher, stats_.matcher.data());
+        logDisparityRange(stats_.range, settings->matcher, std::string(stats_.matcher.view()));
     } catch (const std::exception& e) {
         spdlog::error("new processing settings refused, the previous ones stay in force: {}",
                       e.what());

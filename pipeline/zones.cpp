@@ -153,10 +153,21 @@ double ZoneMonitor::visibleFraction(const ZoneSettings& zone, const cv::Mat& dep
                 if (u < 0 || v < 0 || u >= depth_m.cols || v >= depth_m.rows)
                     continue; // outside the field of view
                 const float z = depth_m.at<float>(v, u);
-                // No depth along that ray says nothing of what is there; a surface nearer
-                // than the sample hides it (a little slack for the depth's own error).
+                // No depth along that ray says nothing of what is there.
+                if (!usableDepth(z))
+                    continue;
+                // Seen through: the ray's surface lies beyond the sample (a little slack
+                // for the depth's own error), so the sample is seen empty.
                 const double slack = std::max(0.05, 0.02 * p[2]);
-                if (usableDepth(z) && z >= p[2] - slack)
+                if (z >= p[2] - slack) {
+                    ++visible;
+                    continue;
+                }
+                // A surface nearer than the sample: inside the zone it is what fills the
+                // zone there, seen; outside (in front of the zone) it hides the sample.
+                const cv::Vec3d surface_optical((u - g.cx_px) * z / g.focal_px,
+                                                (v - g.cy_px) * z / g.focal_px, z);
+                if (inside(rotation_ * surface_optical + t, zone))
                     ++visible;
             }
     return static_cast<double>(visible) / (static_cast<double>(n) * n * n);

@@ -53,6 +53,8 @@ Json pipelineJson(const StatusPipeline& pipeline)
     out["extended_range"] = pipeline.range.extended;
     out["full_resolution_closest_depth_m"] = roundTo(pipeline.range.range_closest_depth_m, 3);
     out["disparity_range_capped"] = pipeline.range.capped;
+    if (pipeline.max_output_depth_m)
+        out["max_output_depth_m"] = roundTo(*pipeline.max_output_depth_m, 3);
     out["region"] = {{"x", pipeline.region.x},
                      {"y", pipeline.region.y},
                      {"width", pipeline.region.width},
@@ -153,9 +155,11 @@ Json statusToJson(const ServiceStatus& status)
                         {"clients", live.clients},
                         {"messages_sent", live.messages_sent},
                         {"bytes_sent", live.bytes_sent},
+                        {"readings_sent", live.readings_sent},
                         {"frames_dropped", live.frames_dropped},
                         {"clients_dropped", live.clients_dropped}};
     out["reading"] = readingToJson(status.reading, status.now_ns);
+    out["max_reading_age_ms"] = status.max_reading_age_ms;
     return out;
 }
 

@@ -73,6 +73,8 @@ struct StatusPipeline {
     double latency_p50_ms = 0.0; // capture stamp to publication
     double latency_p99_ms = 0.0;
     RegionOfInterest region; // nearest.roi, fractions of the image
+    // The outputs' depth cap in force (output.max_depth_m), metres; none uncalibrated.
+    std::optional<double> max_output_depth_m;
 };
 
 // The numbers of the rig's calibration checks (daemon/calibration_health_monitor.hpp).
@@ -116,7 +118,8 @@ struct StatusLiveView {
     uint64_t clients = 0;
     uint64_t messages_sent = 0;
     uint64_t bytes_sent = 0;
-    uint64_t frames_dropped = 0;  // messages slow clients did not get
+    uint64_t readings_sent = 0;   // /stereo/nearest messages handed to clients' sockets
+    uint64_t frames_dropped = 0;  // frame messages slow clients did not get
     uint64_t clients_dropped = 0; // clients closed for not reading
 };
 
@@ -132,6 +135,9 @@ struct ServiceStatus {
     StatusLiveView live_view;
     ReadingReport reading; // its message is borrowed
     int64_t now_ns = 0;    // for the reading's age
+    // publish.max_reading_age_ms: a reading older than this is stale (how a viewer that
+    // holds a reading knows when to stop showing it as current).
+    double max_reading_age_ms = 0.0;
 };
 
 // The `status` object (the reply's "status" member). Numbers meant to be read by people

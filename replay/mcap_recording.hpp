@@ -11,8 +11,9 @@
 //                              (optional: enableDepth())
 //   /stereo/points             sensor_msgs/msg/PointCloud2, x y z intensity float32
 //                              (optional: enablePoints())
-// log_time, publish_time and header.stamp are the capture stamps (ns, CLOCK_MONOTONIC
-// for live recordings); a pair's depth and points carry its left image's stamp. Frame ids
+// log_time, publish_time and header.stamp are the stamps the writer is given: `stereoctl
+// record` gives each frame's capture time in the service's one time base, CLOCK_REALTIME
+// (docs/architecture.md, "Time"); a pair's depth and points carry its left image's stamp. Frame ids
 // stereo_{left,right}_optical_frame (REP 103 optical frames: x right, y down, z forward);
 // depth and points are in the rectified left camera's, stereo_left_optical_frame, as
 // stereo_image_proc gives its disparity and points the left camera's frame id.

@@ -139,8 +139,15 @@ class Reading:
     closest_m: Optional[float] = None
     #: Whether the matcher looks for something nearer than its range (census-sgm).
     near_field_guard: Optional[bool] = None
-    #: The service suspects its calibration (its health check is failing).
+    #: The capture time of the pair on the service machine's CLOCK_REALTIME (ns since the
+    #: Unix epoch): the stamp to merge with other robot data; ``stamp_ns`` is the same
+    #: instant on CLOCK_MONOTONIC.
+    stamp_realtime_ns: Optional[int] = None
+    #: The service suspects its calibration (its health check finds the rows of the two
+    #: images apart): a valid distance may be wrong. ``stereoctl distance`` exits 4 for it.
     calibration_suspect: bool = False
+    #: With ``calibration_suspect``: how far apart the rows are (pixels).
+    calibration_row_offset_px: Optional[float] = None
     #: Subscriptions only: events the service skipped before this one.
     skipped: int = 0
     #: The JSON object as received, with any fields this class does not name.
@@ -176,7 +183,9 @@ class Reading:
                 near_field_guard=(
                     bool(obj["near_field_guard"]) if "near_field_guard" in obj else None
                 ),
+                stamp_realtime_ns=_opt_int(obj.get("stamp_realtime_ns")),
                 calibration_suspect=bool(obj.get("calibration_suspect", False)),
+                calibration_row_offset_px=_opt_float(obj.get("calibration_row_offset_px")),
                 skipped=int(skipped or 0),
                 raw=obj,
             )

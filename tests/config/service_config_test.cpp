@@ -714,6 +714,24 @@ TEST(ConfigDocs, EveryKeyIsDocumented)
     }
 }
 
+TEST(ConfigOutput, MaxDepthIsAutoOrMetresAboveZero)
+{
+    EXPECT_FALSE(defaultConfig().processing.output.max_depth_m.has_value());
+    EXPECT_FALSE(parseConfig("output:\n  max_depth_m: auto\n", "t.yaml")
+                     .processing.output.max_depth_m.has_value());
+    const ServiceConfig set = parseConfig("output:\n  max_depth_m: 12.5\n", "t.yaml");
+    EXPECT_EQ(set.processing.output.max_depth_m, 12.5);
+    const ConfigChange change = diffConfig(defaultConfig(), set);
+    EXPECT_EQ(change.changed, std::vector<std::string>{"output.max_depth_m"});
+    EXPECT_TRUE(change.restart_needed.empty()); // live
+    for (const std::string value : {"0", "-3", "far", "[1]"}) {
+        const auto problems = problemsOf("output:\n  max_depth_m: " + value + "\n");
+        ASSERT_EQ(problems.size(), 1u) << value;
+        EXPECT_NE(problems[0].find("t.yaml:2: output.max_depth_m: "), std::string::npos)
+            << problems[0];
+    }
+}
+
 TEST(ConfigLiveView, ListenAddressRatesAndTheirLimits)
 {
     const ServiceConfig defaults = defaultConfig();

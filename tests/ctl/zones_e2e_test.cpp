@@ -3,6 +3,7 @@
 // view); `stereoctl zones` reads occupied, clear and unknown and exits 1; the zones
 // stream gives one event per frame; a reload with other zones applies them live.
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -115,6 +116,8 @@ TEST_F(ZonesService, OccupiedClearAndUnknownWithTheirExitCode)
     EXPECT_EQ(chair["state"], "occupied");
     // Ground truth: the chair's nearest point in the box is 1.578 m from the camera.
     EXPECT_NEAR(chair["nearest_m"].get<double>(), 1.578, 0.02 * 1.578);
+    // The chair fills much of its box: seen, not "0 % in sight".
+    EXPECT_GT(chair["visible_fraction"].get<double>(), 0.5) << chair.dump();
     EXPECT_EQ(reply["zones"][1]["state"], "clear");
     EXPECT_EQ(reply["zones"][2]["state"], "unknown");
     EXPECT_EQ(reply["zones"][2]["reason"], "not_visible");
@@ -124,7 +127,8 @@ TEST_F(ZonesService, OccupiedClearAndUnknownWithTheirExitCode)
     EXPECT_NE(text.out.find("chair: occupied, nearest"), std::string::npos) << text.out;
 }
 
-// The zones drawn on the colourised depth: the chair's box in red where it projects.
+// The zones drawn on the depth in grey: the chair's box in red where it projects, the
+// clear one in green, and no other colour in the picture but their labels'.
 TEST_F(ZonesService, PictureDrawsTheZonesOnTheDepth)
 {
     const std::string picture = dir_.file("zones.png");
@@ -143,6 +147,14 @@ TEST_F(ZonesService, PictureDrawsTheZonesOnTheDepth)
         }
     EXPECT_GT(red, 1000);   // the occupied chair box
     EXPECT_GT(green, 1000); // the clear box in front
+    // The background is grey: the boxes' colours appear nowhere else.
+    int coloured = 0;
+    for (int y = 0; y < image.rows; ++y)
+        for (int x = 0; x < image.cols; ++x) {
+            const cv::Vec3b c = image.at<cv::Vec3b>(y, x);
+            coloured += std::max({c[0], c[1], c[2]}) - std::min({c[0], c[1], c[2]}) > 30;
+        }
+    EXPECT_LT(coloured, static_cast<int>(image.total() / 5)) << "the depth is in colour";
 }
 
 TEST_F(ZonesService, TheStreamGivesOneEventPerFrame)

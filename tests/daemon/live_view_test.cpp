@@ -49,30 +49,48 @@ PublishedFrame frameOf(cv::Size size)
     return frame;
 }
 
-// Feeds frames from a thread of its own, as the socket server's I/O thread does.
+// Feeds frames from a thread of its own, as the socket server's I/O thread does; each
+// reading names its frame (0, 1, ...).
 class Producer {
   public:
     Producer(LiveView& view, cv::Size size, std::chrono::milliseconds period)
         : thread_([this, &view, size, period] {
               PublishedFrame frame = frameOf(size);
               while (!stop_.load()) {
+                  const uint64_t number = frames_.load();
+                  frame.result.frame = number;
                   frame.result.stamp_ns = Clock::now().time_since_epoch().count();
-                  view.onFrame(frame, R"({"valid":true,"distance_m":2.5})");
+                  view.onFrame(frame, R"({"valid":true,"distance_m":2.5,"frame":)" +
+                                          std::to_string(number) + "}");
+                  frames_.store(number + 1);
                   std::this_thread::sleep_for(period);
               }
           })
     {
     }
-    ~Producer()
+    ~Producer() { stop(); }
+    void stop()
     {
         stop_.store(true);
-        thread_.join();
+        if (thread_.joinable())
+            thread_.join();
     }
+    uint64_t frames() const { return frames_.load(); }
 
   private:
     std::atomic<bool> stop_{false};
+    std::atomic<uint64_t> frames_{0};
     std::thread thread_;
 };
+
+// The frame a /stereo/nearest message names.
+std::optional<uint64_t> readingFrame(const test::WebSocketClient::Message& message)
+{
+    const std::size_t at = message.payload.find(R"("frame":)");
+    if (at == std::string::npos)
+        return std::nullopt;
+    return std::stoull(message.payload.substr(at + 8));
+}
 
 uint32_t subscriptionOf(const test::WebSocketClient::Message& message)
 {
@@ -131,6 +149,65 @@ TEST(LiveView, ChannelsArriveUnderTheirSubscriptionIdsAtTheirOwnRates)
     EXPECT_TRUE(status.listening);
     EXPECT_EQ(status.clients, 1u);
     EXPECT_GE(status.messages_sent, static_cast<uint64_t>(counts[7] + counts[9] + counts[11]));
+    view.stop();
+}
+
+// A client subscribed to big frames that reads slower than they come: frames are
+// decimated (counted), every reading still arrives, and none waits behind the frames.
+TEST(LiveView, ASlowClientGetsEveryReadingAndFewerFrames)
+{
+    LiveViewSettings settings;
+    settings.port = 0;
+    settings.max_rate_hz = 100;
+    const cv::Size size(1282, 1110); // Aloe at full size: 5.7 MB of depth a frame
+    LiveView view(settings, geometryOf(size));
+    ASSERT_EQ(view.start(), "");
+    auto client = subscribe(
+        view.port(), {{1, kNearest}, {2, kDepth}, {3, kDisparity}, {4, kLeftImage}, {5, kPoints}});
+    Producer producer(view, size, 40ms);
+
+    std::vector<uint64_t> readings;
+    int frames = 0;
+    const auto receive = [&](std::chrono::milliseconds timeout) {
+        const auto message = client->receive(timeout);
+        if (!message)
+            return false;
+        if (subscriptionOf(*message) == 1) {
+            const auto frame = readingFrame(*message);
+            EXPECT_TRUE(frame.has_value()) << message->payload;
+            if (frame)
+                readings.push_back(*frame);
+        } else {
+            ++frames;
+            // A client that takes its time over each image (a browser drawing it): far
+            // slower than four channels of frames come, however fast they are made.
+            std::this_thread::sleep_for(150ms);
+        }
+        return true;
+    };
+    const auto start = Clock::now();
+    while (Clock::now() - start < 4s)
+        ASSERT_TRUE(receive(2s)) << "no message for 2 s";
+    producer.stop();
+    while (receive(1500ms)) {
+    }
+    ASSERT_FALSE(readings.empty());
+    // From the first reading that reached the client (its subscription was not in force
+    // for the first frames) to the last frame made: every one, in order.
+    for (std::size_t i = 1; i < readings.size(); ++i)
+        ASSERT_EQ(readings[i], readings[i - 1] + 1) << "a reading was lost or reordered";
+    EXPECT_EQ(readings.back() + 1, producer.frames());
+    EXPECT_GE(readings.size(), 20u);
+    const StatusLiveView status = view.status();
+    EXPECT_EQ(status.readings_sent, readings.size());
+    // Frames are what the slow client loses (replaced while waiting for its socket, or
+    // already in the mailbox when the feed thread is the slower one, as under TSan), and
+    // it is not closed for being slow.
+    EXPECT_GE(frames, 5);
+    EXPECT_LT(static_cast<uint64_t>(frames), 4 * producer.frames())
+        << status.frames_dropped << " frames dropped";
+    EXPECT_EQ(status.clients_dropped, 0u);
+    EXPECT_FALSE(client->closed());
     view.stop();
 }
 

@@ -76,7 +76,7 @@ TEST_F(StereodCli, HelpListsTheOptionsAndExitCodes)
     const ProcessResult result = run({"--help"});
     EXPECT_EQ(result.exit_code, 0) << result.err;
     for (const char* option : {"--config", "--check-config", "--replay", "--calib", "--socket",
-                               "--log-level", "Exit codes"})
+                               "--log-level", "Exit codes", ".mcap"})
         EXPECT_NE(result.out.find(option), std::string::npos) << option;
 }
 
