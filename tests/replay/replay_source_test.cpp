@@ -26,6 +26,7 @@
 #include "replay/replay_source.hpp"
 #include "tests/support/bags.hpp"
 #include "tests/support/data_paths.hpp"
+#include "tests/support/descriptor_exhaustion.hpp"
 #include "tests/support/process.hpp"
 #include "tests/support/recordings.hpp"
 #include "tests/support/temp_dir.hpp"
@@ -836,18 +837,6 @@ TEST_F(ReplaySourceTest, StampsThatRepeatComeOneFramePeriodApart)
             << "pair " << k;
 }
 
-// The descriptors of this process in use now.
-int openDescriptors()
-{
-    int count = 0;
-    if (DIR* dir = ::opendir("/proc/self/fd")) {
-        while (::readdir(dir) != nullptr)
-            ++count;
-        ::closedir(dir);
-    }
-    return count - 3; // ".", ".." and the directory's own
-}
-
 // Issue 23: with the process out of descriptors the replay could not open its frames and
 // stopped for good ("no pair readable in a whole pass"). It must say so, try again, and go
 // on once descriptors are free again.
@@ -868,20 +857,11 @@ TEST_F(ReplaySourceTest, RecoversWhenDescriptorsReturn)
     };
     ASSERT_TRUE(drainUntil([&] { return rig.source.status().pairs >= 3; }));
 
-    rlimit saved{};
-    ASSERT_EQ(::getrlimit(RLIMIT_NOFILE, &saved), 0);
-    rlimit lowered = saved;
-    lowered.rlim_cur = static_cast<rlim_t>(openDescriptors() + 16);
-    ASSERT_EQ(::setrlimit(RLIMIT_NOFILE, &lowered), 0);
-    std::vector<int> taken;
-    for (int fd; (fd = ::open("/dev/null", O_RDONLY | O_CLOEXEC)) >= 0;)
-        taken.push_back(fd);
+    test::DescriptorExhaustion exhaustion;
     const bool failed =
         drainUntil([&] { return rig.source.status().state == SourceState::Failed; });
     const std::string error = rig.source.status().last_error;
-    for (const int fd : taken)
-        ::close(fd);
-    ASSERT_EQ(::setrlimit(RLIMIT_NOFILE, &saved), 0);
+    exhaustion.release();
     ASSERT_TRUE(failed) << "the replay went on without descriptors?";
     EXPECT_NE(error.find("trying again"), std::string::npos) << error;
 
