@@ -144,7 +144,8 @@ Json statusToJson(const ServiceStatus& status)
                         {"messages_sent", live.messages_sent},
                         {"bytes_sent", live.bytes_sent},
                         {"frames_dropped", live.frames_dropped},
-                        {"clients_dropped", live.clients_dropped}};
+                        {"clients_dropped", live.clients_dropped},
+                        {"refused", live.refused}};
     out["reading"] = readingToJson(status.reading, status.now_ns);
     return out;
 }

@@ -112,7 +112,9 @@ struct StatusLiveView {
     uint64_t messages_sent = 0;
     uint64_t bytes_sent = 0;
     uint64_t frames_dropped = 0;  // messages slow clients did not get
-    uint64_t clients_dropped = 0; // clients closed for not reading
+    uint64_t clients_dropped = 0; // clients closed for not reading (frames or replies)
+    uint64_t refused = 0;         // requests refused: no or a wrong token, a foreign page,
+                                  // too many clients, out of descriptors
 };
 
 // Everything the `status` object says, as plain values. States are the protocol's names.

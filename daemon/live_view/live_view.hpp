@@ -14,6 +14,11 @@
 //    subscriptions and sends. A client whose socket holds more than kSkipBytes unsent
 //    loses frames (counted); one that stays so for kStuckMs is closed (counted).
 //
+// Bounds (docs/live-view.md): who may connect and how many is the transport's
+// (websocket_transport.hpp: the token, the Origin, max_clients, max_connections, the
+// reply backlog); here, a client subscribes to each channel at most once (kChannelEnd - 1
+// subscriptions), and a request gets at most one status reply.
+//
 // Thread contract: start()/stop() from the controlling thread; onFrame(),
 // onStatus() from one thread (the socket server's); counters() from any thread.
 
@@ -55,7 +60,16 @@ enum Channel : uint32_t {
 
 struct LiveViewSettings {
     std::string host = "127.0.0.1";
-    uint16_t port = 8765;      // 0: any free port (tests)
+    uint16_t port = 8765; // 0: any free port (tests)
+    // Who may watch (daemon/live_view/admission.hpp): the token every request must carry
+    // (empty: a new one from the kernel's random source at start()), and the pages besides
+    // the live view's own whose browsers may connect.
+    std::string token;
+    std::vector<std::string> allowed_origins;
+    // WebSocket sessions at most, and sockets of any kind at most (the service keeps this
+    // below its descriptor limit).
+    std::size_t max_clients = 16;
+    std::size_t max_connections = 32;
     int points_step = 4;       // every n-th point of the cloud goes out
     double max_rate_hz = 10.0; // frame channels; status is once a second
     // Per channel, at most this often; 0 (and kStatus, once a second) follows max_rate_hz.
@@ -82,6 +96,8 @@ class LiveView final : public PublishObserver {
     std::string start();
     void stop();
     uint16_t port() const noexcept;
+    // The token every request must carry (made by start() when the settings had none).
+    const std::string& token() const noexcept { return settings_.token; }
 
     // The socket server's I/O thread: a new result, and its reading as the protocol's
     // reading object (the same text `stereoctl distance --json` prints).

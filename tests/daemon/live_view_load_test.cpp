@@ -76,9 +76,8 @@ TEST_F(LiveViewLoad, EightReadersAndOneStuckClientLeaveTheWorkerItsRate)
     const double quiet_fps = fps(quiet_start, quiet_end);
     const double quiet_mib = residentMiB(service_->pid());
 
-    test::ChildProcess load({STEREOD_NODE, test::kClientScripts + "/load.mjs",
-                             "ws://127.0.0.1:" + std::to_string(port), std::to_string(kReaders),
-                             std::to_string(kLoadSeconds)},
+    test::ChildProcess load({STEREOD_NODE, test::kClientScripts + "/load.mjs", websocket_,
+                             std::to_string(kReaders), std::to_string(kLoadSeconds)},
                             dir_.file("load.log"));
     std::this_thread::sleep_for(3s); // the clients connect and subscribe
     const auto load_start = frames();

@@ -1,7 +1,7 @@
 // Opens stereod's live view page in Debian's Chromium (headless, through playwright-core),
 // waits for the distance, hovers the depth image, and prints what the page shows as JSON;
 // saves a screenshot:
-//   node page.mjs http://127.0.0.1:8765/ OUT.png
+//   node page.mjs http://127.0.0.1:8765/?token=TOKEN OUT.png
 import { chromium } from "playwright-core";
 
 const [url, screenshot] = [process.argv[2], process.argv[3]];
