@@ -87,6 +87,10 @@ class McapRecordingWriter {
     void close() { writer_.close(); }
 
     uint64_t pairsWritten() const noexcept { return pairs_; }
+    // Pairs whose two images are in chunks on disk: what a replay finds should the open
+    // chunk never be written (a full disk). Pairs are written in order, the right image
+    // after the left, so this is the right images on disk.
+    uint64_t pairsOnDisk() const noexcept { return writer_.messagesOnDisk(right_channel_); }
     const mcap::Writer& file() const noexcept { return writer_; }
 
   private:
