@@ -479,6 +479,7 @@ ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceH
         pipeline.bad_frames = stats.bad_frames;
         pipeline.out_of_sync = stats.out_of_sync;
         pipeline.stage_mean_ms = stats.stage_mean_ms;
+        pipeline.zones_mean_ms = stats.zones_mean_ms;
         pipeline.publish_mean_ms = stats.publish_mean_ms;
         pipeline.latency_p50_ms = stats.latency_p50_ms;
         pipeline.latency_p99_ms = stats.latency_p99_ms;

@@ -63,6 +63,7 @@ Json pipelineJson(const StatusPipeline& pipeline)
                        {"depth", roundTo(stage.depth_ms, 3)},
                        {"nearest", roundTo(stage.nearest_ms, 3)},
                        {"cloud", roundTo(stage.cloud_ms, 3)},
+                       {"zones", roundTo(pipeline.zones_mean_ms, 3)},
                        {"publish", roundTo(pipeline.publish_mean_ms, 3)}};
     out["latency_ms"] = {{"p50", roundTo(pipeline.latency_p50_ms, 3)},
                          {"p99", roundTo(pipeline.latency_p99_ms, 3)}};

@@ -69,6 +69,7 @@ struct StatusPipeline {
     uint64_t bad_frames = 0;
     uint64_t out_of_sync = 0;
     StageTimings stage_mean_ms;
+    double zones_mean_ms = 0.0;
     double publish_mean_ms = 0.0;
     double latency_p50_ms = 0.0; // capture stamp to publication
     double latency_p99_ms = 0.0;
