@@ -434,5 +434,45 @@ TEST_F(LiveViewE2e, AddressesAreWrittenAsUrlsAndOnesBeyondLoopbackWarned)
     EXPECT_EQ(log.find(token_), std::string::npos) << "the token is in the log";
 }
 
+// `stereoctl view` with a display opens a browser on a file of the user's that leads to
+// the page, never on the address itself: a command line (xdg-open's, the browser's) is
+// visible to every user of the machine, and the token in it would be too.
+TEST_F(LiveViewE2e, ViewOpensTheBrowserThroughAPrivateFile)
+{
+    const uint16_t port = freePort();
+    startService("127.0.0.1:" + std::to_string(port));
+    ASSERT_FALSE(HasFailure());
+    const std::string bin = dir_.file("bin");
+    const std::string runtime = dir_.file("run");
+    std::filesystem::create_directory(bin);
+    std::filesystem::create_directory(runtime);
+    const std::string opened = dir_.file("opened.txt");
+    {
+        std::ofstream fake(bin + "/xdg-open");
+        fake << "#!/bin/sh\necho \"$@\" > " << opened << "\n";
+    }
+    std::filesystem::permissions(bin + "/xdg-open", std::filesystem::perms::owner_all);
+    const char* path = std::getenv("PATH");
+    const ProcessResult view =
+        runProcess({test::stereoctlPath(), "--socket", socket_, "view"},
+                   {"DISPLAY=:0", "XDG_RUNTIME_DIR=" + runtime,
+                    "PATH=" + bin + ":" + (path != nullptr ? path : "/usr/bin:/bin")});
+    ASSERT_EQ(view.exit_code, 0) << view.err;
+    std::string argument;
+    for (int i = 0; i < 50 && argument.empty(); ++i) { // xdg-open runs detached
+        std::ifstream in(opened);
+        std::getline(in, argument);
+        std::this_thread::sleep_for(100ms);
+    }
+    ASSERT_EQ(argument.rfind("file://" + runtime + "/stereod-view-", 0), 0u) << argument;
+    EXPECT_EQ(argument.find(token_), std::string::npos) << "the token is on a command line";
+    const std::string file = argument.substr(7);
+    EXPECT_EQ(std::filesystem::status(file).permissions() & std::filesystem::perms::all,
+              std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+    std::ifstream in(file);
+    const std::string html((std::istreambuf_iterator<char>(in)), {});
+    EXPECT_NE(html.find("url=" + page_), std::string::npos) << html;
+}
+
 } // namespace
 } // namespace stereod
