@@ -341,4 +341,34 @@ template <class Access> KeyDef idListKey(std::string path, bool live, Access acc
     return def;
 }
 
+// A list of texts: `["https://app.foxglove.dev"]`, or empty (`[]` or nothing).
+template <class Access> KeyDef textListKey(std::string path, bool live, Access access)
+{
+    KeyDef def{std::move(path), live, {}, {}};
+    def.read = [access](const YAML::Node& node, ServiceConfig& config,
+                        const ReadContext&) -> ReadResult {
+        const std::string expected = "a list of texts, like [\"https://app.foxglove.dev\"]";
+        std::vector<std::string> texts;
+        if (!node.IsNull() && !node.IsSequence()) {
+            return ReadFailure{"not a list", expected};
+        }
+        for (const auto& item : node) {
+            if (!item.IsScalar()) {
+                return ReadFailure{"not a list of texts", expected};
+            }
+            texts.push_back(item.Scalar());
+        }
+        access(config) = std::move(texts);
+        return std::nullopt;
+    };
+    def.show = [access](const ServiceConfig& config) {
+        std::string text = "[";
+        for (const std::string& item : access(config)) {
+            text += (text.size() > 1 ? ", " : "") + renderText(item);
+        }
+        return text + "]";
+    };
+    return def;
+}
+
 } // namespace stereod::config_detail

@@ -412,6 +412,12 @@ std::vector<KeyDef> buildKeyTable()
     add(textKey(
         "live_view.listen", kRestart, [](auto& c) -> auto& { return c.live_view.listen; }, false));
     add(integerKey(
+        "live_view.max_clients", kRestart,
+        [](auto& c) -> auto& { return c.live_view.max_clients; }));
+    add(textListKey(
+        "live_view.allowed_origins", kRestart,
+        [](auto& c) -> auto& { return c.live_view.allowed_origins; }));
+    add(integerKey(
         "live_view.points_step", kRestart,
         [](auto& c) -> auto& { return c.live_view.points_step; }));
     add(realKey(

@@ -1,6 +1,7 @@
 // stereoctl: the command-line client of stereod and its offline tools (docs/stereoctl.md).
 // This file declares the command line; ctl/*_commands.cpp do the work.
 
+#include <csignal>
 #include <cstdio>
 #include <exception>
 #include <functional>
@@ -453,6 +454,10 @@ CLI::App* declareDevices(CLI::App& app, DevicesOptions& o)
 int main(int argc, char** argv)
 {
     using namespace stereod;
+    // A file that reaches the size limit (ulimit -f) must fail its write with EFBIG, which
+    // the command reports with what it wrote, rather than kill the process (SIGXFSZ) with
+    // no word and the recording's count lost.
+    std::signal(SIGXFSZ, SIG_IGN);
     CLI::App app("stereoctl: client and offline tools of the stereod stereo depth service",
                  "stereoctl");
     app.failure_message(oneLineFailure);

@@ -589,7 +589,9 @@ int runRecord(const RecordOptions& options)
     }
     progress.update(counts, pair_writer.written(), 0, queue.capacity(), true);
 
-    const uint64_t written = pair_writer.written();
+    // A bag's pairs count once their chunk is on disk: a chunk the disk refused (ENOSPC,
+    // EFBIG) holds pairs handed to the writer that no replay will find.
+    const uint64_t written = bag ? bag->pairsOnDisk() : pair_writer.written();
     const std::string write_error = pair_writer.failed() ? pair_writer.error() : close_error;
     const uint64_t dropped = counts.service_skipped + counts.queue_dropped;
     if (options.json) {

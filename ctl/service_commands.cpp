@@ -7,6 +7,7 @@
 #include <fmt/format.h>
 #include <opencv2/core.hpp>
 #include <spawn.h>
+#include <unistd.h>
 
 #include "ctl/client.hpp"
 #include "ctl/commands.hpp"
@@ -23,6 +24,24 @@ extern char** environ;
 namespace stereod {
 
 namespace {
+
+// A page only this user can read (in XDG_RUNTIME_DIR) that sends the browser on to `url`;
+// `url` itself when there is no such directory or the file cannot be written.
+std::string privateRedirect(const std::string& url)
+{
+    const char* runtime = std::getenv("XDG_RUNTIME_DIR");
+    if (runtime == nullptr || *runtime == '\0')
+        return url;
+    std::string path = std::string(runtime) + "/stereod-view-XXXXXX.html";
+    const int fd = ::mkstemps(path.data(), 5); // mode 0600
+    if (fd < 0)
+        return url;
+    const std::string html = "<!DOCTYPE html><meta http-equiv=\"refresh\" content=\"0;url=" + url +
+                             "\"><a href=\"" + url + "\">stereod live view</a>\n";
+    const bool written = ::write(fd, html.data(), html.size()) == static_cast<ssize_t>(html.size());
+    ::close(fd);
+    return written ? "file://" + path : url;
+}
 
 using json = nlohmann::ordered_json;
 
@@ -233,23 +252,28 @@ int runStatus(const StatusOptions& options)
 int runView(const StatusOptions& options)
 {
     ProtocolClient client = connect(options.service);
-    const json reply = client.request({{"cmd", "status"}});
-    const json& live = member(member(reply, "status"), "live_view");
-    const std::string listen = text(live, "listen");
-    if (!live.value("listening", false)) {
+    const json reply = client.request({{"cmd", "view"}});
+    const std::string listen = text(reply, "listen");
+    if (!reply.value("listening", false)) {
         fmt::print(stderr, "stereoctl: the live view is not listening ({}){}\n",
-                   listen.empty() ? "this service has none" : "live_view.listen: " + listen,
-                   text(live, "error").empty() ? "" : ": " + text(live, "error"));
+                   listen.empty() || listen == "off" ? "live_view.listen: off"
+                                                     : "live_view.listen: " + listen,
+                   text(reply, "error").empty() ? "" : ": " + text(reply, "error"));
         return kExitNoReading;
     }
-    const std::string page = "http://" + listen + "/";
-    fmt::print("{}\nFoxglove: Open connection, Foxglove WebSocket, ws://{}\n", page, listen);
+    const std::string page = text(reply, "page");
+    fmt::print("{}\nFoxglove: Open connection, Foxglove WebSocket, {}\n", page,
+               text(reply, "websocket"));
     const char* display = std::getenv("DISPLAY");
     const char* wayland = std::getenv("WAYLAND_DISPLAY");
     if ((display != nullptr && *display != '\0') || (wayland != nullptr && *wayland != '\0')) {
+        // The browser gets a file of this user's that leads to the page, not the page's
+        // address: a command line is visible to every user of the machine, the token in
+        // it would be too.
+        const std::string opened = privateRedirect(page);
         // Detached: the browser outlives this command.
         pid_t pid = 0;
-        const char* argv[] = {"xdg-open", page.c_str(), nullptr};
+        const char* argv[] = {"xdg-open", opened.c_str(), nullptr};
         if (posix_spawnp(&pid, "xdg-open", nullptr, nullptr, const_cast<char* const*>(argv),
                          environ) != 0)
             fmt::print(stderr, "stereoctl: no xdg-open to open a browser; open {} yourself\n",

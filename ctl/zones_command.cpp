@@ -27,20 +27,37 @@ namespace {
 
 using json = nlohmann::ordered_json;
 
+// A field as text: a number with `decimals`, text as it is, "?" for anything else (null,
+// missing): a zone's state must reach the user and the exit code whatever its numbers say.
+std::string field(const json& zone, const char* key, int decimals = 3, double scale = 1.0)
+{
+    const auto it = zone.find(key);
+    if (it == zone.end() || it->is_null())
+        return "?";
+    if (it->is_number())
+        return fmt::format("{:.{}f}", it->get<double>() * scale, decimals);
+    return it->is_string() ? it->get<std::string>() : it->dump();
+}
+
 std::string zoneLine(const json& zone)
 {
-    std::string line = fmt::format("{}: {}", zone.value("name", std::string("?")),
-                                   zone.value("state", std::string("unknown")));
+    std::string line = fmt::format("{}: {}", field(zone, "name"), field(zone, "state"));
     if (zone.contains("reason"))
-        line += " (" + zone["reason"].get<std::string>() + ")";
-    if (zone.value("points", 0) > 0 && zone.contains("nearest_point_m")) {
+        line += " (" + field(zone, "reason") + ")";
+    const auto points = zone.find("points");
+    const bool has_points =
+        points != zone.end() && points->is_number() && points->get<double>() > 0;
+    if (has_points && zone.contains("nearest_point_m")) {
         const json& p = zone["nearest_point_m"];
-        line += fmt::format(", nearest {:.3f} m at ({:.2f}, {:.2f}, {:.2f})",
-                            zone.value("nearest_m", 0.0), p[0].get<double>(), p[1].get<double>(),
-                            p[2].get<double>());
+        std::string at = "?";
+        if (p.is_array() && p.size() == 3 &&
+            std::all_of(p.begin(), p.end(), [](const json& v) { return v.is_number(); }))
+            at = fmt::format("({:.2f}, {:.2f}, {:.2f})", p[0].get<double>(), p[1].get<double>(),
+                             p[2].get<double>());
+        line += ", nearest " + field(zone, "nearest_m") + " m at " + at;
     }
-    line += fmt::format(", {} points, {:.0f} % in sight", zone.value("points", 0),
-                        100.0 * zone.value("visible_fraction", 0.0));
+    line += ", " + field(zone, "points", 0) + " points, " +
+            field(zone, "visible_fraction", 0, 100.0) + " % in sight";
     return line;
 }
 
@@ -51,7 +68,9 @@ int exitCodeFor(const json& zones, bool stale)
     bool unknown = stale || !zones.is_array() || zones.empty();
     bool occupied = false;
     for (const json& zone : zones) {
-        const std::string state = zone.value("state", std::string("unknown"));
+        const auto it = zone.find("state");
+        const std::string state =
+            it != zone.end() && it->is_string() ? it->get<std::string>() : "unknown";
         occupied = occupied || state == "occupied";
         unknown = unknown || state == "unknown";
     }

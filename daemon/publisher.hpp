@@ -57,6 +57,7 @@ struct PipelineStats {
     uint64_t out_of_sync = 0;     // pairs whose skew exceeded source.max_skew_ms
     double fps = 0.0;             // processed pairs per second over the last frames
     StageTimings stage_mean_ms;   // mean of each stage over the last frames, ms
+    double zones_mean_ms = 0.0;   // mean of the keep-out zones' stage (0 without zones)
     double publish_mean_ms = 0.0; // mean of the publish stage (depth to mm, hand-off)
     // From a pair's capture stamp to its result's publication, over the last pairs, ms.
     double latency_p50_ms = 0.0;

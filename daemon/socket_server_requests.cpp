@@ -298,4 +298,19 @@ void SocketServer::handle(Client& client, const CalibrationRequest&, const std::
     reply(client, answer);
 }
 
+void SocketServer::handle(Client& client, const ViewRequest&, const std::optional<Json>& id)
+{
+    const LiveViewLinks links = backend_.liveViewLinks();
+    Json answer = okReply(id);
+    answer["listening"] = links.listening;
+    answer["listen"] = links.listen;
+    if (links.listening) {
+        answer["page"] = links.page;
+        answer["websocket"] = links.websocket;
+    } else {
+        answer["error"] = links.error;
+    }
+    reply(client, answer);
+}
+
 } // namespace stereod

@@ -251,6 +251,7 @@ void Worker::processPair(StereoPair& pair)
     // Keep-out zones from the depth the reading trusts; without it, every zone is unknown
     // for this pair (its hysteresis untouched) with the reading's reason.
     slot.camera_pose = zones_.settings().camera_pose;
+    const int64_t zones_start_ns = monotonicNowNs();
     if (!zones_.settings().zones.empty()) {
         const std::vector<ZoneReading>& zones =
             slot.depth_valid && processor_ != nullptr
@@ -265,6 +266,7 @@ void Worker::processPair(StereoPair& pair)
     }
 
     const int64_t publish_start_ns = monotonicNowNs();
+    zones_ms_.add(static_cast<double>(publish_start_ns - zones_start_ns) / 1e6);
     if (!result.depth_m.empty())
         depthToMillimetres(result.depth_m, slot.depth_mm);
     else
@@ -290,6 +292,7 @@ void Worker::processPair(StereoPair& pair)
     stats_.stage_mean_ms.cloud_ms = mean(cloud_ms_);
     stats_.stage_mean_ms.extended_range_ms = mean(extended_ms_);
     stats_.stage_mean_ms.near_field_probe_ms = mean(probe_ms_);
+    stats_.zones_mean_ms = mean(zones_ms_);
     const int64_t published_ns = monotonicNowNs();
     publish_ms_.add(static_cast<double>(published_ns - publish_start_ns) / 1e6);
     stats_.publish_mean_ms = mean(publish_ms_);

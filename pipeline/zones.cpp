@@ -61,10 +61,19 @@ const char* zoneStateName(ZoneState state) noexcept
 
 void validateZonesSettings(const ZonesSettings& s)
 {
-    for (int i = 0; i < 3; ++i)
-        if (!std::isfinite(s.camera_pose.translation_m[i]) ||
-            !std::isfinite(s.camera_pose.rpy_deg[i]))
-            invalid("robot.camera_pose", "must be finite numbers");
+    const auto within = [](double value, double limit) {
+        return std::isfinite(value) && std::abs(value) <= limit;
+    };
+    for (int i = 0; i < 3; ++i) {
+        if (!within(s.camera_pose.translation_m[i], kMaxZoneCoordinateM))
+            invalid("robot.camera_pose.translation_m",
+                    "must be finite and within 1000 m of the base origin");
+        if (!within(s.camera_pose.rpy_deg[i], 360.0))
+            invalid("robot.camera_pose.rpy_deg", "must be finite angles within +-360 degrees");
+    }
+    if (s.zones.size() > kMaxZones)
+        invalid("zones", std::to_string(s.zones.size()) + " zones, more than the " +
+                             std::to_string(kMaxZones) + " a frame can afford");
     if (!(s.min_visible_fraction >= 0.0 && s.min_visible_fraction <= 1.0))
         invalid("zones_min_visible_fraction", "must be within 0..1");
     if (s.pixel_step < 1 || s.pixel_step > 16)
@@ -82,9 +91,10 @@ void validateZonesSettings(const ZonesSettings& s)
             if (s.zones[other].name == zone.name)
                 invalid(key + ".name", "\"" + zone.name + "\" is used twice");
         for (int i = 0; i < 3; ++i)
-            if (!(std::isfinite(zone.min_m[i]) && std::isfinite(zone.max_m[i]) &&
-                  zone.min_m[i] < zone.max_m[i]))
-                invalid(key + ".max", "each coordinate must be finite and greater than min's");
+            if (!(within(zone.min_m[i], kMaxZoneCoordinateM) &&
+                  within(zone.max_m[i], kMaxZoneCoordinateM) && zone.min_m[i] < zone.max_m[i]))
+                invalid(key + ".max", "each coordinate must be finite, within 1000 m of the base "
+                                      "origin and greater than min's");
         if (zone.min_points < 1)
             invalid(key + ".min_points", "must be >= 1");
         if (zone.enter_frames < 1 || zone.leave_frames < 1)

@@ -19,6 +19,7 @@
 //
 // Thread-bound: a ZoneMonitor keeps each zone's hysteresis and its scratch buffers.
 
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -59,7 +60,17 @@ struct ZonesSettings {
     double nearest_percentile = 1.0;
 };
 
-// Throws std::invalid_argument naming the setting ("zones[1].max: ...") when unusable.
+// Zones at most: each costs a test per depth point, a sort of the points inside it and a
+// volume of samples per frame (measured at 718x496, boxes of about 4000 points: 1.3 ms of
+// CPU a frame for one, 4.5 ms for 16; 5000 took a 10 fps service down to 4).
+inline constexpr std::size_t kMaxZones = 16;
+// Coordinates at most this far from the base origin, m: a camera and the space a robot
+// drives through lie within it, and points that far apart keep their distances finite.
+inline constexpr double kMaxZoneCoordinateM = 1000.0;
+
+// Throws std::invalid_argument naming the setting ("zones[1].max: ...") when unusable:
+// more than kMaxZones zones, a coordinate beyond kMaxZoneCoordinateM, an angle beyond
+// +-360 degrees, or anything not finite.
 void validateZonesSettings(const ZonesSettings& settings);
 
 enum class ZoneState { Clear, Occupied, Unknown };

@@ -69,6 +69,7 @@ struct StatusPipeline {
     uint64_t bad_frames = 0;
     uint64_t out_of_sync = 0;
     StageTimings stage_mean_ms;
+    double zones_mean_ms = 0.0;
     double publish_mean_ms = 0.0;
     double latency_p50_ms = 0.0; // capture stamp to publication
     double latency_p99_ms = 0.0;
@@ -120,7 +121,9 @@ struct StatusLiveView {
     uint64_t bytes_sent = 0;
     uint64_t readings_sent = 0;   // /stereo/nearest messages handed to clients' sockets
     uint64_t frames_dropped = 0;  // frame messages slow clients did not get
-    uint64_t clients_dropped = 0; // clients closed for not reading
+    uint64_t clients_dropped = 0; // clients closed for not reading (frames or replies)
+    uint64_t refused = 0;         // requests refused: no or a wrong token, a foreign page,
+                                  // too many clients, out of descriptors
 };
 
 // Everything the `status` object says, as plain values. States are the protocol's names.

@@ -1,5 +1,6 @@
 #include "daemon/live_view/live_view.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -12,6 +13,8 @@
 #include <unistd.h>
 
 #include "base/clock.hpp"
+#include "config/service_config.hpp"
+#include "daemon/live_view/admission.hpp"
 #include "protocol/json_writer.hpp"
 #include "protocol/reading_json.hpp"
 #include "replay/ros2_messages.hpp"
@@ -162,7 +165,7 @@ struct LiveView::Sessions {
 LiveView::LiveView(LiveViewSettings settings, RectifiedGeometry geometry)
     : settings_(std::move(settings)), geometry_(geometry), sessions_(std::make_unique<Sessions>())
 {
-    address_ = settings_.host + ":" + std::to_string(settings_.port);
+    address_ = formatListenAddress(settings_.host, settings_.port);
     WebSocketTransport::Handlers handlers;
     handlers.opened = [this](WebSocketTransport::ConnectionId id) {
         sessions_->clients[id] = Client{};
@@ -183,19 +186,40 @@ LiveView::LiveView(LiveViewSettings settings, RectifiedGeometry geometry)
         Client& client = sessions_->clients[id];
         const ClientRequest request = parseClientMessage(text);
         switch (request.kind) {
-        case ClientRequest::Kind::Subscribe:
+        case ClientRequest::Kind::Subscribe: {
+            // One subscription per channel and client: a client cannot make the service
+            // hold ids without end, nor send it one frame many times over.
+            std::string refused;
+            std::size_t refusals = 0;
             for (const auto& [sub, channel] : request.subscriptions) {
+                std::string why;
+                const uint32_t wanted = channel; // a structured binding no lambda may capture
                 if (channel < kLeftImage || channel >= kChannelEnd) {
-                    transport_->sendText(
-                        id, statusJson(2, "subscribe: no channel " + std::to_string(channel)));
+                    why = "no channel " + std::to_string(channel);
+                } else if (client.subscriptions.count(sub) != 0) {
+                    continue; // the same id twice: already subscribed
+                } else if (const auto taken = std::find_if(
+                               client.subscriptions.begin(), client.subscriptions.end(),
+                               [wanted](const auto& s) { return s.second == wanted; });
+                           taken != client.subscriptions.end()) {
+                    why = "channel " + std::to_string(channel) + " is subscribed already, as " +
+                          std::to_string(taken->first);
+                } else {
+                    client.subscriptions[sub] = static_cast<Channel>(channel);
+                    subscribers_[channel].fetch_add(1, std::memory_order_relaxed);
                     continue;
                 }
-                if (client.subscriptions.count(sub) != 0)
-                    continue; // the same id twice: already subscribed
-                client.subscriptions[sub] = static_cast<Channel>(channel);
-                subscribers_[channel].fetch_add(1, std::memory_order_relaxed);
+                if (refusals++ == 0)
+                    refused = why;
             }
+            if (refusals > 0)
+                transport_->sendReply(
+                    id, statusJson(2, "subscribe: " + refused +
+                                          (refusals > 1 ? " (and " + std::to_string(refusals - 1) +
+                                                              " more refused)"
+                                                        : std::string())));
             break;
+        }
         case ClientRequest::Kind::Unsubscribe:
             for (const uint32_t sub : request.unsubscriptions) {
                 const auto it = client.subscriptions.find(sub);
@@ -207,7 +231,7 @@ LiveView::LiveView(LiveViewSettings settings, RectifiedGeometry geometry)
             break;
         case ClientRequest::Kind::Ignored:
         case ClientRequest::Kind::Invalid:
-            transport_->sendText(
+            transport_->sendReply(
                 id,
                 statusJson(request.kind == ClientRequest::Kind::Invalid ? 2 : 1, request.problem));
             break;
@@ -224,10 +248,21 @@ LiveView::~LiveView()
 
 std::string LiveView::start()
 {
-    error_ = transport_->start(settings_.host, settings_.port, kSubprotocol);
+    if (settings_.token.empty())
+        settings_.token = newToken();
+    TransportLimits limits;
+    limits.token = settings_.token;
+    limits.allowed_origins = settings_.allowed_origins;
+    limits.max_clients = settings_.max_clients;
+    limits.max_connections = settings_.max_connections;
+    // Replies get 1 MiB of their own above what frames may hold (kSkipBytes): a client
+    // that lags behind its frames is not closed for one reply, one that never reads its
+    // replies is.
+    limits.max_reply_backlog_bytes = kSkipBytes + (1u << 20);
+    error_ = transport_->start(settings_.host, settings_.port, kSubprotocol, std::move(limits));
     if (!error_.empty())
         return error_;
-    address_ = settings_.host + ":" + std::to_string(transport_->port());
+    address_ = formatListenAddress(settings_.host, transport_->port());
     listening_.store(true, std::memory_order_release);
     feed_thread_ = std::thread([this] { feed(); });
     return {};
@@ -560,7 +595,7 @@ void LiveView::pumpAll()
 HttpResponse LiveView::serveFile(const std::string& request) const
 {
     std::string path = request.substr(0, request.find('?'));
-    if (!safePath(path))
+    if (path.empty() || path.front() != '/' || !safePath(path))
         return HttpResponse{400, "text/plain; charset=utf-8", "bad path\n"};
     if (path == "/")
         path = "/index.html";
@@ -588,8 +623,10 @@ StatusLiveView LiveView::status() const
     c.messages_sent = messages_.load(std::memory_order_relaxed);
     c.bytes_sent = bytes_.load(std::memory_order_relaxed);
     c.frames_dropped = frames_dropped_.load(std::memory_order_relaxed);
-    c.clients_dropped = clients_dropped_.load(std::memory_order_relaxed);
+    c.clients_dropped =
+        clients_dropped_.load(std::memory_order_relaxed) + transport_->closedForReplies();
     c.readings_sent = readings_sent_.load(std::memory_order_relaxed);
+    c.refused = transport_->refused();
     return c;
 }
 

@@ -23,6 +23,11 @@
 // waits behind at most the budget and one frame. A client that reads nothing for
 // kStuckMs while data waits for it is closed (counted in clients_dropped).
 //
+// Bounds (docs/live-view.md): who may connect and how many is the transport's
+// (websocket_transport.hpp: the token, the Origin, max_clients, max_connections, the
+// reply backlog); here, a client subscribes to each channel at most once (kChannelEnd - 1
+// subscriptions), and a request gets at most one status reply.
+//
 // Thread contract: start()/stop() from the controlling thread; onFrame(),
 // onStatus() from one thread (the socket server's); status() from any thread.
 // Units: stamps and log times in ns; the stamps of the messages (header.stamp, log time)
@@ -67,7 +72,16 @@ enum Channel : uint32_t {
 
 struct LiveViewSettings {
     std::string host = "127.0.0.1";
-    uint16_t port = 8765;      // 0: any free port (tests)
+    uint16_t port = 8765; // 0: any free port (tests)
+    // Who may watch (daemon/live_view/admission.hpp): the token every request must carry
+    // (empty: a new one from the kernel's random source at start()), and the pages besides
+    // the live view's own whose browsers may connect.
+    std::string token;
+    std::vector<std::string> allowed_origins;
+    // WebSocket sessions at most, and sockets of any kind at most (the service keeps this
+    // below its descriptor limit).
+    std::size_t max_clients = 16;
+    std::size_t max_connections = 32;
     int points_step = 4;       // every n-th point of the cloud goes out
     double max_rate_hz = 10.0; // frame channels; status is once a second
     // Per channel, at most this often. 0: a frame channel follows max_rate_hz; kNearest
@@ -107,6 +121,8 @@ class LiveView final : public PublishObserver {
     std::string start();
     void stop();
     uint16_t port() const noexcept;
+    // The token every request must carry (made by start() when the settings had none).
+    const std::string& token() const noexcept { return settings_.token; }
 
     // The socket server's I/O thread: a new result, and its reading as the protocol's
     // reading object (the same text `stereoctl distance --json` prints). Its messages are

@@ -546,6 +546,25 @@ TEST(ConfigOverrides, CommandLineValuesReplaceTheFileAndAreNamedInProblems)
     }
 }
 
+// Issue 23: without a file, a bad --live-view was blamed on "<defaults>". Given the
+// overrides, the message names the option, as a file's does.
+TEST(ConfigOverrides, ProblemsOfOverriddenValuesNameTheOptionWithoutAFile)
+{
+    ServiceConfig config = defaultConfig();
+    ConfigOverrides overrides;
+    overrides.live_view = "nonsense";
+    applyOverrides(config, overrides);
+    try {
+        validateConfig(config, overrides);
+        FAIL();
+    } catch (const ConfigError& error) {
+        ASSERT_EQ(error.problems().size(), 1u) << error.what();
+        EXPECT_EQ(error.problems()[0].rfind("command line (--live-view): live_view.listen: ", 0),
+                  0u)
+            << error.problems()[0];
+    }
+}
+
 TEST(ConfigOverrides, ValidateConfigChecksAnInCodeConfiguration)
 {
     test::TempDir dir;

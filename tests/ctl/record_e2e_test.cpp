@@ -426,5 +426,39 @@ TEST_F(RecordE2e, FullDiskStopsTheRecordingAndNotTheService)
     EXPECT_TRUE(service_->running());
 }
 
+// Issue 23: a bag that reached the file size limit (ulimit -f) killed stereoctl with
+// SIGXFSZ (exit 153, no word), and a bag on a full disk was reported with the pairs of the
+// chunk the disk refused (303 said, 285 replayed). The recorder now stops with the reason,
+// and the count is what a replay finds.
+TEST_F(RecordE2e, ABagAtTheFileSizeLimitOrOnAFullDiskCountsWhatReplays)
+{
+    startService(true);
+    // About 2.5 MB a chunk of 4 MiB: the first chunk fits, the second does not.
+    const std::string limited = dir_.file("limited.mcap");
+    const ProcessResult at_limit =
+        runProcess({"/usr/bin/prlimit", "--fsize=4000000", "--", stereoctlPath(), "record", "--out",
+                    limited, "--frames", "100", "--json", "--socket", socket_});
+    EXPECT_EQ(at_limit.signal, 0) << at_limit.err;
+    ASSERT_EQ(at_limit.exit_code, 2) << at_limit.out << at_limit.err;
+    EXPECT_NE(at_limit.err.find("File too large"), std::string::npos) << at_limit.err;
+    const Json limited_summary = Json::parse(at_limit.out);
+    EXPECT_EQ(limited_summary["ended"], "write_failed");
+    const std::size_t limited_pairs = expectBagOfSourcePairs(limited, source_);
+    EXPECT_GT(limited_pairs, 0u);
+    EXPECT_EQ(limited_summary["pairs"].get<std::size_t>(), limited_pairs) << at_limit.out;
+
+    const std::string full = dir_.file("full/run.mcap");
+    fs::create_directory(dir_.file("full"));
+    const ProcessResult on_full =
+        ctl({"record", "--out", full, "--frames", "100", "--json"},
+            {"LD_PRELOAD=" STEREOD_DISK_FULL_PRELOAD, "STEREOD_TEST_FULL_DIR=" + dir_.file("full"),
+             "STEREOD_TEST_FULL_BYTES=4000000", "ASAN_OPTIONS=verify_asan_link_order=0"});
+    ASSERT_EQ(on_full.exit_code, 2) << on_full.out << on_full.err;
+    const Json full_summary = Json::parse(on_full.out);
+    const std::size_t full_pairs = expectBagOfSourcePairs(full, source_);
+    EXPECT_GT(full_pairs, 0u);
+    EXPECT_EQ(full_summary["pairs"].get<std::size_t>(), full_pairs) << on_full.out;
+}
+
 } // namespace
 } // namespace stereod

@@ -13,8 +13,10 @@
 #include <iterator>
 #include <memory>
 #include <regex>
+#include <sstream>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include <arpa/inet.h>
 #include <gtest/gtest.h>
@@ -34,6 +36,7 @@
 #include "tests/support/depth_values.hpp"
 #include "tests/support/process.hpp"
 #include "tests/support/temp_dir.hpp"
+#include "tests/support/websocket_client.hpp"
 
 namespace stereod {
 namespace {
@@ -58,8 +61,8 @@ TEST_F(LiveViewE2e, FoxgloveClientGetsEveryChannelAndTheServicesOwnValues)
     startService("127.0.0.1:" + std::to_string(port));
     ASSERT_FALSE(HasFailure());
 
-    const ProcessResult node = runProcess({STEREOD_NODE, kClientScripts + "/client.mjs",
-                                           "ws://127.0.0.1:" + std::to_string(port), "4"});
+    const ProcessResult node =
+        runProcess({STEREOD_NODE, kClientScripts + "/client.mjs", websocket_, "4"});
     ASSERT_EQ(node.exit_code, 0) << node.err;
     const Json got = Json::parse(node.out);
 
@@ -182,19 +185,18 @@ class LiveViewPage : public LiveViewE2e {
         return path != nullptr ? path : "/usr/bin/chromium";
     }
     static std::string screenshots() { return std::string(STEREOD_BINARY_DIR) + "/live-view"; }
-    // The page opened by page.mjs, going through `states`; read each with next().
-    void openPage(uint16_t port, const std::string& name, const std::vector<std::string>& states)
+    // The page at the address `stereoctl view` prints, opened by page.mjs, going through `states`; read each with next().
+    void openPage(const std::string& name, const std::vector<std::string>& states)
     {
         std::vector<std::string> argv = {STEREOD_NODE, kClientScripts + "/page.mjs",
-                                         "http://127.0.0.1:" + std::to_string(port) + "/",
-                                         screenshots(), name};
+                                         page_, screenshots(), name};
         argv.insert(argv.end(), states.begin(), states.end());
-        page_ = std::make_unique<test::ChildProcess>(argv, dir_.file("page.log"));
+        browser_ = std::make_unique<test::ChildProcess>(argv, dir_.file("page.log"));
     }
     // What the page showed in its next state.
     Json next()
     {
-        const auto line = page_->readLine(90s);
+        const auto line = browser_->readLine(90s);
         if (!line) {
             ADD_FAILURE() << "the page never showed the state: " << readText(dir_.file("page.log"));
             return Json::object();
@@ -215,7 +217,7 @@ class LiveViewPage : public LiveViewE2e {
         return std::string(std::istreambuf_iterator<char>(in), {});
     }
 
-    std::unique_ptr<test::ChildProcess> page_;
+    std::unique_ptr<test::ChildProcess> browser_;
 };
 
 // The distance `stereoctl distance` gives, connected, the depth in colours that follow the
@@ -230,7 +232,7 @@ TEST_F(LiveViewPage, ShowsTheDistanceThenStaleWhenNothingComes)
     const uint16_t port = freePort();
     startService("127.0.0.1:" + std::to_string(port), config);
     ASSERT_FALSE(HasFailure());
-    openPage(port, "distance", {"valid", "stale"});
+    openPage("distance", {"valid", "stale"});
     const Json shown = next();
     ASSERT_FALSE(HasFailure());
     const ProcessResult distance =
@@ -305,7 +307,7 @@ TEST_F(LiveViewPage, RegionAimedAtNothingShowsNoReadingAndTheReason)
     const uint16_t port = freePort();
     startService("127.0.0.1:" + std::to_string(port), config, false);
     ASSERT_FALSE(HasFailure());
-    openPage(port, "no-reading", {"none"});
+    openPage("no-reading", {"none"});
     const Json shown = next();
     EXPECT_EQ(shown["distance"], "NO READING: nothing_in_range");
     EXPECT_EQ(shown["detail"].get<std::string>().rfind("nothing within the depth range", 0), 0u)
@@ -333,7 +335,7 @@ TEST_F(LiveViewPage, SomethingNearerThanTheRangeShowsTheBound)
     const uint16_t port = freePort();
     startService("127.0.0.1:" + std::to_string(port), config, false);
     ASSERT_FALSE(HasFailure());
-    openPage(port, "nearer", {"nearer"});
+    openPage("nearer", {"nearer"});
     const Json shown = next();
     // The closest the range sees: f*B / 31 px = 9.68 m.
     EXPECT_EQ(shown["distance"], "NEARER THAN 9.68 m");
@@ -379,7 +381,7 @@ TEST_F(LiveViewPage, ASuspectCalibrationIsShownWithTheDistance)
     const uint16_t port = freePort();
     startService("127.0.0.1:" + std::to_string(port), config, false);
     ASSERT_FALSE(HasFailure());
-    openPage(port, "suspect", {"suspect"});
+    openPage("suspect", {"suspect"});
     const Json shown = next();
     EXPECT_TRUE(
         std::regex_match(shown["distance"].get<std::string>(), std::regex(R"(\d+\.\d{3} m)")))
@@ -414,8 +416,7 @@ TEST_F(LiveViewE2e, TheMatchersWholeNameReadsBackThroughStatusAndTheLiveView)
     ASSERT_EQ(text.exit_code, 0) << text.err;
     EXPECT_NE(text.out.find(", matcher census-sgm (planar), "), std::string::npos) << text.out;
 
-    const ProcessResult node = runProcess({STEREOD_NODE, kClientScripts + "/client.mjs",
-                                           "ws://127.0.0.1:" + std::to_string(port), "3"});
+    const ProcessResult node = runProcess({STEREOD_NODE, kClientScripts + "/client.mjs", websocket_, "3"});
     ASSERT_EQ(node.exit_code, 0) << node.err;
     const Json got = Json::parse(node.out);
     ASSERT_TRUE(got["status"].is_object()) << node.out.substr(0, 300);
@@ -470,8 +471,7 @@ TEST_F(LiveViewE2e, DepthsBeyondTheOutputCapAreLeftOut)
     // The reading comes from the whole depth: tsukuba's nearest objects, within the cap.
     EXPECT_TRUE(snapshot["reading"]["valid"].get<bool>()) << snapshot["reading"].dump();
 
-    const ProcessResult node = runProcess({STEREOD_NODE, kClientScripts + "/client.mjs",
-                                           "ws://127.0.0.1:" + std::to_string(port), "2"});
+    const ProcessResult node = runProcess({STEREOD_NODE, kClientScripts + "/client.mjs", websocket_, "2"});
     ASSERT_EQ(node.exit_code, 0) << node.err;
     const Json got = Json::parse(node.out);
     ASSERT_TRUE(got["depth"].is_object());
@@ -513,31 +513,54 @@ TEST_F(LiveViewE2e, HttpServesThePageAndRefusesEverythingElse)
     const uint16_t port = freePort();
     startService("127.0.0.1:" + std::to_string(port));
     ASSERT_FALSE(HasFailure());
-    // `stereoctl view` names the address (no display here: no browser is opened).
+    // `stereoctl view` names the address with the token (no display here: no browser is
+    // opened), and Foxglove's.
     const ProcessResult view = runProcess({test::stereoctlPath(), "--socket", socket_, "view"},
                                           {"DISPLAY=", "WAYLAND_DISPLAY="});
     EXPECT_EQ(view.exit_code, 0) << view.err;
-    EXPECT_EQ(view.out.rfind("http://127.0.0.1:" + std::to_string(port) + "/\n", 0), 0u)
-        << view.out;
-    const std::string page = httpGet(port, "/");
+    const std::string authority = "127.0.0.1:" + std::to_string(port);
+    ASSERT_EQ(token_.size(), 32u) << page_;
+    EXPECT_EQ(view.out, "http://" + authority + "/?token=" + token_ +
+                            "\nFoxglove: Open connection, Foxglove WebSocket, ws://" + authority +
+                            "/?token=" + token_ + "\n");
+    const std::string t = "?token=" + token_;
+    const std::string page = httpGet(port, "/" + t);
     EXPECT_EQ(page.rfind("HTTP/1.1 200", 0), 0u) << page.substr(0, 200);
     EXPECT_NE(page.find("text/html"), std::string::npos);
     EXPECT_NE(page.find("viewer.js"), std::string::npos);
+    // The page keeps the token in a cookie of its own for its scripts and WebSocket.
+    EXPECT_NE(page.find("Set-Cookie: stereod_live_view_" + std::to_string(port) + "=" + token_ +
+                        "; Path=/; HttpOnly; SameSite=Strict"),
+              std::string::npos)
+        << page.substr(0, 400);
+    const std::string cookie =
+        "Cookie: stereod_live_view_" + std::to_string(port) + "=" + token_ + "\r\n";
     // The page's icon, which it names (no 404 in the browser's console).
     EXPECT_NE(page.find(R"(rel="icon" href="favicon.svg")"), std::string::npos);
-    const std::string icon = httpGet(port, "/favicon.svg");
+    const std::string icon = httpGet(port, "/favicon.svg", cookie);
     EXPECT_EQ(icon.rfind("HTTP/1.1 200", 0), 0u) << icon.substr(0, 200);
     EXPECT_NE(icon.find("image/svg+xml"), std::string::npos);
-    const std::string three = httpGet(port, "/three/build/three.module.js");
+    const std::string three = httpGet(port, "/three/build/three.module.js", cookie);
     EXPECT_EQ(three.rfind("HTTP/1.1 200", 0), 0u)
         << three.substr(0, 200) << " (is libjs-three installed?)";
-    EXPECT_EQ(httpGet(port, "/../../etc/passwd").rfind("HTTP/1.1 400", 0), 0u);
-    EXPECT_EQ(httpGet(port, "/three/../../../etc/passwd").rfind("HTTP/1.1 400", 0), 0u);
-    EXPECT_EQ(httpGet(port, "/nothing.js").rfind("HTTP/1.1 404", 0), 0u);
+    EXPECT_EQ(httpGet(port, "/../../etc/passwd" + t).rfind("HTTP/1.1 400", 0), 0u);
+    EXPECT_EQ(httpGet(port, "/three/../../../etc/passwd" + t).rfind("HTTP/1.1 400", 0), 0u);
+    EXPECT_EQ(httpGet(port, "/nothing.js" + t).rfind("HTTP/1.1 404", 0), 0u);
+    // Issue 23: a target without its leading slash was glued onto the web root as text:
+    // "socket_transport.cpp" served daemon/live_view/websocket_transport.cpp.
+    const std::string glued = httpGet(port, "socket_transport.cpp" + t);
+    EXPECT_EQ(glued.rfind("HTTP/1.1 400", 0), 0u) << glued.substr(0, 300);
+    EXPECT_EQ(glued.find("websocketpp"), std::string::npos);
+    // Without the token, or with another: nothing is served, and the reason says where
+    // the address comes from.
+    const std::string bare = httpGet(port, "/");
+    EXPECT_EQ(bare.rfind("HTTP/1.1 401", 0), 0u) << bare.substr(0, 300);
+    EXPECT_NE(bare.find("stereoctl view"), std::string::npos) << bare;
+    EXPECT_EQ(httpGet(port, "/?token=" + std::string(32, '0')).rfind("HTTP/1.1 401", 0), 0u);
     EXPECT_EQ(
-        httpExchange(
-            port,
-            "POST / HTTP/1.1\r\nHost: stereod\r\nConnection: close\r\nContent-Length: 0\r\n\r\n")
+        httpExchange(port, "POST /" + t +
+                               " HTTP/1.1\r\nHost: stereod\r\nConnection: close\r\nContent-Length: "
+                               "0\r\n\r\n")
             .rfind("HTTP/1.1 405", 0),
         0u);
     // Garbage instead of HTTP: an error answer or a closed connection, and the service
@@ -545,9 +568,179 @@ TEST_F(LiveViewE2e, HttpServesThePageAndRefusesEverythingElse)
     httpExchange(port, std::string("\x16\x03\x01\x02\x00\x01\x00\x01\xfc\x03\x03", 11));
     httpExchange(port, "GET / HTTP/1.1\r\nHost: stereod\r\nConnection: close\r\nX: " +
                            std::string(100000, 'a') + "\r\n\r\n");
-    EXPECT_EQ(httpGet(port, "/").rfind("HTTP/1.1 200", 0), 0u);
+    EXPECT_EQ(httpGet(port, "/" + t).rfind("HTTP/1.1 200", 0), 0u);
     ProtocolClient client(socket_, 10000ms);
     EXPECT_TRUE(client.request({{"cmd", "distance"}})["reading"].value("valid", false));
+}
+
+// Issue 23: a page served from another origin (here http://127.0.0.2:PORT) opened the live
+// view's WebSocket in Chromium and received 38 camera images in 4 s. Now its handshake is
+// refused for its Origin, and so is the same page holding the token (one that leaked).
+TEST_F(LiveViewPage, AForeignPageGetsNothingEvenWithTheToken)
+{
+    const uint16_t port = freePort();
+    startService("127.0.0.1:" + std::to_string(port));
+    ASSERT_FALSE(HasFailure());
+    const ProcessResult page =
+        runProcess({STEREOD_NODE, kClientScripts + "/cross_origin.mjs", "127.0.0.2",
+                    "ws://127.0.0.1:" + std::to_string(port) + "/", websocket_, "4"});
+    ASSERT_EQ(page.exit_code, 0) << page.err;
+    const Json got = Json::parse(page.out);
+    ASSERT_EQ(got["attempts"].size(), 2u) << got.dump();
+    for (const Json& attempt : got["attempts"]) {
+        EXPECT_FALSE(attempt["opened"].get<bool>()) << attempt.dump();
+        EXPECT_EQ(attempt["messages"], 0) << attempt.dump();
+    }
+    EXPECT_NE(got["origin"].get<std::string>().find("127.0.0.2"), std::string::npos);
+    EXPECT_GE(status()["live_view"]["refused"].get<uint64_t>(), 2u);
+}
+
+// CPU seconds a process has used (utime + stime of /proc/PID/stat).
+double cpuSeconds(pid_t pid)
+{
+    std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+    std::string text((std::istreambuf_iterator<char>(in)), {});
+    std::istringstream fields(text.substr(text.rfind(')') + 2));
+    std::string field;
+    long long utime = 0, stime = 0;
+    for (int i = 3; fields >> field; ++i) {
+        if (i == 14)
+            utime = std::stoll(field);
+        if (i == 15) {
+            stime = std::stoll(field);
+            break;
+        }
+    }
+    return static_cast<double>(utime + stime) / static_cast<double>(::sysconf(_SC_CLK_TCK));
+}
+
+// Issue 23: under `ulimit -n 200`, 260 WebSocket connections left the replay unable to
+// open its frames, for good ("no pair readable in a whole pass"), the Unix socket unable
+// to accept, and the live view's thread spinning on accept() at 85 % of a core. The live
+// view's connections are now kept within the descriptor budget (the rest wait in the
+// kernel's backlog): the replay, the socket and the live view's own clients go on.
+TEST_F(LiveViewE2e, ManyConnectionsUnderALowDescriptorLimitLeaveTheServiceServing)
+{
+    launcher_ = {"/usr/bin/prlimit", "--nofile=200:200", "--"};
+    const uint16_t port = freePort();
+    startService("127.0.0.1:" + std::to_string(port));
+    ASSERT_FALSE(HasFailure());
+    const pid_t pid = service_->pid();
+    const auto frames = [&] { return status()["pipeline"]["frames"].get<uint64_t>(); };
+    const double idle_cpu_start = cpuSeconds(pid);
+    std::this_thread::sleep_for(2s);
+    const double idle_cpu = cpuSeconds(pid) - idle_cpu_start;
+
+    std::vector<UniqueFd> connections;
+    const std::string handshake = "GET /?token=" + token_ +
+                                  " HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
+                                  "Connection: Upgrade\r\nSec-WebSocket-Version: 13\r\n"
+                                  "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+                                  "Sec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n";
+    for (int i = 0; i < 260; ++i) {
+        UniqueFd fd = test::connectLoopback(port);
+        ASSERT_TRUE(fd) << "connection " << i;
+        ::send(fd.get(), handshake.data(), handshake.size(), MSG_NOSIGNAL);
+        connections.push_back(std::move(fd));
+    }
+    std::this_thread::sleep_for(1s);
+    const uint64_t frames_before = frames();
+    const double busy_cpu_start = cpuSeconds(pid);
+    std::this_thread::sleep_for(2s);
+    const double busy_cpu = cpuSeconds(pid) - busy_cpu_start;
+    EXPECT_GE(frames(), frames_before + 5) << "the replay stopped";
+    EXPECT_LT(busy_cpu, idle_cpu + 0.6)
+        << "idle " << idle_cpu << " s, with 260 connections " << busy_cpu << " s of CPU in 2 s";
+    ProtocolClient client(socket_, 10000ms);
+    EXPECT_TRUE(client.request({{"cmd", "distance"}})["reading"].value("valid", false));
+    const Json live = status()["live_view"];
+    EXPECT_LE(live["clients"].get<uint64_t>(), 16u) << live.dump();
+    EXPECT_GE(live["refused"].get<uint64_t>(), 1u) << live.dump();
+
+    connections.clear();
+    std::this_thread::sleep_for(2s);
+    const uint64_t frames_after = frames();
+    std::this_thread::sleep_for(1s);
+    EXPECT_GE(frames(), frames_after + 3);
+    EXPECT_TRUE(client.request({{"cmd", "distance"}})["reading"].value("valid", false));
+    // A client gets in again.
+    const auto deadline = std::chrono::steady_clock::now() + 15s;
+    bool admitted = false;
+    while (!admitted && std::chrono::steady_clock::now() < deadline) {
+        try {
+            test::WebSocketClient viewer(
+                port, "foxglove.websocket.v1",
+                test::WebSocketClient::Options{"/?token=" + token_, "", 0});
+            admitted = true;
+        } catch (const std::runtime_error&) {
+            std::this_thread::sleep_for(200ms);
+        }
+    }
+    EXPECT_TRUE(admitted);
+}
+
+// Issue 23: "[::]" was logged as http://:::18771/, and 0.0.0.0 at info with no warning.
+// Addresses are written as URLs write them, a wildcard is reached at loopback, and an
+// address beyond this machine is warned about.
+TEST_F(LiveViewE2e, AddressesAreWrittenAsUrlsAndOnesBeyondLoopbackWarned)
+{
+    const uint16_t port = freePort();
+    startService("[::]:" + std::to_string(port));
+    ASSERT_FALSE(HasFailure());
+    EXPECT_EQ(status()["live_view"]["listen"], "[::]:" + std::to_string(port));
+    EXPECT_EQ(page_, "http://[::1]:" + std::to_string(port) + "/?token=" + token_);
+    EXPECT_EQ(websocket_, "ws://[::1]:" + std::to_string(port) + "/?token=" + token_);
+    EXPECT_EQ(httpGet(port, "/?token=" + token_).rfind("HTTP/1.1 200", 0), 0u);
+    service_.reset();
+    std::ifstream in(dir_.file("stereod.log"));
+    const std::string log((std::istreambuf_iterator<char>(in)), {});
+    EXPECT_NE(log.find("live view listening on [::]:" + std::to_string(port)), std::string::npos)
+        << log;
+    EXPECT_NE(log.find("[warning] live view: [::]:" + std::to_string(port) +
+                       " is reached from beyond this machine"),
+              std::string::npos)
+        << log;
+    EXPECT_EQ(log.find(token_), std::string::npos) << "the token is in the log";
+}
+
+// `stereoctl view` with a display opens a browser on a file of the user's that leads to
+// the page, never on the address itself: a command line (xdg-open's, the browser's) is
+// visible to every user of the machine, and the token in it would be too.
+TEST_F(LiveViewE2e, ViewOpensTheBrowserThroughAPrivateFile)
+{
+    const uint16_t port = freePort();
+    startService("127.0.0.1:" + std::to_string(port));
+    ASSERT_FALSE(HasFailure());
+    const std::string bin = dir_.file("bin");
+    const std::string runtime = dir_.file("run");
+    std::filesystem::create_directory(bin);
+    std::filesystem::create_directory(runtime);
+    const std::string opened = dir_.file("opened.txt");
+    {
+        std::ofstream fake(bin + "/xdg-open");
+        fake << "#!/bin/sh\necho \"$@\" > " << opened << "\n";
+    }
+    std::filesystem::permissions(bin + "/xdg-open", std::filesystem::perms::owner_all);
+    const char* path = std::getenv("PATH");
+    const ProcessResult view =
+        runProcess({test::stereoctlPath(), "--socket", socket_, "view"},
+                   {"DISPLAY=:0", "XDG_RUNTIME_DIR=" + runtime,
+                    "PATH=" + bin + ":" + (path != nullptr ? path : "/usr/bin:/bin")});
+    ASSERT_EQ(view.exit_code, 0) << view.err;
+    std::string argument;
+    for (int i = 0; i < 50 && argument.empty(); ++i) { // xdg-open runs detached
+        std::ifstream in(opened);
+        std::getline(in, argument);
+        std::this_thread::sleep_for(100ms);
+    }
+    ASSERT_EQ(argument.rfind("file://" + runtime + "/stereod-view-", 0), 0u) << argument;
+    EXPECT_EQ(argument.find(token_), std::string::npos) << "the token is on a command line";
+    const std::string file = argument.substr(7);
+    EXPECT_EQ(std::filesystem::status(file).permissions() & std::filesystem::perms::all,
+              std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+    std::ifstream in(file);
+    const std::string html((std::istreambuf_iterator<char>(in)), {});
+    EXPECT_NE(html.find("url=" + page_), std::string::npos) << html;
 }
 
 } // namespace

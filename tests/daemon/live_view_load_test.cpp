@@ -82,9 +82,8 @@ TEST_F(LiveViewLoad, EightReadersAndOneStuckClientLeaveTheWorkerItsRate)
     const double quiet_fps = fps(quiet_start, quiet_end);
     const double quiet_mib = residentMiB(service_->pid());
 
-    test::ChildProcess load({STEREOD_NODE, test::kClientScripts + "/load.mjs",
-                             "ws://127.0.0.1:" + std::to_string(port), std::to_string(kReaders),
-                             std::to_string(kLoadSeconds)},
+    test::ChildProcess load({STEREOD_NODE, test::kClientScripts + "/load.mjs", websocket_,
+                             std::to_string(kReaders), std::to_string(kLoadSeconds)},
                             dir_.file("load.log"));
     std::this_thread::sleep_for(3s); // the clients connect and subscribe
     const auto load_start = frames();
@@ -191,8 +190,8 @@ TEST_F(LiveViewLoad, EveryReadingReachesAClientOfEveryChannelAtFullSize)
     ASSERT_FALSE(HasFailure());
 
     constexpr int kSeconds = 24;
-    test::ChildProcess client({STEREOD_NODE, test::kClientScripts + "/readings.mjs",
-                               "ws://127.0.0.1:" + std::to_string(port), std::to_string(kSeconds)},
+    test::ChildProcess client({STEREOD_NODE, test::kClientScripts + "/readings.mjs", websocket_,
+                               std::to_string(kSeconds)},
                               dir_.file("readings.log"));
     std::this_thread::sleep_for(4s); // connected, subscribed, the first frames through
     const Json before = status();

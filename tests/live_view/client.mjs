@@ -1,7 +1,7 @@
 // Connects to stereod's live view with Foxglove's own client (@foxglove/ws-protocol),
 // subscribes to every advertised channel for a while, decodes the CDR messages with
 // @foxglove/rosmsg2-serialization, and prints what it saw as JSON:
-//   node client.mjs ws://127.0.0.1:8765 SECONDS
+//   node client.mjs ws://127.0.0.1:8765/?token=TOKEN SECONDS
 // Latency is the client's wall clock (CLOCK_REALTIME, the time base of the live view's
 // log times and header stamps) at receipt minus the message's log time; `clock_offset_ns`
 // is the wall clock minus CLOCK_MONOTONIC (process.hrtime) here, to hold readings'

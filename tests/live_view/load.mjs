@@ -5,7 +5,7 @@
 // the service's stamp_ns, minus their age_ms when the service wrote them: the time spent
 // in the live view and on the way; p50 and max, ms), and whether the server closed the one
 // that never read.
-//   node load.mjs ws://127.0.0.1:8765 CLIENTS SECONDS
+//   node load.mjs ws://127.0.0.1:8765/?token=TOKEN CLIENTS SECONDS
 import net from "node:net";
 import wsProtocol from "@foxglove/ws-protocol";
 import WebSocket from "ws";
@@ -43,12 +43,13 @@ function reader() {
 // The client that never reads, by hand: the handshake, the advertise it waits for, one
 // masked subscribe frame for every channel, then no more reading.
 function stuckClient() {
-  const { hostname, port } = new URL(url);
+  const { hostname, port, pathname, search } = new URL(url);
   const socket = net.connect(Number(port), hostname);
   const state = { subscribed: false, closed: false, bytesRead: 0 };
   let received = Buffer.alloc(0);
   socket.on("connect", () => {
-    socket.write(`GET / HTTP/1.1\r\nHost: ${hostname}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n` +
+    socket.write(`GET ${pathname}${search} HTTP/1.1\r\nHost: ${hostname}:${port}\r\n` +
+                 "Upgrade: websocket\r\nConnection: Upgrade\r\n" +
                  "Sec-WebSocket-Version: 13\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n" +
                  `Sec-WebSocket-Protocol: ${FoxgloveClient.SUPPORTED_SUBPROTOCOL}\r\n\r\n`);
   });

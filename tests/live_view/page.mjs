@@ -4,7 +4,7 @@
 // each it waits until the page shows that state, saves a screenshot OUTDIR/NAME-STATE.png,
 // and prints one JSON line with what the page shows; the caller may change the service
 // between two states (stop it, say) and read the next line.
-//   node page.mjs http://127.0.0.1:8765/ OUTDIR NAME [STATE...]    (default: valid)
+//   node page.mjs http://127.0.0.1:8765/?token=TOKEN OUTDIR NAME [STATE...]    (default: valid)
 // With the first state a distance (valid or suspect), it also hovers the depth image and
 // reports the hover text.
 import { mkdirSync } from "node:fs";

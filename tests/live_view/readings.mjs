@@ -4,7 +4,7 @@
 // prints, as JSON, every /stereo/nearest message (the reading's frame, its age when it
 // reached the client, and whether it was valid), the message count per topic, and
 // whether the server closed the connection.
-//   node readings.mjs ws://127.0.0.1:8765 SECONDS [TOPIC...]
+//   node readings.mjs ws://127.0.0.1:8765/?token=TOKEN SECONDS [TOPIC...]
 // Age: the client's CLOCK_MONOTONIC at receipt (process.hrtime, the clock of stereod's
 // `stamp_ns`) minus the reading's capture stamp; transit: that age minus the reading's own
 // `age_ms`, its age when the service wrote it: the time it spent in the live view and on

@@ -274,5 +274,39 @@ TEST(Zones, SettingsAreChecked)
     }
 }
 
+// Issue 23: 5000 zones took a 10 fps service down to 4 fps, and a pose at 1e300 m made an
+// occupied zone's distance overflow to null. Both are refused, naming the setting.
+TEST(Zones, TooManyZonesAndCoordinatesFarAwayAreRefused)
+{
+    const auto refusal = [](const ZonesSettings& settings) {
+        try {
+            validateZonesSettings(settings);
+        } catch (const std::invalid_argument& e) {
+            return std::string(e.what());
+        }
+        return std::string("(accepted)");
+    };
+    ZonesSettings many = oneZone({0, 0, 0}, {1, 1, 1});
+    while (many.zones.size() < kMaxZones) {
+        many.zones.push_back(many.zones[0]);
+        many.zones.back().name = "zone" + std::to_string(many.zones.size());
+    }
+    EXPECT_EQ(refusal(many), "(accepted)");
+    many.zones.push_back(many.zones[0]);
+    many.zones.back().name = "one too many";
+    EXPECT_EQ(refusal(many).rfind("zones: 17 zones, more than the 16", 0), 0u) << refusal(many);
+
+    ZonesSettings far = oneZone({1e300 - 1, -1, -1}, {1e300, 1, 1});
+    EXPECT_EQ(refusal(far).rfind("zones[0].max: ", 0), 0u) << refusal(far);
+    far = oneZone({0, 0, 0}, {1, 1, 1});
+    far.camera_pose.translation_m = {1e300, 0, 0};
+    EXPECT_EQ(refusal(far).rfind("robot.camera_pose.translation_m: ", 0), 0u) << refusal(far);
+    far.camera_pose.translation_m = {0, 0, 0};
+    far.camera_pose.rpy_deg = {0, 1e9, 0};
+    EXPECT_EQ(refusal(far).rfind("robot.camera_pose.rpy_deg: ", 0), 0u) << refusal(far);
+    far.camera_pose.rpy_deg = {0, -360, 0};
+    EXPECT_EQ(refusal(far), "(accepted)");
+}
+
 } // namespace
 } // namespace stereod
