@@ -481,8 +481,9 @@ int main(int argc, char** argv)
                            "print the service's status object as JSON"),
          [&] { return runStatus(o.status); }},
         {addServiceCommand(app, "view",
-                           "print the live view's address (Foxglove WebSocket and the viewer "
-                           "page) and open a browser on it when there is a display",
+                           "print the live view's addresses with its token (the viewer page, "
+                           "Foxglove's WebSocket) and open a browser on the page when there is "
+                           "a display",
                            o.view.service, sockets),
          [&] { return runView(o.view); }},
         {addServiceCommand(app, "watch", "one line per new reading until interrupted (Ctrl-C)",

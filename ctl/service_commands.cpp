@@ -147,13 +147,13 @@ void printStatus(const json& status)
 
     const json& pipeline = member(status, "pipeline");
     const json& extended = member(pipeline, "extended_range");
-    fmt::print("pipeline: {} frames, {} fps, matcher {}, {} disparities from {}{}, closest depth {} "
-               "m, depth out to {} m
-",
-               number(pipeline, "frames", 0), number(pipeline, "fps", 1), text(pipeline, "matcher"),
-               number(pipeline, "num_disparities", 0), number(pipeline, "min_disparity", 0),
-               extended.is_boolean() && extended.get<bool>() ? " and the extended range" : "",
-               number(pipeline, "closest_depth_m", 2), number(pipeline, "max_output_depth_m", 1));
+    fmt::print(
+        "pipeline: {} frames, {} fps, matcher {}, {} disparities from {}{}, closest depth {} "
+        "m, depth out to {} m\n",
+        number(pipeline, "frames", 0), number(pipeline, "fps", 1), text(pipeline, "matcher"),
+        number(pipeline, "num_disparities", 0), number(pipeline, "min_disparity", 0),
+        extended.is_boolean() && extended.get<bool>() ? " and the extended range" : "",
+        number(pipeline, "closest_depth_m", 2), number(pipeline, "max_output_depth_m", 1));
     printStageTable(stdout, member(pipeline, "stage_ms"));
     const json& latency = member(pipeline, "latency_ms");
     fmt::print("latency from capture to reading: p50 {} ms, p99 {} ms\n", number(latency, "p50", 1),

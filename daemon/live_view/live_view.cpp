@@ -214,10 +214,12 @@ LiveView::LiveView(LiveViewSettings settings, RectifiedGeometry geometry)
             }
             if (refusals > 0)
                 transport_->sendReply(
-                    id, statusJson(2, "subscribe: " + refused +
-                                          (refusals > 1 ? " (and " + std::to_string(refusals - 1) +
-                                                              " more refused)"
-                                                        : std::string())));
+                    id,
+                    statusJson(2, "subscribe: " + refused +
+                                      (refusals > 1 ? " (and " + std::to_string(refusals - 1) +
+                                                          " more refused)"
+                                                    : std::string())),
+                    replyBacklogAllowed(client));
             break;
         }
         case ClientRequest::Kind::Unsubscribe:
@@ -233,7 +235,8 @@ LiveView::LiveView(LiveViewSettings settings, RectifiedGeometry geometry)
         case ClientRequest::Kind::Invalid:
             transport_->sendReply(
                 id,
-                statusJson(request.kind == ClientRequest::Kind::Invalid ? 2 : 1, request.problem));
+                statusJson(request.kind == ClientRequest::Kind::Invalid ? 2 : 1, request.problem),
+                replyBacklogAllowed(client));
             break;
         }
     };
@@ -255,10 +258,6 @@ std::string LiveView::start()
     limits.allowed_origins = settings_.allowed_origins;
     limits.max_clients = settings_.max_clients;
     limits.max_connections = settings_.max_connections;
-    // Replies get 1 MiB of their own above what frames may hold (kSkipBytes): a client
-    // that lags behind its frames is not closed for one reply, one that never reads its
-    // replies is.
-    limits.max_reply_backlog_bytes = kSkipBytes + (1u << 20);
     error_ = transport_->start(settings_.host, settings_.port, kSubprotocol, std::move(limits));
     if (!error_.empty())
         return error_;
@@ -563,6 +562,11 @@ void LiveView::sendTo(WebSocketTransport::ConnectionId id, Client& client, Chann
         }
     }
     client.buffered_after_send = transport_->buffered(id);
+}
+
+std::size_t LiveView::replyBacklogAllowed(const Client& client)
+{
+    return std::max(kFrameBudgetBytes, client.buffered_after_send) + (std::size_t{1} << 20);
 }
 
 void LiveView::handOverFrames(WebSocketTransport::ConnectionId id, Client& client)

@@ -167,6 +167,12 @@ class LiveView final : public PublishObserver {
     // Transport thread: the client's waiting frames, longest waiting first, while its
     // socket holds less than kFrameBudgetBytes.
     void handOverFrames(WebSocketTransport::ConnectionId id, Client& client);
+    // Transport thread: the unsent bytes a reply to the client may find. Frames go out
+    // while less than kFrameBudgetBytes wait, so one large frame (a full-size cloud) may
+    // sit above the budget: replies get 1 MiB of their own above what the frames left.
+    // A client that lags behind its frames is not closed for one reply; one that never
+    // reads its replies is.
+    static std::size_t replyBacklogAllowed(const Client& client);
     // From the feed thread: every client's waiting frames offered again.
     void pumpAll();
     HttpResponse serveFile(const std::string& path) const;

@@ -362,9 +362,10 @@ bool WebSocketTransport::sendBinary(ConnectionId id, const std::string& bytes)
     return con && !con->send(bytes, websocketpp::frame::opcode::binary);
 }
 
-bool WebSocketTransport::sendReply(ConnectionId id, const std::string& text)
+bool WebSocketTransport::sendReply(ConnectionId id, const std::string& text,
+                                   std::size_t max_backlog_bytes)
 {
-    if (buffered(id) > impl_->limits.max_reply_backlog_bytes) {
+    if (buffered(id) > max_backlog_bytes) {
         closed_for_replies_.fetch_add(1, std::memory_order_relaxed);
         close(id, "too slow: not reading its replies");
         return false;

@@ -13,9 +13,9 @@
 //  - out of descriptors (EMFILE), the connection waiting is taken on a spare descriptor,
 //    answered 503 and closed, and accepting backs off (100 ms, doubling to 1.6 s) instead
 //    of spinning;
-//  - a reply to a client's request (sendReply) finds at most `max_reply_backlog_bytes`
-//    unsent to that client, or the client is closed: a client that sends and never reads
-//    cannot make the service queue replies without end.
+//  - a reply to a client's request (sendReply) finds at most the backlog its caller
+//    allows unsent to that client, or the client is closed: a client that sends and never
+//    reads cannot make the service queue replies without end.
 //
 // Thread contract: start()/stop() from one controlling thread; post() and the counters
 // from any thread; the handlers run on the I/O thread, and sendText()/sendBinary()/
@@ -44,7 +44,6 @@ struct TransportLimits {
     std::vector<std::string> allowed_origins;       // pages besides the live view's own
     std::size_t max_clients = 16;                   // WebSocket sessions
     std::size_t max_connections = 32;               // sockets of any kind, sessions included
-    std::size_t max_reply_backlog_bytes = 5u << 20; // unsent when a reply is queued
 };
 
 class WebSocketTransport {
@@ -78,8 +77,8 @@ class WebSocketTransport {
     bool sendText(ConnectionId id, const std::string& text);
     bool sendBinary(ConnectionId id, const std::string& bytes);
     // A reply to the client's own request; closes the client instead (and returns false)
-    // when more than max_reply_backlog_bytes wait unsent to it.
-    bool sendReply(ConnectionId id, const std::string& text);
+    // when more than max_backlog_bytes wait unsent to it.
+    bool sendReply(ConnectionId id, const std::string& text, std::size_t max_backlog_bytes);
     // Bytes queued for the connection and not yet written to its socket.
     std::size_t buffered(ConnectionId id) const;
     // Closes with `reason` and shuts the socket down: the connection ends even when the

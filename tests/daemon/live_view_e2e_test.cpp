@@ -185,11 +185,12 @@ class LiveViewPage : public LiveViewE2e {
         return path != nullptr ? path : "/usr/bin/chromium";
     }
     static std::string screenshots() { return std::string(STEREOD_BINARY_DIR) + "/live-view"; }
-    // The page at the address `stereoctl view` prints, opened by page.mjs, going through `states`; read each with next().
+    // The page at the address `stereoctl view` prints, opened by page.mjs, going through `states`;
+    // read each with next().
     void openPage(const std::string& name, const std::vector<std::string>& states)
     {
-        std::vector<std::string> argv = {STEREOD_NODE, kClientScripts + "/page.mjs",
-                                         page_, screenshots(), name};
+        std::vector<std::string> argv = {STEREOD_NODE, kClientScripts + "/page.mjs", page_,
+                                         screenshots(), name};
         argv.insert(argv.end(), states.begin(), states.end());
         browser_ = std::make_unique<test::ChildProcess>(argv, dir_.file("page.log"));
     }
@@ -416,7 +417,8 @@ TEST_F(LiveViewE2e, TheMatchersWholeNameReadsBackThroughStatusAndTheLiveView)
     ASSERT_EQ(text.exit_code, 0) << text.err;
     EXPECT_NE(text.out.find(", matcher census-sgm (planar), "), std::string::npos) << text.out;
 
-    const ProcessResult node = runProcess({STEREOD_NODE, kClientScripts + "/client.mjs", websocket_, "3"});
+    const ProcessResult node =
+        runProcess({STEREOD_NODE, kClientScripts + "/client.mjs", websocket_, "3"});
     ASSERT_EQ(node.exit_code, 0) << node.err;
     const Json got = Json::parse(node.out);
     ASSERT_TRUE(got["status"].is_object()) << node.out.substr(0, 300);
@@ -471,7 +473,8 @@ TEST_F(LiveViewE2e, DepthsBeyondTheOutputCapAreLeftOut)
     // The reading comes from the whole depth: tsukuba's nearest objects, within the cap.
     EXPECT_TRUE(snapshot["reading"]["valid"].get<bool>()) << snapshot["reading"].dump();
 
-    const ProcessResult node = runProcess({STEREOD_NODE, kClientScripts + "/client.mjs", websocket_, "2"});
+    const ProcessResult node =
+        runProcess({STEREOD_NODE, kClientScripts + "/client.mjs", websocket_, "2"});
     ASSERT_EQ(node.exit_code, 0) << node.err;
     const Json got = Json::parse(node.out);
     ASSERT_TRUE(got["depth"].is_object());

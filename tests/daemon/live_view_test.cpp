@@ -171,7 +171,7 @@ TEST(LiveView, ASlowClientGetsEveryReadingAndFewerFrames)
     LiveView view(settings, geometryOf(size));
     ASSERT_EQ(view.start(), "");
     auto client = subscribe(
-        view.port(), {{1, kNearest}, {2, kDepth}, {3, kDisparity}, {4, kLeftImage}, {5, kPoints}});
+        view, {{1, kNearest}, {2, kDepth}, {3, kDisparity}, {4, kLeftImage}, {5, kPoints}});
     Producer producer(view, size, 40ms);
 
     std::vector<uint64_t> readings;
@@ -465,8 +465,9 @@ TEST(LiveView, OneSubscriptionPerChannelAndOneReplyPerRequest)
 }
 
 // Issue 23: 2,000,000 {"op":"x"} never read: +500 MB, never dropped (the slow-client check
-// only looked at subscribed channels). A reply now finds at most 5 MiB unsent (4 MiB of
-// frames and 1 MiB of replies), or the client is closed and counted.
+// only looked at subscribed channels). A reply now finds a bounded backlog unsent (the
+// frame budget, one frame and 1 MiB), and a client that reads nothing for kStuckMs is
+// closed: either way it is closed and counted.
 TEST(LiveView, AClientThatNeverReadsItsRepliesIsClosed)
 {
     LiveViewSettings settings;
