@@ -40,10 +40,10 @@ struct HttpResponse {
 
 // Who may connect, and how much each may hold.
 struct TransportLimits {
-    std::string token;                              // required on every request (admission.hpp)
-    std::vector<std::string> allowed_origins;       // pages besides the live view's own
-    std::size_t max_clients = 16;                   // WebSocket sessions
-    std::size_t max_connections = 32;               // sockets of any kind, sessions included
+    std::string token;                        // required on every request (admission.hpp)
+    std::vector<std::string> allowed_origins; // pages besides the live view's own
+    std::size_t max_clients = 16;             // WebSocket sessions
+    std::size_t max_connections = 32;         // sockets of any kind, sessions included
 };
 
 class WebSocketTransport {
