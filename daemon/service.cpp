@@ -56,17 +56,9 @@ std::string processingProblem(const ProcessorSettings& settings,
 // with a DIR that does not exist is a source problem, whatever layer finds it.
 ExitCode exitCodeFor(const ConfigError& error)
 {
-    const auto all_about = [&](std::string_view key) {
-        const std::string needle = ": " + std::string(key) + ": ";
-        return !error.problems().empty() &&
-               std::all_of(error.problems().begin(), error.problems().end(),
-                           [&](const std::string& problem) {
-                               return problem.find(needle) != std::string::npos;
-                           });
-    };
-    if (all_about("source.replay.path"))
+    if (error.onlyAbout("source.replay.path"))
         return ExitCode::Source;
-    if (all_about("calibration"))
+    if (error.onlyAbout("calibration"))
         return ExitCode::Calibration;
     return ExitCode::InvalidConfig;
 }

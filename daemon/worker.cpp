@@ -84,11 +84,6 @@ void Worker::join()
         thread_.join();
 }
 
-void Worker::setMaxSkewMs(double max_skew_ms) noexcept
-{
-    max_skew_ms_.store(max_skew_ms, std::memory_order_relaxed);
-}
-
 void Worker::updateSettings(const ProcessorSettings& settings)
 {
     auto fresh = std::make_unique<ProcessorSettings>(settings);
@@ -242,7 +237,7 @@ void Worker::processPair(StereoPair& pair)
     facts.stamp_ns = stamp_ns;
     facts.frame = frame;
     facts.skew_ms = std::abs(static_cast<double>(slot.skew_ns)) / 1e6;
-    facts.max_skew_ms = max_skew_ms_.load(std::memory_order_relaxed);
+    facts.max_skew_ms = max_skew_ms_;
     // Calibration health: a suspect calibration marks the reading, and withholds it when it
     // failed and the configuration asks for that.
     facts.calibration_suspect = false;

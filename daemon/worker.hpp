@@ -20,7 +20,7 @@
 // frames, so that a calibration can be made from the running service.
 //
 // Thread contract: start(), join() and the destructor from the controlling thread;
-// setMaxSkewMs(), updateSettings(), busySinceNs() and waitFinished() from any thread; the processor
+// updateSettings(), busySinceNs() and waitFinished() from any thread; the processor
 // and the publisher's write side are used by the worker thread only while it runs.
 
 #include <array>
@@ -106,8 +106,6 @@ class Worker {
     // and the pair in hand is done. Idempotent.
     void join();
 
-    void setMaxSkewMs(double max_skew_ms) noexcept;
-
     // Calibration health (borrowed until the worker is destroyed; null: none): the worker
     // offers it a rectified pair when it is due, flags readings while it is degraded or
     // failed, and withholds them (calibration_suspect) while it is failed if asked to.
@@ -157,7 +155,7 @@ class Worker {
     CalibrationHealthMonitor* health_ = nullptr;
     std::atomic<bool> withhold_when_failed_{false};
     std::thread thread_;
-    std::atomic<double> max_skew_ms_;
+    const double max_skew_ms_; // source.max_skew_ms, which needs a restart to change
     std::atomic<ProcessorSettings*> pending_settings_{nullptr}; // owned; see updateSettings()
     std::atomic<ZonesSettings*> pending_zones_{nullptr};        // owned; see updateZones()
     std::atomic<int64_t> busy_since_ns_{0};
