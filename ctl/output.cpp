@@ -14,8 +14,8 @@ namespace stereod {
 namespace {
 
 // The pipeline's order, which is also the order people read the table in.
-constexpr std::array<const char*, 8> kStageOrder = {"rectify", "colour", "match",        "depth",
-                                                    "nearest", "cloud",  "cloud_colour", "publish"};
+constexpr std::array<const char*, 9> kStageOrder = {
+    "rectify", "colour", "match", "depth", "nearest", "cloud", "cloud_colour", "zones", "publish"};
 
 } // namespace
 
