@@ -73,8 +73,7 @@ template <typename Work> void timed(benchmark::State& state, Work&& work)
         ++frames;
     }
     state.counters["allocs_per_frame"] = static_cast<double>(cpp) / static_cast<double>(frames);
-    state.counters["mat_allocs_per_frame"] =
-        static_cast<double>(mat) / static_cast<double>(frames);
+    state.counters["mat_allocs_per_frame"] = static_cast<double>(mat) / static_cast<double>(frames);
 }
 
 void BM_RectifyLeftGrey(benchmark::State& state)
@@ -119,8 +118,14 @@ void process(benchmark::State& state, bool colour)
     state.counters["points"] = static_cast<double>(result.cloud.size());
 }
 
-void BM_ProcessGrey(benchmark::State& state) { process(state, false); }
-void BM_ProcessColour(benchmark::State& state) { process(state, true); }
+void BM_ProcessGrey(benchmark::State& state)
+{
+    process(state, false);
+}
+void BM_ProcessColour(benchmark::State& state)
+{
+    process(state, true);
+}
 
 BENCHMARK(BM_RectifyLeftGrey)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_RectifyLeftColour)->Unit(benchmark::kMillisecond)->UseRealTime();
