@@ -10,6 +10,7 @@
 
 #include <fmt/format.h>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "config/service_config.hpp"
 #include "ctl/commands.hpp"
@@ -96,6 +97,22 @@ cv::Mat readGray(const std::string& path)
                                      path));
     }
     return image;
+}
+
+// The colour of an image file as BGR, or an empty Mat when the file is grey (or has no
+// colour OpenCV decodes): the cloud's colours. The file was read once as grey already
+// (readGray), which stays what the matcher sees.
+cv::Mat readColour(const std::string& path)
+{
+    cv::Mat image;
+    try {
+        image = cv::imread(path, cv::IMREAD_ANYCOLOR);
+    } catch (const cv::Exception& e) {
+        throw UsageError(fmt::format("cannot read image {}: {}", path, e.what()));
+    }
+    if (image.channels() == 4)
+        cv::cvtColor(image, image, cv::COLOR_BGRA2BGR);
+    return image.channels() == 3 ? image : cv::Mat();
 }
 
 ProcessorSettings depthSettings(const DepthOptions& options)
@@ -212,7 +229,8 @@ int runDepth(const DepthOptions& options)
 
     StereoProcessor processor(calibration, settings);
     DepthResult result;
-    processor.process(left, right, /*stamp_ns=*/0, /*frame=*/0, result);
+    const cv::Mat left_colour = readColour(options.left_path);
+    processor.process(left, left_colour, right, /*stamp_ns=*/0, /*frame=*/0, result);
     const DisparityRange range = processor.disparityRange();
 
     // In the order written, which is the order they are reported in.
@@ -226,7 +244,7 @@ int runDepth(const DepthOptions& options)
         written.emplace_back("depth", options.depth_path);
     }
     if (!options.cloud_path.empty()) {
-        writePly(options.cloud_path, result.cloud);
+        writePly(options.cloud_path, result.cloud, result.cloud_colour);
         written.emplace_back("cloud", options.cloud_path);
     }
     if (!options.colormap_path.empty()) {

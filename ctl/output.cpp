@@ -14,18 +14,24 @@ namespace stereod {
 namespace {
 
 // The pipeline's order, which is also the order people read the table in.
-constexpr std::array<const char*, 7> kStageOrder = {"rectify", "match", "depth",  "nearest",
-                                                    "cloud",   "zones", "publish"};
+constexpr std::array<const char*, 9> kStageOrder = {
+    "rectify", "colour", "match", "depth", "nearest", "cloud", "cloud_colour", "zones", "publish"};
 
 } // namespace
 
 nlohmann::ordered_json stageTimingsToJson(const StageTimings& timings)
 {
-    return {{"rectify", timings.rectify_ms},
-            {"match", timings.match_ms},
-            {"depth", timings.depth_ms},
-            {"nearest", timings.nearest_ms},
-            {"cloud", timings.cloud_ms}};
+    nlohmann::ordered_json stages = {{"rectify", timings.rectify_ms},
+                                     {"match", timings.match_ms},
+                                     {"depth", timings.depth_ms},
+                                     {"nearest", timings.nearest_ms},
+                                     {"cloud", timings.cloud_ms}};
+    // The colour stages only for a colour left image (exactly 0 otherwise).
+    if (timings.colour_ms > 0.0)
+        stages["colour"] = timings.colour_ms;
+    if (timings.cloud_colour_ms > 0.0)
+        stages["cloud_colour"] = timings.cloud_colour_ms;
+    return stages;
 }
 
 void printStageTable(std::FILE* out, const nlohmann::ordered_json& stage_ms)

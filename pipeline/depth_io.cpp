@@ -311,8 +311,14 @@ cv::Mat readDepthPng(const std::string& path)
     return depth_m;
 }
 
-void writePly(const std::string& path, const std::vector<CloudPoint>& cloud)
+void writePly(const std::string& path, const std::vector<CloudPoint>& cloud,
+              const std::vector<CloudColour>& colours)
 {
+    const bool coloured = !colours.empty();
+    if (coloured && colours.size() != cloud.size())
+        throw std::invalid_argument(path + ": " + std::to_string(colours.size()) +
+                                    " colours for a cloud of " + std::to_string(cloud.size()) +
+                                    " points");
     std::ofstream out;
     openForWriting(out, path);
     out << "ply\n"
@@ -323,16 +329,27 @@ void writePly(const std::string& path, const std::vector<CloudPoint>& cloud)
         << "property float x\n"
         << "property float y\n"
         << "property float z\n"
-        << "property float intensity\n"
-        << "end_header\n";
-    if constexpr (std::endian::native == std::endian::little) {
+        << "property float intensity\n";
+    if (coloured)
+        out << "property uchar red\n"
+            << "property uchar green\n"
+            << "property uchar blue\n";
+    out << "end_header\n";
+    if (!coloured && std::endian::native == std::endian::little) {
         out.write(reinterpret_cast<const char*>(cloud.data()),
                   static_cast<std::streamsize>(cloud.size() * sizeof(CloudPoint)));
     } else {
-        for (const CloudPoint& p : cloud) {
+        for (std::size_t i = 0; i < cloud.size(); ++i) {
+            const CloudPoint& p = cloud[i];
             const float v[4] = {toLittleEndian(p.x), toLittleEndian(p.y), toLittleEndian(p.z),
                                 toLittleEndian(p.intensity)};
             out.write(reinterpret_cast<const char*>(v), sizeof(v));
+            if (coloured) {
+                const char rgb[3] = {static_cast<char>(colours[i].r),
+                                     static_cast<char>(colours[i].g),
+                                     static_cast<char>(colours[i].b)};
+                out.write(rgb, sizeof(rgb));
+            }
         }
     }
     finishWriting(out, path);

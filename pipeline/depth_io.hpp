@@ -3,7 +3,8 @@
 //  - disparity: .pfm float32, Middlebury convention (invalid = +inf), or .png uint16 with
 //    disparity * 256, KITTI convention (0 = invalid);
 //  - depth: .png uint16 in millimetres, 0 = invalid;
-//  - point cloud: .ply with x y z in metres (rectified left camera) and intensity;
+//  - point cloud: .ply with x y z in metres (rectified left camera), intensity, and the
+//    colour when the left camera gives one;
 //  - a colourised depth picture for people.
 // Every writer throws std::runtime_error naming the file and what failed.
 
@@ -32,8 +33,12 @@ cv::Mat readDepthPng(const std::string& path);
 // Per-pixel match confidence (CV_8UC1: 0 = no disparity, 1..255) as an 8-bit .png.
 void writeConfidencePng(const std::string& path, const cv::Mat& confidence);
 
-// Binary little-endian .ply, float x y z intensity.
-void writePly(const std::string& path, const std::vector<CloudPoint>& cloud);
+// Binary little-endian .ply, float x y z intensity, and with `colours` (one per point,
+// same order; empty for a grey cloud) uchar red green blue after them, the properties
+// viewers such as MeshLab and CloudCompare show as the points' colour. Throws
+// std::invalid_argument when colours are given for a different number of points.
+void writePly(const std::string& path, const std::vector<CloudPoint>& cloud,
+              const std::vector<CloudColour>& colours = {});
 
 // A BGR picture of the depth: near is warm, far is cool, invalid is black. The scale
 // runs from min_depth_m to max_depth_m.

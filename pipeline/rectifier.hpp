@@ -19,10 +19,11 @@ class Rectifier {
     // True when rectify() resamples (full calibration); false when it only copies.
     bool remaps() const { return !left_map_xy_.empty(); }
 
-    // Rectifies one raw CV_8UC1 image into `out`, which is reused when it already has the
-    // calibrated size and type: no allocation of any kind in steady state (see
-    // remapBilinear). Both inputs must have the calibrated image size; `out` must not
-    // share its buffer with `raw`.
+    // Rectifies one raw CV_8UC1 image, or the left camera's colour (CV_8UC3, BGR) with the
+    // same maps, into `out`, which is reused when it already has the calibrated size and
+    // the input's type: no allocation of any kind in steady state (see remapBilinear).
+    // Inputs must have the calibrated image size; `out` must not share its buffer with
+    // `raw`.
     void rectifyLeft(const cv::Mat& raw, cv::Mat& out) const;
     void rectifyRight(const cv::Mat& raw, cv::Mat& out) const;
 
@@ -34,15 +35,15 @@ class Rectifier {
     cv::Mat right_map_xy_, right_map_frac_;
 };
 
-// Bilinear resampling of a CV_8UC1 image through fixed-point maps, the same result as
-// cv::remap(src, out, map_xy, map_frac, cv::INTER_LINEAR, cv::BORDER_CONSTANT, 0):
+// Bilinear resampling of a CV_8UC1 or CV_8UC3 image through fixed-point maps, the same
+// result as cv::remap(src, out, map_xy, map_frac, cv::INTER_LINEAR, cv::BORDER_CONSTANT, 0):
 //  - map_xy (CV_16SC2) holds, for every output pixel, the integer source pixel (x, y) at
 //    the top left of its 2x2 neighbourhood; map_frac (CV_16UC1, same size) the sub-pixel
 //    position in 1/32 pixel as fy * 32 + fx (cv::INTER_TAB_SIZE = 32), both as
 //    cv::initUndistortRectifyMap or cv::convertMaps make them;
 //  - a neighbour outside `src` counts as 0, so an output pixel whose whole neighbourhood
 //    lies outside is 0 and one on the image's edge fades to 0.
-// `out` becomes CV_8UC1 of the maps' size, reusing its buffer when it already is; it must
+// `out` becomes the source's type at the maps' size, reusing its buffer when it already is; it must
 // not share its buffer with `src`. Rows are split across OpenCV's thread pool
 // (cv::parallel_for_), which allocates nothing per call once it has started. Throws
 // std::invalid_argument naming the argument when the types or sizes do not fit.

@@ -180,6 +180,8 @@ struct StereoProcessor::Impl {
         const cv::Size size = calibration.rectified.image_size;
         out.left_rectified.create(size, CV_8UC1);
         out.left_rectified.setTo(0);
+        out.left_rectified_colour.release();
+        out.cloud_colour.clear();
         out.disparity.create(size, CV_32FC1);
         out.disparity.setTo(std::numeric_limits<float>::infinity());
         out.confidence.create(size, CV_8UC1);
@@ -211,6 +213,7 @@ struct StereoProcessor::Impl {
     NearestObjectFinder nearest;
     double max_output_depth_m;     // the outputs' depth cap in force, metres
     cv::Mat left_gray, right_gray; // colour inputs converted, reused
+    cv::Mat left_bgr;              // a BGRA left without its alpha, reused
     cv::Mat right_rectified;       // full calibration only, reused
     cv::Mat last_right;            // what the matcher saw last (see lastRightRectified())
     bool last_frame_bad = false;   // log a run of bad frames once
@@ -228,6 +231,12 @@ StereoProcessor::~StereoProcessor() = default;
 void StereoProcessor::process(const cv::Mat& left, const cv::Mat& right, int64_t stamp_ns,
                               uint64_t frame, DepthResult& out)
 {
+    process(left, cv::Mat(), right, stamp_ns, frame, out);
+}
+
+void StereoProcessor::process(const cv::Mat& left, const cv::Mat& left_colour, const cv::Mat& right,
+                              int64_t stamp_ns, uint64_t frame, DepthResult& out)
+{
     Impl& p = *impl_;
     out.frame = frame;
     out.stamp_ns = stamp_ns;
@@ -238,7 +247,13 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& right, int64_t
     const cv::Mat left_gray = p.grayView(left, p.left_gray, "left", problem);
     const cv::Mat right_gray =
         left_gray.empty() ? cv::Mat() : p.grayView(right, p.right_gray, "right", problem);
-    if (left_gray.empty() || right_gray.empty()) {
+    if (!left_gray.empty() && !left_colour.empty() &&
+        (left_colour.type() != CV_8UC3 || left_colour.size() != left.size())) {
+        problem = "left colour image is " + describeSize(left_colour.size()) + " with " +
+                  std::to_string(left_colour.channels()) +
+                  " channels, not 8-bit BGR of the left image's size";
+    }
+    if (left_gray.empty() || right_gray.empty() || !problem.empty()) {
         p.last_right = cv::Mat();
         p.badFrame(out, problem);
         return;
@@ -253,6 +268,18 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& right, int64_t
     if (p.rectifier.remaps()) {
         p.rectifier.rectifyRight(right_gray, p.right_rectified);
         right_rectified = p.right_rectified;
+    }
+    const Clock::time_point t_grey = Clock::now();
+    // The colour left, for the outputs only, through the same maps.
+    if (!left_colour.empty()) {
+        p.rectifier.rectifyLeft(left_colour, out.left_rectified_colour);
+    } else if (left.channels() == 3) {
+        p.rectifier.rectifyLeft(left, out.left_rectified_colour);
+    } else if (left.channels() == 4) {
+        cv::cvtColor(left, p.left_bgr, cv::COLOR_BGRA2BGR);
+        p.rectifier.rectifyLeft(p.left_bgr, out.left_rectified_colour);
+    } else {
+        out.left_rectified_colour.release();
     }
     const Clock::time_point t1 = Clock::now();
 
@@ -283,14 +310,21 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& right, int64_t
     else
         out.cloud.clear();
     const Clock::time_point t5 = Clock::now();
+    if (p.settings.compute_cloud && !out.left_rectified_colour.empty())
+        cloudColours(out.depth_m, out.left_rectified_colour, out.cloud_colour);
+    else
+        out.cloud_colour.clear();
+    const Clock::time_point t6 = Clock::now();
 
-    out.timings.rectify_ms = msBetween(t0, t1);
+    out.timings.rectify_ms = msBetween(t0, t_grey);
+    out.timings.colour_ms = out.left_rectified_colour.empty() ? 0.0 : msBetween(t_grey, t1);
     out.timings.match_ms = msBetween(t1, t2);
     out.timings.extended_range_ms = p.matcher->extendedRangeMs();
     out.timings.near_field_probe_ms = p.matcher->nearFieldProbeMs();
     out.timings.depth_ms = msBetween(t2, t3);
     out.timings.nearest_ms = msBetween(t3, t4);
     out.timings.cloud_ms = msBetween(t4, t5);
+    out.timings.cloud_colour_ms = out.cloud_colour.empty() ? 0.0 : msBetween(t5, t6);
 }
 
 void StereoProcessor::updateSettings(const ProcessorSettings& settings)

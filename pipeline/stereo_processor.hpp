@@ -59,7 +59,13 @@ struct StageTimings {
     // Parts of match_ms: census-sgm's extended range and near-field probe.
     double extended_range_ms = 0.0;
     double near_field_probe_ms = 0.0;
-    double totalMs() const { return rectify_ms + match_ms + depth_ms + nearest_ms + cloud_ms; }
+    double colour_ms = 0.0;       // the colour left rectified; exactly 0 for grey input
+    double cloud_colour_ms = 0.0; // the cloud's colours; exactly 0 without them
+    double totalMs() const
+    {
+        return rectify_ms + colour_ms + match_ms + depth_ms + nearest_ms + cloud_ms +
+               cloud_colour_ms;
+    }
 };
 
 // One point of the cloud: camera frame of the rectified left camera (x right, y down,
@@ -69,15 +75,25 @@ struct CloudPoint {
     float intensity;
 };
 
+// The colour of a cloud point, from the rectified colour left image, 0..255 per channel.
+struct CloudColour {
+    uint8_t r, g, b;
+};
+
 // Everything the chain produced for one pair. Reused frame after frame: buffers keep
 // their capacity.
 struct DepthResult {
-    cv::Mat left_rectified;        // CV_8UC1
+    cv::Mat left_rectified; // CV_8UC1, what the matcher saw
+    // The left camera's colour rectified with the same maps: CV_8UC3, BGR (OpenCV's
+    // order); empty when the left input is grey.
+    cv::Mat left_rectified_colour;
     cv::Mat disparity;             // CV_32FC1, pixels; invalid = +inf (Middlebury)
     cv::Mat confidence;            // CV_8UC1, 0 invalid, 1..255 (see MatchOutput)
     cv::Mat near_field;            // CV_8UC1, near-field evidence (MatchOutput::near_field)
     cv::Mat depth_m;               // CV_32FC1, metres; invalid (or beyond the cap) = 0
     std::vector<CloudPoint> cloud; // valid depths within the cap; capacity kept across frames
+    // One colour per cloud point, in the same order; empty when the left input is grey.
+    std::vector<CloudColour> cloud_colour;
     // What the pair's reading is judged from (the worker adds skew and calibration health,
     // the socket server the source and the age), and the verdict on what the chain knew.
     ReadingFacts facts;
@@ -111,13 +127,20 @@ class StereoProcessor {
     StereoProcessor(const StereoProcessor&) = delete;
     StereoProcessor& operator=(const StereoProcessor&) = delete;
 
-    // Runs the chain on one raw (unrectified) grayscale pair. Frames whose size does not
+    // Runs the chain on one raw (unrectified) pair, 8-bit grey or colour (BGR, BGRA): the
+    // matcher works on grey; a colour left is also rectified into
+    // out.left_rectified_colour and colours the cloud. Frames whose size does not
     // match the calibration give a BadFrame reading, never an exception. out.facts holds
     // the pair's facts, out.reading judgeReading() of them, both from the whole depth; then
     // depths beyond maxOutputDepth() are cleared from out.depth_m, and the cloud is made
     // from what is left.
     void process(const cv::Mat& left, const cv::Mat& right, int64_t stamp_ns, uint64_t frame,
                  DepthResult& out);
+    // The same with the left camera's colour beside its grey image, for sources that
+    // decode both (the matcher then sees the camera's own luma, as with a grey source):
+    // `left_colour` is CV_8UC3 (BGR) of the left image's size, or empty for none.
+    void process(const cv::Mat& left, const cv::Mat& left_colour, const cv::Mat& right,
+                 int64_t stamp_ns, uint64_t frame, DepthResult& out);
 
     // Applies settings that can change live (matcher parameters, nearest settings).
     // Throws std::invalid_argument, leaving the current settings in force, if invalid.

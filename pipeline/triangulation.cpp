@@ -66,4 +66,22 @@ void buildPointCloud(const cv::Mat& depth_m, const cv::Mat& left_rectified,
     }
 }
 
+void cloudColours(const cv::Mat& depth_m, const cv::Mat& left_rectified_colour,
+                  std::vector<CloudColour>& colours)
+{
+    CV_Assert(depth_m.type() == CV_32FC1 && left_rectified_colour.type() == CV_8UC3 &&
+              depth_m.size() == left_rectified_colour.size());
+    colours.clear();
+    colours.reserve(depth_m.total());
+    for (int v = 0; v < depth_m.rows; ++v) {
+        const float* z = depth_m.ptr<float>(v);
+        const uint8_t* bgr = left_rectified_colour.ptr<uint8_t>(v);
+        for (int u = 0; u < depth_m.cols; ++u) {
+            if (!(z[u] > 0.0f))
+                continue;
+            colours.push_back(CloudColour{bgr[3 * u + 2], bgr[3 * u + 1], bgr[3 * u]});
+        }
+    }
+}
+
 } // namespace stereod

@@ -27,4 +27,10 @@ void clearDepthBeyond(cv::Mat& depth_m, float max_depth_m);
 void buildPointCloud(const cv::Mat& depth_m, const cv::Mat& left_rectified,
                      const RectifiedGeometry& geometry, std::vector<CloudPoint>& cloud);
 
+// The colours of the points buildPointCloud() makes from `depth_m`, in the same order:
+// left_rectified_colour (CV_8UC3, BGR) at each valid (> 0) depth pixel, as r, g, b.
+// `colours` is cleared and refilled, its capacity kept and grown once to the full image.
+void cloudColours(const cv::Mat& depth_m, const cv::Mat& left_rectified_colour,
+                  std::vector<CloudColour>& colours);
+
 } // namespace stereod

@@ -18,6 +18,7 @@ packages=(
   camera-calibration-parsers-tools python3-camera-calibration-parsers   # ROS's own calibration parsers: the ROS format tests
   python3-numpy python3-pytest python3-setuptools python3-venv   # python/: the Python client and its tests
   systemd   # systemd-analyze, systemd-sysusers, systemd-tmpfiles: the unit checks (tests/daemon)
+  help2man lintian   # scripts/package.sh: man pages from --help, the packages checked
 )
 
 ensure_packages setup "${packages[@]}"

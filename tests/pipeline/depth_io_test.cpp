@@ -222,6 +222,38 @@ TEST_F(DepthIo, PlyHeaderAndPointCount)
     EXPECT_EQ(second[3], 7.0f);
 }
 
+TEST_F(DepthIo, ColouredPlyHasRedGreenBlueAfterEachPoint)
+{
+    const std::vector<CloudPoint> cloud = {{0.1f, -0.2f, 1.5f, 128.0f}, {-1.0f, 0.5f, 3.25f, 7.0f}};
+    const std::vector<CloudColour> colours = {{255, 0, 10}, {1, 200, 3}};
+    const std::string p = path("colour.ply");
+    writePly(p, cloud, colours);
+    const std::string file = bytes(p);
+    const auto end = file.find("end_header\n");
+    ASSERT_NE(end, std::string::npos);
+    const std::string header = file.substr(0, end);
+    const auto i = header.find("property float intensity\n");
+    const auto r = header.find("property uchar red\n");
+    const auto g = header.find("property uchar green\n");
+    const auto b = header.find("property uchar blue\n");
+    ASSERT_TRUE(i != std::string::npos && r != std::string::npos && g != std::string::npos &&
+                b != std::string::npos)
+        << header;
+    EXPECT_TRUE(i < r && r < g && g < b);
+    const size_t data = end + std::strlen("end_header\n");
+    const size_t vertex = 4 * sizeof(float) + 3;
+    ASSERT_EQ(file.size() - data, 2 * vertex);
+    float second[4];
+    std::memcpy(second, file.data() + data + vertex, sizeof second);
+    EXPECT_EQ(second[2], 3.25f);
+    EXPECT_EQ(static_cast<uint8_t>(file[data + 16]), 255);
+    EXPECT_EQ(static_cast<uint8_t>(file[data + 18]), 10);
+    EXPECT_EQ(static_cast<uint8_t>(file[data + vertex + 16 + 1]), 200);
+
+    const std::vector<CloudColour> one = {{1, 2, 3}};
+    EXPECT_THROW(writePly(path("mismatch.ply"), cloud, one), std::invalid_argument);
+}
+
 TEST_F(DepthIo, EmptyCloudIsAValidPly)
 {
     const std::string p = path("empty.ply");

@@ -69,6 +69,35 @@ TEST_F(HotPathAllocations, RectifierAllocatesNothingAfterTheFirstFrame)
     EXPECT_GT(cv::countNonZero(left), static_cast<int>(left.total() / 2));
 }
 
+TEST_F(HotPathAllocations, ColourRectifyAllocatesNothingAfterTheFirstFrame)
+{
+    const cv::Size size(640, 480);
+    const StereoCalibration calibration = bench::makePlausibleRigCalibration(size);
+    const bench::ImagePair raw =
+        bench::simulateRawPair(calibration, bench::loadScene(bench::scenes()[0], size));
+    cv::Mat colour;
+    cv::Mat planes[] = {raw.left, 255 - raw.left, raw.left / 2};
+    cv::merge(planes, 3, colour);
+    const Rectifier rectifier(calibration);
+
+    cv::Mat out;
+    rectifier.rectifyLeft(colour, out);
+    const uint8_t* buffer = out.data;
+    uint64_t cpp = 0;
+    uint64_t mat = 0;
+    {
+        const bench::AllocationWindow window;
+        for (int frame = 0; frame < kFrames; ++frame)
+            rectifier.rectifyLeft(colour, out);
+        cpp = window.cppAllocations();
+        mat = window.matAllocations();
+    }
+    EXPECT_EQ(cpp, 0u) << "operator new calls in " << kFrames << " frames";
+    EXPECT_EQ(mat, 0u) << "new cv::Mat buffers in " << kFrames << " frames";
+    EXPECT_EQ(out.data, buffer);
+    EXPECT_EQ(out.type(), CV_8UC3);
+}
+
 TEST_F(HotPathAllocations, DepthToMillimetresAllocatesNothingIntoAPreparedBuffer)
 {
     cv::Mat depth_m(480, 640, CV_32FC1);

@@ -435,6 +435,55 @@ TEST_F(Processor, ColourInputIsConvertedToGrey)
     EXPECT_EQ(cv::countNonZero(same), static_cast<int>(grey.disparity.total()));
 }
 
+// The colour goes to the outputs and nowhere else: the matcher sees the same grey, the
+// rectified colour is the left camera's (a rectified-only calibration copies it), and
+// every cloud point gets the colour of its own pixel, in the cloud's order.
+TEST_F(Processor, ColourLeftRidesAlongToTheOutputs)
+{
+    StereoProcessor p(calibration_, settings_);
+    DepthResult grey, colour;
+    p.process(left_, right_, 0, 0, grey);
+    p.process(left_, left_colour_, right_, 0, 0, colour);
+    EXPECT_TRUE(grey.left_rectified_colour.empty());
+    EXPECT_TRUE(grey.cloud_colour.empty());
+
+    EXPECT_EQ(cv::norm(grey.disparity, colour.disparity, cv::NORM_INF), 0.0);
+    EXPECT_EQ(grey.reading.distance_m, colour.reading.distance_m);
+    ASSERT_EQ(colour.left_rectified_colour.type(), CV_8UC3);
+    EXPECT_EQ(cv::norm(colour.left_rectified_colour, left_colour_, cv::NORM_INF), 0.0);
+    ASSERT_EQ(colour.cloud_colour.size(), colour.cloud.size());
+    ASSERT_GT(colour.cloud.size(), colour.depth_m.total() / 2);
+    size_t i = 0;
+    size_t wrong = 0;
+    for (int v = 0; v < colour.depth_m.rows; ++v)
+        for (int u = 0; u < colour.depth_m.cols; ++u) {
+            if (!(colour.depth_m.at<float>(v, u) > 0.0f))
+                continue;
+            const cv::Vec3b bgr = left_colour_.at<cv::Vec3b>(v, u);
+            const CloudColour c = colour.cloud_colour[i++];
+            wrong += (c.r != bgr[2] || c.g != bgr[1] || c.b != bgr[0]) ? 1 : 0;
+        }
+    EXPECT_EQ(i, colour.cloud.size());
+    EXPECT_EQ(wrong, 0u);
+    // Tsukuba is colourful: the channels differ, so a swap of red and blue would show.
+    EXPECT_GT(cv::norm(colour.left_rectified_colour.reshape(1), cv::NORM_L1), 0.0);
+
+    // Buffers kept from frame to frame, as for the grey outputs.
+    const uint8_t* colour_data = colour.left_rectified_colour.data;
+    const CloudColour* cloud_colour_data = colour.cloud_colour.data();
+    p.process(left_, left_colour_, right_, 1, 1, colour);
+    EXPECT_EQ(colour.left_rectified_colour.data, colour_data);
+    EXPECT_EQ(colour.cloud_colour.data(), cloud_colour_data);
+
+    // A colour image that does not fit the left one is a bad frame, not an exception.
+    cv::Mat small;
+    cv::resize(left_colour_, small, cv::Size(64, 48));
+    p.process(left_, small, right_, 2, 2, colour);
+    EXPECT_FALSE(colour.reading.valid);
+    EXPECT_TRUE(colour.left_rectified_colour.empty());
+    EXPECT_TRUE(colour.cloud_colour.empty());
+}
+
 TEST_F(Processor, CloudSkippedWhenNotWanted)
 {
     settings_.compute_cloud = false;

@@ -265,6 +265,40 @@ TEST_F(EdgeMaps, MatchOpenCvAtEveryEdgeCase)
     EXPECT_EQ(cv::countNonZero(out & outside), 0);
 }
 
+// The left camera's colour through the same maps: each channel exactly as the grey
+// resampling of that channel alone (so the colour lines up with what was matched), and
+// against cv::remap within the grey contract, black where there is no raw data.
+TEST_F(EdgeMaps, ColourResamplesEachChannelAsGrey)
+{
+    cv::Mat aloe = cv::imread(kSamples + "aloeL.jpg", cv::IMREAD_COLOR);
+    ASSERT_FALSE(aloe.empty());
+    cv::Mat colour;
+    cv::resize(aloe, colour, src_.size(), 0.0, 0.0, cv::INTER_AREA);
+    cv::Mat out;
+    remapBilinear(colour, map_xy_, map_frac_, out);
+    ASSERT_EQ(out.type(), CV_8UC3);
+    ASSERT_EQ(out.size(), map_xy_.size());
+
+    std::vector<cv::Mat> in_planes, out_planes;
+    cv::split(colour, in_planes);
+    cv::split(out, out_planes);
+    for (int c = 0; c < 3; ++c) {
+        cv::Mat grey;
+        remapBilinear(in_planes[static_cast<size_t>(c)], map_xy_, map_frac_, grey);
+        EXPECT_EQ(cv::norm(grey, out_planes[static_cast<size_t>(c)], cv::NORM_INF), 0.0)
+            << "channel " << c;
+    }
+    cv::Mat d;
+    cv::absdiff(out, openCvRemap(colour, map_xy_, map_frac_), d);
+    EXPECT_LE(cv::norm(d, cv::NORM_INF), 1.0);
+    EXPECT_LT(cv::mean(d.reshape(1))[0], 0.05);
+    const cv::Mat outside = whollyOutside(map_xy_, src_.size());
+    EXPECT_EQ(cv::countNonZero(out_planes[0] & outside) +
+                  cv::countNonZero(out_planes[1] & outside) +
+                  cv::countNonZero(out_planes[2] & outside),
+              0);
+}
+
 TEST_F(EdgeMaps, EdgePixelsFadeToBlackLikeAConstantBorder)
 {
     // A white source: inside the image every output is 255; one neighbour column out,
@@ -310,10 +344,10 @@ TEST_F(EdgeMaps, ReadsARegionOfABiggerImageAndReusesTheOutput)
 TEST_F(EdgeMaps, RefusesWhatItCannotResample)
 {
     cv::Mat out;
-    const cv::Mat colour(src_.size(), CV_8UC3, cv::Scalar::all(0));
+    const cv::Mat two_channels(src_.size(), CV_8UC2, cv::Scalar::all(0));
     EXPECT_TRUE(test::contains(test::refusalMessage<std::invalid_argument>(
-                                   [&] { remapBilinear(colour, map_xy_, map_frac_, out); }),
-                               "CV_8UC1"));
+                                   [&] { remapBilinear(two_channels, map_xy_, map_frac_, out); }),
+                               "CV_8UC1 or CV_8UC3"));
     EXPECT_TRUE(test::contains(test::refusalMessage<std::invalid_argument>(
                                    [&] { remapBilinear(cv::Mat(), map_xy_, map_frac_, out); }),
                                "source"));
