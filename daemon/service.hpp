@@ -144,6 +144,7 @@ class Service final : private ServerBackend {
                                 int64_t now_ns) override;
     ReloadOutcome reload() override;
     void onTick(int64_t now_ns) override;
+    LiveViewLinks liveViewLinks() override;
     // The watchdog rule (daemon/systemd_notifier.hpp), asked by the pinger's thread: the
     // event loop ran its timer within one watchdog interval, and the worker is not stuck
     // in one pair for as long. The pings come from their own thread, so a loop busy with
@@ -156,6 +157,10 @@ class Service final : private ServerBackend {
     // The STATUS= line for systemd now.
     std::string statusText(int64_t now_ns, const SourceHealth& health);
     void onSignal();
+    // Shares the descriptors left under RLIMIT_NOFILE between the socket's clients and
+    // the live view's connections, each at most what the configuration asks; says so when
+    // the limit makes them fewer (sets socket_max_clients_, live_view_connections_).
+    void budgetDescriptors();
     // Listens for the live view when live_view.listen says so; a failure is logged and
     // the service runs on without it.
     void startLiveView();
@@ -174,11 +179,14 @@ class Service final : private ServerBackend {
     std::unique_ptr<Worker> worker_;
     std::unique_ptr<SocketServer> server_;
     std::unique_ptr<live_view::LiveView> live_view_; // none when live_view.listen is off
+    int socket_max_clients_ = 0;                     // socket.max_clients, within the budget
+    std::size_t live_view_connections_ = 0;          // the live view's sockets, within the budget
     UniqueFd signal_fd_;
     UniqueFd stop_fd_; // eventfd written by requestStop(); outlives server_
 
     DisparityRange initial_range_; // for `status` before the first frame
     std::string initial_matcher_;
+    std::optional<double> initial_max_output_depth_m_; // none uncalibrated
     int64_t started_ns_ = 0;
     bool running_ = false;
     // Stall detection: when the ring's push count last changed, as seen by this thread.
