@@ -31,7 +31,8 @@ GuidedSpans::GuidedSpans(const CensusSgmSettings& full, const CensusSgmSettings&
       num_disparities_(full.num_disparities),
       units_(roundUp(full.num_disparities, kLaneAlign) / kLaneAlign)
 {
-    const size_t coarse_area = static_cast<size_t>(coarse_width_) * static_cast<size_t>(coarse_height_);
+    const size_t coarse_area =
+        static_cast<size_t>(coarse_width_) * static_cast<size_t>(coarse_height_);
     own_.assign(coarse_area, Window{});
     along_.assign(coarse_area, Window{});
     coarse_spans_.assign(coarse_area, LaneSpan{0, static_cast<uint8_t>(units_)});
@@ -104,7 +105,8 @@ void GuidedSpans::predict(const float* coarse_disparity, const uint8_t* coarse_l
     // Each full-resolution pixel takes the span of the coarse pixel it lies in.
     for (int y = 0; y < height_; ++y) {
         const LaneSpan* coarse_row =
-            coarse_spans_.data() + static_cast<size_t>(std::min(y / 2, ch - 1)) * static_cast<size_t>(cw);
+            coarse_spans_.data() +
+            static_cast<size_t>(std::min(y / 2, ch - 1)) * static_cast<size_t>(cw);
         LaneSpan* row = spans_.data() + static_cast<size_t>(y) * static_cast<size_t>(width_);
         for (int x = 0; x < width_; ++x)
             row[x] = coarse_row[std::min(x / 2, cw - 1)];
