@@ -10,8 +10,9 @@
 //                                               sgm::CensusSgm::compute() (census-sgm) or
 //                                               cv::StereoSGBM / cv::StereoBM compute()
 //   compare/scene:S/size:WxH/disp:N             our pipeline, census-sgm alone, SGBM 3-way
-//                                               alone and SGBM 5-path alone, interleaved
-//                                               frame by frame: the ratios
+//                                               alone, SGBM 5-path alone and our pipeline
+//                                               with the guided search, interleaved frame
+//                                               by frame: the ratios
 //   opencv/scene:S/size:WxH/stage:rectify       cv::remap of both images alone, same maps
 // After the run, markdown tables put them side by side, with the ratios of our pipeline
 // and matcher to OpenCV's SGBM alone (bench/README.md explains them).
