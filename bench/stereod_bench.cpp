@@ -10,8 +10,9 @@
 //                                               sgm::CensusSgm::compute() (census-sgm) or
 //                                               cv::StereoSGBM / cv::StereoBM compute()
 //   compare/scene:S/size:WxH/disp:N             our pipeline, census-sgm alone, SGBM 3-way
-//                                               alone and SGBM 5-path alone, interleaved
-//                                               frame by frame: the ratios
+//                                               alone, SGBM 5-path alone and our pipeline
+//                                               with the guided search, interleaved frame
+//                                               by frame: the ratios
 //   opencv/scene:S/size:WxH/stage:rectify       cv::remap of both images alone, same maps
 // After the run, markdown tables put them side by side, with the ratios of our pipeline
 // and matcher to OpenCV's SGBM alone (bench/README.md explains them).
@@ -80,12 +81,18 @@ struct MatcherChoice {
     MatcherKind kind;
     SgbmMode sgbm_mode;
     MatcherTuning tuning = MatcherTuning::Natural;
+    bool guided = false; // matcher.guided_search
 };
+
+// census-sgm with the guided search (matcher.guided_search).
+const MatcherChoice kGuidedChoice{kOurMatcherGuided, MatcherKind::CensusSgm, SgbmMode::Sgbm,
+                                  MatcherTuning::Natural, true};
 
 // census-sgm's planar tuning runs on the chessboard rig only: the man-made scene it is for.
 const std::vector<MatcherChoice> kMatchers = {
     {kOurMatcher, MatcherKind::CensusSgm, SgbmMode::Sgbm},
     {kOurMatcherPlanar, MatcherKind::CensusSgm, SgbmMode::Sgbm, MatcherTuning::Planar},
+    kGuidedChoice,
     {kSgbm5Path, MatcherKind::Sgbm, SgbmMode::Sgbm},
     {kSgbm3Way, MatcherKind::Sgbm, SgbmMode::ThreeWay},
     {"bm", MatcherKind::Bm, SgbmMode::Sgbm},
@@ -139,6 +146,7 @@ ProcessorSettings settingsFor(const Case& c, const MatcherChoice& m)
     ProcessorSettings settings;
     settings.matcher = matcherDefaults(m.kind, m.sgbm_mode, m.tuning);
     settings.matcher.num_disparities = c.num_disparities;
+    settings.matcher.guided_search = m.guided;
     settings.compute_cloud = true;
     return settings;
 }
@@ -462,6 +470,7 @@ void benchCensusAlone(benchmark::State& state, const Case& c, const MatcherChoic
     const double frames = std::max(1.0, static_cast<double>(state.iterations()));
     state.counters["extended_ms"] = extended_ms / frames;
     state.counters["probe_ms"] = probe_ms / frames;
+    state.counters["searched_share"] = alone.core->searchedShare();
     state.counters["num_disparities"] = alone.core->settings().full.num_disparities;
     state.counters["threads"] = alone.core->settings().full.threads;
     state.counters["memory_mb"] =
@@ -492,11 +501,15 @@ void benchOpenCvAlone(benchmark::State& state, const Case& c, const MatcherChoic
 
 // The ratios of the summary, measured on a shared, noisy machine: each iteration runs,
 // one after the other on the same pair, our whole pipeline (process() + publish with
-// census-sgm), census-sgm's core alone, SGBM 3-way alone and SGBM 5-path alone, so that
-// load from outside hits all four alike. The ratios are of the sums over a repetition.
+// census-sgm), census-sgm's core alone, SGBM 3-way alone, SGBM 5-path alone and our whole
+// pipeline with the guided search, so that load from outside hits all five alike. The
+// ratios are of the sums over a repetition.
+constexpr int kCompared = 5; // what CompareRig::run() times
+
 struct CompareRig {
     std::string key;
     std::unique_ptr<StereoProcessor> processor;
+    std::unique_ptr<StereoProcessor> guided;
     std::unique_ptr<PublishStage> publish;
     uint64_t next_frame = 0;
     std::unique_ptr<CensusAlone> census;
@@ -504,8 +517,9 @@ struct CompareRig {
     cv::Ptr<cv::StereoMatcher> five_path;
     cv::Mat disparity_fixed16; // CV_16SC1, 16 x disparity in pixels; SGBM's output
 
-    // One frame of each; milliseconds of each in `ms` (pipeline, census, 3-way, 5-path).
-    void run(const SceneInputs& inputs, double ms[4])
+    // One frame of each; milliseconds of each in `ms` (pipeline, census, 3-way, 5-path,
+    // guided pipeline).
+    void run(const SceneInputs& inputs, double ms[kCompared])
     {
         const int64_t t0 = monotonicNs();
         processor->process(inputs.raw.left, inputs.raw.right, t0, next_frame++,
@@ -520,10 +534,15 @@ struct CompareRig {
         const int64_t t3 = monotonicNs();
         five_path->compute(pair.left, pair.right, disparity_fixed16);
         const int64_t t4 = monotonicNs();
+        guided->process(inputs.raw.left, inputs.raw.right, t4, next_frame++,
+                        publish->writeResult());
+        publish->run();
+        const int64_t t5 = monotonicNs();
         ms[0] = static_cast<double>(t1 - t0) * 1e-6;
         ms[1] = static_cast<double>(t2 - t1) * 1e-6;
         ms[2] = static_cast<double>(t3 - t2) * 1e-6;
         ms[3] = static_cast<double>(t4 - t3) * 1e-6;
+        ms[4] = static_cast<double>(t5 - t4) * 1e-6;
     }
 };
 
@@ -538,6 +557,8 @@ CompareRig& compareRig(const Case& c)
         const MatcherChoice& ours = kMatchers[0];
         fresh->processor =
             std::make_unique<StereoProcessor>(inputs.calibration, settingsFor(c, ours));
+        fresh->guided =
+            std::make_unique<StereoProcessor>(inputs.calibration, settingsFor(c, kGuidedChoice));
         fresh->publish = std::make_unique<PublishStage>();
         fresh->census = makeCensusAlone(c, ours, inputs.rectified);
         for (const MatcherChoice& m : kMatchers) {
@@ -550,7 +571,7 @@ CompareRig& compareRig(const Case& c)
             (m.sgbm_mode == SgbmMode::ThreeWay ? fresh->three_way : fresh->five_path) =
                 makeOpenCvMatcher(settings, range);
         }
-        double ms[4];
+        double ms[kCompared];
         for (int i = 0; i < kWarmupFrames; ++i) {
             fresh->run(inputs, ms);
         }
@@ -569,15 +590,17 @@ void benchCompare(benchmark::State& state, const Case& c)
         return;
     }
     const SceneInputs& inputs = sceneInputs(*c.scene, c.size);
-    double sums[4] = {0.0, 0.0, 0.0, 0.0};
+    double sums[kCompared] = {};
     uint64_t frames = 0;
     for (auto _ : state) {
-        double ms[4];
+        double ms[kCompared];
         rig->run(inputs, ms);
-        state.SetIterationTime((ms[0] + ms[1] + ms[2] + ms[3]) * 1e-3);
-        for (int i = 0; i < 4; ++i) {
+        double total = 0.0;
+        for (int i = 0; i < kCompared; ++i) {
             sums[i] += ms[i];
+            total += ms[i];
         }
+        state.SetIterationTime(total * 1e-3);
         ++frames;
     }
     if (frames == 0) {
@@ -591,6 +614,8 @@ void benchCompare(benchmark::State& state, const Case& c)
     state.counters["pipeline_per_3way"] = sums[0] / sums[2];
     state.counters["census_per_3way"] = sums[1] / sums[2];
     state.counters["census_per_5path"] = sums[1] / sums[3];
+    state.counters["guided_pipeline_ms"] = sums[4] / n;
+    state.counters["guided_pipeline_per_3way"] = sums[4] / sums[2];
     state.counters["peak_rss_mb"] = peakRssMb();
 }
 

@@ -152,8 +152,9 @@ void SummaryTable::printRatios(std::ostream& out) const
 {
     out << "\n| scene | size | disp | our pipeline ms | census-sgm alone ms | SGBM 3-way alone ms "
            "| SGBM 5-path alone ms | our pipeline / 3-way alone | census-sgm alone / 3-way alone "
-           "| census-sgm alone / 5-path alone | census-sgm memory MB |\n"
-           "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+           "| census-sgm alone / 5-path alone | census-sgm memory MB | guided pipeline ms "
+           "| guided pipeline / 3-way alone |\n"
+           "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
     bool all_medians = true;
     for (const SummaryCase& c : cases_) {
         const benchmark::UserCounters* m = counters(c.compare_benchmark, all_medians);
@@ -168,13 +169,16 @@ void SummaryTable::printRatios(std::ostream& out) const
             << fixed(counter(m, "pipeline_per_3way"), 2) << " | "
             << fixed(counter(m, "census_per_3way"), 2) << " | "
             << fixed(counter(m, "census_per_5path"), 2) << " | "
-            << fixed(c.census_memory_bytes / 1e6, 1) << " |\n";
+            << fixed(c.census_memory_bytes / 1e6, 1) << " | "
+            << fixed(counter(m, "guided_pipeline_ms"), 2) << " | "
+            << fixed(counter(m, "guided_pipeline_per_3way"), 2) << " |\n";
     }
     out << "\nInterleaved: every iteration of compare/... runs our whole pipeline (census-sgm, "
            "process() + publish), census-sgm's core alone (2 threads), cv::StereoSGBM "
-           "MODE_SGBM_3WAY alone and MODE_SGBM (5 paths) alone, one after the other on the same "
-           "pair, so that load from other processes hits all four alike; each ratio is of the "
-           "sums over a repetition, "
+           "MODE_SGBM_3WAY alone and MODE_SGBM (5 paths) alone, and our whole pipeline with the "
+           "guided search (matcher.guided_search), one after the other on the same pair, so "
+           "that load from other processes hits all five alike; each ratio is of the sums over "
+           "a repetition, "
         << medianNote(all_medians)
         << ". Below 1 where ours is faster. SGBM: the service's default parameters, OpenCV on "
            "2 threads. census-sgm memory: censusSgmMemoryBytes() with the case's settings and "
@@ -202,7 +206,8 @@ void SummaryTable::printAllocations(std::ostream& out) const
             const double mat = counter(p, "mat_allocs_per_frame");
             const double alone_cpp = counter(alone, "allocs_per_frame");
             const double alone_mat = counter(alone, "mat_allocs_per_frame");
-            if (r.matcher == kOurMatcher || r.matcher == kOurMatcherPlanar) {
+            if (r.matcher == kOurMatcher || r.matcher == kOurMatcherPlanar ||
+                r.matcher == kOurMatcherGuided) {
                 for (const double v : {cpp, mat, alone_cpp, alone_mat}) {
                     if (!std::isnan(v)) {
                         ours_measured = true;

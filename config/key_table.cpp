@@ -295,6 +295,9 @@ std::vector<KeyDef> buildKeyTable()
     add(boolKey(
         "matcher.extended_range", kLive,
         [](auto& c) -> auto& { return c.processing.matcher.extended_range; }));
+    add(boolKey(
+        "matcher.guided_search", kLive,
+        [](auto& c) -> auto& { return c.processing.matcher.guided_search; }));
 
     add(realKey(
         "nearest.roi.x", kLive, [](auto& c) -> auto& { return c.processing.nearest.roi.x; },

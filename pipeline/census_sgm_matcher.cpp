@@ -102,6 +102,7 @@ sgm::PyramidSgmSettings pyramidSgmSettings(const MatcherSettings& settings,
     sgm::PyramidSgmSettings p;
     p.full = censusSgmSettings(settings, range);
     p.extended_range = settings.extended_range;
+    p.guided_search = settings.guided_search;
     p.near_field_probe = true;
     return p;
 }

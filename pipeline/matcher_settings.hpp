@@ -117,6 +117,10 @@ struct MatcherSettings {
     // full-resolution match (pipeline/sgm/pyramid_sgm.hpp): the closest depth measured
     // halves for about a quarter more matching time.
     bool extended_range = true;
+    // census-sgm, with the extended range: the half-resolution level runs first and the
+    // full resolution searches only around what it measured, the whole range where that
+    // is unreliable (pipeline/sgm/guided_spans.hpp).
+    bool guided_search = false;
 };
 
 // How the disparity range was chosen, for logs and `status`.

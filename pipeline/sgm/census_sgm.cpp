@@ -291,7 +291,8 @@ struct CensusSgm::Impl {
         p2[w] = p2_by_step[0];
     }
 
-    void matchBand(int band, const uint8_t* left, size_t stride, const CensusSgmOutput& out)
+    void matchBand(int band, const uint8_t* left, size_t stride, const LaneSpan* spans,
+                   const CensusSgmOutput& out)
     {
         const CensusSgmSettings& s = settings;
         BandScratch& b = bands[static_cast<size_t>(band)];
@@ -312,8 +313,12 @@ struct CensusSgm::Impl {
                 right_reversed[p] = planeRow(census_right_reversed, p, y);
             }
             const CensusRows rows{left_planes, right_planes, right_reversed, planes};
+            const size_t row = static_cast<size_t>(y) * static_cast<size_t>(s.width);
+            const LaneSpan* row_spans = spans != nullptr ? spans + row : nullptr;
+            const LaneSpan* prev_spans =
+                spans != nullptr && y > first_row ? row_spans - s.width : nullptr;
             kernels->cost_row(rows, s.width, s.min_disparity, s.num_disparities, lanes,
-                              cost_invalid, b.cost.data());
+                              cost_invalid, b.cost.data(), row_spans);
 
             const int parity = (y - first_row) & 1;
             const uint8_t* others[4];
@@ -327,23 +332,22 @@ struct CensusSgm::Impl {
                 cur_rows[i] = b.above[i][parity].data();
                 others[i] = cur_rows[i];
             }
-            const AbovePaths above_paths{above, kAboveDx, p2_rows, prev_rows, cur_rows};
+            const AbovePaths above_paths{above, kAboveDx, p2_rows, prev_rows, cur_rows, prev_spans};
             if (y < y0) {
                 // Warming up the paths from above for this band's first row.
                 kernels->paths_forward(b.cost.data(), static_cast<uint8_t>(s.p1), s.width, lanes,
-                                       above_paths, nullptr, nullptr);
+                                       above_paths, nullptr, nullptr, row_spans);
                 continue;
             }
             penaltiesAlong(left, stride, y, b.p2_along.data());
             kernels->paths_forward(b.cost.data(), static_cast<uint8_t>(s.p1), s.width, lanes,
-                                   above_paths, b.p2_along.data(), b.forward.data());
+                                   above_paths, b.p2_along.data(), b.forward.data(), row_spans);
             others[above] = b.forward.data();
-            kernels->winners_backward(b.cost.data(), b.p2_along.data() + 1,
-                                      static_cast<uint8_t>(s.p1), s.width, lanes,
-                                      PathRows{others, above + 1}, s.min_disparity,
-                                      s.num_disparities, b.row_scratch.data(), b.sum_scratch.data(),
-                                      b.winners, b.right_lane.data(), b.winners_scratch.data());
-            const size_t row = static_cast<size_t>(y) * static_cast<size_t>(s.width);
+            kernels->winners_backward(
+                b.cost.data(), b.p2_along.data() + 1, static_cast<uint8_t>(s.p1), s.width, lanes,
+                PathRows{others, above + 1}, s.min_disparity, s.num_disparities,
+                b.row_scratch.data(), b.sum_scratch.data(), b.winners, b.right_lane.data(),
+                b.winners_scratch.data(), row_spans);
             kernels->decide_row(b.winners, b.right_lane.data(), s.width, decide, fixed.data() + row,
                                 out.confidence + row, out.range_limit + row);
         }
@@ -528,7 +532,7 @@ CensusSgm::CensusSgm(const CensusSgmSettings& settings)
 CensusSgm::~CensusSgm() = default;
 
 void CensusSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* right,
-                        size_t right_stride, const CensusSgmOutput& out)
+                        size_t right_stride, const CensusSgmOutput& out, const LaneSpan* spans)
 {
     Impl& m = *impl_;
     const CensusSgmSettings& s = m.settings;
@@ -548,7 +552,7 @@ void CensusSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* 
         m.censusRows(m.padded_right, m.census_right, y0, y1);
         m.reverseRightRows(y0, y1);
     });
-    m.pool.run(bands, [&](int band) { m.matchBand(band, left, left_stride, out); });
+    m.pool.run(bands, [&](int band) { m.matchBand(band, left, left_stride, spans, out); });
 
     const auto band_start = [&](int band) { return s.height * band / bands; };
     std::vector<int16_t>* result = s.median ? &m.filtered : &m.fixed;

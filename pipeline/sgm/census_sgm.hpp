@@ -135,9 +135,10 @@ class CensusSgm {
 
     // left, right: rectified 8-bit images of settings.width x settings.height, their rows
     // left_stride and right_stride bytes apart (two views of one frame, or copies, need
-    // not agree).
+    // not agree). spans: width x height, the lanes each pixel searches (a guided search,
+    // sgm_kernels.hpp; first < end <= lane count / kLaneAlign), or nullptr: every lane.
     void compute(const uint8_t* left, size_t left_stride, const uint8_t* right, size_t right_stride,
-                 const CensusSgmOutput& out);
+                 const CensusSgmOutput& out, const LaneSpan* spans = nullptr);
 
     const CensusSgmSettings& settings() const;
     // Row y of the census images the last compute() made (both views, and the right one

@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "pipeline/sgm/guided_spans.hpp"
 #include "pipeline/sgm/texture.hpp"
 
 namespace stereod::sgm {
@@ -41,6 +43,11 @@ void halve(const uint8_t* image, size_t stride, int half_width, int half_height,
 bool hasCoarseLevel(const PyramidSgmSettings& s)
 {
     return s.extended_range;
+}
+
+bool isGuided(const PyramidSgmSettings& s)
+{
+    return s.extended_range && s.guided_search;
 }
 
 } // namespace
@@ -92,6 +99,8 @@ size_t pyramidSgmMemoryBytes(const PyramidSgmSettings& s)
         const CensusSgmSettings coarse = coarseLevelSettings(s.full);
         const size_t area = static_cast<size_t>(coarse.width) * static_cast<size_t>(coarse.height);
         bytes += censusSgmMemoryBytes(coarse) + area * (2 + sizeof(float) + 2);
+        if (isGuided(s))
+            bytes += GuidedSpans::memoryBytes(s.full, coarse);
     }
     if (s.near_field_probe) {
         const int width = hasCoarseLevel(s) ? s.full.width / 2 : s.full.width;
@@ -119,6 +128,8 @@ struct PyramidSgm::Impl {
             extended_last = 2 * (c.min_disparity + c.num_disparities - 1);
             probe_width = c.width;
             probe_height = c.height;
+            if (isGuided(s))
+                guide = std::make_unique<GuidedSpans>(s.full, c);
         }
         if (s.near_field_probe)
             probe = std::make_unique<NearFieldProbe>(probe_width, probe_height);
@@ -141,6 +152,15 @@ struct PyramidSgm::Impl {
                 if (coarse_limit[c] != 0) {
                     out.near_field[i] = kNearerThanExtendedRange;
                     continue;
+                }
+                if (guide && guide->narrow(i) && std::isfinite(out.disparity_px[i]) &&
+                    !(std::abs(2.0f * coarse_disparity[c] - out.disparity_px[i]) <=
+                      static_cast<float>(kGuideAgreePx))) {
+                    // A narrow search, which has no competitor outside its span to be
+                    // told apart from: the coarse level's match over the whole range at
+                    // this place must agree (an unmeasured one does not).
+                    out.disparity_px[i] = std::numeric_limits<float>::infinity();
+                    out.confidence[i] = 0;
                 }
                 if (coarse_near[c] == 0) {
                     // The full range's near end, next to a near surface the coarse level
@@ -238,7 +258,8 @@ struct PyramidSgm::Impl {
     CensusSgm full;
     int full_last;
     int extended_last = 0;
-    std::unique_ptr<CensusSgm> coarse; // null without the extended range
+    std::unique_ptr<CensusSgm> coarse;  // null without the extended range
+    std::unique_ptr<GuidedSpans> guide; // null without the guided search
     std::vector<uint8_t> half_left, half_right;
     std::vector<float> coarse_disparity;
     std::vector<uint8_t> coarse_confidence, coarse_limit;
@@ -260,9 +281,6 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
 {
     Impl& m = *impl_;
     const Clock::time_point t0 = Clock::now();
-    m.full.compute(left, left_stride, right, right_stride,
-                   {out.disparity_px, out.confidence, out.near_field});
-    const Clock::time_point t1 = Clock::now();
     if (m.coarse) {
         const CensusSgmSettings& c = m.coarse->settings();
         halve(left, left_stride, c.width, c.height, m.half_left.data());
@@ -271,16 +289,30 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
             m.half_left.data(), static_cast<size_t>(c.width), m.half_right.data(),
             static_cast<size_t>(c.width),
             {m.coarse_disparity.data(), m.coarse_confidence.data(), m.coarse_limit.data()});
-        m.merge(out);
+        if (m.guide)
+            m.guide->predict(m.coarse_disparity.data(), m.coarse_limit.data());
     }
+    const Clock::time_point t1 = Clock::now();
+    m.full.compute(left, left_stride, right, right_stride,
+                   {out.disparity_px, out.confidence, out.near_field},
+                   m.guide ? m.guide->spans() : nullptr);
     const Clock::time_point t2 = Clock::now();
+    if (m.coarse)
+        m.merge(out);
+    const Clock::time_point t3 = Clock::now();
     m.runProbe(left, left_stride, probe_region, out);
-    m.timings = {msBetween(t0, t1), msBetween(t1, t2), msBetween(t2, Clock::now())};
+    m.timings = {msBetween(t1, t2), msBetween(t0, t1) + msBetween(t2, t3),
+                 msBetween(t3, Clock::now())};
 }
 
 const PyramidSgmTimings& PyramidSgm::timings() const
 {
     return impl_->timings;
+}
+
+double PyramidSgm::searchedShare() const
+{
+    return impl_->guide ? impl_->guide->searchedShare() : 1.0;
 }
 
 const PyramidSgmSettings& PyramidSgm::settings() const

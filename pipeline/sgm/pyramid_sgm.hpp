@@ -24,6 +24,10 @@
 // Inside the full range the full level decides: the coarse level's edges are a pixel
 // wider, and natural scenes keep the accuracy of the full-resolution match.
 //
+// With the guided search the coarse level runs first, and the full level searches only
+// around what it measured (guided_spans.hpp): the whole range where the prediction is
+// unreliable, a few dozen disparities elsewhere.
+//
 // Then the near-field probe (near_field_probe.hpp) looks past the range actually searched
 // (the extended one, at the coarse level, or the full one when the extended range is off)
 // over the region the reading comes from, and its evidence tiles are marked too.
@@ -58,7 +62,7 @@ inline constexpr uint8_t kExplainedConfidence = 2;
 // What the last compute() spent on each part, milliseconds.
 struct PyramidSgmTimings {
     double full_ms = 0.0;     // the full-resolution match
-    double extended_ms = 0.0; // the coarse level: halving, matching, merging
+    double extended_ms = 0.0; // the coarse level: halving, matching, predicting, merging
     double probe_ms = 0.0;    // the near-field probe
 };
 
@@ -66,6 +70,9 @@ struct PyramidSgmSettings {
     CensusSgmSettings full; // the full-resolution level, with the image size
     // The coarse level over twice the range. Off: the full level alone, as CensusSgm.
     bool extended_range = true;
+    // With the extended range: the coarse level runs first and the full level searches
+    // only the spans it predicts (guided_spans.hpp) rather than the whole range.
+    bool guided_search = false;
     // The near-field probe over the region compute() is given.
     bool near_field_probe = true;
 };
@@ -110,6 +117,9 @@ class PyramidSgm {
     int fullRangeLast() const;
     int extendedRangeLast() const;
     const PyramidSgmTimings& timings() const;
+    // The share of the full level's disparities the last compute() searched, 0..1 (1
+    // without the guided search).
+    double searchedShare() const;
     // Tiles the near-field probe marked in the last compute(), and tiles it could probe.
     int nearEvidenceTiles() const;
     int probedTiles() const;

@@ -21,7 +21,14 @@
 //    write only the L bytes and byte 0, where the SIMD kernels keep min L of the block
 //    for the next step of the path (the scalar reference leaves it alone);
 //  - the sum of the paths is 16-bit and is formed only inside winners_backward(), from
-//    the 8-bit rows of the other paths and its own: no 16-bit sum row is ever kept.
+//    the 8-bit rows of the other paths and its own: no 16-bit sum row is ever kept;
+//  - with lane spans (a guided search, pyramid_sgm.hpp), pixel x searches only the lanes
+//    of spans[x]: its costs and path costs are computed there alone, a path cost outside
+//    a pixel's span counts as 255 (never reached) for the next pixel of the path, and its
+//    winner is the best inside the span. A path block then holds its span's L, and 255
+//    in the kLaneAlign bytes just before and after the span (its guards: they stand in
+//    for the lanes beyond, so that L[k - 1] and L[k + 1] load without a branch); the
+//    bytes further out keep whatever an earlier pixel left there and are never read.
 //
 // Reentrant: kernels keep no state; each thread passes its own rows.
 
@@ -36,6 +43,26 @@ inline constexpr int kPathPad = 32;   // keeps each path block's L values aligne
 inline constexpr size_t pathBlockBytes(int lanes)
 {
     return static_cast<size_t>(lanes + 2 * kPathPad);
+}
+
+// The lanes one pixel searches, in units of kLaneAlign: k in [kLaneAlign * first,
+// kLaneAlign * end), first < end <= lanes / kLaneAlign. The kernels take one per pixel of
+// a row, or nullptr: every lane.
+struct LaneSpan {
+    uint8_t first = 0;
+    uint8_t end = 0;
+};
+
+// The lanes [first, end) pixel x searches: those of spans[x], or every lane.
+struct LaneInterval {
+    int first = 0;
+    int end = 0;
+};
+inline LaneInterval lanesOf(const LaneSpan* spans, int x, int lanes)
+{
+    if (spans == nullptr)
+        return {0, lanes};
+    return {kLaneAlign * spans[x].first, kLaneAlign * spans[x].end};
 }
 
 // One row of the census images of both views: `planes` byte planes, plane p holding
@@ -60,11 +87,12 @@ inline constexpr size_t winnersScratch(int width, int min_disparity, int lanes)
 }
 
 // Entries of sum_scratch that winners_backward() needs: the summed paths of 16 pixels,
-// each with 16 entries of margin on both sides, and two vectors per pixel.
+// each with 16 entries of margin on both sides, two vectors per pixel, and the right
+// view's best of a group over the lanes (with spans).
 inline constexpr int kWinnerGroup = 16;
 inline constexpr size_t winnersSumScratch(int lanes)
 {
-    return static_cast<size_t>(kWinnerGroup) * static_cast<size_t>(lanes + 32 + kLaneAlign);
+    return static_cast<size_t>(kWinnerGroup + 1) * static_cast<size_t>(lanes + 32 + kLaneAlign);
 }
 
 // The best and second-best disparity lane of each pixel of a row over the summed paths,
@@ -106,6 +134,8 @@ struct AbovePaths {
     const uint8_t* const* prev; // [count] row y-1's path blocks, or nullptr on the path's
                                 // first row (then L = C)
     uint8_t* const* cur;        // [count] row y's path blocks, written
+    // Row y-1's lane spans, when the kernel is given spans for row y (the same image's).
+    const LaneSpan* prev_spans = nullptr;
 };
 
 // The rows that winners_backward() sums with its own path: `count` rows of `width` path
@@ -128,17 +158,19 @@ struct SgmKernels {
 
     // cost[x * lanes + k] for x in 0..width-1: Hamming distance of the censuses; lanes
     // whose right pixel x - (min_disparity + k) lies outside 0..width-1, and lanes at or
-    // past num_disparities, get cost_invalid.
+    // past num_disparities, get cost_invalid. With spans, only the lanes of spans[x].
     void (*cost_row)(const CensusRows& census, int width, int min_disparity, int num_disparities,
-                     int lanes, uint8_t cost_invalid, uint8_t* cost);
+                     int lanes, uint8_t cost_invalid, uint8_t* cost, const LaneSpan* spans);
 
     // The paths that come from the previous row, and the left->right path along the row,
     // in one pass over the row (the path along the row waits on each pixel's min L; the
     // others fill that time). Writes every pixel's path block of each path from above to
     // above.cur[i] and, unless `along` is nullptr, of the left->right path to along
-    // (width blocks each). p2_along[x]: P2 for the step from x - 1 onto x.
+    // (width blocks each). p2_along[x]: P2 for the step from x - 1 onto x. With spans
+    // (row y's; above.prev_spans row y-1's), each pixel's lanes alone (see above).
     void (*paths_forward)(const uint8_t* cost, uint8_t p1, int width, int lanes,
-                          const AbovePaths& above, const uint8_t* p2_along, uint8_t* along);
+                          const AbovePaths& above, const uint8_t* p2_along, uint8_t* along,
+                          const LaneSpan* spans);
 
     // The right->left path along the row (p2[x]: stepping onto x), summed in 16 bits with
     // `others`, and the winner of every pixel over the first num_disparities lanes (a
@@ -146,11 +178,16 @@ struct SgmKernels {
     // smallest sum (ties: smallest k) among the lanes whose left pixel
     // xr + min_disparity + k lies inside the row (0xFFFF when none). path_scratch: two path
     // blocks (pads 255); sum_scratch: winnersSumScratch() entries; scratch:
-    // winnersScratch() entries.
+    // winnersScratch() entries. With spans, each pixel's winner, second and neighbours'
+    // sums come from the lanes of its span (0 for a neighbour outside it), and only those
+    // lanes offer the right view a match; a best lane at an end of the span that is not an
+    // end of the range (the true minimum may lie beyond it) gets second_sum = best_sum,
+    // which no uniqueness test passes.
     void (*winners_backward)(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width,
                              int lanes, const PathRows& others, int min_disparity,
                              int num_disparities, uint8_t* path_scratch, uint16_t* sum_scratch,
-                             const WinnerRows& winners, uint16_t* right_lane, uint16_t* scratch);
+                             const WinnerRows& winners, uint16_t* right_lane, uint16_t* scratch,
+                             const LaneSpan* spans);
 
     // The winners of a row made into what the matcher reports, for x in 0..width-1:
     //  - disparity[x]: 16 x (min_disparity + best lane + the parabola's sub-pixel offset

@@ -41,11 +41,12 @@ void censusRow(const uint8_t* center, size_t stride, int width, int census_width
 }
 
 void costRow(const CensusRows& census, int width, int min_disparity, int num_disparities, int lanes,
-             uint8_t cost_invalid, uint8_t* cost)
+             uint8_t cost_invalid, uint8_t* cost, const LaneSpan* spans)
 {
     for (int x = 0; x < width; ++x) {
         uint8_t* c = cost + static_cast<size_t>(x) * lanes;
-        for (int k = 0; k < lanes; ++k) {
+        const LaneInterval span = lanesOf(spans, x, lanes);
+        for (int k = span.first; k < span.end; ++k) {
             const int xr = x - (min_disparity + k);
             if (k >= num_disparities || xr < 0 || xr >= width) {
                 c[k] = cost_invalid;
@@ -74,14 +75,18 @@ void costCurve(const CensusRows& census, int x, int width, int first_disparity, 
     }
 }
 
-// One step of a path: L(k) = C(k) + min(Lp(k), Lp(k±1) + P1, min Lp + P2) - min Lp.
-// prev and out are path blocks (L at kPathPad, 255 around it); prev == nullptr starts
+// One step of a path: L(k) = C(k) + min(Lp(k), Lp(k±1) + P1, min Lp + P2) - min Lp, for
+// the lanes of `span`; L is 255 at the others. prev and out are path blocks (L at
+// kPathPad, 255 around it), prev holding 255 outside its own span; prev == nullptr starts
 // the path (L = C).
-void step(const uint8_t* cost, const uint8_t* prev, uint8_t p1, uint8_t p2, int lanes, uint8_t* out)
+void step(const uint8_t* cost, const uint8_t* prev, uint8_t p1, uint8_t p2, int lanes,
+          LaneInterval span, uint8_t* out)
 {
     uint8_t* l = out + kPathPad;
+    std::fill(l, l + span.first, uint8_t{255});
+    std::fill(l + span.end, l + lanes, uint8_t{255});
     if (prev == nullptr) {
-        std::copy(cost, cost + lanes, l);
+        std::copy(cost + span.first, cost + span.end, l + span.first);
         return;
     }
     const uint8_t* lp = prev + kPathPad;
@@ -89,7 +94,7 @@ void step(const uint8_t* cost, const uint8_t* prev, uint8_t p1, uint8_t p2, int 
     for (int k = 0; k < lanes; ++k)
         min_prev = std::min(min_prev, lp[k]);
     const uint8_t jump = addSaturated(min_prev, p2);
-    for (int k = 0; k < lanes; ++k) {
+    for (int k = span.first; k < span.end; ++k) {
         const uint8_t best =
             std::min({lp[k], addSaturated(lp[k - 1], p1), addSaturated(lp[k + 1], p1), jump});
         l[k] = addSaturated(cost[k], static_cast<uint8_t>(best - min_prev));
@@ -97,19 +102,20 @@ void step(const uint8_t* cost, const uint8_t* prev, uint8_t p1, uint8_t p2, int 
 }
 
 void pathForward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
-                 uint8_t* out)
+                 const LaneSpan* spans, uint8_t* out)
 {
     const size_t block = pathBlockBytes(lanes);
     const uint8_t* prev = nullptr;
     for (int x = 0; x < width; ++x) {
         uint8_t* l = out + static_cast<size_t>(x) * block;
-        step(cost + static_cast<size_t>(x) * static_cast<size_t>(lanes), prev, p1, p2[x], lanes, l);
+        step(cost + static_cast<size_t>(x) * static_cast<size_t>(lanes), prev, p1, p2[x], lanes,
+             lanesOf(spans, x, lanes), l);
         prev = l;
     }
 }
 
 void pathFromAbove(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes, int dx,
-                   const uint8_t* prev, uint8_t* cur)
+                   const LaneSpan* spans, const uint8_t* prev, uint8_t* cur)
 {
     const size_t block = pathBlockBytes(lanes);
     for (int x = 0; x < width; ++x) {
@@ -118,24 +124,24 @@ void pathFromAbove(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width
                                   ? prev + static_cast<size_t>(xp) * block
                                   : nullptr;
         step(cost + static_cast<size_t>(x) * static_cast<size_t>(lanes), from, p1, p2[x], lanes,
-             cur + static_cast<size_t>(x) * block);
+             lanesOf(spans, x, lanes), cur + static_cast<size_t>(x) * block);
     }
 }
 
 void pathsForward(const uint8_t* cost, uint8_t p1, int width, int lanes, const AbovePaths& above,
-                  const uint8_t* p2_along, uint8_t* along)
+                  const uint8_t* p2_along, uint8_t* along, const LaneSpan* spans)
 {
     for (int i = 0; i < above.count; ++i)
-        pathFromAbove(cost, above.p2[i], p1, width, lanes, above.dx[i], above.prev[i],
+        pathFromAbove(cost, above.p2[i], p1, width, lanes, above.dx[i], spans, above.prev[i],
                       above.cur[i]);
     if (along != nullptr)
-        pathForward(cost, p2_along, p1, width, lanes, along);
+        pathForward(cost, p2_along, p1, width, lanes, spans, along);
 }
 
 void winnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
                      const PathRows& others, int min_disparity, int num_disparities,
                      uint8_t* path_scratch, uint16_t* s, const WinnerRows& out,
-                     uint16_t* right_lane, uint16_t* scratch)
+                     uint16_t* right_lane, uint16_t* scratch, const LaneSpan* spans)
 {
     const size_t block = pathBlockBytes(lanes);
     uint8_t* a = path_scratch;
@@ -147,8 +153,12 @@ void winnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int wid
     std::fill(right_lane, right_lane + width, uint16_t{0xFFFF});
     for (int x = width - 1; x >= 0; --x) {
         const size_t at = static_cast<size_t>(x) * static_cast<size_t>(lanes);
-        step(cost + at, prev, p1, p2[x], lanes, a);
-        for (int k = 0; k < num_disparities; ++k) {
+        const LaneInterval span = lanesOf(spans, x, lanes);
+        step(cost + at, prev, p1, p2[x], lanes, span, a);
+        // The summed lanes: the span's, within the range.
+        const int first = span.first;
+        const int end = std::min(span.end, num_disparities);
+        for (int k = first; k < end; ++k) {
             int total = a[kPathPad + k];
             for (int i = 0; i < others.count; ++i)
                 total += others.rows[i][static_cast<size_t>(x) * block + kPathPad +
@@ -158,22 +168,26 @@ void winnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int wid
         prev = a;
         std::swap(a, b);
 
-        int best = 0;
-        for (int k = 1; k < num_disparities; ++k)
+        int best = first;
+        for (int k = first + 1; k < end; ++k)
             if (s[k] < s[best])
                 best = k;
         uint16_t second = 0xFFFF;
-        for (int k = 0; k < num_disparities; ++k)
+        for (int k = first; k < end; ++k)
             if (k < best - 1 || k > best + 1)
                 second = std::min(second, s[k]);
-        const uint16_t below = best > 0 ? s[best - 1] : uint16_t{0};
-        const uint16_t above = best < num_disparities - 1 ? s[best + 1] : uint16_t{0};
+        // A minimum at an end of the span that is not an end of the range: the true one
+        // may lie beyond it.
+        if ((best == first && first > 0) || (best == end - 1 && end < num_disparities))
+            second = s[best];
+        const uint16_t below = best > first ? s[best - 1] : uint16_t{0};
+        const uint16_t above = best < end - 1 ? s[best + 1] : uint16_t{0};
         out.best_lane[x] = static_cast<uint16_t>(best);
         out.best_sum[x] = s[best];
         out.second_sum[x] = second;
         out.below_sum[x] = below;
         out.above_sum[x] = above;
-        for (int k = 0; k < num_disparities; ++k) {
+        for (int k = first; k < end; ++k) {
             const int xr = x - min_disparity - k;
             if (xr < 0 || xr >= width)
                 continue;

@@ -34,24 +34,24 @@ void CensusRow(const uint8_t* center, size_t stride, int width, int census_width
     scalarKernels().census_row(center, stride, width, census_width, census_height, planes);
 }
 void CostRow(const CensusRows& census, int width, int min_disparity, int num_disparities, int lanes,
-             uint8_t cost_invalid, uint8_t* cost)
+             uint8_t cost_invalid, uint8_t* cost, const LaneSpan* spans)
 {
     scalarKernels().cost_row(census, width, min_disparity, num_disparities, lanes, cost_invalid,
-                             cost);
+                             cost, spans);
 }
 void PathsForward(const uint8_t* cost, uint8_t p1, int width, int lanes, const AbovePaths& above,
-                  const uint8_t* p2_along, uint8_t* along)
+                  const uint8_t* p2_along, uint8_t* along, const LaneSpan* spans)
 {
-    scalarKernels().paths_forward(cost, p1, width, lanes, above, p2_along, along);
+    scalarKernels().paths_forward(cost, p1, width, lanes, above, p2_along, along, spans);
 }
 void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
                      const PathRows& others, int min_disparity, int num_disparities,
                      uint8_t* path_scratch, uint16_t* sum_scratch, const WinnerRows& winners,
-                     uint16_t* right_lane, uint16_t* scratch)
+                     uint16_t* right_lane, uint16_t* scratch, const LaneSpan* spans)
 {
     scalarKernels().winners_backward(cost, p2, p1, width, lanes, others, min_disparity,
                                      num_disparities, path_scratch, sum_scratch, winners,
-                                     right_lane, scratch);
+                                     right_lane, scratch, spans);
 }
 void DecideRow(const WinnerRows& winners, const uint16_t* right_lane, int width,
                const DecideSettings& settings, int16_t* disparity, uint8_t* confidence,
@@ -159,7 +159,7 @@ void CensusRow(const uint8_t* center, size_t stride, int width, int census_width
 }
 
 void CostRow(const CensusRows& census, int width, int min_disparity, int num_disparities, int lanes,
-             uint8_t cost_invalid, uint8_t* cost)
+             uint8_t cost_invalid, uint8_t* cost, const LaneSpan* spans)
 {
     const D8 d;
     const int n = static_cast<int>(hn::Lanes(d));
@@ -170,8 +170,9 @@ void CostRow(const CensusRows& census, int width, int min_disparity, int num_dis
         // The lanes whose right pixel is inside the image, and not padding.
         const int k_lo = std::max(0, x - min_disparity - width + 1);
         const int k_hi = std::min(num_disparities - 1, x - min_disparity);
+        const LaneInterval span = lanesOf(spans, x, lanes);
         if (k_hi < k_lo) {
-            std::memset(c, cost_invalid, static_cast<size_t>(lanes));
+            std::memset(c + span.first, cost_invalid, static_cast<size_t>(span.end - span.first));
             continue;
         }
         // right_reversed index of lane 0: x - min_disparity = width - 1 - j.
@@ -190,14 +191,14 @@ void CostRow(const CensusRows& census, int width, int min_disparity, int num_dis
             }
             return sum;
         };
-        if (k_lo == 0 && k_hi == lanes - 1) { // every lane valid: most pixels
-            for (int k0 = 0; k0 < lanes; k0 += n)
+        if (k_lo <= span.first && k_hi >= span.end - 1) { // every lane valid: most pixels
+            for (int k0 = span.first; k0 < span.end; k0 += n)
                 hn::StoreU(distance(k0), d, c + k0);
             continue;
         }
         const auto lo = hn::Set(d, static_cast<uint8_t>(k_lo)); // k_lo <= k_hi <= 255
         const auto hi = hn::Set(d, static_cast<uint8_t>(k_hi));
-        for (int k0 = 0; k0 < lanes; k0 += n) {
+        for (int k0 = span.first; k0 < span.end; k0 += n) {
             if (k0 > k_hi || k0 + n <= k_lo) {
                 hn::StoreU(invalid, d, c + k0);
                 continue;
@@ -207,6 +208,24 @@ void CostRow(const CensusRows& census, int width, int min_disparity, int num_dis
             hn::StoreU(hn::IfThenElse(outside, invalid, distance(k0)), d, c + k0);
         }
     }
+}
+
+// The first step of a path over lanes first .. end-1: L = C, written to l; returns min L
+// in every byte.
+template <class Visit>
+HWY_INLINE hn::Vec<D8> StartPath(const uint8_t* cost, int first, int end, uint8_t* l,
+                                 const Visit& visit)
+{
+    const D8 d;
+    const int n = static_cast<int>(hn::Lanes(d));
+    auto running_min = hn::Set(d, uint8_t{255});
+    for (int k0 = first; k0 < end; k0 += n) {
+        const auto v = hn::LoadU(d, cost + k0);
+        hn::StoreU(v, d, l + k0);
+        running_min = hn::Min(running_min, v);
+        visit(k0, v);
+    }
+    return MinOfBytes(running_min);
 }
 
 // One step of a path (see step() in the scalar reference): writes L to out + kPathPad and
@@ -221,15 +240,8 @@ HWY_INLINE hn::Vec<D8> Step(const uint8_t* cost, const uint8_t* prev, hn::Vec<D8
     const int n = static_cast<int>(hn::Lanes(d));
     uint8_t* l = out + kPathPad;
     auto running_min = hn::Set(d, uint8_t{255});
-    if (prev == nullptr) {
-        for (int k0 = 0; k0 < lanes; k0 += n) {
-            const auto v = hn::LoadU(d, cost + k0);
-            hn::StoreU(v, d, l + k0);
-            running_min = hn::Min(running_min, v);
-            visit(k0, v);
-        }
-        return MinOfBytes(running_min);
-    }
+    if (prev == nullptr)
+        return StartPath(cost, 0, lanes, l, visit);
     const uint8_t* lp = prev + kPathPad;
     const auto jump = hn::SaturatedAdd(v_min_prev, hn::Set(d, p2));
     for (int k0 = 0; k0 < lanes; k0 += n) {
@@ -237,6 +249,47 @@ HWY_INLINE hn::Vec<D8> Step(const uint8_t* cost, const uint8_t* prev, hn::Vec<D8
         const auto lower = hn::SaturatedAdd(hn::LoadU(d, lp + k0 - 1), v_p1);
         const auto upper = hn::SaturatedAdd(hn::LoadU(d, lp + k0 + 1), v_p1);
         const auto best = hn::Min(hn::Min(same, lower), hn::Min(upper, jump));
+        const auto v = hn::SaturatedAdd(hn::LoadU(d, cost + k0), hn::Sub(best, v_min_prev));
+        hn::StoreU(v, d, l + k0);
+        running_min = hn::Min(running_min, v);
+        visit(k0, v);
+    }
+    return MinOfBytes(running_min);
+}
+
+// Step() over the lanes of `span` alone (spans, sgm_kernels.hpp): prev holds L inside
+// prev_span and 255 in its guards, a lane beyond them counts as 255; writes out's guards.
+// The branches pick, per vector, which of L(k), L(k - 1) and L(k + 1) prev holds.
+template <class Visit>
+HWY_INLINE hn::Vec<D8> StepInSpan(const uint8_t* cost, const uint8_t* prev, LaneInterval prev_span,
+                                  hn::Vec<D8> v_min_prev, hn::Vec<D8> v_p1, uint8_t p2,
+                                  LaneInterval span, uint8_t* out, const Visit& visit)
+{
+    const D8 d;
+    const int n = static_cast<int>(hn::Lanes(d));
+    uint8_t* l = out + kPathPad;
+    const auto unreached = hn::Set(d, uint8_t{255});
+    for (int g = 0; g < kLaneAlign; g += n) { // within the block: kPathPad == kLaneAlign
+        hn::StoreU(unreached, d, l + span.first - kLaneAlign + g);
+        hn::StoreU(unreached, d, l + span.end + g);
+    }
+    auto running_min = unreached;
+    if (prev == nullptr)
+        return StartPath(cost, span.first, span.end, l, visit);
+    const uint8_t* lp = prev + kPathPad;
+    const auto jump = hn::SaturatedAdd(v_min_prev, hn::Set(d, p2));
+    for (int k0 = span.first; k0 < span.end; k0 += n) {
+        auto best = jump;
+        if (k0 >= prev_span.first && k0 < prev_span.end) {
+            const auto same = hn::LoadU(d, lp + k0);
+            const auto lower = hn::SaturatedAdd(hn::LoadU(d, lp + k0 - 1), v_p1);
+            const auto upper = hn::SaturatedAdd(hn::LoadU(d, lp + k0 + 1), v_p1);
+            best = hn::Min(hn::Min(same, lower), hn::Min(upper, jump));
+        } else if (k0 + n == prev_span.first) { // only L(k + 1) of the last lane
+            best = hn::Min(hn::SaturatedAdd(hn::LoadU(d, lp + k0 + 1), v_p1), jump);
+        } else if (k0 == prev_span.end) { // only L(k - 1) of the first lane
+            best = hn::Min(hn::SaturatedAdd(hn::LoadU(d, lp + k0 - 1), v_p1), jump);
+        }
         const auto v = hn::SaturatedAdd(hn::LoadU(d, cost + k0), hn::Sub(best, v_min_prev));
         hn::StoreU(v, d, l + k0);
         running_min = hn::Min(running_min, v);
@@ -258,9 +311,9 @@ template <int kLast, int kFirst = 0, class F> HWY_INLINE void WithCount(int coun
 
 // paths_forward() for kAbove paths from above: a count known to the compiler unrolls the
 // loop over them.
-template <int kAbove>
+template <int kAbove, bool kSpans>
 void PathsForwardOf(const uint8_t* cost, uint8_t p1, int width, int lanes, const AbovePaths& above,
-                    const uint8_t* p2_along, uint8_t* along)
+                    const uint8_t* p2_along, uint8_t* along, const LaneSpan* spans)
 {
     const D8 d;
     const size_t block = pathBlockBytes(lanes);
@@ -279,8 +332,10 @@ void PathsForwardOf(const uint8_t* cost, uint8_t p1, int width, int lanes, const
         prev_row[i] = above.prev[i];
         cur_row[i] = above.cur[i];
     }
+    const LaneSpan* prev_spans = above.prev_spans;
     for (int x = 0; x < width; ++x) {
         const uint8_t* c = cost + static_cast<size_t>(x) * static_cast<size_t>(lanes);
+        const LaneInterval span = lanesOf(spans, x, lanes);
         for (int i = 0; i < kAbove; ++i) {
             const int xp = x + dx[i];
             const uint8_t* from = (prev_row[i] != nullptr && xp >= 0 && xp < width)
@@ -288,21 +343,35 @@ void PathsForwardOf(const uint8_t* cost, uint8_t p1, int width, int lanes, const
                                       : nullptr;
             const auto v_min_prev = hn::Set(d, from != nullptr ? from[0] : uint8_t{0});
             uint8_t* out = cur_row[i] + static_cast<size_t>(x) * block;
-            out[0] = hn::GetLane(Step(c, from, v_min_prev, v_p1, p2[i][x], lanes, out, none));
+            if constexpr (kSpans) {
+                const LaneInterval from_span =
+                    from != nullptr ? lanesOf(prev_spans, xp, lanes) : LaneInterval{};
+                out[0] = hn::GetLane(
+                    StepInSpan(c, from, from_span, v_min_prev, v_p1, p2[i][x], span, out, none));
+            } else {
+                out[0] = hn::GetLane(Step(c, from, v_min_prev, v_p1, p2[i][x], lanes, out, none));
+            }
         }
         if (along != nullptr) {
             const uint8_t* prev = x == 0 ? nullptr : along + static_cast<size_t>(x - 1) * block;
-            v_min = Step(c, prev, v_min, v_p1, p2_along[x], lanes,
-                         along + static_cast<size_t>(x) * block, none);
+            uint8_t* out = along + static_cast<size_t>(x) * block;
+            if constexpr (kSpans)
+                v_min = StepInSpan(c, prev, x == 0 ? LaneInterval{} : lanesOf(spans, x - 1, lanes),
+                                   v_min, v_p1, p2_along[x], span, out, none);
+            else
+                v_min = Step(c, prev, v_min, v_p1, p2_along[x], lanes, out, none);
         }
     }
 }
 
 void PathsForward(const uint8_t* cost, uint8_t p1, int width, int lanes, const AbovePaths& above,
-                  const uint8_t* p2_along, uint8_t* along)
+                  const uint8_t* p2_along, uint8_t* along, const LaneSpan* spans)
 {
     WithCount<3>(above.count, [&](auto count) { // the matcher has 1 or 3
-        PathsForwardOf<count()>(cost, p1, width, lanes, above, p2_along, along);
+        if (spans != nullptr)
+            PathsForwardOf<count(), true>(cost, p1, width, lanes, above, p2_along, along, spans);
+        else
+            PathsForwardOf<count(), false>(cost, p1, width, lanes, above, p2_along, along, spans);
     });
 }
 
@@ -314,11 +383,11 @@ static_assert(kWinnerGroup <= (1 << kTagBits), "a group index fits in the tag");
 
 // winners_backward() for kOthers other paths: a count known to the compiler unrolls the
 // sum and keeps the rows' pointers in registers.
-template <int kOthers>
+template <int kOthers, bool kSpans>
 void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
                        const PathRows& others, int min_disparity, int num_disparities,
                        uint8_t* path_scratch, uint16_t* sum_scratch, const WinnerRows& out,
-                       uint16_t* right_lane, uint16_t* scratch)
+                       uint16_t* right_lane, uint16_t* scratch, const LaneSpan* spans)
 {
     const D8 d;
     const D16 d16;
@@ -355,6 +424,15 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
         return sum_scratch + static_cast<size_t>(g) * group_stride + 16;
     };
 
+    // The lanes pixel x summed: its span's, within the range.
+    const auto summed = [&](int x) {
+        const LaneInterval span = lanesOf(spans, x, lanes);
+        return LaneInterval{span.first, std::min(span.end, num_disparities)};
+    };
+    // With spans: the smallest key of the group per position p = k + g (a right pixel),
+    // over the lanes each pixel summed, from position `first`; 0xFFFF elsewhere.
+    uint16_t* group_best = sum_scratch + static_cast<size_t>(kWinnerGroup) * (group_stride + 32);
+
     const auto finish_group = [&](int x_first, int count) {
         for (int g = 0; g < count; ++g) {
             const uint16_t* key = keys_of(g);
@@ -372,25 +450,60 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
             const auto near =
                 hn::Lt(hn::Sub(k_first, hn::Set(d16, static_cast<uint16_t>(best - 1))), three16);
             const uint16_t second = MinOfU16(hn::IfThenElse(near, v_next, v_first));
-            const auto sum_at = [&](int k) {
-                return k >= 0 && k < num_disparities ? static_cast<uint16_t>(key[k] >> kTagBits)
-                                                     : uint16_t{0};
-            };
             const int x = x_first - g;
+            const LaneInterval lanes_summed = kSpans ? summed(x) : LaneInterval{0, num_disparities};
+            const auto sum_at = [&](int k) {
+                return k >= lanes_summed.first && k < lanes_summed.end
+                           ? static_cast<uint16_t>(key[k] >> kTagBits)
+                           : uint16_t{0};
+            };
             out.best_lane[x] = static_cast<uint16_t>(best);
             out.best_sum[x] = static_cast<uint16_t>(best_key >> kTagBits);
             out.second_sum[x] =
                 second == 0xFFFF ? second : static_cast<uint16_t>(second >> kTagBits);
             out.below_sum[x] = sum_at(best - 1);
             out.above_sum[x] = sum_at(best + 1);
+            // A minimum at an end of the span that is not an end of the range: the true
+            // one may lie beyond it (sgm_kernels.hpp).
+            if (kSpans && ((best == lanes_summed.first && best > 0) ||
+                           (best == lanes_summed.end - 1 && lanes_summed.end < num_disparities)))
+                out.second_sum[x] = out.best_sum[x];
         }
         // The right view: pixel g of the group has j = j0 + g, so its lane for position
         // p0 is p0 - g. Keys of pixels past the row's ends, and margins, are 0xFFFF.
         const std::ptrdiff_t j0 = width - 1 - x_first + min_disparity;
-        for (int p0 = 0; p0 < num_disparities + count - 1; p0 += n16) {
+        int p_first = 0;
+        int p_end = num_disparities + count - 1;
+        if constexpr (kSpans) {
+            // Only the lanes each pixel summed hold its keys: the group's smallest per
+            // position, gathered over them.
+            int first = num_disparities, end = 0;
+            for (int g = 0; g < count; ++g) {
+                const LaneInterval lanes_summed = summed(x_first - g);
+                first = std::min(first, lanes_summed.first);
+                end = std::max(end, lanes_summed.end);
+            }
+            p_first = first;
+            p_end = end + count - 1;
+            for (int p0 = p_first; p0 < p_end; p0 += n16)
+                hn::StoreU(none16, d16, group_best + (p0 - p_first));
+            for (int g = 0; g < count; ++g) {
+                const LaneInterval lanes_summed = summed(x_first - g);
+                for (int k0 = lanes_summed.first; k0 < lanes_summed.end; k0 += n16) {
+                    uint16_t* at = group_best + (k0 + g - p_first);
+                    hn::StoreU(hn::Min(hn::LoadU(d16, at), hn::LoadU(d16, keys_of(g) + k0)), d16,
+                               at);
+                }
+            }
+        }
+        for (int p0 = p_first; p0 < p_end; p0 += n16) {
             auto best_key = none16;
-            for (int g = 0; g < count; ++g)
-                best_key = hn::Min(best_key, hn::LoadU(d16, keys_of(g) + p0 - g));
+            if constexpr (kSpans) {
+                best_key = hn::LoadU(d16, group_best + (p0 - p_first));
+            } else {
+                for (int g = 0; g < count; ++g)
+                    best_key = hn::Min(best_key, hn::LoadU(d16, keys_of(g) + p0 - g));
+            }
             const auto sums = hn::ShiftRight<kTagBits>(best_key);
             const auto g_of = hn::Sub(hn::Set(d16, static_cast<uint16_t>(kWinnerGroup - 1)),
                                       hn::And(best_key, tag_mask));
@@ -411,16 +524,19 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
     uint8_t* a = path_scratch;
     uint8_t* b = path_scratch + block;
     const uint8_t* prev = nullptr;
+    LaneInterval prev_span{};
     auto v_min = hn::Zero(d);
     for (int x = width - 1; x >= 0; --x) {
         const size_t at = static_cast<size_t>(x) * static_cast<size_t>(lanes);
+        const LaneInterval span = lanesOf(spans, x, lanes);
         const size_t block_at = static_cast<size_t>(x) * block + kPathPad;
         const int g = (width - 1 - x) % kWinnerGroup;
         uint16_t* key = sum_scratch + static_cast<size_t>(g) * group_stride + 16;
         const auto right_tag = hn::Set(d16, static_cast<uint16_t>(kWinnerGroup - 1 - g));
-        auto best = none16;            // per lane: smallest sum << kTagBits | k / n16
-        auto next = none16;            // per lane: the second smallest
-        auto lane_tag = hn::Zero(d16); // k0 / n16 of the next half vector, in every lane
+        auto best = none16; // per lane: smallest sum << kTagBits | k / n16
+        auto next = none16; // per lane: the second smallest
+        // k0 / n16 of the next half vector, in every lane
+        auto lane_tag = hn::Set(d16, static_cast<uint16_t>(span.first / n16));
         // Sums the paths for the lanes of this vector.
         const auto visit = [&](int k0, hn::Vec<D8> v) {
             if (k0 >= num_disparities)
@@ -447,8 +563,12 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
                 best = hn::Min(best, hi);
             }
         };
-        v_min = Step(cost + at, prev, v_min, v_p1, p2[x], lanes, a, visit);
+        if constexpr (kSpans)
+            v_min = StepInSpan(cost + at, prev, prev_span, v_min, v_p1, p2[x], span, a, visit);
+        else
+            v_min = Step(cost + at, prev, v_min, v_p1, p2[x], lanes, a, visit);
         prev = a;
+        prev_span = span;
         std::swap(a, b);
         hn::StoreU(best, d16, lane_best + (2 * g) * n16);
         hn::StoreU(next, d16, lane_best + (2 * g + 1) * n16);
@@ -589,13 +709,18 @@ void DecideRow(const WinnerRows& w, const uint16_t* right_lane, int width, const
 void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
                      const PathRows& others, int min_disparity, int num_disparities,
                      uint8_t* path_scratch, uint16_t* sum_scratch, const WinnerRows& out,
-                     uint16_t* right_lane, uint16_t* scratch)
+                     uint16_t* right_lane, uint16_t* scratch, const LaneSpan* spans)
 {
     // At most 4 (sgm_kernels.hpp): the summed paths and a tag fit 16 bits.
     WithCount<4>(others.count, [&](auto count) {
-        WinnersBackwardOf<count()>(cost, p2, p1, width, lanes, others, min_disparity,
-                                   num_disparities, path_scratch, sum_scratch, out, right_lane,
-                                   scratch);
+        if (spans != nullptr)
+            WinnersBackwardOf<count(), true>(cost, p2, p1, width, lanes, others, min_disparity,
+                                             num_disparities, path_scratch, sum_scratch, out,
+                                             right_lane, scratch, spans);
+        else
+            WinnersBackwardOf<count(), false>(cost, p2, p1, width, lanes, others, min_disparity,
+                                              num_disparities, path_scratch, sum_scratch, out,
+                                              right_lane, scratch, spans);
     });
 }
 

@@ -73,10 +73,11 @@ cv::Mat openCvThreeWay(const cv::Mat& left, const cv::Mat& right, int num_dispar
 // Our processor through a rectified-only calibration (f*B = 10 px*m, doffs 0) and a fixed
 // range, as a user runs `stereoctl depth --rectified --matcher census-sgm`.
 cv::Mat censusSgm(const cv::Mat& left, const cv::Mat& right, int num_disparities, int threads,
-                  MatcherTuning tuning = MatcherTuning::Natural)
+                  MatcherTuning tuning = MatcherTuning::Natural, bool guided = false)
 {
     ProcessorSettings settings;
     settings.matcher = matcherDefaults(MatcherKind::CensusSgm, SgbmMode::Sgbm, tuning);
+    settings.matcher.guided_search = guided;
     settings.matcher.num_disparities = num_disparities;
     settings.matcher.threads = threads;
     settings.compute_cloud = false;
@@ -97,7 +98,7 @@ struct SceneScores {
 
 // Every real scene, printed as it is scored. Fails the test (and returns fewer) when the
 // shared data are missing.
-std::vector<SceneScores> scoreEveryScene(MatcherTuning tuning)
+std::vector<SceneScores> scoreEveryScene(MatcherTuning tuning, bool guided = false)
 {
     const std::vector<SceneTruth> list = test::scenesWithTruth();
     EXPECT_GE(list.size(), 17u) << "shared data missing under " << test::sharedDataDir();
@@ -111,14 +112,14 @@ std::vector<SceneScores> scoreEveryScene(MatcherTuning tuning)
         }
         const cv::Mat truth = test::loadTruthPx(s);
         const int n = test::referenceRange(truth);
-        const SceneScores r{s.name, n, score(censusSgm(left, right, n, 2, tuning), truth),
+        const SceneScores r{s.name, n, score(censusSgm(left, right, n, 2, tuning, guided), truth),
                             score(openCvThreeWay(left, right, n), truth)};
-        std::printf("[accuracy] %s%-10s %3d disp | census-sgm bad-2 %5.2f %% density %5.1f %% "
+        std::printf("[accuracy] %s%s%-10s %3d disp | census-sgm bad-2 %5.2f %% density %5.1f %% "
                     "too far %4.2f %% correct %5.1f %% | sgbm-3way bad-2 %5.2f %% density "
                     "%5.1f %% too far %4.2f %% correct %5.1f %%\n",
-                    tuning == MatcherTuning::Planar ? "planar " : "", r.name.c_str(), n,
-                    r.ours.bad2, r.ours.density, r.ours.too_far, r.ours.correct(), r.ref.bad2,
-                    r.ref.density, r.ref.too_far, r.ref.correct());
+                    tuning == MatcherTuning::Planar ? "planar " : "", guided ? "guided " : "",
+                    r.name.c_str(), n, r.ours.bad2, r.ours.density, r.ours.too_far,
+                    r.ours.correct(), r.ref.bad2, r.ref.density, r.ref.too_far, r.ref.correct());
         scored.push_back(r);
     }
     return scored;
@@ -164,6 +165,34 @@ TEST(CensusSgmAccuracy, EveryRealSceneAgainstOpenCvThreeWay)
                 m.ours_bad2 / m.ref_bad2, m.ours_far / m.ref_far, worse_bad2, fewer_correct);
     EXPECT_LE(m.ours_bad2, 0.5 * m.ref_bad2);
     EXPECT_LE(m.ours_far, 0.5 * m.ref_far);
+}
+
+// The guided search (matcher.guided_search: the full resolution searches only around the
+// half-resolution level's match): as accurate as the full search where it reports, never
+// more too-far errors, but fewer pixels reported where the coarse level measured nothing
+// or disagrees. Measured: mean bad-2 3.80 % (full search 3.78 %), too far 0.71 % (0.77 %),
+// bad-2 below SGBM 3-way's on every scene; correct pixels at most 9.3 points below SGBM
+// 3-way's (Playroom: 60.1 % against 69.4 %; the full search 64.6 %), within 5 points on
+// the other 16 scenes.
+TEST(CensusSgmAccuracy, GuidedSearchOnNaturalScenes)
+{
+    const std::vector<SceneScores> list = scoreEveryScene(MatcherTuning::Natural, true);
+    ASSERT_GE(list.size(), 17u);
+    int fewer_correct = 0;
+    for (const SceneScores& r : list) {
+        EXPECT_LE(r.ours.bad2, r.ref.bad2) << r.name;
+        EXPECT_GE(r.ours.correct(), r.ref.correct() - 10.0) << r.name;
+        fewer_correct += r.ours.correct() < r.ref.correct() - 5.0;
+    }
+    EXPECT_LE(fewer_correct, 1);
+    const MeanScores m = meanScores(list);
+    std::printf("[accuracy] guided: mean over %zu scenes: bad-2 %.2f %% too far %.2f %% | "
+                "sgbm-3way bad-2 %.2f %% too far %.2f %% | ratio %.2f, %.2f | %d with over 5 "
+                "points fewer correct\n",
+                list.size(), m.ours_bad2, m.ours_far, m.ref_bad2, m.ref_far,
+                m.ours_bad2 / m.ref_bad2, m.ours_far / m.ref_far, fewer_correct);
+    EXPECT_LE(m.ours_bad2, 0.46 * m.ref_bad2);
+    EXPECT_LE(m.ours_far, 0.4 * m.ref_far);
 }
 
 // The planar tuning, made for man-made scenes of uniform flat surfaces (the real rig's

@@ -33,9 +33,10 @@ struct Output {
     std::vector<uint8_t> near_field;
 };
 
-PyramidSgmSettings settingsFor(bool extended, bool simd = true)
+PyramidSgmSettings settingsFor(bool extended, bool simd = true, bool guided = false)
 {
     PyramidSgmSettings s;
+    s.guided_search = guided;
     s.full.width = kWidth;
     s.full.height = kHeight;
     s.full.num_disparities = kNumDisparities;
@@ -137,17 +138,60 @@ TEST(PyramidSgmTest, WithoutTheExtendedRangeTheFullLevelIsCensusSgm)
 
 TEST(PyramidSgmTest, SimdAndScalarGiveIdenticalOutput)
 {
-    for (const int disparity : {40, 100, 150}) {
-        const SyntheticPair pair = sceneWith(disparity);
-        const Output simd = match(pair, settingsFor(true, true));
-        const Output scalar = match(pair, settingsFor(true, false));
-        for (size_t i = 0; i < pair.left.size(); ++i) {
-            ASSERT_TRUE(simd.disparity_px[i] == scalar.disparity_px[i] ||
-                        (std::isinf(simd.disparity_px[i]) && std::isinf(scalar.disparity_px[i])))
-                << "disparity " << disparity << ", pixel " << i;
-            ASSERT_EQ(simd.confidence[i], scalar.confidence[i]) << disparity << ", " << i;
-            ASSERT_EQ(simd.near_field[i], scalar.near_field[i]) << disparity << ", " << i;
+    for (const bool guided : {false, true})
+        for (const int disparity : {40, 100, 150}) {
+            SCOPED_TRACE(guided ? "guided" : "full search");
+            const SyntheticPair pair = sceneWith(disparity);
+            const Output simd = match(pair, settingsFor(true, true, guided));
+            const Output scalar = match(pair, settingsFor(true, false, guided));
+            for (size_t i = 0; i < pair.left.size(); ++i) {
+                ASSERT_TRUE(
+                    simd.disparity_px[i] == scalar.disparity_px[i] ||
+                    (std::isinf(simd.disparity_px[i]) && std::isinf(scalar.disparity_px[i])))
+                    << "disparity " << disparity << ", pixel " << i;
+                ASSERT_EQ(simd.confidence[i], scalar.confidence[i]) << disparity << ", " << i;
+                ASSERT_EQ(simd.near_field[i], scalar.near_field[i]) << disparity << ", " << i;
+            }
         }
+}
+
+// The guided search (guided_spans.hpp) on a surface in the full range, beyond it, and
+// beyond the extended range: the full search's disparities where both report, searching
+// less than the whole range, and never a too-far number.
+TEST(PyramidSgmTest, TheGuidedSearchFindsWhatTheFullSearchFinds)
+{
+    for (const int disparity : {40, 100, 150}) {
+        SCOPED_TRACE("rectangle at " + std::to_string(disparity) + " px");
+        const SyntheticPair pair = sceneWith(disparity);
+        PyramidSgm guided(settingsFor(true, true, true));
+        const size_t area = pair.left.size();
+        Output out{std::vector<float>(area), std::vector<uint8_t>(area),
+                   std::vector<uint8_t>(area)};
+        guided.compute(pair.left.data(), kWidth, pair.right.data(), kWidth, kWholeImage,
+                       {out.disparity_px.data(), out.confidence.data(), out.near_field.data()});
+        EXPECT_LT(guided.searchedShare(), 0.75);
+        const Output full = match(pair, settingsFor(true));
+        int both = 0, agree = 0, full_reported = 0, guided_reported = 0;
+        for (size_t i = 0; i < area; ++i) {
+            const float g = out.disparity_px[i], f = full.disparity_px[i];
+            full_reported += std::isfinite(f);
+            guided_reported += std::isfinite(g);
+            if (std::isfinite(g) && std::isfinite(f)) {
+                ++both;
+                agree += std::abs(g - f) <= 1.0f;
+            }
+        }
+        EXPECT_GT(agree, both * 99 / 100) << agree << " of " << both;
+        EXPECT_GT(guided_reported, full_reported * 9 / 10);
+        int inside = 0, near = 0;
+        forEachInside(pair, [&](size_t i) {
+            ++inside;
+            const float d = out.disparity_px[i];
+            EXPECT_FALSE(std::isfinite(d) && d < static_cast<float>(disparity) - 3.0f)
+                << "a too-far number: " << d;
+            near += std::isfinite(d) || out.near_field[i] != kNoNearEvidence;
+        });
+        EXPECT_GT(near, inside * 3 / 4) << near << " of " << inside;
     }
 }
 

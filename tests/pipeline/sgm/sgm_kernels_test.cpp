@@ -123,7 +123,7 @@ std::vector<uint8_t> costRow(int width, int min_disparity, int num_disparities,
     const CensusRowPair census(width, min_disparity, lanes, model.planes(), random);
     std::vector<uint8_t> cost(static_cast<size_t>(width) * static_cast<size_t>(lanes));
     scalarKernels().cost_row(census.rows, width, min_disparity, num_disparities, lanes,
-                             static_cast<uint8_t>(model.bits()), cost.data());
+                             static_cast<uint8_t>(model.bits()), cost.data(), nullptr);
     return cost;
 }
 
@@ -133,6 +133,36 @@ std::vector<uint8_t> penalties(int width, const CostModel& model, Random& random
     std::vector<uint8_t> p2(static_cast<size_t>(width));
     fillRandom(p2, random, model.p1 + 1, model.p2);
     return p2;
+}
+
+// Lane spans of a guided search for one row (sgm_kernels.hpp): neighbours' spans overlap,
+// touch, or lie apart, some cover every lane; or none (every lane) when `with_spans` is false.
+std::vector<LaneSpan> laneSpans(bool with_spans, int width, int lanes, Random& random)
+{
+    if (!with_spans)
+        return {};
+    const int units = lanes / kLaneAlign;
+    std::vector<LaneSpan> spans(static_cast<size_t>(width));
+    for (LaneSpan& span : spans) {
+        const int first = random.uniform(0, 3) == 0 ? 0 : random.uniform(0, units - 1);
+        const int end = random.uniform(0, 3) == 0 ? units : random.uniform(first + 1, units);
+        span = {static_cast<uint8_t>(first), static_cast<uint8_t>(end)};
+    }
+    return spans;
+}
+
+const LaneSpan* spansOrNull(const std::vector<LaneSpan>& spans)
+{
+    return spans.empty() ? nullptr : spans.data();
+}
+
+// Whether lane k of pixel x is searched.
+bool searched(const std::vector<LaneSpan>& spans, int x, int k)
+{
+    if (spans.empty())
+        return true;
+    const LaneSpan span = spans[static_cast<size_t>(x)];
+    return k >= kLaneAlign * span.first && k < kLaneAlign * span.end;
 }
 
 TEST(SgmKernelsTest, SimdTargetIsNamed)
@@ -186,26 +216,34 @@ TEST(SgmKernelsTest, CensusRowMatchesScalar)
         }
 }
 
+// Without spans every lane; with spans the lanes of each pixel's span, the others left as
+// they were.
 TEST(SgmKernelsTest, CostRowMatchesScalar)
 {
     Random random(2);
     for (const CostModel& model : kCostModels)
-        for (int width : kWidths)
-            for (int num_disparities : kNumDisparities)
-                for (int min_disparity : kMinDisparities) {
-                    SCOPED_TRACE(describe(width, num_disparities, min_disparity) + ", planes " +
-                                 std::to_string(model.planes()));
-                    const int lanes = lanesFor(num_disparities);
-                    const CensusRowPair census(width, min_disparity, lanes, model.planes(), random);
-                    const size_t cells = static_cast<size_t>(width) * static_cast<size_t>(lanes);
-                    std::vector<uint8_t> expected(cells, 0xA5), actual(cells, 0x5A);
-                    const auto invalid = static_cast<uint8_t>(model.bits());
-                    scalarKernels().cost_row(census.rows, width, min_disparity, num_disparities,
-                                             lanes, invalid, expected.data());
-                    simdKernels().cost_row(census.rows, width, min_disparity, num_disparities,
-                                           lanes, invalid, actual.data());
-                    ASSERT_EQ(actual, expected);
-                }
+        for (bool with_spans : {false, true})
+            for (int width : kWidths)
+                for (int num_disparities : kNumDisparities)
+                    for (int min_disparity : kMinDisparities) {
+                        SCOPED_TRACE(describe(width, num_disparities, min_disparity) + ", planes " +
+                                     std::to_string(model.planes()) +
+                                     (with_spans ? ", spans" : ""));
+                        const int lanes = lanesFor(num_disparities);
+                        const CensusRowPair census(width, min_disparity, lanes, model.planes(),
+                                                   random);
+                        const auto spans = laneSpans(with_spans, width, lanes, random);
+                        const size_t cells =
+                            static_cast<size_t>(width) * static_cast<size_t>(lanes);
+                        std::vector<uint8_t> expected(cells, 0xA5), actual(cells, 0xA5);
+                        const auto invalid = static_cast<uint8_t>(model.bits());
+                        scalarKernels().cost_row(census.rows, width, min_disparity, num_disparities,
+                                                 lanes, invalid, expected.data(),
+                                                 spansOrNull(spans));
+                        simdKernels().cost_row(census.rows, width, min_disparity, num_disparities,
+                                               lanes, invalid, actual.data(), spansOrNull(spans));
+                        ASSERT_EQ(actual, expected);
+                    }
 }
 
 // A row of path blocks as the matcher allocates it: pads at 255 (the contract sets them
@@ -224,15 +262,20 @@ std::vector<uint8_t> pathBlocks(int width, int lanes, Random& random)
 // L values of every block of a row of path blocks, and the pads around them that the next
 // step's L[k - 1] and L[k + 1] read: the contract keeps those at 255. Byte 0 of a block
 // belongs to the kernels (the SIMD ones keep min L there) and is not compared.
+// With spans, the L values of each pixel's span alone.
 void expectBlocksMatch(const std::vector<uint8_t>& actual, const std::vector<uint8_t>& expected,
-                       int width, int lanes)
+                       int width, int lanes, const std::vector<LaneSpan>& spans)
 {
     const size_t block = pathBlockBytes(lanes);
     for (int x = 0; x < width; ++x) {
         const uint8_t* a = actual.data() + static_cast<size_t>(x) * block;
         const uint8_t* e = expected.data() + static_cast<size_t>(x) * block;
-        ASSERT_TRUE(std::equal(a + kPathPad, a + kPathPad + lanes, e + kPathPad))
-            << "path costs of pixel " << x;
+        for (int k = 0; k < lanes; ++k) {
+            if (searched(spans, x, k)) {
+                ASSERT_EQ(a[kPathPad + k], e[kPathPad + k])
+                    << "path cost of pixel " << x << ", lane " << k;
+            }
+        }
         for (const uint8_t* b : {a, e}) {
             ASSERT_TRUE(std::all_of(b + 1, b + kPathPad, [](uint8_t v) { return v == 255; }))
                 << "pad before pixel " << x << (b == a ? " (simd)" : " (scalar)");
@@ -254,59 +297,72 @@ TEST(SgmKernelsTest, PathsForwardMatchesScalar)
         for (int above : {0, 1, 2, 3})
             for (int width : kWidths)
                 for (int num_disparities : kNumDisparities)
-                    for (int min_disparity : kMinDisparities) {
-                        SCOPED_TRACE(describe(width, num_disparities, min_disparity) +
-                                     ", paths from above " + std::to_string(above));
-                        const int lanes = lanesFor(num_disparities);
-                        std::vector<uint8_t> expected_rows[3][2], actual_rows[3][2];
-                        for (int i = 0; i < above; ++i)
-                            for (int r = 0; r < 2; ++r) {
-                                expected_rows[i][r] = pathBlocks(width, lanes, random);
-                                actual_rows[i][r] = expected_rows[i][r];
-                            }
-                        std::vector<uint8_t> expected_along = pathBlocks(width, lanes, random);
-                        std::vector<uint8_t> actual_along = expected_along;
-                        for (int y = 0; y < kRows; ++y) {
-                            SCOPED_TRACE("row " + std::to_string(y));
-                            const auto cost =
-                                costRow(width, min_disparity, num_disparities, model, random);
-                            std::vector<uint8_t> p2_above[3];
-                            const uint8_t* p2_ptr[3];
-                            const uint8_t* expected_prev[3];
-                            const uint8_t* actual_prev[3];
-                            uint8_t* expected_cur[3];
-                            uint8_t* actual_cur[3];
-                            const int cur = y & 1;
-                            for (int i = 0; i < above; ++i) {
-                                p2_above[i] = penalties(width, model, random);
-                                p2_ptr[i] = p2_above[i].data();
-                                expected_prev[i] =
-                                    y == 0 ? nullptr : expected_rows[i][cur ^ 1].data();
-                                actual_prev[i] = y == 0 ? nullptr : actual_rows[i][cur ^ 1].data();
-                                expected_cur[i] = expected_rows[i][cur].data();
-                                actual_cur[i] = actual_rows[i][cur].data();
-                            }
-                            const auto p2_along = penalties(width, model, random);
-                            // The left->right path on odd rows only: the matcher's warm-up
-                            // rows run the paths from above alone.
-                            const bool along = above == 0 || y % 2 == 1;
-                            scalarKernels().paths_forward(
-                                cost.data(), model.p1, width, lanes,
-                                AbovePaths{above, kDx, p2_ptr, expected_prev, expected_cur},
-                                p2_along.data(), along ? expected_along.data() : nullptr);
-                            simdKernels().paths_forward(
-                                cost.data(), model.p1, width, lanes,
-                                AbovePaths{above, kDx, p2_ptr, actual_prev, actual_cur},
-                                p2_along.data(), along ? actual_along.data() : nullptr);
+                    for (int min_disparity : kMinDisparities)
+                        for (bool with_spans : {false, true}) {
+                            SCOPED_TRACE(describe(width, num_disparities, min_disparity) +
+                                         ", paths from above " + std::to_string(above) +
+                                         (with_spans ? ", spans" : ""));
+                            const int lanes = lanesFor(num_disparities);
+                            std::vector<LaneSpan> prev_spans;
+                            std::vector<uint8_t> expected_rows[3][2], actual_rows[3][2];
                             for (int i = 0; i < above; ++i)
-                                ASSERT_NO_FATAL_FAILURE(expectBlocksMatch(
-                                    actual_rows[i][cur], expected_rows[i][cur], width, lanes))
-                                    << "path from above " << i;
-                            ASSERT_NO_FATAL_FAILURE(
-                                expectBlocksMatch(actual_along, expected_along, width, lanes))
-                                << "left->right path";
+                                for (int r = 0; r < 2; ++r) {
+                                    expected_rows[i][r] = pathBlocks(width, lanes, random);
+                                    actual_rows[i][r] = expected_rows[i][r];
+                                }
+                            std::vector<uint8_t> expected_along = pathBlocks(width, lanes, random);
+                            std::vector<uint8_t> actual_along = expected_along;
+                            for (int y = 0; y < kRows; ++y) {
+                                SCOPED_TRACE("row " + std::to_string(y));
+                                const auto cost =
+                                    costRow(width, min_disparity, num_disparities, model, random);
+                                std::vector<uint8_t> p2_above[3];
+                                const uint8_t* p2_ptr[3];
+                                const uint8_t* expected_prev[3];
+                                const uint8_t* actual_prev[3];
+                                uint8_t* expected_cur[3];
+                                uint8_t* actual_cur[3];
+                                const int cur = y & 1;
+                                for (int i = 0; i < above; ++i) {
+                                    p2_above[i] = penalties(width, model, random);
+                                    p2_ptr[i] = p2_above[i].data();
+                                    expected_prev[i] =
+                                        y == 0 ? nullptr : expected_rows[i][cur ^ 1].data();
+                                    actual_prev[i] =
+                                        y == 0 ? nullptr : actual_rows[i][cur ^ 1].data();
+                                    expected_cur[i] = expected_rows[i][cur].data();
+                                    actual_cur[i] = actual_rows[i][cur].data();
+                                }
+                                const auto p2_along = penalties(width, model, random);
+                                const auto spans = laneSpans(with_spans, width, lanes, random);
+                                // The left->right path on odd rows only: the matcher's warm-up
+                                // rows run the paths from above alone.
+                                const bool along = above == 0 || y % 2 == 1;
+                                scalarKernels().paths_forward(
+                                    cost.data(), model.p1, width, lanes,
+                                    AbovePaths{above, kDx, p2_ptr, expected_prev, expected_cur,
+                                               spansOrNull(prev_spans)},
+                                    p2_along.data(), along ? expected_along.data() : nullptr,
+                                    spansOrNull(spans));
+                                simdKernels().paths_forward(
+                                    cost.data(), model.p1, width, lanes,
+                                    AbovePaths{above, kDx, p2_ptr, actual_prev, actual_cur,
+                                               spansOrNull(prev_spans)},
+                                    p2_along.data(), along ? actual_along.data() : nullptr,
+                                    spansOrNull(spans));
+                                for (int i = 0; i < above; ++i)
+                                    ASSERT_NO_FATAL_FAILURE(expectBlocksMatch(actual_rows[i][cur],
+                                                                              expected_rows[i][cur],
+                                                                              width, lanes, spans))
+                                        << "path from above " << i;
+                                if (along) {
+                                    ASSERT_NO_FATAL_FAILURE(expectBlocksMatch(
+                                        actual_along, expected_along, width, lanes, spans))
+                                        << "left->right path";
+                                }
+                                prev_spans = spans;
+                            }
                         }
-                    }
 }
 
 TEST(SgmKernelsTest, WinnersBackwardMatchesScalar)
@@ -317,65 +373,68 @@ TEST(SgmKernelsTest, WinnersBackwardMatchesScalar)
             for (int width : kWidths)
                 for (int num_disparities : kNumDisparities)
                     for (int min_disparity : kMinDisparities)
-                        for (int levels : {3, 200}) {
-                            // 3 levels: many equal sums (ties go to the smallest lane);
-                            // 200: few.
-                            SCOPED_TRACE(describe(width, num_disparities, min_disparity) +
-                                         ", other paths " + std::to_string(others) + ", levels " +
-                                         std::to_string(levels));
-                            const int lanes = lanesFor(num_disparities);
-                            const size_t block = pathBlockBytes(lanes);
-                            const auto cost =
-                                costRow(width, min_disparity, num_disparities, model, random);
-                            const auto p2 = penalties(width, model, random);
-                            // The other paths' rows: a valley around a random best lane per
-                            // pixel, noise on top, anywhere in 0..255 as 8-bit path costs are.
-                            std::vector<std::vector<uint8_t>> rows(static_cast<size_t>(others));
-                            std::vector<const uint8_t*> row_ptr;
-                            for (auto& r : rows) {
-                                r = pathBlocks(width, lanes, random);
-                                for (int x = 0; x < width; ++x) {
-                                    const int best = random.uniform(0, num_disparities - 1);
-                                    for (int k = 0; k < lanes; ++k) {
-                                        const int valley =
-                                            std::abs(k - best) * 8 +
-                                            random.uniform(0, levels - 1) * (200 / levels);
-                                        r[static_cast<size_t>(x) * block + kPathPad +
-                                          static_cast<size_t>(k)] =
-                                            static_cast<uint8_t>(std::min(255, valley));
+                        for (int levels : {3, 200})
+                            for (bool with_spans : {false, true}) {
+                                // 3 levels: many equal sums (ties go to the smallest lane);
+                                // 200: few.
+                                SCOPED_TRACE(describe(width, num_disparities, min_disparity) +
+                                             ", other paths " + std::to_string(others) +
+                                             ", levels " + std::to_string(levels) +
+                                             (with_spans ? ", spans" : ""));
+                                const int lanes = lanesFor(num_disparities);
+                                const auto spans = laneSpans(with_spans, width, lanes, random);
+                                const size_t block = pathBlockBytes(lanes);
+                                const auto cost =
+                                    costRow(width, min_disparity, num_disparities, model, random);
+                                const auto p2 = penalties(width, model, random);
+                                // The other paths' rows: a valley around a random best lane per
+                                // pixel, noise on top, anywhere in 0..255 as 8-bit path costs are.
+                                std::vector<std::vector<uint8_t>> rows(static_cast<size_t>(others));
+                                std::vector<const uint8_t*> row_ptr;
+                                for (auto& r : rows) {
+                                    r = pathBlocks(width, lanes, random);
+                                    for (int x = 0; x < width; ++x) {
+                                        const int best = random.uniform(0, num_disparities - 1);
+                                        for (int k = 0; k < lanes; ++k) {
+                                            const int valley =
+                                                std::abs(k - best) * 8 +
+                                                random.uniform(0, levels - 1) * (200 / levels);
+                                            r[static_cast<size_t>(x) * block + kPathPad +
+                                              static_cast<size_t>(k)] =
+                                                static_cast<uint8_t>(std::min(255, valley));
+                                        }
                                     }
+                                    row_ptr.push_back(r.data());
                                 }
-                                row_ptr.push_back(r.data());
+                                const PathRows path_rows{row_ptr.data(), others};
+                                std::vector<uint8_t> path_scratch(2 * block, 255);
+                                std::vector<uint16_t> sum_scratch(winnersSumScratch(lanes));
+                                std::vector<uint16_t> scratch(
+                                    winnersScratch(width, min_disparity, lanes));
+                                WinnerStorage expected(width, 1);
+                                WinnerStorage actual(width, 6);
+                                std::vector<uint16_t> expected_right(static_cast<size_t>(width), 7);
+                                std::vector<uint16_t> actual_right(static_cast<size_t>(width), 8);
+                                fillRandom(sum_scratch, random, 0, 65535);
+                                fillRandom(scratch, random, 0, 65535);
+                                scalarKernels().winners_backward(
+                                    cost.data(), p2.data(), model.p1, width, lanes, path_rows,
+                                    min_disparity, num_disparities, path_scratch.data(),
+                                    sum_scratch.data(), expected.rows, expected_right.data(),
+                                    scratch.data(), spansOrNull(spans));
+                                fillRandom(sum_scratch, random, 0, 65535);
+                                fillRandom(scratch, random, 0, 65535);
+                                std::fill(path_scratch.begin(), path_scratch.end(), uint8_t{255});
+                                simdKernels().winners_backward(
+                                    cost.data(), p2.data(), model.p1, width, lanes, path_rows,
+                                    min_disparity, num_disparities, path_scratch.data(),
+                                    sum_scratch.data(), actual.rows, actual_right.data(),
+                                    scratch.data(), spansOrNull(spans));
+                                for (int field = 0; field < WinnerStorage::kFields; ++field)
+                                    ASSERT_EQ(actual.field(field), expected.field(field))
+                                        << WinnerStorage::kNames[field];
+                                ASSERT_EQ(actual_right, expected_right);
                             }
-                            const PathRows path_rows{row_ptr.data(), others};
-                            std::vector<uint8_t> path_scratch(2 * block, 255);
-                            std::vector<uint16_t> sum_scratch(winnersSumScratch(lanes));
-                            std::vector<uint16_t> scratch(
-                                winnersScratch(width, min_disparity, lanes));
-                            WinnerStorage expected(width, 1);
-                            WinnerStorage actual(width, 6);
-                            std::vector<uint16_t> expected_right(static_cast<size_t>(width), 7);
-                            std::vector<uint16_t> actual_right(static_cast<size_t>(width), 8);
-                            fillRandom(sum_scratch, random, 0, 65535);
-                            fillRandom(scratch, random, 0, 65535);
-                            scalarKernels().winners_backward(cost.data(), p2.data(), model.p1,
-                                                             width, lanes, path_rows, min_disparity,
-                                                             num_disparities, path_scratch.data(),
-                                                             sum_scratch.data(), expected.rows,
-                                                             expected_right.data(), scratch.data());
-                            fillRandom(sum_scratch, random, 0, 65535);
-                            fillRandom(scratch, random, 0, 65535);
-                            std::fill(path_scratch.begin(), path_scratch.end(), uint8_t{255});
-                            simdKernels().winners_backward(cost.data(), p2.data(), model.p1, width,
-                                                           lanes, path_rows, min_disparity,
-                                                           num_disparities, path_scratch.data(),
-                                                           sum_scratch.data(), actual.rows,
-                                                           actual_right.data(), scratch.data());
-                            for (int field = 0; field < WinnerStorage::kFields; ++field)
-                                ASSERT_EQ(actual.field(field), expected.field(field))
-                                    << WinnerStorage::kNames[field];
-                            ASSERT_EQ(actual_right, expected_right);
-                        }
 }
 
 // Winners as winners_backward() leaves them: the best sum the smallest, the second and the
