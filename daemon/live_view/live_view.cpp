@@ -12,7 +12,7 @@
 #include <unistd.h>
 
 #include "base/clock.hpp"
-#include "replay/ros2_messages.hpp"
+#include "ros2/messages.hpp"
 
 namespace stereod::live_view {
 
