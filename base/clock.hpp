@@ -10,6 +10,11 @@ namespace stereod {
 // Current CLOCK_MONOTONIC time in nanoseconds: the clock of every capture stamp.
 int64_t monotonicNowNs() noexcept;
 
+// A CLOCK_MONOTONIC stamp as CLOCK_REALTIME (ns since the epoch), by the two clocks'
+// offset now. For the outside world only (ROS 2 headers, which use wall time): the offset
+// moves when the wall clock is set, so stamps compared inside the service stay monotonic.
+int64_t realtimeFromMonotonicNs(int64_t monotonic_ns) noexcept;
+
 // a - b and a + b in ns, saturated to the int64_t range instead of wrapping: stamps
 // come from devices and recordings, and may be anything (a recording stamped INT64_MIN
 // and INT64_MAX must read as far apart, not as 0 apart).

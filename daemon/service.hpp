@@ -31,6 +31,7 @@
 #include "daemon/calibration_health_monitor.hpp"
 #include "daemon/live_view/live_view.hpp"
 #include "daemon/publisher.hpp"
+#include "daemon/ros2_observer.hpp"
 #include "daemon/socket_server.hpp"
 #include "daemon/source_counter_watch.hpp"
 #include "daemon/systemd_notifier.hpp"
@@ -159,6 +160,9 @@ class Service final : private ServerBackend {
     // Listens for the live view when live_view.listen says so; a failure is logged and
     // the service runs on without it.
     void startLiveView();
+    // Joins the DDS domain as a ROS 2 node when ros2.enabled says so; a failure is logged
+    // and the service runs on without it.
+    void startRos2();
     void onStopRequest();
     void shutdown() noexcept;
 
@@ -174,6 +178,9 @@ class Service final : private ServerBackend {
     std::unique_ptr<Worker> worker_;
     std::unique_ptr<SocketServer> server_;
     std::unique_ptr<live_view::LiveView> live_view_; // none when live_view.listen is off
+    std::unique_ptr<ros2::Ros2Publisher> ros2_;      // none when ros2.enabled is false
+    std::unique_ptr<Ros2Observer> ros2_observer_;
+    PublishObservers observers_; // the live view and the ROS 2 node, as they started
     UniqueFd signal_fd_;
     UniqueFd stop_fd_; // eventfd written by requestStop(); outlives server_
 
