@@ -4,26 +4,25 @@
 
 namespace stereod {
 
-namespace {
-
-int64_t nowNs(clockid_t clock) noexcept
+int64_t monotonicNowNs() noexcept
 {
     timespec ts{};
-    clock_gettime(clock, &ts);
+    clock_gettime(CLOCK_MONOTONIC, &ts);
     return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
-} // namespace
-
-int64_t monotonicNowNs() noexcept
+int64_t realtimeOffsetNs() noexcept
 {
-    return nowNs(CLOCK_MONOTONIC);
-}
-
-int64_t realtimeFromMonotonicNs(int64_t monotonic_ns) noexcept
-{
-    const int64_t offset_ns = nowNs(CLOCK_REALTIME) - nowNs(CLOCK_MONOTONIC);
-    return saturatingAddNs(monotonic_ns, offset_ns);
+    timespec before{}, realtime{}, after{};
+    clock_gettime(CLOCK_MONOTONIC, &before);
+    clock_gettime(CLOCK_REALTIME, &realtime);
+    clock_gettime(CLOCK_MONOTONIC, &after);
+    const auto ns = [](const timespec& ts) {
+        return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+    };
+    // The realtime read sits between the two monotonic ones: against their middle.
+    const int64_t monotonic = ns(before) + (ns(after) - ns(before)) / 2;
+    return ns(realtime) - monotonic;
 }
 
 } // namespace stereod

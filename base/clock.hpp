@@ -1,6 +1,8 @@
 #pragma once
-// The clock of every stamp (CLOCK_MONOTONIC, in ns) and arithmetic on stamps that
-// saturates instead of wrapping.
+// The clock of every stamp (CLOCK_MONOTONIC, in ns), its relation to the system's wall
+// clock (CLOCK_REALTIME, the time base of what leaves the service for other robot tools:
+// docs/architecture.md, "Time"), and arithmetic on stamps that saturates instead of
+// wrapping.
 
 #include <cstdint>
 #include <limits>
@@ -10,10 +12,12 @@ namespace stereod {
 // Current CLOCK_MONOTONIC time in nanoseconds: the clock of every capture stamp.
 int64_t monotonicNowNs() noexcept;
 
-// A CLOCK_MONOTONIC stamp as CLOCK_REALTIME (ns since the epoch), by the two clocks'
-// offset now. For the outside world only (ROS 2 headers, which use wall time): the offset
-// moves when the wall clock is set, so stamps compared inside the service stay monotonic.
-int64_t realtimeFromMonotonicNs(int64_t monotonic_ns) noexcept;
+// CLOCK_REALTIME minus CLOCK_MONOTONIC now, in ns: added to a capture stamp, the same
+// instant on the wall clock (ns since the Unix epoch). Sampled between two reads of the
+// monotonic clock, so it is off by at most the time one clock read takes. It changes when
+// the wall clock is set or slewed (NTP): take it once per pair and convert every stamp of
+// that pair with it (PublishedFrame::realtimeNs()).
+int64_t realtimeOffsetNs() noexcept;
 
 // a - b and a + b in ns, saturated to the int64_t range instead of wrapping: stamps
 // come from devices and recordings, and may be anything (a recording stamped INT64_MIN

@@ -464,6 +464,21 @@ void checkLiveView(Checker& checker, const LiveViewConfig& live_view)
     } catch (const std::invalid_argument& e) {
         checker.fail("live_view.listen", e.what(), "HOST:PORT with an IP address, or off");
     }
+    checker.integer("live_view.max_clients", live_view.max_clients, 1, 256, " clients");
+    for (const std::string& origin : live_view.allowed_origins) {
+        // What a browser sends: scheme://host[:port], no path; or "*" for any page.
+        const std::size_t scheme = origin.find("://");
+        const bool looks_right =
+            origin == "*" ||
+            (scheme != std::string::npos && scheme > 0 && origin.size() > scheme + 3 &&
+             origin.find_first_of("/ \t", scheme + 3) == std::string::npos);
+        if (!looks_right) {
+            checker.fail("live_view.allowed_origins", "\"" + origin + "\" is not an origin",
+                         "origins as browsers send them: scheme://host[:port] without a path, "
+                         "like https://app.foxglove.dev, or *");
+            break;
+        }
+    }
     checker.integer("live_view.points_step", live_view.points_step, 1, 1000, "");
     checker.real("live_view.max_rate_hz", live_view.max_rate_hz, above(0, 1000, " Hz"));
     const auto& r = live_view.rate_hz;
@@ -495,6 +510,8 @@ std::vector<Problem> checkValues(const ServiceConfig& config, const KeyLocations
     checkSource(checker, config.source, config.calibration_path);
     checkMatcher(checker, config.processing.matcher);
     checkNearest(checker, config.processing.nearest);
+    if (const auto& cap = config.processing.output.max_depth_m)
+        checker.real("output.max_depth_m", *cap, above(0, 1e6, " m"));
     checker.real("calibration_health.interval_s", config.calibration_health.interval_s,
                  closed(0, 3600, " s"));
     checker.real("robot.min_visible_fraction", config.zones.min_visible_fraction,

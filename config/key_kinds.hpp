@@ -123,6 +123,31 @@ KeyDef autoIntegerKey(std::string path, bool live, Access access, std::string ex
     return def;
 }
 
+// "auto" (std::nullopt) or a number, in `unit`; its range is checked by validation.
+template <class Access>
+KeyDef autoRealKey(std::string path, bool live, Access access, std::string unit)
+{
+    KeyDef def{std::move(path), live, {}, {}};
+    const std::string expected = "auto or a number, in " + unit;
+    def.read = [access, expected](const YAML::Node& node, ServiceConfig& config,
+                                  const ReadContext&) -> ReadResult {
+        if (node.IsScalar() && node.Scalar() == "auto") {
+            access(config) = std::nullopt;
+            return std::nullopt;
+        }
+        const auto value = node.IsScalar() ? parseReal(node.Scalar()) : std::nullopt;
+        if (!value) {
+            return ReadFailure{"not auto or a number", expected};
+        }
+        access(config) = *value;
+        return std::nullopt;
+    };
+    def.show = [access](const ServiceConfig& config) {
+        return access(config) ? formatNumber(*access(config)) : std::string("auto");
+    };
+    return def;
+}
+
 template <class Access> KeyDef boolKey(std::string path, bool live, Access access)
 {
     KeyDef def{std::move(path), live, {}, {}};
@@ -310,6 +335,36 @@ template <class Access> KeyDef idListKey(std::string path, bool live, Access acc
         std::string text = "[";
         for (const uint32_t id : access(config)) {
             text += (text.size() > 1 ? ", " : "") + std::to_string(id);
+        }
+        return text + "]";
+    };
+    return def;
+}
+
+// A list of texts: `["https://app.foxglove.dev"]`, or empty (`[]` or nothing).
+template <class Access> KeyDef textListKey(std::string path, bool live, Access access)
+{
+    KeyDef def{std::move(path), live, {}, {}};
+    def.read = [access](const YAML::Node& node, ServiceConfig& config,
+                        const ReadContext&) -> ReadResult {
+        const std::string expected = "a list of texts, like [\"https://app.foxglove.dev\"]";
+        std::vector<std::string> texts;
+        if (!node.IsNull() && !node.IsSequence()) {
+            return ReadFailure{"not a list", expected};
+        }
+        for (const auto& item : node) {
+            if (!item.IsScalar()) {
+                return ReadFailure{"not a list of texts", expected};
+            }
+            texts.push_back(item.Scalar());
+        }
+        access(config) = std::move(texts);
+        return std::nullopt;
+    };
+    def.show = [access](const ServiceConfig& config) {
+        std::string text = "[";
+        for (const std::string& item : access(config)) {
+            text += (text.size() > 1 ? ", " : "") + renderText(item);
         }
         return text + "]";
     };

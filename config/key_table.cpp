@@ -339,6 +339,9 @@ std::vector<KeyDef> buildKeyTable()
     add(realKey(
         "nearest.max_depth_m", kLive,
         [](auto& c) -> auto& { return c.processing.nearest.max_depth_m; }, "m"));
+    add(autoRealKey(
+        "output.max_depth_m", kLive,
+        [](auto& c) -> auto& { return c.processing.output.max_depth_m; }, "m"));
     add(realKey(
         "nearest.percentile", kLive,
         [](auto& c) -> auto& { return c.processing.nearest.percentile; }, "percent"));
@@ -408,6 +411,12 @@ std::vector<KeyDef> buildKeyTable()
         [](auto& c) -> auto& { return c.publish.max_reading_age_ms; }, "ms"));
     add(textKey(
         "live_view.listen", kRestart, [](auto& c) -> auto& { return c.live_view.listen; }, false));
+    add(integerKey(
+        "live_view.max_clients", kRestart,
+        [](auto& c) -> auto& { return c.live_view.max_clients; }));
+    add(textListKey(
+        "live_view.allowed_origins", kRestart,
+        [](auto& c) -> auto& { return c.live_view.allowed_origins; }));
     add(integerKey(
         "live_view.points_step", kRestart,
         [](auto& c) -> auto& { return c.live_view.points_step; }));

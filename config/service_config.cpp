@@ -237,7 +237,16 @@ void applyOverrides(ServiceConfig& config, const ConfigOverrides& overrides)
 
 void validateConfig(const ServiceConfig& config)
 {
-    auto problems = checkValues(config, KeyLocations{});
+    validateConfig(config, ConfigOverrides{});
+}
+
+void validateConfig(const ServiceConfig& config, const ConfigOverrides& overrides)
+{
+    // Where each overridden value came from; the values themselves are in `config` already.
+    ServiceConfig scratch = config;
+    KeyLocations locations;
+    overrideKeys(scratch, overrides, locations);
+    auto problems = checkValues(config, locations);
     if (!problems.empty()) {
         throw ConfigError(inLineOrder(std::move(problems)));
     }
@@ -288,6 +297,21 @@ std::optional<ListenAddress> parseListenAddress(const std::string& text)
         inet_pton(AF_INET6, address.host.c_str(), &scratch) != 1)
         throw std::invalid_argument("\"" + address.host + "\" is not an IP address");
     return address;
+}
+
+std::string formatListenAddress(const std::string& host, uint16_t port)
+{
+    const bool v6 = host.find(':') != std::string::npos;
+    return (v6 ? "[" + host + "]" : host) + ":" + std::to_string(port);
+}
+
+bool isLoopbackHost(const std::string& host)
+{
+    in_addr v4{};
+    if (inet_pton(AF_INET, host.c_str(), &v4) == 1)
+        return (ntohl(v4.s_addr) >> 24) == 127;
+    in6_addr v6{};
+    return inet_pton(AF_INET6, host.c_str(), &v6) == 1 && IN6_IS_ADDR_LOOPBACK(&v6);
 }
 
 } // namespace stereod

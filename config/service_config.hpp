@@ -99,6 +99,11 @@ struct LiveViewConfig {
     // "HOST:PORT" (an IP address; loopback unless the network should see the cameras), or
     // "off".
     std::string listen = "127.0.0.1:8765";
+    // WebSocket clients at once (Foxglove, the page); each may hold a few MiB of frames.
+    int max_clients = 16;
+    // Web pages, besides the live view's own, whose browsers may connect (their Origin,
+    // e.g. "https://app.foxglove.dev"); every request needs the live view's token anyway.
+    std::vector<std::string> allowed_origins;
     int points_step = 4;       // every n-th point of the cloud is sent
     double max_rate_hz = 10.0; // frame channels at most this often
     // Per channel (live_view.rate_hz.*): at most this often; 0 follows max_rate_hz.
@@ -168,6 +173,11 @@ struct ListenAddress {
     uint16_t port = 0;
 };
 std::optional<ListenAddress> parseListenAddress(const std::string& text);
+// HOST:PORT as parseListenAddress() reads it back, with an IPv6 host in brackets
+// ("[::1]:8765"): also the authority part of a URL.
+std::string formatListenAddress(const std::string& host, uint16_t port);
+// True for a host only this machine reaches (127.0.0.0/8, ::1).
+bool isLoopbackHost(const std::string& host);
 
 // Reads a file, applies the overrides, then validates the result, so that a file whose
 // replay path does not exist on this machine still runs with --replay. Problems with an
@@ -184,8 +194,11 @@ void applyOverrides(ServiceConfig& config, const ConfigOverrides& overrides);
 ServiceConfig parseConfig(const std::string& yaml_text, const std::string& origin);
 
 // Checks a configuration assembled in code (defaults plus command-line overrides).
-// Throws ConfigError with every problem found.
+// Throws ConfigError with every problem found. With the overrides that were applied, a
+// problem with an overridden value names the option ("command line (--live-view):
+// live_view.listen: ..."), as loadConfig() does, instead of "<defaults>".
 void validateConfig(const ServiceConfig& config);
+void validateConfig(const ServiceConfig& config, const ConfigOverrides& overrides);
 
 // Which settings differ between two configurations and whether all of them can change
 // while running, as the dotted keys of the file ("nearest.roi.x", ...). Those that need

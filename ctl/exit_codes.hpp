@@ -14,5 +14,8 @@ inline constexpr int kExitNotProducing = 2;
 inline constexpr int kExitUsage = 2;
 // The service cannot be reached (no socket, refused, connection lost, timed out).
 inline constexpr int kExitUnreachable = 3;
+// A distance, but the service suspects its calibration (`calibration_suspect`: its health
+// check finds the rows of the two images apart): the number may be wrong.
+inline constexpr int kExitCalibrationSuspect = 4;
 
 } // namespace stereod

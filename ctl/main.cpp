@@ -1,6 +1,7 @@
 // stereoctl: the command-line client of stereod and its offline tools (docs/stereoctl.md).
 // This file declares the command line; ctl/*_commands.cpp do the work.
 
+#include <csignal>
 #include <cstdio>
 #include <exception>
 #include <functional>
@@ -161,7 +162,7 @@ CLI::App* declareDistance(CLI::App& app, DistanceOptions& o, CommandSockets& soc
     CLI::App* cmd = addServiceCommand(
         app, "distance",
         "the nearest-object distance now (exit 0 valid, 1 no reading in range, 2 stale or not "
-        "producing, 3 service unreachable)",
+        "producing, 3 service unreachable, 4 valid but the calibration is suspect)",
         o.service, sockets, &o.json, "print the reading object as JSON");
     cmd->add_option("--max-age-ms", o.max_age_ms, "refuse a reading older than this (ms)")
         ->check(kPositive);
@@ -453,6 +454,10 @@ CLI::App* declareDevices(CLI::App& app, DevicesOptions& o)
 int main(int argc, char** argv)
 {
     using namespace stereod;
+    // A file that reaches the size limit (ulimit -f) must fail its write with EFBIG, which
+    // the command reports with what it wrote, rather than kill the process (SIGXFSZ) with
+    // no word and the recording's count lost.
+    std::signal(SIGXFSZ, SIG_IGN);
     CLI::App app("stereoctl: client and offline tools of the stereod stereo depth service",
                  "stereoctl");
     app.failure_message(oneLineFailure);
@@ -476,8 +481,9 @@ int main(int argc, char** argv)
                            "print the service's status object as JSON"),
          [&] { return runStatus(o.status); }},
         {addServiceCommand(app, "view",
-                           "print the live view's address (Foxglove WebSocket and the viewer "
-                           "page) and open a browser on it when there is a display",
+                           "print the live view's addresses with its token (the viewer page, "
+                           "Foxglove's WebSocket) and open a browser on the page when there is "
+                           "a display",
                            o.view.service, sockets),
          [&] { return runView(o.view); }},
         {addServiceCommand(app, "watch", "one line per new reading until interrupted (Ctrl-C)",

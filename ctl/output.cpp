@@ -14,8 +14,8 @@ namespace stereod {
 namespace {
 
 // The pipeline's order, which is also the order people read the table in.
-constexpr std::array<const char*, 6> kStageOrder = {"rectify", "match", "depth",
-                                                    "nearest", "cloud", "publish"};
+constexpr std::array<const char*, 7> kStageOrder = {"rectify", "match", "depth",  "nearest",
+                                                    "cloud",   "zones", "publish"};
 
 } // namespace
 

@@ -62,10 +62,16 @@ std::optional<NoReadingReason> reasonFromCode(std::string_view code)
     return std::nullopt;
 }
 
+bool calibrationSuspect(const nlohmann::ordered_json& reading)
+{
+    const auto suspect = reading.find("calibration_suspect");
+    return suspect != reading.end() && suspect->is_boolean() && suspect->get<bool>();
+}
+
 int exitCodeForReading(const nlohmann::ordered_json& reading)
 {
     if (isValid(reading)) {
-        return kExitOk;
+        return calibrationSuspect(reading) ? kExitCalibrationSuspect : kExitOk;
     }
     std::optional<NoReadingReason> reason;
     if (const auto r = reading.find("reason"); r != reading.end() && r->is_object()) {
@@ -81,12 +87,40 @@ int exitCodeForReading(const nlohmann::ordered_json& reading)
     return kExitNoReading;
 }
 
-std::string formatDistance(const nlohmann::ordered_json& reading)
+namespace {
+
+// "  CALIBRATION SUSPECT: rows +1.52 px apart" for a flagged reading, else "".
+std::string suspectNote(const nlohmann::ordered_json& reading)
+{
+    if (!calibrationSuspect(reading)) {
+        return {};
+    }
+    std::string note = "  CALIBRATION SUSPECT";
+    if (const auto offset = reading.find("calibration_row_offset_px");
+        offset != reading.end() && offset->is_number()) {
+        note += fmt::format(": rows {:+.2f} px apart", offset->get<double>());
+    }
+    return note;
+}
+
+} // namespace
+
+namespace {
+
+// "0.873 m" or "no reading: <reason message>", without the flag.
+std::string distanceText(const nlohmann::ordered_json& reading)
 {
     if (isValid(reading)) {
         return fmt::format("{:.3f} m", reading["distance_m"].get<double>());
     }
     return "no reading: " + reasonMessage(reading);
+}
+
+} // namespace
+
+std::string formatDistance(const nlohmann::ordered_json& reading)
+{
+    return distanceText(reading) + (isValid(reading) ? suspectNote(reading) : std::string());
 }
 
 std::string formatWatchLine(const nlohmann::ordered_json& reading)
@@ -95,13 +129,17 @@ std::string formatWatchLine(const nlohmann::ordered_json& reading)
     if (const auto frame = reading.find("frame"); frame != reading.end() && frame->is_number()) {
         line = fmt::format("frame {}  ", frame->get<uint64_t>());
     }
-    line += formatDistance(reading);
+    line += distanceText(reading);
     if (const auto age = reading.find("age_ms"); age != reading.end() && age->is_number()) {
         line += fmt::format("  age {:.0f} ms", age->get<double>());
     }
     if (const auto valid = reading.find("valid_fraction");
         valid != reading.end() && valid->is_number()) {
         line += fmt::format("  valid {:.0f} %", 100.0 * valid->get<double>());
+    }
+    // At the end, where a reader scanning the columns finds it.
+    if (isValid(reading)) {
+        line += suspectNote(reading);
     }
     return line;
 }

@@ -23,14 +23,18 @@ std::optional<NoReadingReason> reasonFromCode(std::string_view code);
 // Exit code of `stereoctl distance` for a reading object: 0 valid; 1 a fresh frame whose
 // data support no number (too few valid pixels, nothing in range, bad frame); 2 the
 // service is not producing (stale, out of sync, source down, no frame yet, or a reason
-// this client does not know).
+// this client does not know); 4 valid, but with `calibration_suspect`.
 int exitCodeForReading(const nlohmann::ordered_json& reading);
 
-// "0.873 m", or "no reading: <reason message>".
+// Whether the reading carries `calibration_suspect: true`.
+bool calibrationSuspect(const nlohmann::ordered_json& reading);
+
+// "0.873 m", "0.873 m  CALIBRATION SUSPECT: rows +1.52 px apart" when the reading is
+// flagged, or "no reading: <reason message>".
 std::string formatDistance(const nlohmann::ordered_json& reading);
 
 // One line of `stereoctl watch`: "frame 118  1.412 m  age 37 ms  valid 83 %", or the
-// reason instead of the distance.
+// reason instead of the distance; flagged readings end with "  CALIBRATION SUSPECT: ...".
 std::string formatWatchLine(const nlohmann::ordered_json& reading);
 
 } // namespace stereod

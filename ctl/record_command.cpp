@@ -50,8 +50,15 @@ namespace fs = std::filesystem;
 struct PairBuffer {
     cv::Mat left;
     cv::Mat right;
+    // Each camera's own capture stamps (the source's: CLOCK_MONOTONIC for cameras, the
+    // recorded ones on replay): what a CSV+PNG recording keeps, to be replayed as it was.
     int64_t left_stamp_ns = 0;
     int64_t right_stamp_ns = 0;
+    // The same frames in the service's one time base, CLOCK_REALTIME: what a bag carries
+    // (header.stamp and log time), as ROS does. A service older than these fields gives
+    // none: the bag then keeps the source's stamps.
+    std::optional<int64_t> left_realtime_ns;
+    std::optional<int64_t> right_realtime_ns;
     // The pair's results (--with), when the event carried them. The buffers keep their
     // size from pair to pair.
     cv::Mat depth_m; // CV_32FC1 metres, 0 = none
@@ -343,6 +350,14 @@ bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair,
     if (pair != nullptr) {
         pair->depth_present = false;
         pair->cloud_present = false;
+        const auto stamp = [&event](const char* key) -> std::optional<int64_t> {
+            const auto it = event.find(key);
+            if (it == event.end() || !it->is_number_integer())
+                return std::nullopt;
+            return it->get<int64_t>();
+        };
+        pair->left_realtime_ns = stamp("left_stamp_realtime_ns");
+        pair->right_realtime_ns = stamp("right_stamp_realtime_ns");
     }
     for (const json& header : *payloads) {
         const Payload payload = parsePayload(header);
@@ -467,15 +482,20 @@ int runRecord(const RecordOptions& options)
             bag->enableDepth();
         if (results.points)
             bag->enablePoints();
-        // A pair's depth and points carry its left image's stamp: the depth is the left
-        // camera's view, and a ROS user pairs them with the image by stamp.
+        // The pairs in the one time base (CLOCK_REALTIME, as ROS stamps its messages): log
+        // times that never step back when the service replays a recording in a loop, and
+        // stamps that merge with the robot's other data. A pair's depth and points carry
+        // its left image's stamp: the depth is the left camera's view, and a ROS user
+        // pairs them with the image by stamp.
         write = [&bag, results](const PairBuffer& p) {
-            bag->write(p.left, p.right, p.left_stamp_ns, p.right_stamp_ns);
+            const int64_t left = p.left_realtime_ns.value_or(p.left_stamp_ns);
+            const int64_t right = p.right_realtime_ns.value_or(p.right_stamp_ns);
+            bag->write(p.left, p.right, left, right);
             if (results.depth && p.depth_present)
-                bag->writeDepth(p.depth_m, p.left_stamp_ns);
+                bag->writeDepth(p.depth_m, left);
             if (results.points && p.cloud_present)
                 bag->writePoints(reinterpret_cast<const float*>(p.cloud.data()), p.cloud.size(),
-                                 p.left_stamp_ns);
+                                 left);
         };
     } else {
         csv.emplace(options.out_dir);
@@ -569,11 +589,14 @@ int runRecord(const RecordOptions& options)
     }
     progress.update(counts, pair_writer.written(), 0, queue.capacity(), true);
 
-    const uint64_t written = pair_writer.written();
+    // A bag's pairs count once their chunk is on disk: a chunk the disk refused (ENOSPC,
+    // EFBIG) holds pairs handed to the writer that no replay will find.
+    const uint64_t written = bag ? bag->pairsOnDisk() : pair_writer.written();
     const std::string write_error = pair_writer.failed() ? pair_writer.error() : close_error;
     const uint64_t dropped = counts.service_skipped + counts.queue_dropped;
     if (options.json) {
-        json summary = {{"dir", options.out_dir},
+        // A bag is a file, a CSV+PNG recording a directory: the key says which.
+        json summary = {{mcap ? "file" : "dir", options.out_dir},
                         {"pairs", written},
                         {"dropped", dropped},
                         {"service_skipped", counts.service_skipped},

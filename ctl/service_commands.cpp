@@ -7,6 +7,7 @@
 #include <fmt/format.h>
 #include <opencv2/core.hpp>
 #include <spawn.h>
+#include <unistd.h>
 
 #include "ctl/client.hpp"
 #include "ctl/commands.hpp"
@@ -23,6 +24,24 @@ extern char** environ;
 namespace stereod {
 
 namespace {
+
+// A page only this user can read (in XDG_RUNTIME_DIR) that sends the browser on to `url`;
+// `url` itself when there is no such directory or the file cannot be written.
+std::string privateRedirect(const std::string& url)
+{
+    const char* runtime = std::getenv("XDG_RUNTIME_DIR");
+    if (runtime == nullptr || *runtime == '\0')
+        return url;
+    std::string path = std::string(runtime) + "/stereod-view-XXXXXX.html";
+    const int fd = ::mkstemps(path.data(), 5); // mode 0600
+    if (fd < 0)
+        return url;
+    const std::string html = "<!DOCTYPE html><meta http-equiv=\"refresh\" content=\"0;url=" + url +
+                             "\"><a href=\"" + url + "\">stereod live view</a>\n";
+    const bool written = ::write(fd, html.data(), html.size()) == static_cast<ssize_t>(html.size());
+    ::close(fd);
+    return written ? "file://" + path : url;
+}
 
 using json = nlohmann::ordered_json;
 
@@ -130,11 +149,11 @@ void printStatus(const json& status)
     const json& extended = member(pipeline, "extended_range");
     fmt::print(
         "pipeline: {} frames, {} fps, matcher {}, {} disparities from {}{}, closest depth {} "
-        "m\n",
+        "m, depth out to {} m\n",
         number(pipeline, "frames", 0), number(pipeline, "fps", 1), text(pipeline, "matcher"),
         number(pipeline, "num_disparities", 0), number(pipeline, "min_disparity", 0),
         extended.is_boolean() && extended.get<bool>() ? " and the extended range" : "",
-        number(pipeline, "closest_depth_m", 2));
+        number(pipeline, "closest_depth_m", 2), number(pipeline, "max_output_depth_m", 1));
     printStageTable(stdout, member(pipeline, "stage_ms"));
     const json& latency = member(pipeline, "latency_ms");
     fmt::print("latency from capture to reading: p50 {} ms, p99 {} ms\n", number(latency, "p50", 1),
@@ -167,6 +186,27 @@ void printStatus(const json& status)
                "slow\n",
                number(clients, "connected", 0), number(clients, "subscribers", 0),
                number(clients, "frames_dropped", 0), number(clients, "disconnected_slow", 0));
+
+    const json& live = member(status, "live_view");
+    if (live.is_object()) {
+        if (live.value("listening", false)) {
+            fmt::print("live view: http://{}/, {} clients, {} messages ({} MB), {} readings sent, "
+                       "{} frames dropped for slow clients, {} clients closed as not reading\n",
+                       text(live, "listen"), number(live, "clients", 0),
+                       number(live, "messages_sent", 0),
+                       live.value("bytes_sent", 0.0) > 0
+                           ? fmt::format("{:.1f}", live.value("bytes_sent", 0.0) / 1e6)
+                           : std::string("0"),
+                       number(live, "readings_sent", 0), number(live, "frames_dropped", 0),
+                       number(live, "clients_dropped", 0));
+        } else {
+            const std::string error = optionalText(live, "error");
+            fmt::print("live view: {}{}\n",
+                       text(live, "listen") == "off" ? std::string("off")
+                                                     : "not listening on " + text(live, "listen"),
+                       error.empty() ? std::string() : ": " + error);
+        }
+    }
 
     if (const json& reading = member(status, "reading"); reading.is_object()) {
         fmt::print("reading: {}\n", formatWatchLine(reading));
@@ -212,23 +252,28 @@ int runStatus(const StatusOptions& options)
 int runView(const StatusOptions& options)
 {
     ProtocolClient client = connect(options.service);
-    const json reply = client.request({{"cmd", "status"}});
-    const json& live = member(member(reply, "status"), "live_view");
-    const std::string listen = text(live, "listen");
-    if (!live.value("listening", false)) {
+    const json reply = client.request({{"cmd", "view"}});
+    const std::string listen = text(reply, "listen");
+    if (!reply.value("listening", false)) {
         fmt::print(stderr, "stereoctl: the live view is not listening ({}){}\n",
-                   listen.empty() ? "this service has none" : "live_view.listen: " + listen,
-                   text(live, "error").empty() ? "" : ": " + text(live, "error"));
+                   listen.empty() || listen == "off" ? "live_view.listen: off"
+                                                     : "live_view.listen: " + listen,
+                   text(reply, "error").empty() ? "" : ": " + text(reply, "error"));
         return kExitNoReading;
     }
-    const std::string page = "http://" + listen + "/";
-    fmt::print("{}\nFoxglove: Open connection, Foxglove WebSocket, ws://{}\n", page, listen);
+    const std::string page = text(reply, "page");
+    fmt::print("{}\nFoxglove: Open connection, Foxglove WebSocket, {}\n", page,
+               text(reply, "websocket"));
     const char* display = std::getenv("DISPLAY");
     const char* wayland = std::getenv("WAYLAND_DISPLAY");
     if ((display != nullptr && *display != '\0') || (wayland != nullptr && *wayland != '\0')) {
+        // The browser gets a file of this user's that leads to the page, not the page's
+        // address: a command line is visible to every user of the machine, the token in
+        // it would be too.
+        const std::string opened = privateRedirect(page);
         // Detached: the browser outlives this command.
         pid_t pid = 0;
-        const char* argv[] = {"xdg-open", page.c_str(), nullptr};
+        const char* argv[] = {"xdg-open", opened.c_str(), nullptr};
         if (posix_spawnp(&pid, "xdg-open", nullptr, nullptr, const_cast<char* const*>(argv),
                          environ) != 0)
             fmt::print(stderr, "stereoctl: no xdg-open to open a browser; open {} yourself\n",

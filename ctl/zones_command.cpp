@@ -2,8 +2,10 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <string>
+#include <vector>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -25,20 +27,37 @@ namespace {
 
 using json = nlohmann::ordered_json;
 
+// A field as text: a number with `decimals`, text as it is, "?" for anything else (null,
+// missing): a zone's state must reach the user and the exit code whatever its numbers say.
+std::string field(const json& zone, const char* key, int decimals = 3, double scale = 1.0)
+{
+    const auto it = zone.find(key);
+    if (it == zone.end() || it->is_null())
+        return "?";
+    if (it->is_number())
+        return fmt::format("{:.{}f}", it->get<double>() * scale, decimals);
+    return it->is_string() ? it->get<std::string>() : it->dump();
+}
+
 std::string zoneLine(const json& zone)
 {
-    std::string line = fmt::format("{}: {}", zone.value("name", std::string("?")),
-                                   zone.value("state", std::string("unknown")));
+    std::string line = fmt::format("{}: {}", field(zone, "name"), field(zone, "state"));
     if (zone.contains("reason"))
-        line += " (" + zone["reason"].get<std::string>() + ")";
-    if (zone.value("points", 0) > 0 && zone.contains("nearest_point_m")) {
+        line += " (" + field(zone, "reason") + ")";
+    const auto points = zone.find("points");
+    const bool has_points =
+        points != zone.end() && points->is_number() && points->get<double>() > 0;
+    if (has_points && zone.contains("nearest_point_m")) {
         const json& p = zone["nearest_point_m"];
-        line += fmt::format(", nearest {:.3f} m at ({:.2f}, {:.2f}, {:.2f})",
-                            zone.value("nearest_m", 0.0), p[0].get<double>(), p[1].get<double>(),
-                            p[2].get<double>());
+        std::string at = "?";
+        if (p.is_array() && p.size() == 3 &&
+            std::all_of(p.begin(), p.end(), [](const json& v) { return v.is_number(); }))
+            at = fmt::format("({:.2f}, {:.2f}, {:.2f})", p[0].get<double>(), p[1].get<double>(),
+                             p[2].get<double>());
+        line += ", nearest " + field(zone, "nearest_m") + " m at " + at;
     }
-    line += fmt::format(", {} points, {:.0f} % in sight", zone.value("points", 0),
-                        100.0 * zone.value("visible_fraction", 0.0));
+    line += ", " + field(zone, "points", 0) + " points, " +
+            field(zone, "visible_fraction", 0, 100.0) + " % in sight";
     return line;
 }
 
@@ -49,7 +68,9 @@ int exitCodeFor(const json& zones, bool stale)
     bool unknown = stale || !zones.is_array() || zones.empty();
     bool occupied = false;
     for (const json& zone : zones) {
-        const std::string state = zone.value("state", std::string("unknown"));
+        const auto it = zone.find("state");
+        const std::string state =
+            it != zone.end() && it->is_string() ? it->get<std::string>() : "unknown";
         occupied = occupied || state == "occupied";
         unknown = unknown || state == "unknown";
     }
@@ -77,9 +98,34 @@ cv::Vec3d vec3(const json& value)
     return {value[0].get<double>(), value[1].get<double>(), value[2].get<double>()};
 }
 
-// The zones of `reply` drawn on the colourised depth of the latest frame: each box's twelve
-// edges projected into the rectified left image (parts behind the camera left out),
-// red occupied, green clear, yellow unknown, with its name and state.
+// The depth as grey, near bright and far dark (inverse depth between the display range's
+// ends, as colorizeDepth() spreads it), black where there is none: a background on which
+// the zones' colours are the only colours.
+cv::Mat greyDepth(const cv::Mat& depth_m, double near_m, double far_m)
+{
+    const double inv_far = 1.0 / far_m;
+    const double inv_near = 1.0 / near_m;
+    cv::Mat grey(depth_m.size(), CV_8UC1);
+    for (int y = 0; y < depth_m.rows; ++y) {
+        const float* z = depth_m.ptr<float>(y);
+        uint8_t* out = grey.ptr<uint8_t>(y);
+        for (int x = 0; x < depth_m.cols; ++x) {
+            const bool ok = z[x] > 0.0f && std::isfinite(z[x]);
+            const double t =
+                ok ? std::clamp((1.0 / z[x] - inv_far) / (inv_near - inv_far), 0.0, 1.0) : 0.0;
+            // 40..200: the far end stays apart from "no depth", the near end from white.
+            out[x] = ok ? static_cast<uint8_t>(std::lround(40.0 + 160.0 * t)) : 0;
+        }
+    }
+    cv::Mat picture;
+    cv::cvtColor(grey, picture, cv::COLOR_GRAY2BGR);
+    return picture;
+}
+
+// The zones of `reply` drawn on the depth of the latest frame in grey: each box's twelve
+// edges projected into the rectified left image (parts behind the camera left out), red
+// occupied, green clear, yellow unknown, with a label (name, state, points, share in
+// sight) on a box of the zone's colour.
 void drawPicture(ProtocolClient& client, const json& reply, const std::string& path)
 {
     const json camera = reply.value("camera", json::object());
@@ -100,7 +146,10 @@ void drawPicture(ProtocolClient& client, const json& reply, const std::string& p
     cv::Mat depth_m;
     depth_mm.convertTo(depth_m, CV_32FC1, 1e-3);
     const auto [near_m, far_m] = depthDisplayRange(depth_m);
-    cv::Mat picture = colorizeDepth(depth_m, near_m, far_m);
+    cv::Mat picture = greyDepth(depth_m, near_m, far_m);
+    // Labels readable at any image size: about 1.6 % of the width high.
+    const double font_scale = std::max(0.45, picture.cols / 1400.0);
+    const int font_thickness = picture.cols >= 1000 ? 2 : 1;
 
     const json pose = reply.value("camera_pose", json::object());
     const CameraPose camera_pose{vec3(pose.value("translation_m", json())),
@@ -108,6 +157,12 @@ void drawPicture(ProtocolClient& client, const json& reply, const std::string& p
     const cv::Matx33d base_to_optical = opticalToBaseRotation(camera_pose).t();
     const double f = camera["focal_px"].get<double>();
     const double cx = camera["cx_px"].get<double>();
+    struct Label {
+        std::string text;
+        cv::Point corner; // the box's top left in the picture
+        cv::Scalar colour, ink;
+    };
+    std::vector<Label> labels;
     const double cy = camera["cy_px"].get<double>();
     constexpr double kNearPlane = 0.05; // m: edges are cut where they pass behind this
     const auto optical = [&](const cv::Vec3d& base) {
@@ -150,11 +205,41 @@ void drawPicture(ProtocolClient& client, const json& reply, const std::string& p
                 label.y = std::min(label.y, static_cast<int>(std::min(from.y, to.y)));
             }
         if (in_view) {
-            label.x = std::clamp(label.x, 0, picture.cols - 1);
-            label.y = std::clamp(label.y - 6, 12, picture.rows - 1);
-            cv::putText(picture, zone.value("name", std::string()) + ": " + state, label,
-                        cv::FONT_HERSHEY_SIMPLEX, 0.5, colour, 1, cv::LINE_AA);
+            // Black on green and yellow, white on red.
+            labels.push_back(
+                {fmt::format("{}: {}, {} points, {:.0f} % in sight",
+                             zone.value("name", std::string()), state, zone.value("points", 0),
+                             100.0 * zone.value("visible_fraction", 0.0)),
+                 label, colour,
+                 state == "occupied" ? cv::Scalar(255, 255, 255) : cv::Scalar(0, 0, 0)});
         }
+    }
+    // The labels after every box, so that no edge crosses one; each above its box's top
+    // left corner, kept inside the picture, and moved down past the labels already placed
+    // where two would overlap.
+    std::vector<cv::Rect> placed;
+    for (const Label& l : labels) {
+        int baseline = 0;
+        const cv::Size size = cv::getTextSize(l.text, cv::FONT_HERSHEY_SIMPLEX, font_scale,
+                                              font_thickness, &baseline);
+        const int pad = 3;
+        cv::Rect box(std::clamp(l.corner.x, 0, std::max(0, picture.cols - size.width - 2 * pad)),
+                     std::max(0, l.corner.y - 4 - size.height - pad), size.width + 2 * pad,
+                     size.height + baseline + 2 * pad);
+        for (bool moved = true; moved;) {
+            moved = false;
+            for (const cv::Rect& other : placed) {
+                if ((box & other).area() > 0) {
+                    box.y = other.y + other.height + 1;
+                    moved = true;
+                }
+            }
+        }
+        box.y = std::min(box.y, std::max(0, picture.rows - box.height));
+        placed.push_back(box);
+        cv::rectangle(picture, box, l.colour, cv::FILLED);
+        cv::putText(picture, l.text, cv::Point(box.x + pad, box.y + pad + size.height),
+                    cv::FONT_HERSHEY_SIMPLEX, font_scale, l.ink, font_thickness, cv::LINE_AA);
     }
     writeImagePng(path, picture);
 }

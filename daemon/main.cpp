@@ -102,11 +102,13 @@ int main(int argc, char** argv)
                                         "validate FILE, print every problem (file:line), "
                                         "and exit: 0 valid, 3 invalid");
     auto* replay_option = app.add_option("--replay", request.overrides.replay_path,
-                                         "replay this recording directory (or folder of "
-                                         "left*/right* images)");
+                                         "replay this recording: a directory (frames.csv, or "
+                                         "a folder of left*/right* images) or a ROS 2 bag "
+                                         "(FILE.mcap, two image topics)");
     auto* calib_option = app.add_option("--calib", request.overrides.calibration_path,
                                         "calibration file (default: the configuration's, "
-                                        "or DIR/calibration.yaml of the replay)");
+                                        "or DIR/calibration.yaml, or a bag's camera_info, of "
+                                        "the replay)");
     auto* socket_option = app.add_option("--socket", request.overrides.socket_path,
                                          "Unix socket path (default /run/stereod/stereod.sock)");
     // An empty path would silently mean "not given" further on (`--socket ""` would bind

@@ -17,9 +17,10 @@ class PublishObserver {
     // A new result, and its reading as the protocol's reading object.
     virtual void onFrame(const PublishedFrame& frame, std::string_view reading_json) = 0;
     // Once a second: the `status` object, and the current reading (which may say that
-    // no frame comes any more) with the stamp of the pair behind it (0: none).
+    // no frame comes any more) with the stamp of the pair behind it on CLOCK_REALTIME
+    // (PublishedFrame::realtimeNs(); 0: none).
     virtual void onStatus(std::string_view status_json, std::string_view reading_json,
-                          int64_t reading_stamp_ns) = 0;
+                          int64_t reading_realtime_ns) = 0;
 };
 
 // Several observers as one (the live view and the ROS 2 node), each called in turn.

@@ -44,6 +44,7 @@ void Publisher::publish() noexcept
     const uint64_t sequence = published_.load(std::memory_order_relaxed) + 1;
     slot.sequence = sequence;
     slot.published_ns = monotonicNowNs();
+    slot.realtime_offset_ns = realtimeOffsetNs();
     const uint8_t previous =
         middle_.exchange(static_cast<uint8_t>(back_ | kFresh), std::memory_order_acq_rel);
     back_ = previous & kIndexMask;

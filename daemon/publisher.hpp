@@ -26,6 +26,7 @@
 
 #include <opencv2/core/mat.hpp>
 
+#include "base/clock.hpp"
 #include "base/unique_fd.hpp"
 #include "pipeline/stereo_processor.hpp"
 #include "pipeline/zones.hpp"
@@ -56,12 +57,16 @@ struct PipelineStats {
     uint64_t out_of_sync = 0;     // pairs whose skew exceeded source.max_skew_ms
     double fps = 0.0;             // processed pairs per second over the last frames
     StageTimings stage_mean_ms;   // mean of each stage over the last frames, ms
+    double zones_mean_ms = 0.0;   // mean of the keep-out zones' stage (0 without zones)
     double publish_mean_ms = 0.0; // mean of the publish stage (depth to mm, hand-off)
     // From a pair's capture stamp to its result's publication, over the last pairs, ms.
     double latency_p50_ms = 0.0;
     double latency_p99_ms = 0.0;
-    DisparityRange range;           // the disparity range in force
-    std::array<char, 16> matcher{}; // StereoProcessor::matcherName(), NUL-terminated
+    DisparityRange range;            // the disparity range in force
+    double max_output_depth_m = 0.0; // StereoProcessor::maxOutputDepth(), metres
+    // StereoProcessor::matcherName() ("census-sgm (planar)"), kept in place: copied with
+    // the stats into every result without allocating.
+    FixedText matcher;
 };
 
 // A pair as captured, before rectification: copies of the source's frames, made only
@@ -88,6 +93,9 @@ struct PublishedFrame {
     int64_t skew_ns = 0;      // right minus left capture time of the pair
     uint64_t sequence = 0;    // set by publish(): 1 for the first result, then +1
     int64_t published_ns = 0; // CLOCK_MONOTONIC when published, set by publish()
+    // CLOCK_REALTIME minus CLOCK_MONOTONIC when published, set by publish(): the one
+    // conversion of this pair's stamps to the wall clock (realtimeNs()).
+    int64_t realtime_offset_ns = 0;
     // What made the pair a bad frame (its sizes, the error), for the reason's message;
     // empty otherwise. The reading's verdict is in result.facts / result.reading.
     FixedText reason_message;
@@ -97,6 +105,15 @@ struct PublishedFrame {
     // name's buffer from frame to frame.
     std::vector<ZoneReading> zones;
     CameraPose camera_pose; // robot.camera_pose in force for this pair
+
+    // A CLOCK_MONOTONIC stamp of this pair (result.stamp_ns, or its right frame's) as the
+    // same instant on CLOCK_REALTIME, ns since the Unix epoch: the time base of readings'
+    // stamp_realtime_ns, the live view, bags and anything a robot merges with its other
+    // data (ROS's header.stamp). The one place such a stamp is made.
+    int64_t realtimeNs(int64_t monotonic_ns) const noexcept
+    {
+        return saturatingAddNs(monotonic_ns, realtime_offset_ns);
+    }
 };
 
 class Publisher {

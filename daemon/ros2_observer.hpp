@@ -19,13 +19,14 @@ class Ros2Observer final : public PublishObserver {
 
     void onFrame(const PublishedFrame& frame, std::string_view reading_json) override
     {
-        publisher_.offerFrame(frame.result, frame.depth_valid, frame.stats.range, frame.camera_pose,
+        publisher_.offerFrame(frame.result, frame.realtimeNs(frame.result.stamp_ns),
+                              frame.depth_valid, frame.stats.range, frame.camera_pose,
                               reading_json);
     }
     void onStatus(std::string_view /*status_json*/, std::string_view reading_json,
-                  int64_t reading_stamp_ns) override
+                  int64_t reading_realtime_ns) override
     {
-        publisher_.offerStatus(reading_json, reading_stamp_ns);
+        publisher_.offerStatus(reading_json, reading_realtime_ns);
     }
 
   private:

@@ -1,6 +1,7 @@
 #pragma once
 // What the socket server (daemon/socket_server.hpp) needs from the service behind it: the
-// source's health, the service's part of `status`, `reload`, and a periodic tick. The
+// source's health, the service's part of `status`, `reload`, the live view's links, and a
+// periodic tick. The
 // service implements it; the server's tests put a stub in its place.
 
 #include <cstdint>
@@ -28,6 +29,16 @@ struct ReloadOutcome {
     std::vector<std::string> restart_needed;
 };
 
+// Where the live view is, for `view`: its page and its WebSocket with the token in their
+// URLs, or why it is not listening.
+struct LiveViewLinks {
+    bool listening = false;
+    std::string listen;    // the address bound (or configured: "off", or why not)
+    std::string error;     // why it is not listening, when it should be
+    std::string page;      // http://HOST:PORT/?token=...
+    std::string websocket; // ws://HOST:PORT/?token=... (Foxglove)
+};
+
 // Thread-bound: called on the server's I/O thread only.
 class ServerBackend {
   public:
@@ -45,6 +56,14 @@ class ServerBackend {
 
     // Runs on every timer tick (about every 100 ms).
     virtual void onTick(int64_t now_ns) = 0;
+
+    // The live view's links (a service without one: not listening, listen "off").
+    virtual LiveViewLinks liveViewLinks()
+    {
+        LiveViewLinks links;
+        links.listen = "off";
+        return links;
+    }
 };
 
 } // namespace stereod

@@ -16,6 +16,7 @@
 #include <sys/signalfd.h>
 #include <unistd.h>
 
+#include "base/descriptor_budget.hpp"
 #include "base/system_error.hpp"
 
 namespace stereod {
@@ -117,6 +118,7 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
     if (processor_) {
         initial_range_ = processor_->disparityRange();
         initial_matcher_ = processor_->matcherName();
+        initial_max_output_depth_m_ = processor_->maxOutputDepth();
         logDisparityRange(initial_range_, config_.processing.matcher, initial_matcher_);
     } else {
         initial_matcher_ = "none";
@@ -136,8 +138,10 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
     }
     worker_->updateZones(config_.zones);
 
+    budgetDescriptors();
     ServerOptions server_options;
     server_options.socket = config_.socket;
+    server_options.socket.max_clients = socket_max_clients_;
     server_options.publish = config_.publish;
     if (calibration_)
         server_options.geometry = calibration_->rectified;
@@ -323,6 +327,42 @@ SourceHealth Service::sourceHealth(int64_t now_ns)
     return health;
 }
 
+void Service::budgetDescriptors()
+{
+    // Descriptors the service opens while it runs besides its connections: replay files
+    // and the decoders' pipe, a reload's files, the live view's own (its event loop,
+    // acceptor and timer), the two spare descriptors, log files, systemd's socket.
+    constexpr std::size_t kReserve = 32;
+    // Sockets of the live view beyond its WebSocket clients: the page's HTTP requests and
+    // handshakes in progress.
+    constexpr std::size_t kLiveViewHttp = 16;
+    const std::size_t limit = descriptorLimit();
+    const std::size_t open = countOpenDescriptors();
+    const std::size_t spare = limit > open + kReserve ? limit - open - kReserve : 0;
+    const auto socket_wanted = static_cast<std::size_t>(std::max(config_.socket.max_clients, 1));
+    const bool live = parseListenAddress(config_.live_view.listen).has_value();
+    const std::size_t live_wanted =
+        live ? static_cast<std::size_t>(config_.live_view.max_clients) + kLiveViewHttp : 0;
+    // The socket's clients (the robot's own programs) come first, up to two thirds when
+    // the live view wants the rest; each keeps at least a few.
+    std::size_t socket_clients = socket_wanted;
+    std::size_t live_connections = live_wanted;
+    if (socket_wanted + live_wanted > spare) {
+        socket_clients = std::clamp<std::size_t>(live ? spare * 2 / 3 : spare, 4, socket_wanted);
+        live_connections =
+            live ? std::clamp<std::size_t>(spare - std::min(spare, socket_clients), 2, live_wanted)
+                 : 0;
+        spdlog::warn("descriptors: RLIMIT_NOFILE is {} with {} open and {} kept for the service: "
+                     "socket clients at most {} (socket.max_clients {}){}",
+                     limit, open, kReserve, socket_clients, socket_wanted,
+                     live ? fmt::format(", live view connections at most {} (of {})",
+                                        live_connections, live_wanted)
+                          : std::string());
+    }
+    socket_max_clients_ = static_cast<int>(socket_clients);
+    live_view_connections_ = live_connections;
+}
+
 void Service::startLiveView()
 {
     const auto address = parseListenAddress(config_.live_view.listen); // checked by the config
@@ -331,6 +371,10 @@ void Service::startLiveView()
     live_view::LiveViewSettings settings;
     settings.host = address->host;
     settings.port = address->port;
+    settings.allowed_origins = config_.live_view.allowed_origins;
+    settings.max_connections = live_view_connections_;
+    settings.max_clients = std::min<std::size_t>(
+        static_cast<std::size_t>(config_.live_view.max_clients), live_view_connections_);
     settings.points_step = config_.live_view.points_step;
     settings.max_rate_hz = config_.live_view.max_rate_hz;
     const auto& rates = config_.live_view.rate_hz;
@@ -342,6 +386,7 @@ void Service::startLiveView()
     settings.rate_hz[live_view::kLeftInfo] = rates.camera_info;
     settings.rate_hz[live_view::kRightInfo] = rates.camera_info;
     settings.rate_hz[live_view::kNearest] = rates.nearest;
+    settings.rate_hz[live_view::kZones] = rates.nearest; // the zones come with the reading
     settings.web_root = options_.live_view_web_root;
     live_view_ = std::make_unique<live_view::LiveView>(
         settings, calibration_ ? calibration_->rectified : RectifiedGeometry{});
@@ -353,7 +398,42 @@ void Service::startLiveView()
     }
     observers_.add(*live_view_);
     const std::string bound = live_view_->status().listen;
-    spdlog::info("live view on http://{}/ (Foxglove: ws://{})", bound, bound);
+    // The address with the token is given only over the socket (`view`): logs are read
+    // more widely than the socket may be used.
+    spdlog::info("live view listening on {}, up to {} clients; `stereoctl view` prints its "
+                 "address with the token",
+                 bound, settings.max_clients);
+    if (!isLoopbackHost(address->host))
+        spdlog::warn("live view: {} is reached from beyond this machine: whoever on the network "
+                     "has the token sees the cameras, unencrypted. Keep the default "
+                     "127.0.0.1 and tunnel (ssh -L), docs/live-view.md",
+                     bound);
+}
+
+LiveViewLinks Service::liveViewLinks()
+{
+    LiveViewLinks links;
+    StatusLiveView status;
+    if (live_view_)
+        status = live_view_->status();
+    else
+        status.listen = config_.live_view.listen; // "off"
+    links.listening = status.listening;
+    links.listen = status.listen;
+    links.error = status.error;
+    if (!links.listening)
+        return links;
+    // `view` is asked on this machine (the socket is local): a wildcard address is
+    // reached at loopback.
+    std::string host = parseListenAddress(config_.live_view.listen)->host;
+    if (host == "0.0.0.0")
+        host = "127.0.0.1";
+    else if (host == "::")
+        host = "::1";
+    const std::string authority = formatListenAddress(host, live_view_->port());
+    links.page = "http://" + authority + "/?token=" + live_view_->token();
+    links.websocket = "ws://" + authority + "/?token=" + live_view_->token();
+    return links;
 }
 
 void Service::startRos2()
@@ -440,15 +520,19 @@ ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceH
     pipeline.range = initial_range_;
     pipeline.region = config_.processing.nearest.roi;
     pipeline.matcher = initial_matcher_;
+    pipeline.max_output_depth_m = initial_max_output_depth_m_;
     if (latest != nullptr) {
         const PipelineStats& stats = latest->stats;
         pipeline.frames = stats.frames;
         pipeline.fps = currentFps(*latest, now_ns);
-        pipeline.matcher = stats.matcher.data();
+        pipeline.matcher = stats.matcher.view();
         pipeline.range = stats.range;
+        if (stats.max_output_depth_m > 0.0)
+            pipeline.max_output_depth_m = stats.max_output_depth_m;
         pipeline.bad_frames = stats.bad_frames;
         pipeline.out_of_sync = stats.out_of_sync;
         pipeline.stage_mean_ms = stats.stage_mean_ms;
+        pipeline.zones_mean_ms = stats.zones_mean_ms;
         pipeline.publish_mean_ms = stats.publish_mean_ms;
         pipeline.latency_p50_ms = stats.latency_p50_ms;
         pipeline.latency_p99_ms = stats.latency_p99_ms;

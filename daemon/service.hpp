@@ -145,6 +145,7 @@ class Service final : private ServerBackend {
                                 int64_t now_ns) override;
     ReloadOutcome reload() override;
     void onTick(int64_t now_ns) override;
+    LiveViewLinks liveViewLinks() override;
     // The watchdog rule (daemon/systemd_notifier.hpp), asked by the pinger's thread: the
     // event loop ran its timer within one watchdog interval, and the worker is not stuck
     // in one pair for as long. The pings come from their own thread, so a loop busy with
@@ -157,6 +158,10 @@ class Service final : private ServerBackend {
     // The STATUS= line for systemd now.
     std::string statusText(int64_t now_ns, const SourceHealth& health);
     void onSignal();
+    // Shares the descriptors left under RLIMIT_NOFILE between the socket's clients and
+    // the live view's connections, each at most what the configuration asks; says so when
+    // the limit makes them fewer (sets socket_max_clients_, live_view_connections_).
+    void budgetDescriptors();
     // Listens for the live view when live_view.listen says so; a failure is logged and
     // the service runs on without it.
     void startLiveView();
@@ -178,6 +183,8 @@ class Service final : private ServerBackend {
     std::unique_ptr<Worker> worker_;
     std::unique_ptr<SocketServer> server_;
     std::unique_ptr<live_view::LiveView> live_view_; // none when live_view.listen is off
+    int socket_max_clients_ = 0;                     // socket.max_clients, within the budget
+    std::size_t live_view_connections_ = 0;          // the live view's sockets, within the budget
     std::unique_ptr<ros2::Ros2Publisher> ros2_;      // none when ros2.enabled is false
     std::unique_ptr<Ros2Observer> ros2_observer_;
     PublishObservers observers_; // the live view and the ROS 2 node, as they started
@@ -186,6 +193,7 @@ class Service final : private ServerBackend {
 
     DisparityRange initial_range_; // for `status` before the first frame
     std::string initial_matcher_;
+    std::optional<double> initial_max_output_depth_m_; // none uncalibrated
     int64_t started_ns_ = 0;
     bool running_ = false;
     // Stall detection: when the ring's push count last changed, as seen by this thread.

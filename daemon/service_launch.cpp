@@ -81,7 +81,7 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle
         } else {
             config = defaultConfig();
             applyOverrides(config, request.overrides);
-            validateConfig(config);
+            validateConfig(config, request.overrides);
         }
     } catch (const ConfigError& e) {
         throw StartupError(exitCodeFor(e), std::string("invalid configuration:\n") + e.what());

@@ -13,6 +13,7 @@
 #include <sys/timerfd.h>
 #include <unistd.h>
 
+#include "base/descriptor_budget.hpp"
 #include "base/system_error.hpp"
 #include "capture/frame.hpp"
 #include "daemon/peer_credentials.hpp"
@@ -43,12 +44,17 @@ std::string formatSeconds(double seconds)
 
 // Turns a fresh connection away with one error line, then closes it. The line is short
 // and the new socket's send buffer empty, so one non-blocking send takes it whole.
-void refuseConnection(UniqueFd connection, ErrorCode code, const std::string& message)
+void sendRefusal(int connection, ErrorCode code, const std::string& message)
 {
     std::string line;
     appendJsonLine(line, errorReply(code, message, std::nullopt));
     [[maybe_unused]] const ssize_t sent =
-        ::send(connection.get(), line.data(), line.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+        ::send(connection, line.data(), line.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+}
+
+void refuseConnection(UniqueFd connection, ErrorCode code, const std::string& message)
+{
+    sendRefusal(connection.get(), code, message);
 }
 
 } // namespace
@@ -187,11 +193,28 @@ void SocketServer::acceptClients()
                 continue;
             if (error == EAGAIN || error == EWOULDBLOCK)
                 return;
-            // Out of descriptors (EMFILE, ENFILE) or memory: the listening socket stays
-            // readable, so stop watching it until the next tick instead of spinning.
-            log_limiter_.log(spdlog::level::err, "socket.accept_failed", monotonicNowNs(),
-                             "socket {}: cannot accept a connection: {}", options_.socket.path,
-                             errnoText(error));
+            // Out of descriptors (EMFILE, ENFILE): the spare descriptor takes the waiting
+            // connections one by one, each told why and closed, rather than leave them
+            // hanging in the backlog. Then, as for memory, the listening socket is not
+            // watched until the next tick: the loop backs off instead of spinning.
+            if (outOfDescriptors(error)) {
+                std::size_t refused = 0;
+                while (spare_descriptor_.refuseWaitingConnection(listener_.fd(), [](int waiting) {
+                    sendRefusal(waiting, ErrorCode::TooManyClients,
+                                "the service is out of file descriptors; try again later");
+                }))
+                    ++refused;
+                counters_.rejected += refused;
+                log_limiter_.log(spdlog::level::err, "socket.out_of_descriptors", monotonicNowNs(),
+                                 "socket {}: out of file descriptors ({} open, limit {}): "
+                                 "{} connection(s) refused; accepting again in {} ms",
+                                 options_.socket.path, countOpenDescriptors(), descriptorLimit(),
+                                 refused, kTickNs / 1'000'000);
+            } else {
+                log_limiter_.log(spdlog::level::err, "socket.accept_failed", monotonicNowNs(),
+                                 "socket {}: cannot accept a connection: {}", options_.socket.path,
+                                 errnoText(error));
+            }
             epoll_event event{};
             event.data.u64 = kTagListen;
             ::epoll_ctl(epoll_fd_.get(), EPOLL_CTL_MOD, listener_.fd(), &event);

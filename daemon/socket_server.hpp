@@ -9,7 +9,10 @@
 // the socket takes it (EPOLLOUT while data is unsent). A subscriber with unsent data
 // skips frames (counted; its next event says how many); one whose unsent data exceed
 // publish.max_client_backlog_bytes is disconnected (counted). So no client can slow down
-// another one, the loop, or the worker.
+// another one, the loop, or the worker. With the process out of descriptors, the
+// connections waiting are accepted on a spare descriptor, refused (too_many_clients, "out
+// of file descriptors") and closed, and accepting resumes on the next tick: the loop
+// never spins on EMFILE.
 //
 // Thread contract: construction, run(), watch(), setPublishConfig(), counters() and the
 // destructor on one thread (the I/O thread); requestStop() from any thread and from a
@@ -33,6 +36,7 @@
 #include <poll.h>
 #include <sys/types.h>
 
+#include "base/descriptor_budget.hpp"
 #include "base/unique_fd.hpp"
 #include "config/service_config.hpp"
 #include "daemon/listening_socket.hpp"
@@ -201,6 +205,7 @@ class SocketServer {
     void handle(Client& client, const ReloadRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const CalibrationRequest& request, const std::optional<Json>& id);
     void handle(Client& client, const ZonesRequest& request, const std::optional<Json>& id);
+    void handle(Client& client, const ViewRequest& request, const std::optional<Json>& id);
     // Answers a snapshot from `frame` (its raw frames must be present when asked for).
     void sendSnapshot(Client& client, const SnapshotRequest& request, const std::optional<Json>& id,
                       const PublishedFrame& frame);
@@ -241,13 +246,14 @@ class SocketServer {
     uint64_t next_client_id_ = 0;
     std::vector<std::function<void()>> watches_;
 
-    std::vector<char> read_buffer_; // recv() target, reused
-    std::string reading_event_;     // the frame's reading event line, built once per frame
-    std::string depth_header_;      // the frame's depth event header, built once per frame
-    std::string zones_event_;       // the frame's zones event line, built once per frame
-    std::string raw_header_;        // the frame's raw event header, built once per frame
-    std::size_t live_clients_ = 0;  // connections not closed yet
-    bool listen_paused_ = false;    // out of descriptors: accept again on the next tick
+    std::vector<char> read_buffer_;    // recv() target, reused
+    std::string reading_event_;        // the frame's reading event line, built once per frame
+    std::string depth_header_;         // the frame's depth event header, built once per frame
+    std::string zones_event_;          // the frame's zones event line, built once per frame
+    std::string raw_header_;           // the frame's raw event header, built once per frame
+    std::size_t live_clients_ = 0;     // connections not closed yet
+    bool listen_paused_ = false;       // out of descriptors: accept again on the next tick
+    SpareDescriptor spare_descriptor_; // takes the connections waiting when none is left
     uint64_t last_dispatched_sequence_ = 0;
     PublishObserver* observer_ = nullptr;
     int64_t observer_status_ns_ = 0;

@@ -93,6 +93,8 @@ ReadingReport SocketServer::currentReading(const PublishedFrame* latest, double 
     ReadingReport report;
     report.reading = judgeReading(facts);
     report.has_frame = latest != nullptr;
+    if (latest != nullptr)
+        report.realtime_offset_ns = latest->realtime_offset_ns;
     if (report.reading.reason == NoReadingReason::SourceDown)
         report.detail = health.message;
     else if (report.reading.reason == NoReadingReason::BadFrame && latest != nullptr)
@@ -132,6 +134,7 @@ Json SocketServer::statusNow(int64_t now_ns)
     status.clients = counters();
     status.reading = currentReading(latest, options_.publish.max_reading_age_ms, health, now_ns);
     status.now_ns = now_ns;
+    status.max_reading_age_ms = options_.publish.max_reading_age_ms;
     return statusToJson(status);
 }
 
@@ -153,8 +156,9 @@ void SocketServer::notifyObserverOfStatus(int64_t now_ns)
         currentReading(latest, options_.publish.max_reading_age_ms, health, now_ns);
     observer_reading_.clear();
     appendReadingJson(observer_reading_, report, now_ns);
-    observer_->onStatus(statusNow(now_ns).dump(), observer_reading_,
-                        report.has_frame ? report.reading.stamp_ns : 0);
+    observer_->onStatus(
+        statusNow(now_ns).dump(), observer_reading_,
+        report.has_frame && latest != nullptr ? latest->realtimeNs(report.reading.stamp_ns) : 0);
 }
 
 void SocketServer::handle(Client& client, const SnapshotRequest& request,
@@ -208,6 +212,7 @@ void SocketServer::sendSnapshot(Client& client, const SnapshotRequest& request,
     Json answer = okReply(id);
     answer["frame"] = result.frame;
     answer["stamp_ns"] = result.stamp_ns;
+    answer["stamp_realtime_ns"] = latest->realtimeNs(result.stamp_ns);
     answer["depth_valid"] = latest->depth_valid;
     answer["reading"] = readingToJson(report, now_ns);
     answer["calibration"] = {{"focal_px", geometry.focal_px},
@@ -257,6 +262,7 @@ void SocketServer::handle(Client& client, const ZonesRequest&, const std::option
     } else {
         object.field("frame", latest->result.frame);
         object.field("stamp_ns", latest->result.stamp_ns);
+        object.field("stamp_realtime_ns", latest->realtimeNs(latest->result.stamp_ns));
         object.field("age_ms",
                      roundTo(static_cast<double>(now_ns - latest->result.stamp_ns) / 1e6, 3));
         appendZonesJson(object.openField("zones"), latest->zones);
@@ -288,6 +294,21 @@ void SocketServer::handle(Client& client, const CalibrationRequest&, const std::
         }
         answer["path"] = options_.calibration_path;
         answer["text"] = options_.calibration_text;
+    }
+    reply(client, answer);
+}
+
+void SocketServer::handle(Client& client, const ViewRequest&, const std::optional<Json>& id)
+{
+    const LiveViewLinks links = backend_.liveViewLinks();
+    Json answer = okReply(id);
+    answer["listening"] = links.listening;
+    answer["listen"] = links.listen;
+    if (links.listening) {
+        answer["page"] = links.page;
+        answer["websocket"] = links.websocket;
+    } else {
+        answer["error"] = links.error;
     }
     reply(client, answer);
 }

@@ -69,6 +69,7 @@ void SocketServer::onPublished()
         ReadingReport report;
         report.reading = frame->result.reading;
         report.detail = frame->reason_message.view();
+        report.realtime_offset_ns = frame->realtime_offset_ns;
         observer_reading_.clear();
         appendReadingJson(observer_reading_, report, now_ns);
         observer_->onFrame(*frame, observer_reading_);
@@ -80,6 +81,7 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
     ReadingReport report;
     report.reading = frame.result.reading;
     report.detail = frame.reason_message.view();
+    report.realtime_offset_ns = frame.realtime_offset_ns;
     reading_event_.clear();
     depth_header_.clear();
     zones_event_.clear();
@@ -88,6 +90,7 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
     DepthEventHeader header;
     header.frame = frame.result.frame;
     header.stamp_ns = frame.result.stamp_ns;
+    header.stamp_realtime_ns = frame.realtimeNs(frame.result.stamp_ns);
     header.width = depth.empty() ? 0 : depth.cols;
     header.height = depth.empty() ? 0 : depth.rows;
     header.bytes = matBytes(depth);
@@ -99,6 +102,9 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
     raw_header.frame = frame.result.frame;
     raw_header.left_stamp_ns = raw.left_stamp_ns;
     raw_header.right_stamp_ns = raw.right_stamp_ns;
+    raw_header.left_stamp_realtime_ns = frame.realtimeNs(frame.result.stamp_ns);
+    raw_header.right_stamp_realtime_ns =
+        frame.realtimeNs(saturatingAddNs(frame.result.stamp_ns, frame.skew_ns));
     raw_header.width = raw.left.cols;
     raw_header.height = raw.left.rows;
     const cv::Mat& depth_m = frame.result.depth_m;
@@ -155,11 +161,13 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
             if (is_zones) {
                 if (subscription.skipped > 0) {
                     appendZonesEvent(client.out, frame.zones, frame.result.frame,
-                                     frame.result.stamp_ns, now_ns, subscription.skipped);
+                                     frame.result.stamp_ns, header.stamp_realtime_ns, now_ns,
+                                     subscription.skipped);
                 } else {
                     if (zones_event_.empty())
                         appendZonesEvent(zones_event_, frame.zones, frame.result.frame,
-                                         frame.result.stamp_ns, now_ns, 0);
+                                         frame.result.stamp_ns, header.stamp_realtime_ns, now_ns,
+                                         0);
                     client.out.append(zones_event_);
                 }
             } else if (is_raw) {

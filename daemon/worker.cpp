@@ -98,10 +98,8 @@ void Worker::updateZones(const ZonesSettings& zones)
 void Worker::refreshRange()
 {
     stats_.range = processor_ != nullptr ? processor_->disparityRange() : DisparityRange{};
-    const std::string name = processor_ != nullptr ? processor_->matcherName() : "none";
-    stats_.matcher.fill('\0');
-    std::memcpy(stats_.matcher.data(), name.data(),
-                std::min(name.size(), stats_.matcher.size() - 1));
+    stats_.max_output_depth_m = processor_ != nullptr ? processor_->maxOutputDepth() : 0.0;
+    stats_.matcher.assign(processor_ != nullptr ? processor_->matcherName() : "none");
 }
 
 void Worker::applyPendingSettings()
@@ -124,7 +122,7 @@ void Worker::applyPendingSettings()
         processor_->updateSettings(*settings);
         refreshRange();
         spdlog::info("new processing settings in force");
-        logDisparityRange(stats_.range, settings->matcher, stats_.matcher.data());
+        logDisparityRange(stats_.range, settings->matcher, std::string(stats_.matcher.view()));
     } catch (const std::exception& e) {
         spdlog::error("new processing settings refused, the previous ones stay in force: {}",
                       e.what());
@@ -253,6 +251,7 @@ void Worker::processPair(StereoPair& pair)
     // Keep-out zones from the depth the reading trusts; without it, every zone is unknown
     // for this pair (its hysteresis untouched) with the reading's reason.
     slot.camera_pose = zones_.settings().camera_pose;
+    const int64_t zones_start_ns = monotonicNowNs();
     if (!zones_.settings().zones.empty()) {
         const std::vector<ZoneReading>& zones =
             slot.depth_valid && processor_ != nullptr
@@ -267,6 +266,7 @@ void Worker::processPair(StereoPair& pair)
     }
 
     const int64_t publish_start_ns = monotonicNowNs();
+    zones_ms_.add(static_cast<double>(publish_start_ns - zones_start_ns) / 1e6);
     if (!result.depth_m.empty())
         depthToMillimetres(result.depth_m, slot.depth_mm);
     else
@@ -292,6 +292,7 @@ void Worker::processPair(StereoPair& pair)
     stats_.stage_mean_ms.cloud_ms = mean(cloud_ms_);
     stats_.stage_mean_ms.extended_range_ms = mean(extended_ms_);
     stats_.stage_mean_ms.near_field_probe_ms = mean(probe_ms_);
+    stats_.zones_mean_ms = mean(zones_ms_);
     const int64_t published_ns = monotonicNowNs();
     publish_ms_.add(static_cast<double>(published_ns - publish_start_ns) / 1e6);
     stats_.publish_mean_ms = mean(publish_ms_);

@@ -163,7 +163,7 @@ class Worker {
     ZoneMonitor zones_{ZonesSettings{}};
     PipelineStats stats_;
     RecentValues<double, kWindow> rectify_ms_, match_ms_, depth_ms_, nearest_ms_, cloud_ms_,
-        publish_ms_, extended_ms_, probe_ms_;
+        zones_ms_, publish_ms_, extended_ms_, probe_ms_;
     RecentValues<int64_t, kWindow> processed_ns_;         // when each pair was done, for the rate
     RecentValues<double, kLatencyWindow> latency_ms_;     // capture stamp to publication
     std::array<double, kLatencyWindow> latency_sorted_{}; // scratch for the percentiles

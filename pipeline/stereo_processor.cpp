@@ -81,11 +81,20 @@ DisparityRange chooseDisparityRange(const MatcherSettings& settings,
     return range;
 }
 
+double defaultMaxOutputDepth(const RectifiedGeometry& geometry)
+{
+    return geometry.focal_px * geometry.baseline_m * kMaxOutputDepthStepShare;
+}
+
 DisparityRange validateProcessorSettings(const ProcessorSettings& settings,
                                          const RectifiedGeometry& geometry)
 {
     validateMatcherSettings(settings.matcher);
     validateNearestSettings(settings.nearest);
+    if (settings.output.max_depth_m && !(*settings.output.max_depth_m > 0.0))
+        throw std::invalid_argument(
+            "output.max_depth_m: " + std::to_string(*settings.output.max_depth_m) +
+            " m: must be auto or above 0 m");
     const DisparityRange range = chooseDisparityRange(settings.matcher, geometry);
     const cv::Size size = geometry.image_size;
     const int last_disparity = range.min_disparity + range.num_disparities - 1;
@@ -118,7 +127,9 @@ struct StereoProcessor::Impl {
         : calibration(calibration_in), settings(settings_in),
           range(validateProcessorSettings(settings_in, calibration_in.rectified)),
           rectifier(calibration_in), matcher(makeMatcher(settings_in.matcher, range)),
-          nearest(static_cast<size_t>(calibration_in.rectified.image_size.area()))
+          nearest(static_cast<size_t>(calibration_in.rectified.image_size.area())),
+          max_output_depth_m(settings_in.output.max_depth_m.value_or(
+              defaultMaxOutputDepth(calibration_in.rectified)))
     {
         if (rectifier.remaps())
             right_rectified.create(calibration.rectified.image_size, CV_8UC1);
@@ -198,6 +209,7 @@ struct StereoProcessor::Impl {
     Rectifier rectifier;
     std::unique_ptr<Matcher> matcher;
     NearestObjectFinder nearest;
+    double max_output_depth_m;     // the outputs' depth cap in force, metres
     cv::Mat left_gray, right_gray; // colour inputs converted, reused
     cv::Mat right_rectified;       // full calibration only, reused
     cv::Mat last_right;            // what the matcher saw last (see lastRightRectified())
@@ -263,6 +275,9 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& right, int64_t
     out.reading = judgeReading(out.facts);
     const Clock::time_point t4 = Clock::now();
 
+    // The outputs: the depth within the cap (counted in the cloud stage's time), and the
+    // cloud from it.
+    clearDepthBeyond(out.depth_m, static_cast<float>(p.max_output_depth_m));
     if (p.settings.compute_cloud)
         buildPointCloud(out.depth_m, out.left_rectified, p.calibration.rectified, out.cloud);
     else
@@ -292,6 +307,8 @@ void StereoProcessor::updateSettings(const ProcessorSettings& settings)
         warnIfCapped(range, settings.matcher);
     p.range = range;
     p.settings = settings;
+    p.max_output_depth_m =
+        settings.output.max_depth_m.value_or(defaultMaxOutputDepth(p.calibration.rectified));
 }
 
 const cv::Mat& StereoProcessor::lastRightRectified() const
@@ -312,6 +329,11 @@ const ProcessorSettings& StereoProcessor::settings() const
 DisparityRange StereoProcessor::disparityRange() const
 {
     return impl_->range;
+}
+
+double StereoProcessor::maxOutputDepth() const
+{
+    return impl_->max_output_depth_m;
 }
 
 std::string StereoProcessor::matcherName() const

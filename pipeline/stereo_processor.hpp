@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -22,9 +23,29 @@
 
 namespace stereod {
 
+// What the outputs keep: the depth image and the point cloud (and so every snapshot,
+// subscription, bag and live view channel that carries them). The reading and the zones
+// are made before the outputs are cut: the cap changes no reading.
+struct OutputSettings {
+    // Depths beyond this (metres) are left out of the outputs: at such depths one pixel
+    // of disparity is worth a large share of the depth, and a depth of hundreds of metres
+    // from a fraction of a pixel is noise, not a measurement. nullopt ("auto"):
+    // defaultMaxOutputDepth() of the calibration.
+    std::optional<double> max_depth_m;
+};
+
+// Beyond the depth where one pixel of disparity changes the depth by this share, the
+// depth says little more than "far": the default cap of the outputs.
+inline constexpr double kMaxOutputDepthStepShare = 0.25;
+
+// The default cap: the depth where one pixel of disparity is kMaxOutputDepthStepShare of
+// it, f·B·share / 1 px (where d + doffs = 1 px / share), in metres.
+double defaultMaxOutputDepth(const RectifiedGeometry& geometry);
+
 struct ProcessorSettings {
     MatcherSettings matcher;
     NearestSettings nearest;
+    OutputSettings output;
     bool compute_cloud = true; // the point cloud is skipped when nobody needs it
 };
 
@@ -55,8 +76,8 @@ struct DepthResult {
     cv::Mat disparity;             // CV_32FC1, pixels; invalid = +inf (Middlebury)
     cv::Mat confidence;            // CV_8UC1, 0 invalid, 1..255 (see MatchOutput)
     cv::Mat near_field;            // CV_8UC1, near-field evidence (MatchOutput::near_field)
-    cv::Mat depth_m;               // CV_32FC1, metres; invalid = 0
-    std::vector<CloudPoint> cloud; // valid depths only; capacity kept across frames
+    cv::Mat depth_m;               // CV_32FC1, metres; invalid (or beyond the cap) = 0
+    std::vector<CloudPoint> cloud; // valid depths within the cap; capacity kept across frames
     // What the pair's reading is judged from (the worker adds skew and calibration health,
     // the socket server the source and the age), and the verdict on what the chain knew.
     ReadingFacts facts;
@@ -92,7 +113,9 @@ class StereoProcessor {
 
     // Runs the chain on one raw (unrectified) grayscale pair. Frames whose size does not
     // match the calibration give a BadFrame reading, never an exception. out.facts holds
-    // the pair's facts, out.reading judgeReading() of them.
+    // the pair's facts, out.reading judgeReading() of them, both from the whole depth; then
+    // depths beyond maxOutputDepth() are cleared from out.depth_m, and the cloud is made
+    // from what is left.
     void process(const cv::Mat& left, const cv::Mat& right, int64_t stamp_ns, uint64_t frame,
                  DepthResult& out);
 
@@ -108,6 +131,8 @@ class StereoProcessor {
     const StereoCalibration& calibration() const;
     const ProcessorSettings& settings() const;
     DisparityRange disparityRange() const;
+    // The outputs' depth cap in force (output.max_depth_m, or its default), metres.
+    double maxOutputDepth() const;
     // A name for logs and status: "census-sgm", "sgbm", "sgbm-3way", "bm".
     std::string matcherName() const;
 

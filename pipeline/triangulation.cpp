@@ -32,6 +32,17 @@ void disparityToDepth(const cv::Mat& disparity_px, const RectifiedGeometry& geom
     }
 }
 
+void clearDepthBeyond(cv::Mat& depth_m, float max_depth_m)
+{
+    CV_Assert(depth_m.type() == CV_32FC1);
+    // A select, not a branch, as in disparityToDepth(): vector code whatever the scene.
+    for (int y = 0; y < depth_m.rows; ++y) {
+        float* z = depth_m.ptr<float>(y);
+        for (int x = 0; x < depth_m.cols; ++x)
+            z[x] = z[x] <= max_depth_m ? z[x] : 0.0f;
+    }
+}
+
 void buildPointCloud(const cv::Mat& depth_m, const cv::Mat& left_rectified,
                      const RectifiedGeometry& geometry, std::vector<CloudPoint>& cloud)
 {

@@ -17,6 +17,9 @@ namespace stereod {
 void disparityToDepth(const cv::Mat& disparity_px, const RectifiedGeometry& geometry,
                       cv::Mat& depth_m);
 
+// Sets every depth beyond `max_depth_m` to 0 (invalid), in place; CV_32FC1.
+void clearDepthBeyond(cv::Mat& depth_m, float max_depth_m);
+
 // One point per valid (> 0) depth pixel (u, v): x = (u - cx) Z / f, y = (v - cy) Z / f,
 // z = Z, intensity = the grey level (0..255) of the rectified left image at (u, v).
 // `cloud` is cleared and refilled; its capacity is kept, and grown once to the full

@@ -61,10 +61,19 @@ const char* zoneStateName(ZoneState state) noexcept
 
 void validateZonesSettings(const ZonesSettings& s)
 {
-    for (int i = 0; i < 3; ++i)
-        if (!std::isfinite(s.camera_pose.translation_m[i]) ||
-            !std::isfinite(s.camera_pose.rpy_deg[i]))
-            invalid("robot.camera_pose", "must be finite numbers");
+    const auto within = [](double value, double limit) {
+        return std::isfinite(value) && std::abs(value) <= limit;
+    };
+    for (int i = 0; i < 3; ++i) {
+        if (!within(s.camera_pose.translation_m[i], kMaxZoneCoordinateM))
+            invalid("robot.camera_pose.translation_m",
+                    "must be finite and within 1000 m of the base origin");
+        if (!within(s.camera_pose.rpy_deg[i], 360.0))
+            invalid("robot.camera_pose.rpy_deg", "must be finite angles within +-360 degrees");
+    }
+    if (s.zones.size() > kMaxZones)
+        invalid("zones", std::to_string(s.zones.size()) + " zones, more than the " +
+                             std::to_string(kMaxZones) + " a frame can afford");
     if (!(s.min_visible_fraction >= 0.0 && s.min_visible_fraction <= 1.0))
         invalid("zones_min_visible_fraction", "must be within 0..1");
     if (s.pixel_step < 1 || s.pixel_step > 16)
@@ -82,9 +91,10 @@ void validateZonesSettings(const ZonesSettings& s)
             if (s.zones[other].name == zone.name)
                 invalid(key + ".name", "\"" + zone.name + "\" is used twice");
         for (int i = 0; i < 3; ++i)
-            if (!(std::isfinite(zone.min_m[i]) && std::isfinite(zone.max_m[i]) &&
-                  zone.min_m[i] < zone.max_m[i]))
-                invalid(key + ".max", "each coordinate must be finite and greater than min's");
+            if (!(within(zone.min_m[i], kMaxZoneCoordinateM) &&
+                  within(zone.max_m[i], kMaxZoneCoordinateM) && zone.min_m[i] < zone.max_m[i]))
+                invalid(key + ".max", "each coordinate must be finite, within 1000 m of the base "
+                                      "origin and greater than min's");
         if (zone.min_points < 1)
             invalid(key + ".min_points", "must be >= 1");
         if (zone.enter_frames < 1 || zone.leave_frames < 1)
@@ -153,10 +163,21 @@ double ZoneMonitor::visibleFraction(const ZoneSettings& zone, const cv::Mat& dep
                 if (u < 0 || v < 0 || u >= depth_m.cols || v >= depth_m.rows)
                     continue; // outside the field of view
                 const float z = depth_m.at<float>(v, u);
-                // No depth along that ray says nothing of what is there; a surface nearer
-                // than the sample hides it (a little slack for the depth's own error).
+                // No depth along that ray says nothing of what is there.
+                if (!usableDepth(z))
+                    continue;
+                // Seen through: the ray's surface lies beyond the sample (a little slack
+                // for the depth's own error), so the sample is seen empty.
                 const double slack = std::max(0.05, 0.02 * p[2]);
-                if (usableDepth(z) && z >= p[2] - slack)
+                if (z >= p[2] - slack) {
+                    ++visible;
+                    continue;
+                }
+                // A surface nearer than the sample: inside the zone it is what fills the
+                // zone there, seen; outside (in front of the zone) it hides the sample.
+                const cv::Vec3d surface_optical((u - g.cx_px) * z / g.focal_px,
+                                                (v - g.cy_px) * z / g.focal_px, z);
+                if (inside(rotation_ * surface_optical + t, zone))
                     ++visible;
             }
     return static_cast<double>(visible) / (static_cast<double>(n) * n * n);

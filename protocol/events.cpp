@@ -7,12 +7,13 @@
 namespace stereod {
 
 void appendZonesEvent(std::string& out, const std::vector<ZoneReading>& zones, uint64_t frame,
-                      int64_t stamp_ns, int64_t now_ns, uint64_t skipped)
+                      int64_t stamp_ns, int64_t stamp_realtime_ns, int64_t now_ns, uint64_t skipped)
 {
     JsonObjectWriter object(out);
     object.field("event", "zones");
     object.field("frame", frame);
     object.field("stamp_ns", stamp_ns);
+    object.field("stamp_realtime_ns", stamp_realtime_ns);
     object.field("age_ms", roundTo(static_cast<double>(now_ns - stamp_ns) / 1e6, 3));
     if (skipped > 0)
         object.field("skipped", skipped);
@@ -40,6 +41,7 @@ void appendDepthEventHeader(std::string& out, const DepthEventHeader& header,
     object.field("event", "depth");
     object.field("frame", header.frame);
     object.field("stamp_ns", header.stamp_ns);
+    object.field("stamp_realtime_ns", header.stamp_realtime_ns);
     object.field("format", kFormatDepthMm);
     object.field("width", header.width);
     object.field("height", header.height);
@@ -60,6 +62,8 @@ void appendRawEventHeader(std::string& out, const RawEventHeader& header, uint64
     object.field("frame", header.frame);
     object.field("left_stamp_ns", header.left_stamp_ns);
     object.field("right_stamp_ns", header.right_stamp_ns);
+    object.field("left_stamp_realtime_ns", header.left_stamp_realtime_ns);
+    object.field("right_stamp_realtime_ns", header.right_stamp_realtime_ns);
     object.field("skipped", skipped);
     std::string& payloads = object.openField("payloads");
     payloads.push_back('[');

@@ -16,10 +16,12 @@
 
 namespace stereod {
 
-// Appends `{"event":"zones","frame":N,"stamp_ns":S,"age_ms":A,"zones":[...]}\n`, with
-// "skipped" when `skipped` > 0.
+// Appends `{"event":"zones","frame":N,"stamp_ns":S,"stamp_realtime_ns":R,"age_ms":A,
+// "zones":[...]}\n`, with "skipped" when `skipped` > 0. stamp_ns is the pair's capture
+// time on CLOCK_MONOTONIC, stamp_realtime_ns the same instant on CLOCK_REALTIME.
 void appendZonesEvent(std::string& out, const std::vector<ZoneReading>& zones, uint64_t frame,
-                      int64_t stamp_ns, int64_t now_ns, uint64_t skipped);
+                      int64_t stamp_ns, int64_t stamp_realtime_ns, int64_t now_ns,
+                      uint64_t skipped);
 
 // Appends `{"event":"reading","reading":{...}}\n`, with "skipped" when `skipped` > 0.
 void appendReadingEvent(std::string& out, const ReadingReport& report, int64_t now_ns,
@@ -28,7 +30,8 @@ void appendReadingEvent(std::string& out, const ReadingReport& report, int64_t n
 // The header line of a depth event; `bytes` of u16_mm payload follow it.
 struct DepthEventHeader {
     uint64_t frame = 0;
-    int64_t stamp_ns = 0;
+    int64_t stamp_ns = 0;          // capture time, CLOCK_MONOTONIC
+    int64_t stamp_realtime_ns = 0; // the same instant, CLOCK_REALTIME
     int width = 0;
     int height = 0;
     uint64_t bytes = 0;
@@ -40,8 +43,10 @@ void appendDepthEventHeader(std::string& out, const DepthEventHeader& header,
                             const ReadingReport& report, int64_t now_ns, uint64_t skipped);
 
 // The header line of a raw event; two u8_gray payloads of width * height bytes follow it,
-// raw_left then raw_right. Stamps are each camera's own capture stamp (Frame::
-// source_stamp_ns: CLOCK_MONOTONIC for cameras, the recorded stamp on replay).
+// raw_left then raw_right. left/right_stamp_ns are each camera's own capture stamp (Frame::
+// source_stamp_ns: CLOCK_MONOTONIC for cameras, the recorded stamp on replay);
+// left/right_stamp_realtime_ns each frame's capture time in the service's one time base,
+// CLOCK_REALTIME (for a replay: when the pair was delivered), which bags carry.
 // A subscription `with` depth or cloud adds, after them, `depth` (f32_m, depth_width x
 // depth_height float32) and `cloud` (f32_xyzi, cloud_points x 16 bytes), and the pair's
 // `depth_valid`.
@@ -49,6 +54,8 @@ struct RawEventHeader {
     uint64_t frame = 0;
     int64_t left_stamp_ns = 0;
     int64_t right_stamp_ns = 0;
+    int64_t left_stamp_realtime_ns = 0;
+    int64_t right_stamp_realtime_ns = 0;
     int width = 0;
     int height = 0;
     bool depth_valid = false;

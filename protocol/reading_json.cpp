@@ -4,6 +4,7 @@
 #include <array>
 #include <cstdio>
 
+#include "base/clock.hpp"
 #include "protocol/json_writer.hpp"
 
 namespace stereod {
@@ -107,6 +108,9 @@ void appendReadingJson(std::string& out, const ReadingReport& report, int64_t no
         object.nullField("distance_m");
     if (report.has_frame && reading.reason != NoReadingReason::NoFrameYet) {
         object.field("stamp_ns", reading.stamp_ns);
+        if (report.realtime_offset_ns)
+            object.field("stamp_realtime_ns",
+                         saturatingAddNs(reading.stamp_ns, *report.realtime_offset_ns));
         object.field("age_ms", roundTo(static_cast<double>(now_ns - reading.stamp_ns) / 1e6, 3));
     }
     object.field("frame", reading.frame);

@@ -6,6 +6,7 @@
 // Reentrant: every function here is pure or writes only into the caller's buffer.
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -26,6 +27,10 @@ struct ReadingReport {
     // frame was bad (its sizes, the error), why the source is down. Borrowed: the text
     // must outlive the report's use.
     std::string_view detail;
+    // CLOCK_REALTIME minus CLOCK_MONOTONIC for the pair behind the reading
+    // (PublishedFrame::realtime_offset_ns): with it the object carries stamp_realtime_ns.
+    // None where no service clock lies behind the stamp (`stereoctl depth`).
+    std::optional<int64_t> realtime_offset_ns;
 };
 
 // The reason of a reading as one sentence with the numbers the reading holds, e.g. "too

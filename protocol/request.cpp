@@ -231,6 +231,8 @@ ParseResult parseObject(const Json& request)
         return Request{CalibrationRequest{}, id};
     if (name == "zones")
         return Request{ZonesRequest{}, id};
+    if (name == "view")
+        return Request{ViewRequest{}, id};
     return ProtocolError{
         ErrorCode::UnknownCommand,
         "unknown command " + quoteText(name) + "; known: " + joinNames(knownCommands()), id};
@@ -276,8 +278,9 @@ const char* snapshotItemName(SnapshotItem item) noexcept
 
 const std::vector<std::string>& knownCommands()
 {
-    static const std::vector<std::string> names = {
-        "hello", "distance", "status", "snapshot", "subscribe", "reload", "calibration", "zones"};
+    static const std::vector<std::string> names = {"hello",       "distance",  "status",
+                                                   "snapshot",    "subscribe", "reload",
+                                                   "calibration", "zones",     "view"};
     return names;
 }
 

@@ -57,8 +57,13 @@ struct CalibrationRequest {};
 // The keep-out zones of the latest frame.
 struct ZonesRequest {};
 
-using Command = std::variant<HelloRequest, DistanceRequest, StatusRequest, SnapshotRequest,
-                             SubscribeRequest, ReloadRequest, CalibrationRequest, ZonesRequest>;
+// The live view's addresses with its token (docs/live-view.md): what `stereoctl view`
+// prints. Given only here, so that only those who may use the socket can watch.
+struct ViewRequest {};
+
+using Command =
+    std::variant<HelloRequest, DistanceRequest, StatusRequest, SnapshotRequest, SubscribeRequest,
+                 ReloadRequest, CalibrationRequest, ZonesRequest, ViewRequest>;
 
 struct Request {
     Command command;

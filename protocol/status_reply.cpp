@@ -53,6 +53,8 @@ Json pipelineJson(const StatusPipeline& pipeline)
     out["extended_range"] = pipeline.range.extended;
     out["full_resolution_closest_depth_m"] = roundTo(pipeline.range.range_closest_depth_m, 3);
     out["disparity_range_capped"] = pipeline.range.capped;
+    if (pipeline.max_output_depth_m)
+        out["max_output_depth_m"] = roundTo(*pipeline.max_output_depth_m, 3);
     out["region"] = {{"x", pipeline.region.x},
                      {"y", pipeline.region.y},
                      {"width", pipeline.region.width},
@@ -65,6 +67,7 @@ Json pipelineJson(const StatusPipeline& pipeline)
                        {"depth", roundTo(stage.depth_ms, 3)},
                        {"nearest", roundTo(stage.nearest_ms, 3)},
                        {"cloud", roundTo(stage.cloud_ms, 3)},
+                       {"zones", roundTo(pipeline.zones_mean_ms, 3)},
                        {"publish", roundTo(pipeline.publish_mean_ms, 3)}};
     // Parts of stage_ms.match (not stages of their own: the stage table adds stage_ms up).
     out["match_parts_ms"] = {{"extended_range", roundTo(stage.extended_range_ms, 3)},
@@ -153,8 +156,10 @@ Json statusToJson(const ServiceStatus& status)
                         {"clients", live.clients},
                         {"messages_sent", live.messages_sent},
                         {"bytes_sent", live.bytes_sent},
+                        {"readings_sent", live.readings_sent},
                         {"frames_dropped", live.frames_dropped},
-                        {"clients_dropped", live.clients_dropped}};
+                        {"clients_dropped", live.clients_dropped},
+                        {"refused", live.refused}};
     const StatusRos2& ros2 = status.ros2;
     out["ros2"] = {{"enabled", ros2.enabled},
                    {"publishing", ros2.publishing},
@@ -168,6 +173,7 @@ Json statusToJson(const ServiceStatus& status)
                    {"messages", ros2.messages},
                    {"write_errors", ros2.write_errors}};
     out["reading"] = readingToJson(status.reading, status.now_ns);
+    out["max_reading_age_ms"] = status.max_reading_age_ms;
     return out;
 }
 

@@ -69,10 +69,13 @@ struct StatusPipeline {
     uint64_t bad_frames = 0;
     uint64_t out_of_sync = 0;
     StageTimings stage_mean_ms;
+    double zones_mean_ms = 0.0;
     double publish_mean_ms = 0.0;
     double latency_p50_ms = 0.0; // capture stamp to publication
     double latency_p99_ms = 0.0;
     RegionOfInterest region; // nearest.roi, fractions of the image
+    // The outputs' depth cap in force (output.max_depth_m), metres; none uncalibrated.
+    std::optional<double> max_output_depth_m;
 };
 
 // The numbers of the rig's calibration checks (daemon/calibration_health_monitor.hpp).
@@ -116,8 +119,11 @@ struct StatusLiveView {
     uint64_t clients = 0;
     uint64_t messages_sent = 0;
     uint64_t bytes_sent = 0;
-    uint64_t frames_dropped = 0;  // messages slow clients did not get
-    uint64_t clients_dropped = 0; // clients closed for not reading
+    uint64_t readings_sent = 0;   // /stereo/nearest messages handed to clients' sockets
+    uint64_t frames_dropped = 0;  // frame messages slow clients did not get
+    uint64_t clients_dropped = 0; // clients closed for not reading (frames or replies)
+    uint64_t refused = 0;         // requests refused: no or a wrong token, a foreign page,
+                                  // too many clients, out of descriptors
 };
 
 // stereod as a ROS 2 node (docs/ros2.md).
@@ -148,6 +154,9 @@ struct ServiceStatus {
     StatusRos2 ros2;
     ReadingReport reading; // its message is borrowed
     int64_t now_ns = 0;    // for the reading's age
+    // publish.max_reading_age_ms: a reading older than this is stale (how a viewer that
+    // holds a reading knows when to stop showing it as current).
+    double max_reading_age_ms = 0.0;
 };
 
 // The `status` object (the reply's "status" member). Numbers meant to be read by people

@@ -294,12 +294,29 @@ void Reader::forEachMessage(const std::function<void(const MessageView&, const M
             const MessageRef ref{MessageRef::kNoChunk, loose_messages_[loose]};
             f(message(ref), ref);
         }
-        const std::string& records = loadChunk(i);
-        forEachRecord(records, [&](Op op, std::string_view content, std::size_t offset) {
-            if (op == Op::Message) {
-                f(parseMessage(content), MessageRef{i, offset});
+        // The chunk's messages are parsed before any is handed out, so that a chunk that
+        // does not decompress, or whose records break off, is told apart from what `f`
+        // throws: the messages before the break are kept, the rest of the chunk skipped.
+        chunk_messages_.clear();
+        try {
+            forEachRecord(loadChunk(i), [&](Op op, std::string_view content, std::size_t offset) {
+                if (op == Op::Message) {
+                    chunk_messages_.emplace_back(parseMessage(content), MessageRef{i, offset});
+                }
+            });
+        } catch (const McapError& e) {
+            const std::string where =
+                "chunk at byte " + std::to_string(chunks_[i].chunk_start_offset);
+            if (std::find_if(skipped_chunks_.begin(), skipped_chunks_.end(),
+                             [&](const std::string& s) { return s.rfind(where, 0) == 0; }) ==
+                skipped_chunks_.end()) {
+                skipped_chunks_.push_back(where + " is corrupt (" + e.what() +
+                                          "): the rest of its messages skipped");
             }
-        });
+        }
+        for (const auto& [view, ref] : chunk_messages_) {
+            f(view, ref);
+        }
     }
     for (; loose < loose_messages_.size(); ++loose) {
         const MessageRef ref{MessageRef::kNoChunk, loose_messages_[loose]};

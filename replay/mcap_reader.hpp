@@ -20,6 +20,7 @@
 #include <functional>
 #include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "base/unique_fd.hpp"
@@ -66,9 +67,13 @@ class Reader {
 
     // Calls f(message, ref) for every message in file order: chunk by chunk (each chunk's
     // records in their order), and the data section's own Message records in between.
-    // The message's data is valid only during the call. Throws McapError for a chunk that
-    // does not decompress.
+    // The message's data is valid only during the call. A chunk that does not decompress,
+    // or whose records break off, is skipped from there on and named in skippedChunks():
+    // one damaged chunk does not cost the others. Throws what `f` throws, and McapError
+    // for a Message record outside chunks that cannot be read.
     void forEachMessage(const std::function<void(const MessageView&, const MessageRef&)>& f);
+    // The chunks forEachMessage() skipped, each with where it is and why, once each.
+    const std::vector<std::string>& skippedChunks() const noexcept { return skipped_chunks_; }
 
     // The message at `ref` (from forEachMessage). Its data stays valid until the next call
     // to any member function. Decompresses the chunk unless it is the last one used.
@@ -98,6 +103,10 @@ class Reader {
     bool from_summary_ = false;
     bool truncated_ = false;
     std::string problem_;
+
+    std::vector<std::string> skipped_chunks_;
+    // forEachMessage(): the messages of the chunk at hand, parsed before any is handed out.
+    std::vector<std::pair<MessageView, MessageRef>> chunk_messages_;
 
     uint32_t loaded_chunk_ = MessageRef::kNoChunk;
     std::string chunk_records_; // uncompressed records of loaded_chunk_

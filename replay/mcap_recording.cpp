@@ -7,10 +7,10 @@
 #include <map>
 
 #include <fcntl.h>
-#include <opencv2/imgproc.hpp>
 #include <unistd.h>
 
 #include "base/unique_fd.hpp"
+#include "replay/image_message.hpp"
 
 namespace stereod {
 
@@ -204,18 +204,22 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
                                 const std::string& right_topic)
 {
     McapStereoIndex index;
-    // Image channels by topic.
+    // Image channels by topic; every topic of the bag, for the messages that refuse it.
     std::map<std::string, uint16_t> image_topics;
     std::map<std::string, uint16_t> info_topics;
+    std::map<std::string, std::string> all_topics; // topic -> "encoding, schema"
     for (const auto& [id, channel] : reader.channels()) {
         const auto schema = reader.schemas().find(channel.schema_id);
+        const std::string schema_name =
+            schema == reader.schemas().end() ? "no schema" : schema->second.name;
+        all_topics[channel.topic] = channel.message_encoding + ", " + schema_name;
         if (schema == reader.schemas().end() || channel.message_encoding != "cdr") {
             continue;
         }
-        if (schema->second.name == ros2::kImageType || schema->second.name == "sensor_msgs/Image") {
+        if (schema_name == ros2::kImageType || schema_name == "sensor_msgs/Image") {
             image_topics[channel.topic] = id;
-        } else if (schema->second.name == ros2::kCameraInfoType ||
-                   schema->second.name == "sensor_msgs/CameraInfo") {
+        } else if (schema_name == ros2::kCameraInfoType ||
+                   schema_name == "sensor_msgs/CameraInfo") {
             info_topics[channel.topic] = id;
         }
     }
@@ -230,14 +234,32 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
         throw mcap::McapError(reader.path() + ": " + why +
                               " (its sensor_msgs/msg/Image topics in CDR: " + listed + ")");
     };
+    if (image_topics.empty()) {
+        // Nothing to choose from: say what the bag does hold instead.
+        std::string topics;
+        for (const auto& [topic, what] : all_topics) {
+            topics += (topics.empty() ? "" : ", ") + topic + " (" + what + ")";
+        }
+        throw mcap::McapError(
+            reader.path() + ": no topic carries sensor_msgs/msg/Image in CDR; " +
+            (topics.empty() ? std::string("the bag has no channel") : "its topics: " + topics));
+    }
 
     if (!left_topic.empty() || !right_topic.empty()) {
         index.left_topic = left_topic.empty() ? kMcapLeftImageTopic : left_topic;
         index.right_topic = right_topic.empty() ? kMcapRightImageTopic : right_topic;
         for (const std::string* t : {&index.left_topic, &index.right_topic}) {
             if (image_topics.count(*t) == 0) {
-                refuse("no sensor_msgs/msg/Image topic '" + *t + "'");
+                const auto other = all_topics.find(*t);
+                refuse(other == all_topics.end()
+                           ? "no sensor_msgs/msg/Image topic '" + *t + "'"
+                           : "topic '" + *t + "' is not sensor_msgs/msg/Image in CDR (it is " +
+                                 other->second + ")");
             }
+        }
+        if (index.left_topic == index.right_topic) {
+            refuse("the left and right images are both set to the topic '" + index.left_topic +
+                   "'; a stereo pair needs two topics");
         }
     } else if (image_topics.count(kMcapLeftImageTopic) &&
                image_topics.count(kMcapRightImageTopic)) {
@@ -278,13 +300,23 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
     };
     std::vector<Stamped> lefts, rights;
     std::optional<ros2::CameraInfo> info[2];
+    // Per side: images whose message does not decode, and the first one's reason.
+    uint64_t undecodable[2] = {0, 0};
+    std::string first_problem[2];
     uint64_t bad = 0;
     reader.forEachMessage([&](const mcap::MessageView& m, const mcap::MessageRef& ref) {
         try {
             if (m.channel_id == left_id || m.channel_id == right_id) {
-                const ros2::ImageView image = ros2::parseImage(m.data);
-                auto& list = m.channel_id == left_id ? lefts : rights;
-                list.push_back({image.header.stamp.toNs(), ref, list.size()});
+                const int side = m.channel_id == left_id ? 0 : 1;
+                try {
+                    const ros2::ImageView image = ros2::parseImage(m.data);
+                    auto& list = side == 0 ? lefts : rights;
+                    list.push_back({image.header.stamp.toNs(), ref, list.size()});
+                } catch (const ros2::CdrError& e) {
+                    if (undecodable[side]++ == 0) {
+                        first_problem[side] = e.what();
+                    }
+                }
             } else if (m.channel_id == left_info_id && !info[0]) {
                 info[0] = ros2::parseCameraInfo(m.data);
             } else if (m.channel_id == right_info_id && !info[1]) {
@@ -294,8 +326,20 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
             ++bad;
         }
     });
+    for (const std::string& skipped : reader.skippedChunks()) {
+        index.problems.push_back(skipped);
+    }
+    const std::string* topic_of[2] = {&index.left_topic, &index.right_topic};
+    for (int side = 0; side < 2; ++side) {
+        if (undecodable[side] > 0) {
+            index.problems.push_back(
+                std::to_string(undecodable[side]) + " images on " + *topic_of[side] +
+                " do not decode and were skipped (first: " + first_problem[side] + ")");
+        }
+    }
     if (bad > 0) {
-        index.notes.push_back(std::to_string(bad) + " messages that do not decode were skipped");
+        index.problems.push_back(std::to_string(bad) +
+                                 " camera_info messages that do not decode were skipped");
     }
     if (info[0] && info[1]) {
         index.camera_info.emplace(*info[0], *info[1]);
@@ -357,60 +401,29 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
     }
     index.pairs = std::move(ordered);
     if (index.pairs.empty()) {
-        refuse("no stereo pair: " + std::to_string(lefts.size()) + " images on " +
-               index.left_topic + " and " + std::to_string(rights.size()) + " on " +
-               index.right_topic + " have no stamps within " + std::to_string(tolerance_ns / 1000) +
+        const auto side_text = [&](int side) {
+            const std::size_t readable = side == 0 ? lefts.size() : rights.size();
+            std::string text = std::to_string(readable) + " images on " + *topic_of[side];
+            if (undecodable[side] > 0) {
+                text += " (and " + std::to_string(undecodable[side]) +
+                        " that do not decode: " + first_problem[side] + ")";
+            }
+            return text;
+        };
+        if (lefts.empty() || rights.empty()) {
+            refuse("no stereo pair: " + side_text(0) + " and " + side_text(1));
+        }
+        refuse("no stereo pair: " + side_text(0) + " and " + side_text(1) +
+               " have no stamps within " + std::to_string(tolerance_ns / 1000) +
                " us of each other");
     }
     return index;
 }
 
 bool decodeMcapImage(mcap::Reader& reader, const mcap::MessageRef& ref, cv::Mat& out,
-                     std::string& reason)
+                     std::string& reason, cv::Size expected)
 {
-    ros2::ImageView image;
-    try {
-        image = ros2::parseImage(reader.message(ref).data);
-    } catch (const std::exception& e) {
-        reason = e.what();
-        return false;
-    }
-    const int rows = static_cast<int>(image.height);
-    const int cols = static_cast<int>(image.width);
-    auto* data = const_cast<char*>(image.data.data()); // wrapped read-only, then copied
-    int type = -1;
-    int conversion = -1;
-    if (image.encoding == "mono8" || image.encoding == "8UC1") {
-        type = CV_8UC1;
-    } else if (image.encoding == "rgb8") {
-        type = CV_8UC3;
-        conversion = cv::COLOR_RGB2GRAY;
-    } else if (image.encoding == "bgr8") {
-        type = CV_8UC3;
-        conversion = cv::COLOR_BGR2GRAY;
-    } else if (image.encoding == "rgba8") {
-        type = CV_8UC4;
-        conversion = cv::COLOR_RGBA2GRAY;
-    } else if (image.encoding == "bgra8") {
-        type = CV_8UC4;
-        conversion = cv::COLOR_BGRA2GRAY;
-    } else {
-        reason = "image encoding '" + image.encoding +
-                 "' is not replayed (mono8, rgb8, bgr8, rgba8 and bgra8 are)";
-        return false;
-    }
-    if (rows <= 0 || cols <= 0 || image.step < static_cast<uint32_t>(cols * CV_ELEM_SIZE(type))) {
-        reason = "image of " + std::to_string(cols) + "x" + std::to_string(rows) + " with step " +
-                 std::to_string(image.step) + " is malformed";
-        return false;
-    }
-    const cv::Mat view(rows, cols, type, data, image.step);
-    if (conversion < 0) {
-        view.copyTo(out);
-    } else {
-        cv::cvtColor(view, out, conversion);
-    }
-    return true;
+    return decodeImageMessage(reader.message(ref).data, expected, out, reason);
 }
 
 } // namespace stereod

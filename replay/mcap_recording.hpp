@@ -11,8 +11,9 @@
 //                              (optional: enableDepth())
 //   /stereo/points             sensor_msgs/msg/PointCloud2, x y z intensity float32
 //                              (optional: enablePoints())
-// log_time, publish_time and header.stamp are the capture stamps (ns, CLOCK_MONOTONIC
-// for live recordings); a pair's depth and points carry its left image's stamp. Frame ids
+// log_time, publish_time and header.stamp are the stamps the writer is given: `stereoctl
+// record` gives each frame's capture time in the service's one time base, CLOCK_REALTIME
+// (docs/architecture.md, "Time"); a pair's depth and points carry its left image's stamp. Frame ids
 // stereo_{left,right}_optical_frame (REP 103 optical frames: x right, y down, z forward);
 // depth and points are in the rectified left camera's, stereo_left_optical_frame, as
 // stereo_image_proc gives its disparity and points the left camera's frame id.
@@ -87,6 +88,10 @@ class McapRecordingWriter {
     void close() { writer_.close(); }
 
     uint64_t pairsWritten() const noexcept { return pairs_; }
+    // Pairs whose two images are in chunks on disk: what a replay finds should the open
+    // chunk never be written (a full disk). Pairs are written in order, the right image
+    // after the left, so this is the right images on disk.
+    uint64_t pairsOnDisk() const noexcept { return writer_.messagesOnDisk(right_channel_); }
     const mcap::Writer& file() const noexcept { return writer_; }
 
   private:
@@ -129,7 +134,8 @@ struct McapStereoIndex {
     // The first camera_info of each side's sibling topic (`.../camera_info` beside the
     // image topic), when both exist.
     std::optional<std::pair<ros2::CameraInfo, ros2::CameraInfo>> camera_info;
-    std::vector<std::string> notes; // what was chosen and why, for the log
+    std::vector<std::string> notes;    // what was chosen and why, for the log
+    std::vector<std::string> problems; // what was skipped and why (damaged chunks, messages)
 };
 
 // Indexes the stereo pairs of a bag. Topics: the given ones; when both are empty, the
@@ -143,9 +149,12 @@ struct McapStereoIndex {
 McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_topic,
                                 const std::string& right_topic);
 
-// Decodes one Image message into `out` as 8-bit grayscale (mono8 as is, rgb8/bgr8/
-// rgba8/bgra8 converted). False, with the reason, for other encodings or bad messages.
+// Decodes one Image message of the bag into `out` as 8-bit grayscale (mono8 as is,
+// rgb8/bgr8/rgba8/bgra8 converted), of `expected` size when that is not empty
+// (replay/image_message.hpp says what is checked). False, with the reason, for other
+// encodings or bad messages; throws mcap::McapError when the message cannot be read (a
+// chunk that does not decompress).
 bool decodeMcapImage(mcap::Reader& reader, const mcap::MessageRef& ref, cv::Mat& out,
-                     std::string& reason);
+                     std::string& reason, cv::Size expected = {});
 
 } // namespace stereod

@@ -323,6 +323,87 @@ ChunkView parseChunk(std::string_view content)
     return c;
 }
 
+namespace {
+
+// The most bytes the zstd frames in `data` can give, read from their block headers
+// (RFC 8878, 3.1): a raw or RLE block gives the size its header states, a compressed one
+// at most 128 KiB (Block_Maximum_Size, which no block may exceed). No output is produced and
+// nothing is allocated, so a frame header stating more than its blocks hold is caught before its
+// size is trusted. Throws McapError when the frames do not follow each other as the format says.
+uint64_t zstdOutputBound(std::string_view data)
+{
+    constexpr uint32_t kFrameMagic = 0xFD2FB528;
+    constexpr uint32_t kSkippableMagicMask = 0xFFFFFFF0;
+    constexpr uint32_t kSkippableMagic = 0x184D2A50;
+    constexpr uint64_t kMaxBlockBytes = 128 * 1024;
+    constexpr std::size_t kDictionaryIdBytes[] = {0, 1, 2, 4};
+    constexpr std::size_t kContentSizeBytes[] = {0, 2, 4, 8};
+    uint64_t bound = 0;
+    std::size_t pos = 0;
+    while (pos < data.size()) {
+        ByteReader r(data.substr(pos), "zstd frame");
+        const uint32_t magic = r.u32();
+        if ((magic & kSkippableMagicMask) == kSkippableMagic) {
+            r.bytes(r.u32());
+            pos += r.position();
+            continue;
+        }
+        if (magic != kFrameMagic) {
+            throw McapError("zstd chunk: no zstd frame at byte " + std::to_string(pos) +
+                            " of its records");
+        }
+        const uint8_t descriptor = r.u8();
+        const bool single_segment = (descriptor & 0x20) != 0;
+        const bool checksum = (descriptor & 0x04) != 0;
+        if ((descriptor & 0x08) != 0) {
+            throw McapError("zstd chunk: frame at byte " + std::to_string(pos) +
+                            " sets the reserved bit of its header");
+        }
+        if (!single_segment) {
+            r.u8(); // Window_Descriptor
+        }
+        r.bytes(kDictionaryIdBytes[descriptor & 0x03]);
+        const unsigned content_size_flag = descriptor >> 6;
+        r.bytes(content_size_flag == 0 && single_segment ? 1
+                                                         : kContentSizeBytes[content_size_flag]);
+        bool last = false;
+        while (!last) {
+            const uint32_t header = r.u8() | (uint32_t{r.u8()} << 8) | (uint32_t{r.u8()} << 16);
+            last = (header & 1) != 0;
+            const uint32_t size = header >> 3;
+            if (size > kMaxBlockBytes) {
+                throw McapError("zstd chunk: a block of " + std::to_string(size) +
+                                " bytes in the frame at byte " + std::to_string(pos) +
+                                ", more than zstd's 128 KiB");
+            }
+            switch ((header >> 1) & 3) {
+            case 0: // raw: its bytes as they are
+                bound += size;
+                r.bytes(size);
+                break;
+            case 1: // RLE: one byte, repeated
+                bound += size;
+                r.u8();
+                break;
+            case 2: // compressed
+                bound += kMaxBlockBytes;
+                r.bytes(size);
+                break;
+            default:
+                throw McapError("zstd chunk: a block of the reserved type in the frame at byte " +
+                                std::to_string(pos));
+            }
+        }
+        if (checksum) {
+            r.u32();
+        }
+        pos += r.position();
+    }
+    return bound;
+}
+
+} // namespace
+
 void decompressChunk(const ChunkView& chunk, std::string& out)
 {
     if (chunk.compression.empty()) {
@@ -333,16 +414,29 @@ void decompressChunk(const ChunkView& chunk, std::string& out)
         }
         out.assign(chunk.records);
     } else if (chunk.compression == "zstd") {
-        // The size is the file's word: check it against the frame's own before allocating.
+        // The size is the file's word, and so is the frame's: both are checked, against the
+        // limit and against what the frame's blocks can hold, before anything is allocated.
+        if (chunk.uncompressed_size > kMaxUncompressedChunk) {
+            throw McapError("zstd chunk: " + std::to_string(chunk.uncompressed_size) +
+                            " bytes uncompressed, more than a chunk may hold (" +
+                            std::to_string(kMaxUncompressedChunk >> 20) + " MiB)");
+        }
         const unsigned long long frame_size =
             ZSTD_getFrameContentSize(chunk.records.data(), chunk.records.size());
         if (frame_size == ZSTD_CONTENTSIZE_ERROR) {
             throw McapError("zstd chunk: not a zstd frame");
         }
-        if (frame_size == ZSTD_CONTENTSIZE_UNKNOWN ? chunk.uncompressed_size > kMaxUncompressedChunk
-                                                   : frame_size != chunk.uncompressed_size) {
+        if (frame_size != ZSTD_CONTENTSIZE_UNKNOWN && frame_size != chunk.uncompressed_size) {
             throw McapError("zstd chunk: uncompressed size " +
-                            std::to_string(chunk.uncompressed_size) + " does not match its frame");
+                            std::to_string(chunk.uncompressed_size) +
+                            " does not match its frame's " + std::to_string(frame_size));
+        }
+        const uint64_t bound = zstdOutputBound(chunk.records);
+        if (chunk.uncompressed_size > bound) {
+            throw McapError("zstd chunk: " + std::to_string(chunk.uncompressed_size) +
+                            " bytes uncompressed declared, but its " +
+                            std::to_string(chunk.records.size()) +
+                            " bytes of blocks hold at most " + std::to_string(bound));
         }
         out.resize(chunk.uncompressed_size);
         const std::size_t n =

@@ -35,7 +35,9 @@ inline constexpr std::size_t kMagicSize = sizeof(kMagic);
 inline constexpr std::size_t kRecordPrefixSize = 9;
 // Footer content: summary_start, summary_offset_start (uint64), summary_crc (uint32).
 inline constexpr std::size_t kFooterContentSize = 20;
-// Largest chunk a reader decompresses when the zstd frame does not state its size.
+// Largest chunk a reader decompresses: two images of the largest frame a replay takes
+// (8192x8192 RGBA, 256 MiB each) and their neighbours fit; a chunk's stated size is
+// checked against it, and against what its zstd blocks can hold, before it is allocated.
 inline constexpr uint64_t kMaxUncompressedChunk = uint64_t{1} << 30;
 
 enum class Op : uint8_t {
@@ -223,7 +225,9 @@ struct ChunkView {
 ChunkView parseChunk(std::string_view content);
 
 // The records of a chunk, uncompressed (zstd or none) and CRC-checked when the chunk
-// carries a CRC. Throws McapError for an unknown compression, a size or CRC mismatch.
+// carries a CRC. Throws McapError for an unknown compression, a size or CRC mismatch, a
+// size above kMaxUncompressedChunk or above what the zstd frame's blocks can hold (a
+// frame header may state any size: memory follows what the blocks can really give).
 // `out` is reused: its capacity stays from chunk to chunk.
 void decompressChunk(const ChunkView& chunk, std::string& out);
 

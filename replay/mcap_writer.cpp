@@ -202,8 +202,15 @@ void Writer::flushChunk()
     chunk_records_.clear();
     chunk_message_count_ = 0;
     for (auto& [channel, entries] : chunk_message_index_) {
+        flushed_messages_[channel] += entries.size(); // on disk now (append() returned)
         entries.clear();
     }
+}
+
+uint64_t Writer::messagesOnDisk(uint16_t channel_id) const noexcept
+{
+    const auto it = flushed_messages_.find(channel_id);
+    return it == flushed_messages_.end() ? 0 : it->second;
 }
 
 void Writer::close()

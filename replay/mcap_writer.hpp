@@ -78,6 +78,9 @@ class Writer {
     void close();
 
     uint64_t messagesWritten() const noexcept { return statistics_.message_count; }
+    // Messages of `channel_id` in chunks written to the file: what a reader finds even if
+    // the open chunk never is (a full disk, a kill).
+    uint64_t messagesOnDisk(uint16_t channel_id) const noexcept;
     uint64_t bytesWritten() const noexcept { return position_; }
     // Uncompressed bytes of all message records so far (for compression ratios).
     uint64_t uncompressedBytes() const noexcept { return uncompressed_bytes_; }
@@ -112,8 +115,9 @@ class Writer {
     uint64_t chunk_start_time_ = 0;
     uint64_t chunk_end_time_ = 0;
     std::map<uint16_t, std::vector<std::pair<uint64_t, uint64_t>>> chunk_message_index_;
-    std::string compressed_; // scratch: compressed records
-    std::string out_;        // scratch: chunk + message index records as written
+    std::map<uint16_t, uint64_t> flushed_messages_; // per channel, in chunks written
+    std::string compressed_;                        // scratch: compressed records
+    std::string out_; // scratch: chunk + message index records as written
 };
 
 } // namespace stereod::mcap

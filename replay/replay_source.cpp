@@ -20,6 +20,7 @@
 
 #include "base/unique_fd.hpp"
 #include "replay/image_file.hpp"
+#include "replay/image_message.hpp"
 
 namespace stereod {
 
@@ -90,14 +91,11 @@ void decodeQuietly(const std::vector<uint8_t>& bytes, cv::Mat& out, std::string&
 
 // An image file larger than this is refused unread (a 1920x1080 PNG is a few MB).
 constexpr std::size_t kMaxImageFileBytes = 64u << 20;
-// Before the frame size is known (the first pair), an image declaring more pixels than
-// this is refused undecoded: 8192x8192, beyond any stereo camera's frame.
-constexpr int64_t kMaxImagePixels = int64_t{8192} * 8192;
 
 // Decodes one image file as 8-bit grayscale into `out` (imdecode allocates the buffer),
 // reading it into `bytes` first (a bounded read of a regular file, capacity kept) and
 // refusing it before decoding when its header says it is not `expected` (`expected_what`
-// says what that is), or, with no size expected yet, larger than kMaxImagePixels; or cut
+// says what that is), or, with no size expected yet, larger than kMaxReplayPixels; or cut
 // short. On failure says why, with the errno: ENOENT when missing, EINVAL for a file
 // that is no usable image.
 bool decodeImage(const std::string& path, cv::Size expected, const std::string& expected_what,
@@ -124,7 +122,8 @@ bool decodeImage(const std::string& path, cv::Size expected, const std::string& 
             reason = "is " + sizeText(header.size) + ", " + expected_what + " (not decoded)";
             return false;
         }
-        if (expected.empty() && int64_t{header.size.width} * header.size.height > kMaxImagePixels) {
+        if (expected.empty() &&
+            int64_t{header.size.width} * header.size.height > kMaxReplayPixels) {
             reason = "declares " + sizeText(header.size) +
                      " pixels, more than a frame may have (not decoded)";
             return false;
@@ -133,7 +132,7 @@ bool decodeImage(const std::string& path, cv::Size expected, const std::string& 
     std::string printed;
     try {
         decodeQuietly(bytes, out, printed);
-    } catch (const cv::Exception& e) {
+    } catch (const std::exception& e) { // cv::Exception, or memory that ran out
         out.release();
         reason = std::string("cannot decode: ") + e.what();
         return false;
@@ -233,9 +232,10 @@ ReplaySource::~ReplaySource()
 int ReplaySource::start(PairRing& ring)
 {
     if (thread_.joinable()) {
-        if (state_.load(std::memory_order_acquire) == SourceState::Running)
+        // Running, or trying again after a pass with nothing readable.
+        if (!thread_done_.load(std::memory_order_acquire))
             return -EBUSY;
-        thread_.join(); // a replay that finished or failed on its own
+        thread_.join(); // a replay that finished on its own
     }
     if (open_error_ != 0) {
         state_.store(SourceState::Failed, std::memory_order_release);
@@ -250,7 +250,11 @@ int ReplaySource::start(PairRing& ring)
     recent_count_ = 0;
     state_.store(SourceState::Running, std::memory_order_release);
     try {
-        thread_ = std::thread(&ReplaySource::run, this);
+        thread_done_.store(false, std::memory_order_release);
+        thread_ = std::thread([this] {
+            run();
+            thread_done_.store(true, std::memory_order_release);
+        });
     } catch (const std::system_error& e) {
         ring_ = nullptr;
         fail(recording_.dir + ": cannot start the replay thread: " + e.what());
@@ -297,16 +301,23 @@ void ReplaySource::planSchedule()
                      : std::llround(1e9 / (options_.fps > 0.0 ? options_.fps : 10.0));
 
     // Each pair is due its recorded step after the one before; a stamp that steps back
-    // (a recording spliced from two runs) comes one period after its predecessor, and
-    // the pace goes on from the new stamps.
+    // (a recording spliced from two runs) or repeats the one before (a bag whose stamps
+    // are all equal would otherwise come as fast as it decodes) comes one period after its
+    // predecessor, and the pace goes on from the new stamps.
     schedule_ns_.assign(std::max<std::size_t>(count, 1), 0);
     std::size_t steps_back = 0;
     std::size_t first_back = 0;
+    std::size_t repeats = 0;
+    std::size_t first_repeat = 0;
     for (std::size_t i = 1; i < count; ++i) {
         int64_t step_ns = saturatingSubNs(entries[i].left_stamp_ns, entries[i - 1].left_stamp_ns);
         if (step_ns < 0) {
             if (steps_back++ == 0)
                 first_back = i;
+            step_ns = period_ns_;
+        } else if (step_ns == 0) {
+            if (repeats++ == 0)
+                first_repeat = i;
             step_ns = period_ns_;
         }
         schedule_ns_[i] =
@@ -321,6 +332,11 @@ void ReplaySource::planSchedule()
                      recording_.dir, steps_back, steps_back == 1 ? "" : "s",
                      entries[first_back].index, entries[first_back].left_stamp_ns,
                      entries[first_back - 1].left_stamp_ns, static_cast<double>(period_ns_) / 1e6);
+    if (repeats > 0)
+        spdlog::warn("replay: {}: {} pair{} repeat the stamp of the pair before, first pair {} "
+                     "({} ns): each comes one frame period ({:.1f} ms) after the one before",
+                     recording_.dir, repeats, repeats == 1 ? "" : "s", entries[first_repeat].index,
+                     entries[first_repeat].left_stamp_ns, static_cast<double>(period_ns_) / 1e6);
 }
 
 void ReplaySource::openBag()
@@ -329,9 +345,20 @@ void ReplaySource::openBag()
     if (bag_->truncated())
         spdlog::warn("replay: {}: {}; replaying the pairs before it", options_.path,
                      bag_->problem());
-    McapStereoIndex index = indexMcapStereo(*bag_, options_.left_topic, options_.right_topic);
+    McapStereoIndex index;
+    try {
+        index = indexMcapStereo(*bag_, options_.left_topic, options_.right_topic);
+    } catch (const mcap::McapError& e) {
+        // What the scan stopped at is most likely why nothing fits: say it in the refusal.
+        if (!bag_->truncated())
+            throw;
+        throw mcap::McapError(std::string(e.what()) + "; the bag is damaged: " + bag_->problem(),
+                              e.code());
+    }
     for (const std::string& note : index.notes)
         spdlog::info("replay: {}: {}", options_.path, note);
+    for (const std::string& problem : index.problems)
+        spdlog::warn("replay: {}: {}", options_.path, problem);
     if (index.unpaired_left + index.unpaired_right > 0)
         spdlog::warn("replay: {}: {} left and {} right images have no partner within half a "
                      "frame period and are skipped",
@@ -359,20 +386,25 @@ bool ReplaySource::decodePair(std::size_t i, BadPair& bad)
 {
     const RecordingEntry& entry = recording_.entries[i];
     if (bag_) {
+        // As for files below: each side is checked against the size it must have before
+        // it is decoded, so the message blamed is the one at fault.
         bad.code = EINVAL;
         try {
-            if (!decodeMcapImage(*bag_, bag_pairs_[i].left, left_image_, bad.reason)) {
+            if (!decodeMcapImage(*bag_, bag_pairs_[i].left, left_image_, bad.reason, frame_size_)) {
                 bad.side = kLeft;
                 bad.path = entry.left_path;
                 return false;
             }
-            if (!decodeMcapImage(*bag_, bag_pairs_[i].right, right_image_, bad.reason)) {
+            const cv::Size right_size = frame_size_.empty() ? left_image_.size() : frame_size_;
+            if (!decodeMcapImage(*bag_, bag_pairs_[i].right, right_image_, bad.reason,
+                                 right_size)) {
                 bad.side = kRight;
                 bad.path = entry.right_path;
                 return false;
             }
-        } catch (const mcap::McapError& e) {
-            // A chunk that went bad since the index was made (a file being rewritten).
+        } catch (const std::exception& e) {
+            // A chunk that went bad since the index was made (a file being rewritten), or
+            // memory that ran out reading it.
             bad.side = kLeft;
             bad.path = entry.left_path;
             bad.reason = e.what();
@@ -473,6 +505,12 @@ void ReplaySource::recordDelivery(int64_t stamp_ns, int64_t skew_ns) noexcept
     pairs_.fetch_add(1, std::memory_order_release);
 }
 
+std::string ReplaySource::lastBadPair() const
+{
+    std::lock_guard<std::mutex> lock(status_mutex_);
+    return camera_error_[kLeft].empty() ? camera_error_[kRight] : camera_error_[kLeft];
+}
+
 void ReplaySource::fail(const std::string& message)
 {
     {
@@ -492,8 +530,11 @@ void ReplaySource::run() noexcept
     const int64_t loop_ns = saturatingAddNs(schedule_ns_.back(), period_ns);
 
     int64_t base_ns = monotonicNowNs(); // when the first pair of this pass is due
+    int64_t retry_ns = kRetryMinNs;     // the wait after a pass with nothing readable
+    bool unreadable = false;            // the last pass had nothing readable
     for (;;) {
         const uint64_t pass = next_pass_++;
+        uint64_t readable = 0;
         uint64_t delivered = 0;
         for (std::size_t i = 0; i < count; ++i) {
             if (stop_requested_.load(std::memory_order_acquire))
@@ -503,6 +544,7 @@ void ReplaySource::run() noexcept
                 reportBadPair(i, bad);
                 continue;
             }
+            ++readable;
             const RecordingEntry& entry = entries[i];
 
             // Frames from the pool: lock-free; lockstep waits for a free one instead of
@@ -557,12 +599,35 @@ void ReplaySource::run() noexcept
             ++delivered;
         }
 
-        if (delivered == 0) {
+        if (readable == 0) {
+            // Files removed or damaged, or the process out of descriptors or memory for the
+            // moment: like a camera that vanished, the replay tries again, backing off, and
+            // goes on when the pairs are readable again (status says Failed meanwhile).
+            if (!unreadable)
+                spdlog::error("replay: {}: no pair readable in a whole pass (last: {}); trying "
+                              "again every {} s at most",
+                              recording_.dir, lastBadPair(), kRetryMaxNs / 1'000'000'000);
+            unreadable = true;
             fail(recording_.dir + ": no pair of the " + std::to_string(count) +
-                 " could be read in a whole pass (files removed or damaged?)");
-            spdlog::error("replay: {}: no pair readable in a whole pass; replay stopped",
-                          recording_.dir);
-            return;
+                 " could be read in the last pass (files removed or damaged, or the process "
+                 "out of descriptors?); trying again");
+            if (!sleepUntil(saturatingAddNs(monotonicNowNs(), retry_ns)))
+                return;
+            retry_ns = std::min(retry_ns * 2, kRetryMaxNs);
+            base_ns = monotonicNowNs();
+            continue;
+        }
+        if (unreadable) {
+            unreadable = false;
+            retry_ns = kRetryMinNs;
+            {
+                std::lock_guard<std::mutex> lock(status_mutex_);
+                last_error_.clear();
+            }
+            SourceState failed = SourceState::Failed;
+            state_.compare_exchange_strong(failed, SourceState::Running, std::memory_order_acq_rel);
+            spdlog::info("replay: {}: pairs readable again ({} in the last pass)", recording_.dir,
+                         readable);
         }
         if (!options_.loop) {
             state_.store(SourceState::Finished, std::memory_order_release);

@@ -21,10 +21,13 @@
 // Bad input is never fatal: a missing, corrupt or truncated image, a file that is not a
 // regular one (a row pointing at /dev/zero), or an image whose size differs from the first
 // readable pair's makes the pair skipped, counted (bad_frames of its side) and logged once
-// per file. Sizes are read from the PNG or JPEG header before decoding
-// (replay/image_file.hpp): an image of another size, or, in the first pair, one larger
-// than 8192x8192, is never decoded. Only a recording with no readable pair at all fails
-// start().
+// per file. Sizes are read from the PNG or JPEG header, or the bag's Image message, before
+// decoding (replay/image_file.hpp, replay/image_message.hpp): an image of another size,
+// or, in the first pair, one larger than 8192x8192, is never decoded. Only a recording
+// with no readable pair at all fails start(). A pass that later finds no readable pair
+// (files removed, the process out of descriptors) puts the source in state Failed and
+// is tried again, backing off from kRetryMinNs to kRetryMaxNs, until pairs are readable
+// again: the replay recovers, as a camera that comes back does.
 //
 // Frames come from a FramePool sized from the first readable pair and allocated in the
 // constructor; decoding (cv::imdecode) allocates a temporary image per frame, which
@@ -91,7 +94,7 @@ class ReplaySource final : public FrameSource {
 
     // Starts the replay thread at the first pair. Returns 0; -ENOENT / -EINVAL (and the
     // reason in status().last_error, naming the path) when nothing is readable; -EBUSY
-    // when already running.
+    // when already running (or trying again after a pass with nothing readable).
     int start(PairRing& ring) override;
 
     // Stops and joins the replay thread, promptly even in the middle of a long paced
@@ -144,8 +147,14 @@ class ReplaySource final : public FrameSource {
     // stopping.
     bool sleepUntil(int64_t deadline_ns);
     void recordDelivery(int64_t stamp_ns, int64_t skew_ns) noexcept;
-    // Records a fatal problem for status() and enters state Failed.
+    // Records a problem for status() and enters state Failed.
     void fail(const std::string& message);
+    // The last bad pair reported (its file and reason), for the log.
+    std::string lastBadPair() const;
+
+    // A pass with no readable pair is tried again after this, doubling up to the maximum.
+    static constexpr int64_t kRetryMinNs = 100'000'000;
+    static constexpr int64_t kRetryMaxNs = 5'000'000'000;
 
     const ReplayOptions options_;
     Recording recording_;
@@ -181,6 +190,7 @@ class ReplaySource final : public FrameSource {
     std::mutex wake_mutex_;
     std::condition_variable wake_cv_;
     std::atomic<bool> stop_requested_{false};
+    std::atomic<bool> thread_done_{true}; // run() has returned (the thread may be joined)
 
     // Status: counters are atomics written by the replay thread; strings are guarded by
     // status_mutex_ and written only on the (rare) error paths.

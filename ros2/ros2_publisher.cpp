@@ -140,8 +140,9 @@ void Ros2Publisher::stop()
     writers_.reset();
 }
 
-void Ros2Publisher::offerFrame(const DepthResult& r, bool depth_valid, const DisparityRange& range,
-                               const CameraPose& pose, std::string_view reading_json)
+void Ros2Publisher::offerFrame(const DepthResult& r, int64_t stamp_realtime_ns, bool depth_valid,
+                               const DisparityRange& range, const CameraPose& pose,
+                               std::string_view reading_json)
 {
     if (!publishing_.load(std::memory_order_acquire))
         return;
@@ -151,7 +152,7 @@ void Ros2Publisher::offerFrame(const DepthResult& r, bool depth_valid, const Dis
         if (m.frame)
             frames_skipped_.fetch_add(1, std::memory_order_relaxed);
         m.frame = true;
-        m.stamp_ns = r.stamp_ns;
+        m.stamp_realtime_ns = stamp_realtime_ns;
         m.left.release();
         m.depth_m.release();
         m.disparity.release();
@@ -176,7 +177,7 @@ void Ros2Publisher::offerFrame(const DepthResult& r, bool depth_valid, const Dis
     wake_.notify_one();
 }
 
-void Ros2Publisher::offerStatus(std::string_view reading_json, int64_t reading_stamp_ns)
+void Ros2Publisher::offerStatus(std::string_view reading_json, int64_t reading_realtime_ns)
 {
     if (!publishing_.load(std::memory_order_acquire))
         return;
@@ -184,7 +185,7 @@ void Ros2Publisher::offerStatus(std::string_view reading_json, int64_t reading_s
         std::lock_guard lock(mutex_);
         mailbox_.status = true;
         mailbox_.status_reading_json.assign(reading_json);
-        mailbox_.status_stamp_ns = reading_stamp_ns;
+        mailbox_.status_realtime_ns = reading_realtime_ns;
     }
     wake_.notify_one();
 }
@@ -259,8 +260,9 @@ void Ros2Publisher::run()
         if (work.status && now_ns - last_frame_ns > kStatusSilenceNs) {
             // No frame for a second: the reading says why (source down, stale); the Range
             // has no reading.
-            const int64_t stamp_ns =
-                realtimeFromMonotonicNs(work.status_stamp_ns != 0 ? work.status_stamp_ns : now_ns);
+            const int64_t stamp_ns = work.status_realtime_ns != 0
+                                         ? work.status_realtime_ns
+                                         : saturatingAddNs(now_ns, realtimeOffsetNs());
             Reading none;
             none.reason = NoReadingReason::SourceDown;
             const RangeValues values = rangeFromReading(none, work.nearest, geometry_);
@@ -302,7 +304,7 @@ void Ros2Publisher::publishFrame(const Mailbox& work, Scratch& scratch, int64_t 
         return true;
     };
     const dds_entity_t* w = writers_->writer.data();
-    const Time stamp = Time::fromNs(realtimeFromMonotonicNs(work.stamp_ns));
+    const Time stamp = Time::fromNs(work.stamp_realtime_ns);
 
     if (!work.left.empty() && due(kImageChannel)) {
         sensor_msgs_msg_dds__Image_ image{};
@@ -397,7 +399,7 @@ void Ros2Publisher::publishStaticFrames(const CameraPose& pose)
         pose_ = pose;
     }
     const std::array<FrameTransform, 3> frames = cameraFrames(pose, geometry_.baseline_m);
-    const Time stamp = Time::fromNs(realtimeFromMonotonicNs(monotonicNowNs()));
+    const Time stamp = Time::fromNs(saturatingAddNs(monotonicNowNs(), realtimeOffsetNs()));
     std::array<geometry_msgs_msg_dds__TransformStamped_, 3> transforms{};
     for (std::size_t i = 0; i < frames.size(); ++i) {
         const FrameTransform& f = frames[i];

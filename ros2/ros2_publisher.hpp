@@ -13,8 +13,9 @@
 //    channels at most at max_rate_hz. A reliable reader that does not acknowledge holds a
 //    write at most 100 ms (QoS), and only this thread waits for it.
 //
-// Stamps: a pair's capture stamp (CLOCK_MONOTONIC) goes out as wall time
-// (realtimeFromMonotonicNs), the clock ROS 2 nodes compare stamps on.
+// Stamps: a pair's capture time on the wall clock (CLOCK_REALTIME, the service's one
+// conversion of its monotonic stamps, PublishedFrame::realtimeNs()), the clock ROS 2 nodes
+// compare stamps on; every message of a pair has the same stamp.
 //
 // Thread contract: start()/stop() and setNearest() from the controlling thread (the
 // service's); offerFrame()/offerStatus() from one thread; counters() from any thread.
@@ -97,14 +98,15 @@ class Ros2Publisher {
     std::string start();
     void stop();
 
-    // A new result: its depth is trusted when `depth_valid`; `reading_json` is the
-    // protocol's reading object for it.
-    void offerFrame(const DepthResult& result, bool depth_valid, const DisparityRange& range,
-                    const CameraPose& pose, std::string_view reading_json);
+    // A new result, captured at `stamp_realtime_ns` (CLOCK_REALTIME): its depth is trusted
+    // when `depth_valid`; `reading_json` is the protocol's reading object for it.
+    void offerFrame(const DepthResult& result, int64_t stamp_realtime_ns, bool depth_valid,
+                    const DisparityRange& range, const CameraPose& pose,
+                    std::string_view reading_json);
     // Once a second: the current reading (which says why when no frame comes any more),
-    // the protocol's object, and the stamp of the pair behind it (0: none). Published when
-    // no frame went out for a second.
-    void offerStatus(std::string_view reading_json, int64_t reading_stamp_ns);
+    // the protocol's object, and the wall-clock stamp of the pair behind it (0: none).
+    // Published when no frame went out for a second.
+    void offerStatus(std::string_view reading_json, int64_t reading_realtime_ns);
 
     // New nearest-object settings (a reload): the Range's limits and field of view.
     void setNearest(const NearestSettings& nearest);
@@ -114,7 +116,7 @@ class Ros2Publisher {
   private:
     struct Mailbox {
         bool frame = false;
-        int64_t stamp_ns = 0; // CLOCK_MONOTONIC
+        int64_t stamp_realtime_ns = 0; // the pair's capture time, CLOCK_REALTIME
         cv::Mat left, depth_m, disparity;
         std::vector<CloudPoint> cloud;
         float min_disparity = 0.0f;
@@ -125,7 +127,7 @@ class Ros2Publisher {
         NearestSettings nearest;
         bool status = false;
         std::string status_reading_json;
-        int64_t status_stamp_ns = 0;
+        int64_t status_realtime_ns = 0;
     };
     // The publishing thread's buffers, kept from frame to frame.
     struct Scratch {

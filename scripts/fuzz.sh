@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets (tests/fuzz/: the protocol parser, the configuration
-# loader and the live view's WebSocket message parser) with clang and runs them side by
-# side for a bounded time, each from its checked-in seed corpus.
+# loader, the live view's WebSocket message parser, a bag's Image messages and its zstd
+# chunks) with clang and runs them side by side for a bounded time, each from its
+# checked-in seed corpus.
 #   scripts/fuzz.sh [SECONDS] [TARGET...]    SECONDS of the run (default 60);
 #                                            TARGET: fuzz_protocol, fuzz_config,
-#                                            fuzz_foxglove (default all)
+#                                            fuzz_foxglove, fuzz_image_message,
+#                                            fuzz_mcap_chunk (default all)
 # Fails when a target crashes, hangs (one input over 10 s), leaks or runs out of memory;
 # the input that did it is kept under the build directory (artifacts/) and its path
 # printed. New inputs found go to the build directory's working corpus, never into the
@@ -18,14 +20,18 @@ case "$seconds" in
   ''|*[!0-9]*) echo "fuzz.sh: SECONDS must be a whole number, not '$seconds'" >&2; exit 2 ;;
 esac
 targets=("$@")
-[ ${#targets[@]} -eq 0 ] && targets=(fuzz_protocol fuzz_config fuzz_foxglove)
+[ ${#targets[@]} -eq 0 ] && targets=(fuzz_protocol fuzz_config fuzz_foxglove fuzz_image_message fuzz_mcap_chunk)
 
-declare -A corpus=([fuzz_protocol]=protocol [fuzz_config]=config [fuzz_foxglove]=foxglove)
+declare -A corpus=([fuzz_protocol]=protocol [fuzz_config]=config [fuzz_foxglove]=foxglove
+                   [fuzz_image_message]=image_message [fuzz_mcap_chunk]=mcap_chunk)
 declare -A dict=([fuzz_protocol]=tests/protocol/fuzz_protocol.dict [fuzz_config]=tests/config/fuzz_config.dict
-                 [fuzz_foxglove]=tests/daemon/fuzz_foxglove.dict)
+                 [fuzz_foxglove]=tests/daemon/fuzz_foxglove.dict
+                 [fuzz_image_message]=tests/replay/fuzz_image_message.dict
+                 [fuzz_mcap_chunk]=tests/replay/fuzz_mcap_chunk.dict)
 for target in "${targets[@]}"; do
   if [ -z "${corpus[$target]:-}" ]; then
-    echo "fuzz.sh: unknown target '$target' (expected fuzz_protocol, fuzz_config or fuzz_foxglove)" >&2
+    echo "fuzz.sh: unknown target '$target' (expected fuzz_protocol, fuzz_config, fuzz_foxglove," \
+         "fuzz_image_message or fuzz_mcap_chunk)" >&2
     exit 2
   fi
 done

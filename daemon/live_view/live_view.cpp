@@ -1,5 +1,6 @@
 #include "daemon/live_view/live_view.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -12,6 +13,10 @@
 #include <unistd.h>
 
 #include "base/clock.hpp"
+#include "config/service_config.hpp"
+#include "daemon/live_view/admission.hpp"
+#include "protocol/json_writer.hpp"
+#include "protocol/reading_json.hpp"
 #include "ros2/conventions.hpp"
 #include "ros2/messages.hpp"
 
@@ -23,15 +28,40 @@ using ros2::kLeftOpticalFrame;
 using ros2::kRightOpticalFrame;
 
 // The JSON schema of /stereo/nearest: the reading object of docs/protocol.md.
-const char* kReadingSchema = R"({"type":"object","title":"stereod reading",)"
-                             R"("description":"The reading object of stereod's protocol: )"
-                             R"(valid with distance_m, or not valid with reason.",)"
-                             R"("properties":{"valid":{"type":"boolean"},)"
-                             R"("distance_m":{"type":"number"},"reason":{"type":"string"},)"
-                             R"("message":{"type":"string"},"stamp_ns":{"type":"integer"},)"
-                             R"("age_ms":{"type":"number"}},"required":["valid"]})";
+const char* kReadingSchema =
+    R"({"type":"object","title":"stereod reading",)"
+    R"("description":"The reading object of stereod's protocol (docs/protocol.md): valid with )"
+    R"(distance_m, or not valid with reason.",)"
+    R"("properties":{)"
+    R"("valid":{"type":"boolean"},)"
+    R"("distance_m":{"type":["number","null"],"description":"metres; null without a reading"},)"
+    R"("stamp_ns":{"type":"integer","description":"capture time, CLOCK_MONOTONIC ns"},)"
+    R"("stamp_realtime_ns":{"type":"integer","description":"capture time, CLOCK_REALTIME ns"},)"
+    R"("age_ms":{"type":"number"},)"
+    R"("frame":{"type":"integer"},)"
+    R"("valid_fraction":{"type":"number"},)"
+    R"("in_range_fraction":{"type":"number"},)"
+    R"("region_pixels":{"type":"integer"},)"
+    R"("range_limit_fraction":{"type":"number"},)"
+    R"("calibration_suspect":{"type":"boolean","description":"the calibration health check )"
+    R"(fails: the distance may be wrong"},)"
+    R"("calibration_row_offset_px":{"type":"number"},)"
+    R"("nearer_than_m":{"type":"number"},)"
+    R"("reason":{"type":"object","properties":{"code":{"type":"string"},)"
+    R"("message":{"type":"string"}},"required":["code","message"]}},)"
+    R"("required":["valid","distance_m","frame"]})";
 const char* kStatusSchema = R"({"type":"object","title":"stereod status",)"
                             R"("description":"What stereoctl status --json prints."})";
+// The JSON schema of /stereo/zones: the zones of a pair, as the `zones` request answers.
+const char* kZonesSchema =
+    R"({"type":"object","title":"stereod zones",)"
+    R"("description":"The keep-out zones of one pair (docs/protocol.md, zones).",)"
+    R"("properties":{"frame":{"type":"integer"},"stamp_ns":{"type":"integer"},)"
+    R"("stamp_realtime_ns":{"type":"integer"},)"
+    R"("zones":{"type":"array","items":{"type":"object","properties":{)"
+    R"("name":{"type":"string"},"state":{"type":"string"},"reason":{"type":"string"},)"
+    R"("points":{"type":"integer"},"nearest_m":{"type":"number"},)"
+    R"("visible_fraction":{"type":"number"}}}}},"required":["frame","zones"]})";
 
 std::string contentType(const std::string& path)
 {
@@ -91,15 +121,23 @@ const std::vector<ChannelSpec>& channelSpecs()
          ros2::cameraInfoSchemaText(), "ros2msg"},
         {kNearest, "/stereo/nearest", "json", "stereod.Reading", kReadingSchema, "jsonschema"},
         {kStatus, "/stereo/status", "json", "stereod.Status", kStatusSchema, "jsonschema"},
+        {kZones, "/stereo/zones", "json", "stereod.Zones", kZonesSchema, "jsonschema"},
     };
     return specs;
 }
 
-// One WebSocket client: its subscriptions, and since when it has been too slow.
+// One WebSocket client: its subscriptions, the frames waiting for its socket, and whether
+// it reads.
 struct LiveView::Client {
     std::map<uint32_t, Channel> subscriptions; // subscription id -> channel
-    int64_t lagging_since_ns = 0;              // 0: keeping up
-    bool closing = false;                      // closed for being stuck; gone soon
+    // Per frame channel, the newest message not handed to the socket yet (subscription id
+    // 0: patched per subscription on the way out), and when it came (to keep their order).
+    std::array<std::shared_ptr<std::string>, kChannelEnd> waiting{};
+    std::array<uint64_t, kChannelEnd> waiting_since{};
+    // What the socket held unsent after our last send: it read something when it holds less.
+    std::size_t buffered_after_send = 0;
+    int64_t stalled_since_ns = 0; // 0: reading
+    bool closing = false;         // closed for being stuck; gone soon
 };
 
 // The clients, on the transport's thread only.
@@ -110,7 +148,7 @@ struct LiveView::Sessions {
 LiveView::LiveView(LiveViewSettings settings, RectifiedGeometry geometry)
     : settings_(std::move(settings)), geometry_(geometry), sessions_(std::make_unique<Sessions>())
 {
-    address_ = settings_.host + ":" + std::to_string(settings_.port);
+    address_ = formatListenAddress(settings_.host, settings_.port);
     WebSocketTransport::Handlers handlers;
     handlers.opened = [this](WebSocketTransport::ConnectionId id) {
         sessions_->clients[id] = Client{};
@@ -131,19 +169,42 @@ LiveView::LiveView(LiveViewSettings settings, RectifiedGeometry geometry)
         Client& client = sessions_->clients[id];
         const ClientRequest request = parseClientMessage(text);
         switch (request.kind) {
-        case ClientRequest::Kind::Subscribe:
+        case ClientRequest::Kind::Subscribe: {
+            // One subscription per channel and client: a client cannot make the service
+            // hold ids without end, nor send it one frame many times over.
+            std::string refused;
+            std::size_t refusals = 0;
             for (const auto& [sub, channel] : request.subscriptions) {
+                std::string why;
+                const uint32_t wanted = channel; // a structured binding no lambda may capture
                 if (channel < kLeftImage || channel >= kChannelEnd) {
-                    transport_->sendText(
-                        id, statusJson(2, "subscribe: no channel " + std::to_string(channel)));
+                    why = "no channel " + std::to_string(channel);
+                } else if (client.subscriptions.count(sub) != 0) {
+                    continue; // the same id twice: already subscribed
+                } else if (const auto taken = std::find_if(
+                               client.subscriptions.begin(), client.subscriptions.end(),
+                               [wanted](const auto& s) { return s.second == wanted; });
+                           taken != client.subscriptions.end()) {
+                    why = "channel " + std::to_string(channel) + " is subscribed already, as " +
+                          std::to_string(taken->first);
+                } else {
+                    client.subscriptions[sub] = static_cast<Channel>(channel);
+                    subscribers_[channel].fetch_add(1, std::memory_order_relaxed);
                     continue;
                 }
-                if (client.subscriptions.count(sub) != 0)
-                    continue; // the same id twice: already subscribed
-                client.subscriptions[sub] = static_cast<Channel>(channel);
-                subscribers_[channel].fetch_add(1, std::memory_order_relaxed);
+                if (refusals++ == 0)
+                    refused = why;
             }
+            if (refusals > 0)
+                transport_->sendReply(
+                    id,
+                    statusJson(2, "subscribe: " + refused +
+                                      (refusals > 1 ? " (and " + std::to_string(refusals - 1) +
+                                                          " more refused)"
+                                                    : std::string())),
+                    replyBacklogAllowed(client));
             break;
+        }
         case ClientRequest::Kind::Unsubscribe:
             for (const uint32_t sub : request.unsubscriptions) {
                 const auto it = client.subscriptions.find(sub);
@@ -155,9 +216,10 @@ LiveView::LiveView(LiveViewSettings settings, RectifiedGeometry geometry)
             break;
         case ClientRequest::Kind::Ignored:
         case ClientRequest::Kind::Invalid:
-            transport_->sendText(
+            transport_->sendReply(
                 id,
-                statusJson(request.kind == ClientRequest::Kind::Invalid ? 2 : 1, request.problem));
+                statusJson(request.kind == ClientRequest::Kind::Invalid ? 2 : 1, request.problem),
+                replyBacklogAllowed(client));
             break;
         }
     };
@@ -172,10 +234,17 @@ LiveView::~LiveView()
 
 std::string LiveView::start()
 {
-    error_ = transport_->start(settings_.host, settings_.port, kSubprotocol);
+    if (settings_.token.empty())
+        settings_.token = newToken();
+    TransportLimits limits;
+    limits.token = settings_.token;
+    limits.allowed_origins = settings_.allowed_origins;
+    limits.max_clients = settings_.max_clients;
+    limits.max_connections = settings_.max_connections;
+    error_ = transport_->start(settings_.host, settings_.port, kSubprotocol, std::move(limits));
     if (!error_.empty())
         return error_;
-    address_ = settings_.host + ":" + std::to_string(transport_->port());
+    address_ = formatListenAddress(settings_.host, transport_->port());
     listening_.store(true, std::memory_order_release);
     feed_thread_ = std::thread([this] { feed(); });
     return {};
@@ -199,17 +268,47 @@ uint16_t LiveView::port() const noexcept
     return transport_->port();
 }
 
+void LiveView::sendJson(Channel channel, int64_t log_time_ns, std::string_view text, int64_t now_ns)
+{
+    if (!subscribed(channel))
+        return;
+    // kZones follows kNearest's rate: the zones come with the reading.
+    const double hz = settings_.rate_hz[channel];
+    if (hz > 0 && channel != kStatus) {
+        const auto interval_ns = static_cast<int64_t>(1e9 / hz);
+        // A reading a little early (capture jitter) still goes, as in feed().
+        if (now_ns - json_sent_ns_[channel] < interval_ns - interval_ns / 5)
+            return;
+        json_sent_ns_[channel] = now_ns;
+    }
+    send(channel, log_time_ns, text);
+}
+
 void LiveView::onFrame(const PublishedFrame& frame, std::string_view reading_json)
 {
+    last_frame_ns_ = monotonicNowNs();
     if (!listening_.load(std::memory_order_acquire) ||
         clients_.load(std::memory_order_relaxed) == 0)
         return;
     const DepthResult& r = frame.result;
+    const int64_t stamp_ns = frame.realtimeNs(r.stamp_ns);
+    // Readings first: on their way before the images are even copied.
+    sendJson(kNearest, stamp_ns, reading_json, last_frame_ns_);
+    if (subscribed(kZones)) {
+        zones_json_.clear();
+        JsonObjectWriter object(zones_json_);
+        object.field("frame", r.frame);
+        object.field("stamp_ns", r.stamp_ns);
+        object.field("stamp_realtime_ns", stamp_ns);
+        appendZonesJson(object.openField("zones"), frame.zones);
+        object.close();
+        sendJson(kZones, stamp_ns, zones_json_, last_frame_ns_);
+    }
     {
         std::lock_guard lock(mutex_);
         Mailbox& m = mailbox_;
         m.frame = true;
-        m.stamp_ns = r.stamp_ns;
+        m.stamp_ns = stamp_ns;
         if (subscribed(kLeftImage))
             r.left_rectified.copyTo(m.left);
         if (subscribed(kDepth))
@@ -227,25 +326,22 @@ void LiveView::onFrame(const PublishedFrame& frame, std::string_view reading_jso
             for (std::size_t i = 0; i < r.cloud.size(); i += step)
                 m.cloud.push_back(r.cloud[i]);
         }
-        m.reading_json.assign(reading_json);
     }
     wake_.notify_one();
 }
 
 void LiveView::onStatus(std::string_view status_json, std::string_view reading_json,
-                        int64_t reading_stamp_ns)
+                        int64_t reading_realtime_ns)
 {
     if (!listening_.load(std::memory_order_acquire) ||
         clients_.load(std::memory_order_relaxed) == 0)
         return;
-    {
-        std::lock_guard lock(mutex_);
-        mailbox_.status = true;
-        mailbox_.status_json.assign(status_json);
-        mailbox_.status_reading_json.assign(reading_json);
-        mailbox_.status_reading_stamp_ns = reading_stamp_ns;
-    }
-    wake_.notify_one();
+    const int64_t now_ns = monotonicNowNs();
+    // The status is of now: logged at the wall clock's now.
+    sendJson(kStatus, saturatingAddNs(now_ns, realtimeOffsetNs()), status_json, now_ns);
+    // No frame for a second: the reading says why (source down, stale).
+    if (now_ns - last_frame_ns_ > 1'000'000'000)
+        sendJson(kNearest, reading_realtime_ns, reading_json, now_ns);
 }
 
 void LiveView::feed()
@@ -254,7 +350,6 @@ void LiveView::feed()
     std::string message;
     std::vector<float> depth_nan;
     std::vector<float> disparity_ros;
-    int64_t last_frame_ns = 0;
     // Per channel: the least time between two messages, and when the last one went.
     std::array<int64_t, kChannelEnd> interval_ns{};
     std::array<int64_t, kChannelEnd> last_sent_ns{};
@@ -272,19 +367,36 @@ void LiveView::feed()
         last_sent_ns[channel] = now_ns;
         return true;
     };
+    int64_t last_pump_ns = 0;
     while (true) {
         {
             std::unique_lock lock(mutex_);
-            wake_.wait(lock, [this] { return stopping_ || mailbox_.frame || mailbox_.status; });
+            // While clients are connected, their waiting frames are offered to their
+            // sockets every kPumpIntervalMs even when nothing new comes.
+            const auto ready = [this] { return stopping_ || mailbox_.frame; };
+            if (clients_.load(std::memory_order_relaxed) > 0)
+                wake_.wait_for(lock, std::chrono::milliseconds(kPumpIntervalMs), ready);
+            else
+                wake_.wait(lock, ready);
             if (stopping_)
                 return;
-            std::swap(work, mailbox_);
-            mailbox_.frame = false;
-            mailbox_.status = false;
+            // The buffers swap: the mailbox gets the ones this thread is done with, which
+            // the next result is copied into without allocating.
+            work.frame = mailbox_.frame;
+            if (mailbox_.frame) {
+                std::swap(work.left, mailbox_.left);
+                std::swap(work.depth_m, mailbox_.depth_m);
+                std::swap(work.confidence, mailbox_.confidence);
+                std::swap(work.disparity, mailbox_.disparity);
+                std::swap(work.cloud, mailbox_.cloud);
+                work.stamp_ns = mailbox_.stamp_ns;
+                work.min_disparity = mailbox_.min_disparity;
+                work.max_disparity = mailbox_.max_disparity;
+                mailbox_.frame = false;
+            }
         }
         now_ns = monotonicNowNs();
         if (work.frame) {
-            last_frame_ns = now_ns;
             const int64_t t = work.stamp_ns;
             const ros2::Header left_header{ros2::Time::fromNs(t), kLeftOpticalFrame};
             if (!work.left.empty() && due(kLeftImage)) {
@@ -335,15 +447,11 @@ void LiveView::feed()
                 ros2::serializeCameraInfo(ros2::rectifiedCameraInfo(geometry_, right, t), message);
                 send(channel, t, message);
             }
-            if (due(kNearest))
-                send(kNearest, t, work.reading_json);
+            work.frame = false;
         }
-        if (work.status) {
-            if (subscribed(kStatus))
-                send(kStatus, now_ns, work.status_json);
-            // No frame for a second: the reading says why (source down, stale).
-            if (subscribed(kNearest) && now_ns - last_frame_ns > 1'000'000'000)
-                send(kNearest, work.status_reading_stamp_ns, work.status_reading_json);
+        if (now_ns - last_pump_ns >= kPumpIntervalMs * 1'000'000) {
+            last_pump_ns = now_ns;
+            pumpAll();
         }
     }
 }
@@ -356,43 +464,111 @@ void LiveView::send(Channel channel, int64_t log_time_ns, std::string_view paylo
     appendMessageData(0, static_cast<uint64_t>(log_time_ns), payload, *frame);
     transport_->post([this, channel, frame] {
         const int64_t now_ns = monotonicNowNs();
-        std::vector<WebSocketTransport::ConnectionId> stuck;
         for (auto& [id, client] : sessions_->clients) {
-            if (client.closing)
+            bool wanted = false;
+            for (const auto& [sub, subscribed_channel] : client.subscriptions)
+                wanted = wanted || subscribed_channel == channel;
+            if (!wanted || !stillReading(id, client, now_ns))
                 continue;
-            for (const auto& [sub, subscribed_channel] : client.subscriptions) {
-                if (subscribed_channel != channel)
-                    continue;
-                if (transport_->buffered(id) > kSkipBytes) {
+            if (isPriorityChannel(channel)) {
+                sendTo(id, client, channel, *frame);
+            } else {
+                // Waits for room in the client's socket; a frame still waiting is
+                // replaced, and keeps its place in the order.
+                if (client.waiting[channel])
                     frames_dropped_.fetch_add(1, std::memory_order_relaxed);
-                    if (client.lagging_since_ns == 0)
-                        client.lagging_since_ns = now_ns;
-                    else if (now_ns - client.lagging_since_ns > kStuckMs * 1'000'000) {
-                        client.closing = true;
-                        stuck.push_back(id);
-                    }
-                    break; // the client's other subscriptions to this channel wait too
-                }
-                client.lagging_since_ns = 0;
-                setSubscriptionId(*frame, sub);
-                if (transport_->sendBinary(id, *frame)) {
-                    messages_.fetch_add(1, std::memory_order_relaxed);
-                    bytes_.fetch_add(frame->size(), std::memory_order_relaxed);
-                }
+                else
+                    client.waiting_since[channel] = ++waiting_sequence_;
+                client.waiting[channel] = frame;
             }
+            handOverFrames(id, client);
         }
-        for (const auto id : stuck) {
-            clients_dropped_.fetch_add(1, std::memory_order_relaxed);
-            spdlog::warn("live view: closing a client that has not read for {} s", kStuckMs / 1000);
-            transport_->close(id, "too slow: not reading");
+    });
+}
+
+bool LiveView::stillReading(WebSocketTransport::ConnectionId id, Client& client, int64_t now_ns)
+{
+    if (client.closing)
+        return false;
+    const std::size_t buffered = transport_->buffered(id);
+    // Reading: the socket took bytes since our last send, or holds nothing.
+    if (buffered == 0 || buffered < client.buffered_after_send) {
+        client.stalled_since_ns = 0;
+        client.buffered_after_send = buffered;
+        return true;
+    }
+    if (client.stalled_since_ns == 0) {
+        client.stalled_since_ns = now_ns;
+        return true;
+    }
+    if (now_ns - client.stalled_since_ns <= kStuckMs * 1'000'000)
+        return true;
+    client.closing = true;
+    for (auto& waiting : client.waiting) {
+        if (waiting) {
+            waiting.reset();
+            frames_dropped_.fetch_add(1, std::memory_order_relaxed);
         }
+    }
+    clients_dropped_.fetch_add(1, std::memory_order_relaxed);
+    spdlog::warn("live view: closing a client that has not read for {} s", kStuckMs / 1000);
+    transport_->close(id, "too slow: not reading");
+    return false;
+}
+
+void LiveView::sendTo(WebSocketTransport::ConnectionId id, Client& client, Channel channel,
+                      std::string& frame)
+{
+    for (const auto& [sub, subscribed_channel] : client.subscriptions) {
+        if (subscribed_channel != channel)
+            continue;
+        setSubscriptionId(frame, sub);
+        if (transport_->sendBinary(id, frame)) {
+            messages_.fetch_add(1, std::memory_order_relaxed);
+            bytes_.fetch_add(frame.size(), std::memory_order_relaxed);
+            if (channel == kNearest)
+                readings_sent_.fetch_add(1, std::memory_order_relaxed);
+        }
+    }
+    client.buffered_after_send = transport_->buffered(id);
+}
+
+std::size_t LiveView::replyBacklogAllowed(const Client& client)
+{
+    return std::max(kFrameBudgetBytes, client.buffered_after_send) + (std::size_t{1} << 20);
+}
+
+void LiveView::handOverFrames(WebSocketTransport::ConnectionId id, Client& client)
+{
+    while (client.buffered_after_send < kFrameBudgetBytes) {
+        // The frame that has waited longest goes first.
+        Channel next = kChannelEnd;
+        for (uint32_t c = kLeftImage; c < kChannelEnd; ++c)
+            if (client.waiting[c] &&
+                (next == kChannelEnd || client.waiting_since[c] < client.waiting_since[next]))
+                next = static_cast<Channel>(c);
+        if (next == kChannelEnd)
+            return;
+        const std::shared_ptr<std::string> frame = std::move(client.waiting[next]);
+        client.waiting[next].reset();
+        sendTo(id, client, next, *frame);
+    }
+}
+
+void LiveView::pumpAll()
+{
+    transport_->post([this] {
+        const int64_t now_ns = monotonicNowNs();
+        for (auto& [id, client] : sessions_->clients)
+            if (stillReading(id, client, now_ns))
+                handOverFrames(id, client);
     });
 }
 
 HttpResponse LiveView::serveFile(const std::string& request) const
 {
     std::string path = request.substr(0, request.find('?'));
-    if (!safePath(path))
+    if (path.empty() || path.front() != '/' || !safePath(path))
         return HttpResponse{400, "text/plain; charset=utf-8", "bad path\n"};
     if (path == "/")
         path = "/index.html";
@@ -420,7 +596,10 @@ StatusLiveView LiveView::status() const
     c.messages_sent = messages_.load(std::memory_order_relaxed);
     c.bytes_sent = bytes_.load(std::memory_order_relaxed);
     c.frames_dropped = frames_dropped_.load(std::memory_order_relaxed);
-    c.clients_dropped = clients_dropped_.load(std::memory_order_relaxed);
+    c.clients_dropped =
+        clients_dropped_.load(std::memory_order_relaxed) + transport_->closedForReplies();
+    c.readings_sent = readings_sent_.load(std::memory_order_relaxed);
+    c.refused = transport_->refused();
     return c;
 }
 

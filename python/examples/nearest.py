@@ -35,8 +35,14 @@ def main() -> int:
                 return 1
             else:
                 if reading.valid:
+                    # A flagged calibration may put the number off: say so, as stereoctl does.
+                    suspect = ""
+                    if reading.calibration_suspect:
+                        suspect = "  CALIBRATION SUSPECT"
+                        if reading.calibration_row_offset_px is not None:
+                            suspect += f": rows {reading.calibration_row_offset_px:+.2f} px apart"
                     print(f"frame {reading.frame}  {reading.distance_m:.3f} m  "
-                          f"age {reading.age_ms:.0f} ms", flush=True)
+                          f"age {reading.age_ms:.0f} ms{suspect}", flush=True)
                 elif reading.reason == "nearer_than_range":
                     print(f"obstacle nearer than {reading.nearer_than_m:.2f} m: stop", flush=True)
                 else:

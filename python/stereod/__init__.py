@@ -21,6 +21,7 @@ A missing distance is a normal outcome and comes back as a :class:`Reading` whos
 from .client import (
     DEFAULT_SNAPSHOT_ITEMS,
     DEFAULT_SOCKET_PATH,
+    MAX_PAYLOAD_BYTES,
     Client,
     ProtocolError,
     Reading,
@@ -34,6 +35,7 @@ from .client import (
 __all__ = [
     "DEFAULT_SNAPSHOT_ITEMS",
     "DEFAULT_SOCKET_PATH",
+    "MAX_PAYLOAD_BYTES",
     "Client",
     "ProtocolError",
     "Reading",

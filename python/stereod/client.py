@@ -17,6 +17,16 @@ without exception handling around every call. So:
 
 All exceptions derive from :class:`StereodError`.
 
+Failing closed
+--------------
+A reply is checked before it is believed: a reading that says ``valid`` without a
+finite, positive ``distance_m`` (NaN, ``Infinity``, a string, ``null``, a negative
+number) is a :class:`ProtocolError`, never a valid :class:`Reading`, so "stop if the
+distance is below 0.5 m" cannot be skipped by a reply that is not a number. A payload
+may claim at most :data:`MAX_PAYLOAD_BYTES` and is read as it arrives (a claimed size is
+never allocated up front), and ``timeout_s`` bounds a whole request, its reply and its
+payloads, not each read: a service trickling a byte at a time cannot hold a call longer.
+
 Connections
 -----------
 A :class:`Client` opens its connection on first use and opens a new one on the next call
@@ -30,7 +40,9 @@ thread.
 from __future__ import annotations
 
 import json
+import math
 import socket
+import time
 from dataclasses import dataclass, field
 from typing import Any, Dict, Iterable, Iterator, List, Optional, Sequence, Tuple, Union
 
@@ -60,6 +72,13 @@ _UNAVAILABLE_CODES = frozenset({"too_many_clients", "not_allowed", "idle_timeout
 # A reply line longer than this is treated as malformed (replies are small; images travel
 # as binary payloads).
 _MAX_LINE_BYTES = 16 * 1024 * 1024
+
+#: The largest binary payload a reply may claim: the point cloud of an 8192x8192 frame
+#: (16 bytes a point). A claim above it is a :class:`ProtocolError`.
+MAX_PAYLOAD_BYTES = 1 << 30
+
+# Bytes asked of the socket at a time.
+_RECV_BYTES = 1 << 20
 
 Json = Dict[str, Any]
 
@@ -103,11 +122,29 @@ class StaleReading(StereodError):
 
 
 def _opt_float(value: Any) -> Optional[float]:
-    return None if value is None else float(value)
+    """A JSON number that is finite, or None for null; anything else raises ValueError."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{value!r} is not a number")
+    if not math.isfinite(value):
+        raise ValueError(f"{value!r} is not a finite number")
+    return float(value)
 
 
 def _opt_int(value: Any) -> Optional[int]:
-    return None if value is None else int(value)
+    """A JSON integer, or None for null; anything else raises ValueError."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"{value!r} is not an integer")
+    return value
+
+
+def _reject_constant(name: str) -> Any:
+    # json.loads takes NaN, Infinity and -Infinity by default; no reply of the protocol
+    # holds them, and a distance that is one must never pass for a number.
+    raise ValueError(f"{name} is not JSON")
 
 
 @dataclass
@@ -139,8 +176,15 @@ class Reading:
     closest_m: Optional[float] = None
     #: Whether the matcher looks for something nearer than its range (census-sgm).
     near_field_guard: Optional[bool] = None
-    #: The service suspects its calibration (its health check is failing).
+    #: The capture time of the pair on the service machine's CLOCK_REALTIME (ns since the
+    #: Unix epoch): the stamp to merge with other robot data; ``stamp_ns`` is the same
+    #: instant on CLOCK_MONOTONIC.
+    stamp_realtime_ns: Optional[int] = None
+    #: The service suspects its calibration (its health check finds the rows of the two
+    #: images apart): a valid distance may be wrong. ``stereoctl distance`` exits 4 for it.
     calibration_suspect: bool = False
+    #: With ``calibration_suspect``: how far apart the rows are (pixels).
+    calibration_row_offset_px: Optional[float] = None
     #: Subscriptions only: events the service skipped before this one.
     skipped: int = 0
     #: The JSON object as received, with any fields this class does not name.
@@ -151,6 +195,13 @@ class Reading:
         """Builds a reading from its JSON object; :class:`ProtocolError` when it is not one."""
         if not isinstance(obj, dict) or not isinstance(obj.get("valid"), bool):
             raise ProtocolError("malformed", f"not a reading object: {obj!r}")
+        distance = obj.get("distance_m")
+        if obj["valid"] and (isinstance(distance, bool) or not isinstance(distance, (int, float))
+                             or not math.isfinite(distance) or distance <= 0):
+            # Fail closed: a "valid" reading whose distance is not a positive number would
+            # pass every "closer than" check a robot makes.
+            raise ProtocolError(
+                "malformed", f"a valid reading without a finite positive distance_m: {obj!r}")
         reason = obj.get("reason")
         code = message = None
         if isinstance(reason, dict):
@@ -176,7 +227,9 @@ class Reading:
                 near_field_guard=(
                     bool(obj["near_field_guard"]) if "near_field_guard" in obj else None
                 ),
+                stamp_realtime_ns=_opt_int(obj.get("stamp_realtime_ns")),
                 calibration_suspect=bool(obj.get("calibration_suspect", False)),
+                calibration_row_offset_px=_opt_float(obj.get("calibration_row_offset_px")),
                 skipped=int(skipped or 0),
                 raw=obj,
             )
@@ -280,10 +333,12 @@ def decode_payload(descriptor: Json, data: Union[bytes, bytearray, memoryview]) 
 
 
 class _Connection:
-    """One socket with a buffered reader: JSON lines and binary payloads."""
+    """One socket with its own buffered reader: JSON lines and binary payloads, each read
+    to a deadline (the socket's timeout is set to what is left before every receive)."""
 
     def __init__(self, path: str, timeout_s: Optional[float]) -> None:
         self.path = path
+        self.timeout_s = timeout_s
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         self.sock.settimeout(timeout_s)
         try:
@@ -294,76 +349,105 @@ class _Connection:
         except (socket.timeout, OSError) as error:
             self.sock.close()
             raise ServiceUnavailable(f"cannot connect to {path}: {error}") from None
-        self.reader = self.sock.makefile("rb")
+        self._buffer = bytearray()  # received and not yet handed out
+        # The deadline of the request last answered: its payloads are read by it too.
+        self.reply_deadline: Optional[float] = None
         self.hello: Optional[Json] = None
         self.used = False
 
     def close(self) -> None:
-        try:
-            self.reader.close()
-        finally:
-            self.sock.close()
+        self.sock.close()
 
-    def set_timeout(self, timeout_s: Optional[float]) -> None:
-        self.sock.settimeout(timeout_s)
+    def deadline(self, timeout_s: Optional[float] = None) -> Optional[float]:
+        """The time.monotonic() by which a wait of ``timeout_s`` (default: the client's)
+        must end; None: no limit."""
+        limit = self.timeout_s if timeout_s is None else timeout_s
+        return None if limit is None else time.monotonic() + limit
 
     def send(self, request: Json) -> None:
         line = json.dumps(request, separators=(",", ":")).encode("utf-8") + b"\n"
         try:
+            self.sock.settimeout(self.timeout_s)
             self.sock.sendall(line)
         except (socket.timeout, OSError) as error:
             raise ServiceUnavailable(f"connection to {self.path} lost: {error}") from None
 
-    def read_line(self) -> Json:
+    def _receive(self, deadline: Optional[float], most: int) -> bytes:
+        """At most ``most`` bytes, waiting no later than ``deadline``; b"" when the service
+        closed the connection."""
+        if deadline is None:
+            self.sock.settimeout(None)
+        else:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise socket.timeout()
+            self.sock.settimeout(left)
+        return self.sock.recv(most)
+
+    def read_line(self, deadline: Optional[float]) -> Json:
+        searched = 0  # the buffer holds no newline before this
         try:
-            line = self.reader.readline(_MAX_LINE_BYTES)
+            while True:
+                newline = self._buffer.find(b"\n", searched)
+                if newline >= 0:
+                    line = bytes(self._buffer[:newline + 1])
+                    del self._buffer[:newline + 1]
+                    break
+                searched = len(self._buffer)
+                if searched >= _MAX_LINE_BYTES:
+                    raise ProtocolError("malformed", f"reply line longer than {_MAX_LINE_BYTES} bytes")
+                chunk = self._receive(deadline, _RECV_BYTES)
+                if not chunk:
+                    if self._buffer:
+                        raise ServiceUnavailable(
+                            f"the service closed the connection in the middle of a reply ({self.path})")
+                    raise ServiceUnavailable(f"the service closed the connection ({self.path})")
+                self._buffer += chunk
         except socket.timeout:
             raise ServiceUnavailable(f"no reply from {self.path} in time") from None
         except OSError as error:
             raise ServiceUnavailable(f"connection to {self.path} lost: {error}") from None
-        if not line:
-            raise ServiceUnavailable(f"the service closed the connection ({self.path})")
-        if not line.endswith(b"\n"):
-            if len(line) < _MAX_LINE_BYTES:
-                raise ServiceUnavailable(
-                    f"the service closed the connection in the middle of a reply ({self.path})")
-            raise ProtocolError("malformed", f"reply line longer than {_MAX_LINE_BYTES} bytes")
         try:
-            obj = json.loads(line)
+            obj = json.loads(line, parse_constant=_reject_constant)
         except ValueError as error:
             raise ProtocolError("malformed", f"reply is not JSON ({error}): {line[:200]!r}") from None
         if not isinstance(obj, dict):
             raise ProtocolError("malformed", f"reply is not a JSON object: {line[:200]!r}")
         return obj
 
-    def read_bytes(self, count: int) -> bytearray:
-        buffer = bytearray(count)
-        view = memoryview(buffer)
-        done = 0
+    def read_bytes(self, count: int, deadline: Optional[float]) -> bytearray:
+        """``count`` bytes, grown as they arrive: memory follows what the service sends,
+        not what it claims."""
+        out = self._buffer[:count]
+        del self._buffer[:count]
         try:
-            while done < count:
-                got = self.reader.readinto(view[done:])
-                if not got:
+            while len(out) < count:
+                chunk = self._receive(deadline, min(count - len(out), _RECV_BYTES))
+                if not chunk:
                     raise ServiceUnavailable(
-                        f"the service closed the connection in a payload ({done} of {count} bytes)")
-                done += got
+                        f"the service closed the connection in a payload ({len(out)} of {count} bytes)")
+                out += chunk
         except socket.timeout:
             raise ServiceUnavailable(f"payload from {self.path} not received in time") from None
         except OSError as error:
             raise ServiceUnavailable(f"connection to {self.path} lost: {error}") from None
-        return buffer
+        return out
 
-    def read_payloads(self, descriptors: Sequence[Json]) -> List[bytearray]:
-        out = []
+    def read_payloads(self, descriptors: Sequence[Json], deadline: Optional[float]) -> List[bytearray]:
+        counts = []
         for descriptor in descriptors:
             try:
-                count = int(descriptor["bytes"])
+                count = _opt_int(descriptor["bytes"])
             except (KeyError, TypeError, ValueError):
                 raise ProtocolError("malformed", f"payload without a size: {descriptor!r}") from None
-            if count < 0:
-                raise ProtocolError("malformed", f"negative payload size: {descriptor!r}")
-            out.append(self.read_bytes(count))
-        return out
+            if count is None or count < 0:
+                raise ProtocolError("malformed", f"payload without a size: {descriptor!r}")
+            if count > MAX_PAYLOAD_BYTES:
+                raise ProtocolError(
+                    "malformed", f"payload of {count} bytes, more than {MAX_PAYLOAD_BYTES} "
+                    f"(MAX_PAYLOAD_BYTES): {descriptor!r}")
+            counts.append(count)
+        return [self.read_bytes(count, deadline) for count in counts]
 
 
 def _check(reply: Json) -> Json:
@@ -393,7 +477,8 @@ class Client:
     """A connection to the stereod service.
 
     ``socket_path`` is the service's Unix socket; ``timeout_s`` bounds connecting and
-    each wait for a reply (``None``: wait indefinitely). Usable as a context manager,
+    each request as a whole, its reply line and its payloads (``None``: wait
+    indefinitely). Usable as a context manager,
     which closes the connection at the end::
 
         with Client("/run/stereod/stereod.sock") as client:
@@ -441,8 +526,9 @@ class Client:
             reused = connection.used
             connection.used = True
             try:
+                deadline = connection.deadline()
                 connection.send(request)
-                reply = connection.read_line()
+                reply = connection.read_line(deadline)
             except ServiceUnavailable:
                 self.close()
                 if reused and attempt == 0:
@@ -457,6 +543,7 @@ class Client:
                 self.close()
                 if code == "idle_timeout" and reused and attempt == 0:
                     continue
+            connection.reply_deadline = deadline
             return reply, connection
         raise AssertionError("unreachable")
 
@@ -562,7 +649,7 @@ class Client:
             self.close()
             raise ProtocolError("malformed", "snapshot reply without payloads", reply)
         try:
-            blobs = connection.read_payloads(descriptors)
+            blobs = connection.read_payloads(descriptors, connection.reply_deadline)
         except BaseException:
             self.close()
             raise
@@ -599,11 +686,12 @@ class Client:
             request["with"] = list(results)
         connection = _Connection(self.socket_path, self.timeout_s)
         try:
+            deadline = connection.deadline()
             connection.send(request)
-            _check(connection.read_line())
-            connection.set_timeout(event_timeout_s)
+            _check(connection.read_line(deadline))
             while True:
-                event = connection.read_line()
+                event = connection.read_line(
+                    None if event_timeout_s is None else connection.deadline(event_timeout_s))
                 if "event" not in event:
                     _check(event)  # an error line: raises
                     continue
@@ -614,7 +702,9 @@ class Client:
                     descriptors = [{"name": "depth" if event["event"] == "depth" else "payload",
                                     "format": event.get("format"), "width": event.get("width"),
                                     "height": event.get("height"), "bytes": event["bytes"]}]
-                arrays = _decode_all(descriptors, connection.read_payloads(descriptors))
+                # The event's payloads follow its line: within the client's timeout.
+                arrays = _decode_all(descriptors,
+                                     connection.read_payloads(descriptors, connection.deadline()))
                 yield _event_object(event, arrays)
         finally:
             connection.close()

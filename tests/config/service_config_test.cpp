@@ -546,6 +546,25 @@ TEST(ConfigOverrides, CommandLineValuesReplaceTheFileAndAreNamedInProblems)
     }
 }
 
+// Issue 23: without a file, a bad --live-view was blamed on "<defaults>". Given the
+// overrides, the message names the option, as a file's does.
+TEST(ConfigOverrides, ProblemsOfOverriddenValuesNameTheOptionWithoutAFile)
+{
+    ServiceConfig config = defaultConfig();
+    ConfigOverrides overrides;
+    overrides.live_view = "nonsense";
+    applyOverrides(config, overrides);
+    try {
+        validateConfig(config, overrides);
+        FAIL();
+    } catch (const ConfigError& error) {
+        ASSERT_EQ(error.problems().size(), 1u) << error.what();
+        EXPECT_EQ(error.problems()[0].rfind("command line (--live-view): live_view.listen: ", 0),
+                  0u)
+            << error.problems()[0];
+    }
+}
+
 TEST(ConfigOverrides, ValidateConfigChecksAnInCodeConfiguration)
 {
     test::TempDir dir;
@@ -711,6 +730,24 @@ TEST(ConfigDocs, EveryKeyIsDocumented)
     for (const auto& key : configKeys()) {
         EXPECT_NE(docs.find("`" + key.path + "`"), std::string::npos)
             << key.path << " is not in docs/configuration.md";
+    }
+}
+
+TEST(ConfigOutput, MaxDepthIsAutoOrMetresAboveZero)
+{
+    EXPECT_FALSE(defaultConfig().processing.output.max_depth_m.has_value());
+    EXPECT_FALSE(parseConfig("output:\n  max_depth_m: auto\n", "t.yaml")
+                     .processing.output.max_depth_m.has_value());
+    const ServiceConfig set = parseConfig("output:\n  max_depth_m: 12.5\n", "t.yaml");
+    EXPECT_EQ(set.processing.output.max_depth_m, 12.5);
+    const ConfigChange change = diffConfig(defaultConfig(), set);
+    EXPECT_EQ(change.changed, std::vector<std::string>{"output.max_depth_m"});
+    EXPECT_TRUE(change.restart_needed.empty()); // live
+    for (const std::string value : {"0", "-3", "far", "[1]"}) {
+        const auto problems = problemsOf("output:\n  max_depth_m: " + value + "\n");
+        ASSERT_EQ(problems.size(), 1u) << value;
+        EXPECT_NE(problems[0].find("t.yaml:2: output.max_depth_m: "), std::string::npos)
+            << problems[0];
     }
 }
 

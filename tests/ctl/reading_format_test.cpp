@@ -47,6 +47,34 @@ TEST(ReadingFormat, ExitCodeFollowsTheReasonClass)
     }
 }
 
+TEST(ReadingFormat, ASuspectCalibrationHasItsOwnExitCodeAndIsPrinted)
+{
+    Json suspect = {{"valid", true},
+                    {"distance_m", 0.278},
+                    {"frame", 3},
+                    {"age_ms", 12.0},
+                    {"valid_fraction", 0.5},
+                    {"calibration_suspect", true},
+                    {"calibration_row_offset_px", 1.523}};
+    EXPECT_TRUE(calibrationSuspect(suspect));
+    EXPECT_EQ(exitCodeForReading(suspect), kExitCalibrationSuspect);
+    EXPECT_EQ(kExitCalibrationSuspect, 4);
+    EXPECT_EQ(formatDistance(suspect), "0.278 m  CALIBRATION SUSPECT: rows +1.52 px apart");
+    EXPECT_EQ(formatWatchLine(suspect),
+              "frame 3  0.278 m  age 12 ms  valid 50 %  CALIBRATION SUSPECT: rows +1.52 px apart");
+    suspect.erase("calibration_row_offset_px");
+    EXPECT_EQ(formatDistance(suspect), "0.278 m  CALIBRATION SUSPECT");
+    // A reading withheld for the calibration keeps the exit code of "no reading".
+    Json withheld = noReading("calibration_suspect", "calibration suspect: rows +2.40 px apart");
+    withheld["calibration_suspect"] = true;
+    EXPECT_EQ(exitCodeForReading(withheld), kExitNoReading);
+    EXPECT_EQ(formatDistance(withheld), "no reading: calibration suspect: rows +2.40 px apart");
+    // Not flagged, or flagged false: a plain reading.
+    suspect["calibration_suspect"] = false;
+    EXPECT_FALSE(calibrationSuspect(suspect));
+    EXPECT_EQ(exitCodeForReading(suspect), kExitOk);
+}
+
 TEST(ReadingFormat, AReadingThatDoesNotAddUpIsNeverValid)
 {
     // valid:true without a number, or a reason nobody knows: not a distance to act on.

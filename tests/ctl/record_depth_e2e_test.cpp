@@ -69,11 +69,26 @@ TEST_F(RecordE2e, DepthAndPointsCarryTheStampsOfTheirPairs)
         EXPECT_EQ(results.log_times, left.log_times) << topic;
     }
 
+    // Depths beyond the outputs' cap (output.max_depth_m, by default f*B / 4 px: 2.0 m for
+    // this rig) are not in the bag: NaN in the depth, no point.
+    const float cap_m = static_cast<float>(kFocalPx * kBaselineM / 4.0);
+    const auto within_cap = [cap_m](std::string_view data, std::size_t stride, std::size_t offset) {
+        std::size_t beyond = 0, depths = 0;
+        for (std::size_t at = offset; at + sizeof(float) <= data.size(); at += stride) {
+            float z = 0;
+            std::memcpy(&z, data.data() + at, sizeof z);
+            depths += std::isfinite(z) ? 1 : 0;
+            beyond += std::isfinite(z) && z > cap_m ? 1 : 0;
+        }
+        EXPECT_GT(depths, 10000u);
+        return beyond;
+    };
     mcap::Reader reader(out);
     reader.forEachMessage([&](const mcap::MessageView& message, const mcap::MessageRef&) {
         const std::string& topic = reader.channels().at(message.channel_id).topic;
         if (topic == kMcapDepthTopic) {
             const ros2::ImageView depth = ros2::parseImage(message.data);
+            EXPECT_EQ(within_cap(depth.data, 4, 0), 0u) << "depths beyond the cap";
             EXPECT_EQ(depth.encoding, "32FC1");
             EXPECT_EQ(depth.width, static_cast<uint32_t>(kSize.width));
             EXPECT_EQ(depth.height, static_cast<uint32_t>(kSize.height));
@@ -81,6 +96,7 @@ TEST_F(RecordE2e, DepthAndPointsCarryTheStampsOfTheirPairs)
             EXPECT_EQ(depth.header.frame_id, "stereo_left_optical_frame");
         } else if (topic == kMcapPointsTopic) {
             const ros2::PointCloud2View cloud = ros2::parsePointCloud2(message.data);
+            EXPECT_EQ(within_cap(cloud.data, 16, 8), 0u) << "points beyond the cap";
             EXPECT_EQ(cloud.header.frame_id, "stereo_left_optical_frame");
             EXPECT_GT(cloud.width, 1000u);
         }
@@ -92,13 +108,9 @@ TEST_F(RecordE2e, DepthAndPointsCarryTheStampsOfTheirPairs)
     EXPECT_EQ(index.right_topic, kMcapRightImageTopic);
     EXPECT_EQ(index.pairs.size(), 8u);
     EXPECT_EQ(index.unpaired_left + index.unpaired_right, 0u);
-    const std::string log = dir_.file("replay.log");
-    const std::string socket = dir_.file("r.sock");
-    ChildProcess replay({stereodPath(), "--replay", out, "--socket", socket}, log);
-    const Json reading = firstReading(socket, replay, log);
-    EXPECT_EQ(reading.value("valid", false), true) << reading.dump() << readFile(log);
-    replay.sendSignal(SIGTERM);
-    replay.waitFor(10s);
+    const Replayed replayed = replayOnce(out, "replay");
+    EXPECT_EQ(replayed.reading.value("valid", false), true)
+        << replayed.reading.dump() << replayed.log;
 }
 
 TEST_F(RecordE2e, PairsWithoutTrustedDepthGetNaNDepthAndNoPoints)
@@ -174,15 +186,15 @@ TEST_F(RecordE2e, RecordedDepthAndPointsAreTheSnapshotsThroughRosmsg2Serializati
     ASSERT_FALSE(HasFailure());
     startService(true);
 
-    // The snapshot: a pair's raw left frame (its stamp names the pair), depth and cloud.
+    // The snapshot: a pair's raw left frame (its pixels name the source pair), depth and
+    // cloud.
     ProtocolClient client(socket_, 30000ms);
     const Json snapshot = client.request(
         {{"cmd", "snapshot"}, {"items", Json::array({"raw_left", "depth", "cloud"})}});
     ASSERT_EQ(snapshot["ok"], true) << snapshot.dump();
     ASSERT_EQ(snapshot["depth_valid"], true) << snapshot.dump();
     const Json& payloads = snapshot["payloads"];
-    readGray(client, payloads[0]);
-    const int64_t stamp_ns = payloads[0]["stamp_ns"];
+    const cv::Mat snapshot_left = readGray(client, payloads[0]);
     cv::Mat depth_mm(payloads[1]["height"].get<int>(), payloads[1]["width"].get<int>(), CV_16UC1);
     ASSERT_EQ(payloads[1]["bytes"], depth_mm.total() * 2);
     client.readPayload(depth_mm.data, depth_mm.total() * 2);
@@ -194,6 +206,20 @@ TEST_F(RecordE2e, RecordedDepthAndPointsAreTheSnapshotsThroughRosmsg2Serializati
     const ProcessResult recorded =
         ctl({"record", "--out", out, "--frames", "18", "--with", "depth,points"});
     ASSERT_EQ(recorded.exit_code, 0) << recorded.out << recorded.err;
+    // The bag stamps each delivery of a pair anew (the wall clock): the snapshot's pair is
+    // the one with its left image, at that pair's stamp.
+    int64_t stamp_ns = 0;
+    {
+        mcap::Reader reader(out);
+        for (const McapPair& pair : indexMcapStereo(reader, "", "").pairs) {
+            cv::Mat left;
+            std::string why;
+            ASSERT_TRUE(decodeMcapImage(reader, pair.left, left, why)) << why;
+            if (stamp_ns == 0 && sameImage(left, snapshot_left))
+                stamp_ns = pair.left_stamp_ns;
+        }
+    }
+    ASSERT_NE(stamp_ns, 0) << "the snapshot's pair is not in the bag";
     const ProcessResult node =
         runProcess({STEREOD_NODE, interop + "/read_results.mjs", out, std::to_string(stamp_ns)});
     ASSERT_EQ(node.exit_code, 0) << node.err;
@@ -203,7 +229,11 @@ TEST_F(RecordE2e, RecordedDepthAndPointsAreTheSnapshotsThroughRosmsg2Serializati
 
     const Json& depth = got["depth"];
     ASSERT_TRUE(depth.is_object()) << "no depth at the snapshot's stamp " << stamp_ns;
-    EXPECT_EQ(depth["logTime"], stamp_ns);
+    // Log times beyond a JavaScript number's exact range come as text.
+    const auto text = [](const Json& value) {
+        return value.is_string() ? value.get<std::string>() : value.dump();
+    };
+    EXPECT_EQ(text(depth["logTime"]), std::to_string(stamp_ns));
     const Json& image = depth["message"];
     EXPECT_EQ(image["encoding"], "32FC1");
     EXPECT_EQ(image["width"], depth_mm.cols);
@@ -218,7 +248,7 @@ TEST_F(RecordE2e, RecordedDepthAndPointsAreTheSnapshotsThroughRosmsg2Serializati
 
     const Json& points = got["points"];
     ASSERT_TRUE(points.is_object()) << "no points at the snapshot's stamp " << stamp_ns;
-    EXPECT_EQ(points["logTime"], stamp_ns);
+    EXPECT_EQ(text(points["logTime"]), std::to_string(stamp_ns));
     const Json& message = points["message"];
     const Json fields = Json::parse(R"([
         {"name": "x", "offset": 0, "datatype": 7, "count": 1},

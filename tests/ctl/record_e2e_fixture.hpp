@@ -61,6 +61,9 @@ inline bool sameImage(const cv::Mat& a, const cv::Mat& b)
     return a.size() == b.size() && a.type() == b.type() && cv::norm(a, b, cv::NORM_INF) == 0.0;
 }
 
+// Defined below the fixture, which uses it.
+inline Json firstReading(const std::string& socket, ChildProcess& service, const std::string& log);
+
 class RecordE2e : public ::testing::Test {
   protected:
     void SetUp() override
@@ -183,6 +186,24 @@ class RecordE2e : public ::testing::Test {
         }
     }
 
+    // A second stereod replaying `recording` (no --calib: a bag brings its camera_info)
+    // until its first reading; that reading and the service's whole log once it stopped.
+    struct Replayed {
+        Json reading;
+        std::string log;
+    };
+    Replayed replayOnce(const std::string& recording, const std::string& name)
+    {
+        const std::string log = dir_.file(name + ".log");
+        const std::string socket = dir_.file(name + ".sock");
+        ChildProcess replay({stereodPath(), "--replay", recording, "--socket", socket}, log);
+        Replayed out{firstReading(socket, replay, log), {}};
+        replay.sendSignal(SIGTERM);
+        replay.waitFor(10s);
+        out.log = readFile(log);
+        return out;
+    }
+
     ProcessResult ctl(std::vector<std::string> args, const std::vector<std::string>& env = {}) const
     {
         args.insert(args.begin(), stereoctlPath());
@@ -197,28 +218,56 @@ class RecordE2e : public ::testing::Test {
     std::unique_ptr<ChildProcess> service_;
 };
 
-// Every pair of the bag is a source pair (stamps and pixels); returns how many there are.
-inline std::size_t expectBagOfSourcePairs(const std::string& path,
-                                          const std::vector<SourcePair>& source)
+// The wall clock now (CLOCK_REALTIME), ns since the Unix epoch.
+inline int64_t wallClockNowNs()
 {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(
+               std::chrono::system_clock::now().time_since_epoch())
+        .count();
+}
+
+// Every pair of the bag is a source pair (its pixels: each source pair has its own
+// brightness), stamped in the service's one time base: the wall clock when the replay
+// delivered it (within the last `within` of now), the pairs in order, the right frame the
+// source's own skew after the left, even across the replay's loops. Returns how many
+// pairs there are.
+inline std::size_t expectBagOfSourcePairs(const std::string& path,
+                                          const std::vector<SourcePair>& source,
+                                          std::chrono::nanoseconds within = 10min)
+{
+    const int64_t now_ns = wallClockNowNs();
     mcap::Reader reader(path);
     const McapStereoIndex index = indexMcapStereo(reader, "", "");
     EXPECT_EQ(index.left_topic, kMcapLeftImageTopic);
+    int64_t previous_ns = 0;
     for (const McapPair& p : index.pairs) {
-        const auto match = std::find_if(source.begin(), source.end(), [&](const SourcePair& s) {
-            return s.left_stamp_ns == p.left_stamp_ns && s.right_stamp_ns == p.right_stamp_ns;
-        });
-        EXPECT_NE(match, source.end()) << "stamps " << p.left_stamp_ns << "/" << p.right_stamp_ns;
-        if (match == source.end())
-            continue;
         cv::Mat left, right;
         std::string why;
         EXPECT_TRUE(decodeMcapImage(reader, p.left, left, why)) << why;
         EXPECT_TRUE(decodeMcapImage(reader, p.right, right, why)) << why;
-        EXPECT_TRUE(sameImage(left, match->left));
-        EXPECT_TRUE(sameImage(right, match->right));
+        const auto match = std::find_if(source.begin(), source.end(), [&](const SourcePair& s) {
+            return sameImage(left, s.left) && sameImage(right, s.right);
+        });
+        EXPECT_NE(match, source.end()) << "a pair of the bag is no source pair";
+        if (match == source.end())
+            continue;
+        EXPECT_EQ(p.right_stamp_ns - p.left_stamp_ns, match->right_stamp_ns - match->left_stamp_ns);
+        EXPECT_GT(p.left_stamp_ns, previous_ns) << "the stamps step back";
+        EXPECT_LE(p.left_stamp_ns, now_ns);
+        EXPECT_GT(p.left_stamp_ns, now_ns - within.count()) << "not the wall clock";
+        previous_ns = p.left_stamp_ns;
     }
     return index.pairs.size();
+}
+
+// The source pair whose left image is `left`, or nullptr.
+inline const SourcePair* pairWithLeft(const std::vector<SourcePair>& source, const cv::Mat& left)
+{
+    for (const SourcePair& pair : source) {
+        if (sameImage(pair.left, left))
+            return &pair;
+    }
+    return nullptr;
 }
 
 // The first reading of the service on `socket` that is not "no frame yet".

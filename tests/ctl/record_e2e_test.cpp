@@ -2,6 +2,7 @@
 // processes (the fixture: tests/ctl/record_e2e_fixture.hpp).
 
 #include <algorithm>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -242,9 +243,11 @@ TEST_F(RecordE2e, McapRecordingHoldsThePairsAndTheCalibration)
         const Json& right = got["first"][kMcapRightImageTopic];
         EXPECT_EQ(left["message"]["width"], kSize.width);
         EXPECT_EQ(left["message"]["encoding"], "mono8");
-        const SourcePair* source = pairWithStamps(left["logTime"], right["logTime"]);
-        ASSERT_NE(source, nullptr) << left["logTime"] << "/" << right["logTime"];
-        EXPECT_EQ(left["message"]["data"], test::base64(source->left));
+        const SourcePair* source = nullptr;
+        for (const SourcePair& pair : source_)
+            if (left["message"]["data"] == test::base64(pair.left))
+                source = &pair;
+        ASSERT_NE(source, nullptr) << "the bag's first left image is no source pair's";
         EXPECT_EQ(right["message"]["data"], test::base64(source->right));
         const Json& left_info = got["first"][kMcapLeftInfoTopic]["message"];
         const Json& right_info = got["first"][kMcapRightInfoTopic]["message"];
@@ -259,6 +262,57 @@ TEST_F(RecordE2e, McapRecordingHoldsThePairsAndTheCalibration)
     const ProcessResult again = ctl({"record", "--out", out, "--frames", "1"});
     EXPECT_EQ(again.exit_code, 2) << again.out << again.err;
     EXPECT_NE(again.err.find("exists"), std::string::npos) << again.err;
+}
+
+// One time base: a bag recorded from a replay that loops (6 pairs, 14 recorded) carries
+// the wall clock of each pair's delivery, so its log times never step back, and replaying
+// it gives no warning about stamps that do; the readings carry the same time base beside
+// their CLOCK_MONOTONIC stamp.
+TEST_F(RecordE2e, ALoopingReplayRecordsStampsThatNeverStepBack)
+{
+    startService(true);
+    const std::string out = dir_.file("loop.mcap");
+    const ProcessResult recorded = ctl({"record", "--out", out, "--frames", "14", "--json"});
+    ASSERT_EQ(recorded.exit_code, 0) << recorded.out << recorded.err;
+    const Json summary = Json::parse(recorded.out);
+    EXPECT_EQ(summary["file"], out);
+    EXPECT_FALSE(summary.contains("dir"));
+    EXPECT_EQ(expectBagOfSourcePairs(out, source_), 14u);
+
+    // Every message, in file order: log time = header stamp, never stepping back per topic.
+    mcap::Reader reader(out);
+    std::map<std::string, uint64_t> last;
+    std::size_t messages = 0;
+    reader.forEachMessage([&](const mcap::MessageView& message, const mcap::MessageRef&) {
+        const std::string& topic = reader.channels().at(message.channel_id).topic;
+        const int64_t stamp = topic.find("camera_info") == std::string::npos
+                                  ? ros2::parseImage(message.data).header.stamp.toNs()
+                                  : ros2::parseCameraInfo(message.data).header.stamp.toNs();
+        EXPECT_EQ(message.log_time_ns, static_cast<uint64_t>(stamp)) << topic;
+        EXPECT_GE(message.log_time_ns, last[topic]) << topic << ": the log time steps back";
+        last[topic] = message.log_time_ns;
+        ++messages;
+    });
+    EXPECT_EQ(messages, 4u * 14u);
+
+    const Replayed replayed = replayOnce(out, "replay");
+    EXPECT_EQ(replayed.reading.value("valid", false), true)
+        << replayed.reading.dump() << replayed.log;
+    EXPECT_EQ(replayed.log.find("step back"), std::string::npos) << replayed.log;
+
+    // The reading: stamp_ns on CLOCK_MONOTONIC, stamp_realtime_ns the same instant on the
+    // wall clock.
+    timespec mono{}, real{};
+    clock_gettime(CLOCK_MONOTONIC, &mono);
+    clock_gettime(CLOCK_REALTIME, &real);
+    const int64_t offset_ns =
+        (real.tv_sec - mono.tv_sec) * 1'000'000'000LL + (real.tv_nsec - mono.tv_nsec);
+    ProtocolClient client(socket_, 10000ms);
+    const Json now = client.request({{"cmd", "distance"}})["reading"];
+    ASSERT_TRUE(now.contains("stamp_realtime_ns")) << now.dump();
+    EXPECT_NEAR(static_cast<double>(now["stamp_realtime_ns"].get<int64_t>() -
+                                    now["stamp_ns"].get<int64_t>()),
+                static_cast<double>(offset_ns), 5e6);
 }
 
 TEST_F(RecordE2e, KilledMcapRecorderLeavesABagThatReplays)
@@ -284,14 +338,10 @@ TEST_F(RecordE2e, KilledMcapRecorderLeavesABagThatReplays)
     EXPECT_GE(expectBagOfSourcePairs(out, source_), 30u);
 
     // stereod replays it, with the calibration its camera_info carries.
-    const std::string log = dir_.file("replay.log");
-    const std::string socket = dir_.file("r.sock");
-    ChildProcess replay({stereodPath(), "--replay", out, "--socket", socket}, log);
-    const Json reading = firstReading(socket, replay, log);
-    EXPECT_EQ(reading.value("valid", false), true) << reading.dump() << readFile(log);
-    EXPECT_NE(readFile(log).find("calibration from"), std::string::npos) << readFile(log);
-    replay.sendSignal(SIGTERM);
-    replay.waitFor(10s);
+    const Replayed replayed = replayOnce(out, "replay");
+    EXPECT_EQ(replayed.reading.value("valid", false), true)
+        << replayed.reading.dump() << replayed.log;
+    EXPECT_NE(replayed.log.find("calibration from"), std::string::npos) << replayed.log;
 }
 
 // A bag as a robot's recorder writes it (@mcap/core's writer and rosmsg2-serialization:
@@ -374,6 +424,40 @@ TEST_F(RecordE2e, FullDiskStopsTheRecordingAndNotTheService)
     Json reading = client.request({{"cmd", "distance"}})["reading"];
     EXPECT_EQ(reading["valid"], true) << reading.dump();
     EXPECT_TRUE(service_->running());
+}
+
+// Issue 23: a bag that reached the file size limit (ulimit -f) killed stereoctl with
+// SIGXFSZ (exit 153, no word), and a bag on a full disk was reported with the pairs of the
+// chunk the disk refused (303 said, 285 replayed). The recorder now stops with the reason,
+// and the count is what a replay finds.
+TEST_F(RecordE2e, ABagAtTheFileSizeLimitOrOnAFullDiskCountsWhatReplays)
+{
+    startService(true);
+    // About 2.5 MB a chunk of 4 MiB: the first chunk fits, the second does not.
+    const std::string limited = dir_.file("limited.mcap");
+    const ProcessResult at_limit =
+        runProcess({"/usr/bin/prlimit", "--fsize=4000000", "--", stereoctlPath(), "record", "--out",
+                    limited, "--frames", "100", "--json", "--socket", socket_});
+    EXPECT_EQ(at_limit.signal, 0) << at_limit.err;
+    ASSERT_EQ(at_limit.exit_code, 2) << at_limit.out << at_limit.err;
+    EXPECT_NE(at_limit.err.find("File too large"), std::string::npos) << at_limit.err;
+    const Json limited_summary = Json::parse(at_limit.out);
+    EXPECT_EQ(limited_summary["ended"], "write_failed");
+    const std::size_t limited_pairs = expectBagOfSourcePairs(limited, source_);
+    EXPECT_GT(limited_pairs, 0u);
+    EXPECT_EQ(limited_summary["pairs"].get<std::size_t>(), limited_pairs) << at_limit.out;
+
+    const std::string full = dir_.file("full/run.mcap");
+    fs::create_directory(dir_.file("full"));
+    const ProcessResult on_full =
+        ctl({"record", "--out", full, "--frames", "100", "--json"},
+            {"LD_PRELOAD=" STEREOD_DISK_FULL_PRELOAD, "STEREOD_TEST_FULL_DIR=" + dir_.file("full"),
+             "STEREOD_TEST_FULL_BYTES=4000000", "ASAN_OPTIONS=verify_asan_link_order=0"});
+    ASSERT_EQ(on_full.exit_code, 2) << on_full.out << on_full.err;
+    const Json full_summary = Json::parse(on_full.out);
+    const std::size_t full_pairs = expectBagOfSourcePairs(full, source_);
+    EXPECT_GT(full_pairs, 0u);
+    EXPECT_EQ(full_summary["pairs"].get<std::size_t>(), full_pairs) << on_full.out;
 }
 
 } // namespace

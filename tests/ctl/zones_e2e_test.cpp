@@ -3,6 +3,7 @@
 // view); `stereoctl zones` reads occupied, clear and unknown and exits 1; the zones
 // stream gives one event per frame; a reload with other zones applies them live.
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -14,6 +15,9 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
 
 #include "ctl/client.hpp"
 #include "tests/support/data_paths.hpp"
@@ -115,6 +119,8 @@ TEST_F(ZonesService, OccupiedClearAndUnknownWithTheirExitCode)
     EXPECT_EQ(chair["state"], "occupied");
     // Ground truth: the chair's nearest point in the box is 1.578 m from the camera.
     EXPECT_NEAR(chair["nearest_m"].get<double>(), 1.578, 0.02 * 1.578);
+    // The chair fills much of its box: seen, not "0 % in sight".
+    EXPECT_GT(chair["visible_fraction"].get<double>(), 0.5) << chair.dump();
     EXPECT_EQ(reply["zones"][1]["state"], "clear");
     EXPECT_EQ(reply["zones"][2]["state"], "unknown");
     EXPECT_EQ(reply["zones"][2]["reason"], "not_visible");
@@ -124,7 +130,19 @@ TEST_F(ZonesService, OccupiedClearAndUnknownWithTheirExitCode)
     EXPECT_NE(text.out.find("chair: occupied, nearest"), std::string::npos) << text.out;
 }
 
-// The zones drawn on the colourised depth: the chair's box in red where it projects.
+// Issue 23: the keep-out zones' cost was in no stage of `status`.
+TEST_F(ZonesService, TheZonesCostIsAStageOfStatus)
+{
+    ProtocolClient client(socket_, 5000ms);
+    const Json stages = client.request({{"cmd", "status"}})["status"]["pipeline"]["stage_ms"];
+    ASSERT_TRUE(stages.contains("zones")) << stages.dump();
+    EXPECT_GT(stages["zones"].get<double>(), 0.0) << stages.dump();
+    const ProcessResult status = ctl({"status"});
+    EXPECT_NE(status.out.find("  zones "), std::string::npos) << status.out;
+}
+
+// The zones drawn on the depth in grey: the chair's box in red where it projects, the
+// clear one in green, and no other colour in the picture but their labels'.
 TEST_F(ZonesService, PictureDrawsTheZonesOnTheDepth)
 {
     const std::string picture = dir_.file("zones.png");
@@ -143,6 +161,14 @@ TEST_F(ZonesService, PictureDrawsTheZonesOnTheDepth)
         }
     EXPECT_GT(red, 1000);   // the occupied chair box
     EXPECT_GT(green, 1000); // the clear box in front
+    // The background is grey: the boxes' colours appear nowhere else.
+    int coloured = 0;
+    for (int y = 0; y < image.rows; ++y)
+        for (int x = 0; x < image.cols; ++x) {
+            const cv::Vec3b c = image.at<cv::Vec3b>(y, x);
+            coloured += std::max({c[0], c[1], c[2]}) - std::min({c[0], c[1], c[2]}) > 30;
+        }
+    EXPECT_LT(coloured, static_cast<int>(image.total() / 5)) << "the depth is in colour";
 }
 
 TEST_F(ZonesService, TheStreamGivesOneEventPerFrame)
@@ -179,7 +205,43 @@ zones:
     }
     ASSERT_EQ(zones.size(), 1u) << zones.dump();
     EXPECT_EQ(zones[0]["name"], "front");
-    EXPECT_EQ(ctl({"zones"}).exit_code, 0); // all clear
+    const ProcessResult after = ctl({"zones"});
+    EXPECT_EQ(after.exit_code, 0) << after.out << after.err; // all clear
+}
+
+// Issue 23: an occupied zone whose distance came as null made `stereoctl zones` exit 3
+// ("no service") instead of 1 (occupied). A number it cannot read is printed as "?"; the
+// state and its exit code still reach the robot. A one-reply service stands in for
+// stereod, which no longer sends such a value.
+TEST(ZonesCommand, AnOccupiedZoneExitsOneWhateverItsNumbersSay)
+{
+    test::TempDir dir;
+    const std::string path = dir.file("fake.sock");
+    const int server = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    sockaddr_un address{};
+    address.sun_family = AF_UNIX;
+    std::snprintf(address.sun_path, sizeof address.sun_path, "%s", path.c_str());
+    ASSERT_EQ(::bind(server, reinterpret_cast<sockaddr*>(&address), sizeof address), 0);
+    ASSERT_EQ(::listen(server, 1), 0);
+    std::thread fake([server] {
+        const int client = ::accept(server, nullptr, nullptr);
+        char request[4096];
+        [[maybe_unused]] const ssize_t got = ::recv(client, request, sizeof request, 0);
+        const std::string reply =
+            R"({"ok":true,"frame":3,"stamp_ns":1,"age_ms":20.0,"zones":[{"name":"chair",)"
+            R"("state":"occupied","points":4176,"nearest_m":null,)"
+            R"("nearest_point_m":[null,0,0],"visible_fraction":0.8}]})"
+            "\n";
+        [[maybe_unused]] const ssize_t sent = ::send(client, reply.data(), reply.size(), 0);
+        ::close(client);
+    });
+    const ProcessResult run = runProcess({stereoctlPath(), "zones", "--socket", path});
+    fake.join();
+    ::close(server);
+    EXPECT_EQ(run.exit_code, 1) << run.out << run.err;
+    EXPECT_NE(run.out.find("chair: occupied, nearest ? m at ?, 4176 points, 80 % in sight"),
+              std::string::npos)
+        << run.out;
 }
 
 } // namespace

@@ -4,6 +4,7 @@
 
 #include "daemon/live_view/foxglove_protocol.hpp"
 #include "daemon/live_view/live_view.hpp"
+#include "protocol/reading_json.hpp"
 
 namespace stereod::live_view {
 namespace {
@@ -40,6 +41,62 @@ TEST(FoxgloveProtocol, MalformedRequestsSayWhatIsWrong)
     EXPECT_NE(advertise.problem.find("advertise"), std::string::npos);
 }
 
+// Whether `value` is of the JSON schema type `type` (a name, or a list of names).
+bool ofSchemaType(const json& value, const json& type)
+{
+    if (type.is_array()) {
+        for (const json& one : type)
+            if (ofSchemaType(value, one))
+                return true;
+        return false;
+    }
+    const std::string name = type.get<std::string>();
+    return (name == "boolean" && value.is_boolean()) ||
+           (name == "integer" && value.is_number_integer()) ||
+           (name == "number" && value.is_number()) || (name == "string" && value.is_string()) ||
+           (name == "object" && value.is_object()) || (name == "null" && value.is_null());
+}
+
+// /stereo/nearest's schema declares what a reading object carries, with its types: a
+// valid one flagged calibration_suspect, one nearer than the range, one without a
+// reading (reason an object {code, message}), and frame always.
+TEST(FoxgloveProtocol, TheReadingSchemaDeclaresEveryFieldOfAReading)
+{
+    const json schema = json::parse(channelSpecs()[kNearest - 1].schema);
+    ASSERT_EQ(channelSpecs()[kNearest - 1].topic, "/stereo/nearest");
+    const json& properties = schema["properties"];
+    ReadingReport suspect;
+    suspect.reading.valid = true;
+    suspect.reading.reason = NoReadingReason::None;
+    suspect.reading.distance_m = 1.5;
+    suspect.reading.stamp_ns = 1000;
+    suspect.reading.frame = 7;
+    suspect.reading.calibration_suspect = true;
+    suspect.reading.calibration_row_offset_px = 1.2;
+    suspect.realtime_offset_ns = 1'764'000'000'000'000'000;
+    ReadingReport nearer;
+    nearer.reading.reason = NoReadingReason::NearerThanRange;
+    nearer.reading.nearer_than_m = 0.4;
+    ReadingReport none;
+    none.reading.reason = NoReadingReason::TooFewValidPixels;
+    std::size_t fields = 0;
+    for (const ReadingReport* report : {&suspect, &nearer, &none}) {
+        const json reading = readingToJson(*report, 5000);
+        for (const auto& [key, value] : reading.items()) {
+            ASSERT_TRUE(properties.contains(key)) << key << " is not in the schema";
+            EXPECT_TRUE(ofSchemaType(value, properties[key]["type"]))
+                << key << ": " << value << " is not " << properties[key]["type"];
+            ++fields;
+        }
+        for (const json& key : schema["required"])
+            EXPECT_TRUE(reading.contains(key.get<std::string>())) << key;
+    }
+    EXPECT_GE(fields, 30u);
+    EXPECT_EQ(properties["reason"]["type"], "object");
+    EXPECT_TRUE(properties["reason"]["properties"].contains("code"));
+    EXPECT_TRUE(properties["reason"]["properties"].contains("message"));
+}
+
 TEST(FoxgloveProtocol, MessageDataFrameIsOpcodeIdTimeThenPayload)
 {
     std::string frame;
@@ -62,7 +119,7 @@ TEST(FoxgloveProtocol, AdvertiseListsEveryChannelWithItsSchema)
 {
     const json advertise = json::parse(advertiseJson(channelSpecs()));
     EXPECT_EQ(advertise["op"], "advertise");
-    ASSERT_EQ(advertise["channels"].size(), 9u);
+    ASSERT_EQ(advertise["channels"].size(), 10u);
     for (const json& channel : advertise["channels"]) {
         EXPECT_FALSE(channel["schema"].get<std::string>().empty()) << channel["topic"];
         const bool cdr = channel["encoding"] == "cdr";

@@ -1,6 +1,7 @@
 #pragma once
 // What the live view's end-to-end tests share: a `stereod` replaying a real pair (Tsukuba)
-// with its live view on a given address, its status, and plain HTTP exchanges.
+// with its live view on a given address, its addresses with the token (`view`), its
+// status, and plain HTTP exchanges (tests/support/http_client.hpp).
 #include <chrono>
 #include <filesystem>
 #include <memory>
@@ -20,6 +21,7 @@
 #include "ctl/client.hpp"
 #include "pipeline/calibration.hpp"
 #include "tests/support/data_paths.hpp"
+#include "tests/support/http_client.hpp"
 #include "tests/support/process.hpp"
 #include "tests/support/temp_dir.hpp"
 
@@ -28,44 +30,6 @@ namespace stereod::test {
 using namespace std::chrono_literals;
 
 inline const std::string kClientScripts = std::string(STEREOD_SOURCE_DIR) + "/tests/live_view";
-
-// A port nobody listens on now (bound to 0, then released).
-inline uint16_t freePort()
-{
-    const UniqueFd fd(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
-    sockaddr_in address{};
-    address.sin_family = AF_INET;
-    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ::bind(fd.get(), reinterpret_cast<sockaddr*>(&address), sizeof address);
-    socklen_t length = sizeof address;
-    ::getsockname(fd.get(), reinterpret_cast<sockaddr*>(&address), &length);
-    return ntohs(address.sin_port);
-}
-
-// One HTTP exchange on 127.0.0.1:port; the whole answer.
-inline std::string httpExchange(uint16_t port, const std::string& request)
-{
-    const UniqueFd fd(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0));
-    sockaddr_in address{};
-    address.sin_family = AF_INET;
-    address.sin_port = htons(port);
-    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    if (::connect(fd.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0)
-        return {};
-    ::send(fd.get(), request.data(), request.size(), MSG_NOSIGNAL);
-    std::string answer;
-    char buffer[4096];
-    ssize_t n = 0;
-    while ((n = ::recv(fd.get(), buffer, sizeof buffer, 0)) > 0)
-        answer.append(buffer, static_cast<std::size_t>(n));
-    return answer;
-}
-
-inline std::string httpGet(uint16_t port, const std::string& path)
-{
-    return httpExchange(port,
-                        "GET " + path + " HTTP/1.1\r\nHost: stereod\r\nConnection: close\r\n\r\n");
-}
 
 class LiveViewE2e : public ::testing::Test {
   protected:
@@ -90,9 +54,12 @@ class LiveViewE2e : public ::testing::Test {
     void startService(const std::string& live_view, const std::string& config = {},
                       bool expect_valid = true)
     {
-        std::vector<std::string> argv = {stereodPath(), "--replay",    recording_,
-                                         "--calib",     calibration_,  "--socket",
-                                         socket_,       "--live-view", live_view};
+        std::vector<std::string> argv = launcher_;
+        for (const std::string& arg :
+             {stereodPath(), std::string("--replay"), recording_, std::string("--calib"),
+              calibration_, std::string("--socket"), socket_, std::string("--live-view"),
+              live_view})
+            argv.push_back(arg);
         if (!config.empty()) {
             argv.push_back("--config");
             argv.push_back(config);
@@ -104,8 +71,10 @@ class LiveViewE2e : public ::testing::Test {
                 ProtocolClient client(socket_, 2000ms);
                 const auto reading = client.request({{"cmd", "distance"}})["reading"];
                 if (reading.value("valid", false) ||
-                    (!expect_valid && reading.contains("stamp_ns")))
+                    (!expect_valid && reading.contains("stamp_ns"))) {
+                    readLinks();
                     return;
+                }
             } catch (const std::exception&) {
             }
             std::this_thread::sleep_for(100ms);
@@ -126,6 +95,17 @@ class LiveViewE2e : public ::testing::Test {
         return depth_mm;
     }
 
+    // The live view's addresses with the token, as `stereoctl view` gets them.
+    void readLinks()
+    {
+        ProtocolClient client(socket_, 10000ms);
+        const auto links = client.request({{"cmd", "view"}});
+        page_ = links.value("page", std::string());
+        websocket_ = links.value("websocket", std::string());
+        const std::size_t at = page_.find("?token=");
+        token_ = at == std::string::npos ? std::string() : page_.substr(at + 7);
+    }
+
     nlohmann::ordered_json status()
     {
         ProtocolClient client(socket_, 10000ms);
@@ -134,6 +114,8 @@ class LiveViewE2e : public ::testing::Test {
 
     TempDir dir_;
     std::string recording_, calibration_, socket_;
+    std::string page_, websocket_, token_; // the live view's, once the service runs
+    std::vector<std::string> launcher_;    // runs stereod (e.g. prlimit ... --), or empty
     std::unique_ptr<ChildProcess> service_;
 };
 

@@ -4,17 +4,23 @@
 // docs/protocol.md to the server's I/O thread.
 
 #include <chrono>
+#include <cstdio>
 #include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include <gtest/gtest.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/un.h>
 #include <unistd.h>
 
 #include "capture/frame.hpp"
 #include "config/service_config.hpp"
 #include "daemon/socket_server.hpp"
+#include "tests/support/descriptor_exhaustion.hpp"
 #include "tests/support/process.hpp"
 #include "tests/support/service_doubles.hpp"
 #include "tests/support/temp_dir.hpp"
@@ -332,6 +338,47 @@ TEST_F(SocketServerTest, TooManyClientsAreTurnedAway)
     const Json clients = statusOf(first)["clients"];
     EXPECT_EQ(clients["connected"], 2);
     EXPECT_EQ(clients["rejected"], 1);
+}
+
+// Issue 23: with the process out of descriptors, a connection waited unanswered while
+// accept() failed. It is now taken on the spare descriptor, told why and closed, and the
+// next connection after descriptors return is served.
+TEST_F(SocketServerTest, OutOfDescriptorsAConnectionIsToldWhyAndClosed)
+{
+    start();
+    // Kept open: a connection the server closed meanwhile would free a descriptor.
+    const auto first = connect();
+    ASSERT_EQ(first->request({{"cmd", "hello"}})["ok"], true);
+    UniqueFd waiting(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
+    ASSERT_TRUE(waiting);
+    sockaddr_un address{};
+    address.sun_family = AF_UNIX;
+    std::snprintf(address.sun_path, sizeof address.sun_path, "%s", socket_path_.c_str());
+
+    test::DescriptorExhaustion exhaustion;
+    const int connected =
+        ::connect(waiting.get(), reinterpret_cast<sockaddr*>(&address), sizeof address);
+    std::string line;
+    pollfd p{waiting.get(), POLLIN, 0};
+    while (connected == 0 && line.find('\n') == std::string::npos && ::poll(&p, 1, 5000) == 1) {
+        char chunk[512];
+        const ssize_t n = ::recv(waiting.get(), chunk, sizeof chunk, 0);
+        if (n <= 0)
+            break;
+        line.append(chunk, static_cast<std::size_t>(n));
+    }
+    exhaustion.release();
+
+    ASSERT_EQ(connected, 0);
+    ASSERT_NE(line.find('\n'), std::string::npos) << "no answer: \"" << line << "\"";
+    const Json refusal = Json::parse(line.substr(0, line.find('\n')));
+    EXPECT_EQ(refusal["error"]["code"], "too_many_clients") << line;
+    EXPECT_NE(refusal["error"]["message"].get<std::string>().find("out of file descriptors"),
+              std::string::npos)
+        << line;
+    TestClient next(socket_path_);
+    EXPECT_EQ(next.request({{"cmd", "hello"}})["ok"], true);
+    EXPECT_GE(statusOf(next)["clients"]["rejected"].get<int>(), 1);
 }
 
 TEST_F(SocketServerTest, APeerThatHangsUpIsClosedAndItsPlaceFreed)

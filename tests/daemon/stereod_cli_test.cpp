@@ -16,6 +16,7 @@
 #include <sys/wait.h>
 
 #include "pipeline/calibration.hpp"
+#include "tests/support/bags.hpp"
 #include "tests/support/data_paths.hpp"
 #include "tests/support/process.hpp"
 #include "tests/support/service_doubles.hpp"
@@ -76,7 +77,7 @@ TEST_F(StereodCli, HelpListsTheOptionsAndExitCodes)
     const ProcessResult result = run({"--help"});
     EXPECT_EQ(result.exit_code, 0) << result.err;
     for (const char* option : {"--config", "--check-config", "--replay", "--calib", "--socket",
-                               "--log-level", "Exit codes"})
+                               "--log-level", "Exit codes", ".mcap"})
         EXPECT_NE(result.out.find(option), std::string::npos) << option;
 }
 
@@ -201,6 +202,58 @@ TEST_F(StereodCli, EachStartUpProblemHasItsExitCode)
     EXPECT_EQ(result.exit_code, 6) << result.err;
     EXPECT_NE(result.err.find(blocker), std::string::npos) << result.err;
     EXPECT_FALSE(std::filesystem::exists(socket_));
+}
+
+// Issue 23: bags that lie about their images crashed stereod at start-up (SIGSEGV in
+// cvtColor; OpenCV's bare "_step >= minstep" and exit 1, no file named) or made it
+// allocate what a zstd frame header states (std::bad_alloc). Each is now the source's
+// start-up problem, exit 5, with the bag and the reason.
+TEST_F(StereodCli, BagsThatLieAreRefusedWithTheirReasonNotACrash)
+{
+    const auto lying = [](const char* encoding, uint32_t width, uint32_t step, int64_t stamp_ns) {
+        test::ImageMessage m;
+        m.stamp_ns = stamp_ns;
+        m.encoding = encoding;
+        m.width = width;
+        m.height = 1;
+        m.step = step;
+        m.data.assign(64, '\x40');
+        return m;
+    };
+    struct Case {
+        std::string name;
+        std::string bytes_or_empty; // a bag given as bytes, else written from `pair`
+        std::pair<test::ImageMessage, test::ImageMessage> pair;
+        std::string why;
+    };
+    const std::vector<Case> cases = {
+        {"rgba8.mcap",
+         "",
+         {lying("rgba8", 1u << 30, 0, 1'000'000'000), lying("rgba8", 1u << 30, 0, 1'000'000'000)},
+         "1073741824x1 pixels, more than a frame may have"},
+        {"rgb8.mcap",
+         "",
+         {lying("rgb8", 0x55555556u, 2, 1'000'000'000),
+          lying("rgb8", 0x55555556u, 2, 1'000'000'000)},
+         "1431655766x1 pixels, more than a frame may have"},
+        {"zstd.mcap",
+         test::chunkBag(test::lyingZstdFrame(uint64_t{1} << 40), uint64_t{1} << 40),
+         {},
+         "more than a chunk may hold"},
+    };
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.name);
+        const std::string bag = dir_.file(c.name);
+        if (c.bytes_or_empty.empty())
+            test::writeStereoBag(bag, {c.pair});
+        else
+            std::ofstream(bag, std::ios::binary) << c.bytes_or_empty;
+        const ProcessResult result = run({"--replay", bag, "--socket", socket_});
+        EXPECT_EQ(result.signal, 0) << result.err;
+        EXPECT_EQ(result.exit_code, 5) << result.err;
+        EXPECT_NE(result.err.find(bag), std::string::npos) << result.err;
+        EXPECT_NE(result.err.find(c.why), std::string::npos) << result.err;
+    }
 }
 
 TEST_F(StereodCli, ServesAReplayAndStopsOnSigterm)

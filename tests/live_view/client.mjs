@@ -1,9 +1,11 @@
 // Connects to stereod's live view with Foxglove's own client (@foxglove/ws-protocol),
 // subscribes to every advertised channel for a while, decodes the CDR messages with
 // @foxglove/rosmsg2-serialization, and prints what it saw as JSON:
-//   node client.mjs ws://127.0.0.1:8765 SECONDS
-// Latency is the client's CLOCK_MONOTONIC (process.hrtime, the clock of stereod's capture
-// stamps) at receipt minus the message's log time.
+//   node client.mjs ws://127.0.0.1:8765/?token=TOKEN SECONDS
+// Latency is the client's wall clock (CLOCK_REALTIME, the time base of the live view's
+// log times and header stamps) at receipt minus the message's log time; `clock_offset_ns`
+// is the wall clock minus CLOCK_MONOTONIC (process.hrtime) here, to hold readings'
+// stamp_realtime_ns against their stamp_ns.
 import wsProtocol from "@foxglove/ws-protocol";
 import { parse } from "@foxglove/rosmsg";
 import { MessageReader } from "@foxglove/rosmsg2-serialization";
@@ -19,9 +21,13 @@ const subscriptions = new Map(); // subscription id -> channel
 const readers = new Map(); // channel id -> MessageReader
 const seen = {}; // topic -> {count, bytes, latencies}
 const out = { channels: [], counts: {}, bytes: {}, latency_ms: {}, statuses: [] };
+// CLOCK_REALTIME now, in ns (performance.timeOrigin is the wall clock at the process start).
+const wallNs = () => BigInt(Math.round((performance.timeOrigin + performance.now()) * 1e6));
+out.clock_offset_ns = (wallNs() - process.hrtime.bigint()).toString();
 let depth = null;
 let nearest = null;
 let status = null;
+let zones = null;
 
 client.on("advertise", (list) => {
   for (const channel of list) {
@@ -39,7 +45,7 @@ client.on("status", (s) => out.statuses.push(s));
 client.on("message", ({ subscriptionId, timestamp, data }) => {
   const channel = subscriptions.get(subscriptionId);
   if (!channel) return;
-  const now = process.hrtime.bigint();
+  const now = wallNs();
   const entry = (seen[channel.topic] ??= { count: 0, bytes: 0, latencies: [] });
   entry.count += 1;
   entry.bytes += data.byteLength;
@@ -55,9 +61,15 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
   } else if (readers.has(channel.id)) {
     readers.get(channel.id).readMessage(bytes); // every CDR message must decode
   } else if (channel.topic === "/stereo/nearest") {
-    nearest = JSON.parse(new TextDecoder().decode(bytes));
+    // As text too: stamp_realtime_ns (about 1.8e18) is beyond what a JavaScript number
+    // holds exactly.
+    out.nearest_text = new TextDecoder().decode(bytes);
+    nearest = JSON.parse(out.nearest_text);
+    out.nearest_log_time = timestamp.toString();
   } else if (channel.topic === "/stereo/status") {
     status = JSON.parse(new TextDecoder().decode(bytes));
+  } else if (channel.topic === "/stereo/zones") {
+    zones = JSON.parse(new TextDecoder().decode(bytes));
   }
 });
 client.on("error", (e) => { console.error(String(e)); process.exit(1); });
@@ -74,6 +86,7 @@ setTimeout(() => {
   out.depth = depth;
   out.nearest = nearest;
   out.status = status;
+  out.zones = zones;
   client.close();
   // Exit once stdout is written: a pipe takes 64 KiB at a time.
   process.stdout.write(JSON.stringify(out) + "\n", () => process.exit(0));

@@ -1,10 +1,18 @@
-// Opens stereod's live view page in Debian's Chromium (headless, through playwright-core),
-// waits for the distance, hovers the depth image, and prints what the page shows as JSON;
-// saves a screenshot:
-//   node page.mjs http://127.0.0.1:8765/ OUT.png
+// Opens stereod's live view page in Debian's Chromium (headless, through playwright-core)
+// and follows it through the reading states named on the command line, in order
+// (daemon/live_view/web/reading_view.js: valid, suspect, nearer, none, stale, ...). For
+// each it waits until the page shows that state, saves a screenshot OUTDIR/NAME-STATE.png,
+// and prints one JSON line with what the page shows; the caller may change the service
+// between two states (stop it, say) and read the next line.
+//   node page.mjs http://127.0.0.1:8765/?token=TOKEN OUTDIR NAME [STATE...]    (default: valid)
+// With the first state a distance (valid or suspect), it also hovers the depth image and
+// reports the hover text.
+import { mkdirSync } from "node:fs";
 import { chromium } from "playwright-core";
 
-const [url, screenshot] = [process.argv[2], process.argv[3]];
+const [url, outDir, name] = process.argv.slice(2, 5);
+const states = process.argv.length > 5 ? process.argv.slice(5) : ["valid"];
+mkdirSync(outDir, { recursive: true });
 const browser = await chromium.launch({
   executablePath: process.env.STEREOD_CHROMIUM ?? "/usr/bin/chromium",
   args: ["--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader"],
@@ -12,39 +20,61 @@ const browser = await chromium.launch({
 try {
   const page = await browser.newPage({ viewport: { width: 1280, height: 1000 } });
   const errors = [];
+  const failed = []; // requests the server answered with an error (a favicon 404, ...)
   page.on("pageerror", (e) => errors.push(String(e)));
+  page.on("response", (r) => { if (r.status() >= 400) failed.push(`${r.status()} ${r.url()}`); });
   await page.goto(url);
-  // The distance, or NO READING, and a drawn depth image.
-  await page.waitForFunction(() => {
-    const text = document.getElementById("distance").textContent;
-    return / m$/.test(text) || text.startsWith("NO READING");
-  }, null, { timeout: 30000 });
+  // The status panel filled: the page is connected and reads its channels.
   await page.waitForFunction(() => document.getElementById("status").textContent.startsWith("state"),
                              null, { timeout: 30000 });
-  await page.waitForTimeout(500);
-  const shown = await page.evaluate(() => {
-    const canvas = document.getElementById("depth");
-    const pixels = canvas.getContext("2d").getImageData(0, 0, canvas.width, canvas.height).data;
-    let sum = 0, sum2 = 0;
-    const n = pixels.length / 4;
-    for (let i = 0; i < pixels.length; i += 4) {
-      const v = pixels[i] + pixels[i + 1] + pixels[i + 2];
-      sum += v; sum2 += v * v;
+  let first = true;
+  for (const state of states) {
+    if (state === "valid" || state === "suspect" || state === "none" || state === "nearer") {
+      // A depth image drawn, and its colour bar.
+      await page.waitForFunction(() => document.getElementById("colourbar").dataset.labels,
+                                 null, { timeout: 30000 });
     }
-    const mean = sum / n;
-    return { distance: document.getElementById("distance").textContent,
-             depth_width: canvas.width, depth_height: canvas.height,
-             depth_variance: sum2 / n - mean * mean,
-             status: document.getElementById("status").textContent };
-  });
-  // Hovering the depth image below its centre shows that pixel's depth and confidence.
-  const box = await page.locator("#depth").boundingBox();
-  await page.mouse.move(box.x + box.width * 0.5, box.y + box.height * 0.6);
-  await page.waitForFunction(() => document.getElementById("hover").style.display === "block",
-                             null, { timeout: 5000 });
-  const hover = await page.evaluate(() => document.getElementById("hover").textContent);
-  await page.screenshot({ path: screenshot });
-  process.stdout.write(JSON.stringify({ ...shown, hover, errors }) + "\n");
+    // What the page shows is read the moment it shows the state.
+    await page.waitForFunction((s) => document.getElementById("reading").dataset.state === s,
+                               state, { timeout: 45000, polling: 20 });
+    const shown = await page.evaluate(() => {
+      const $ = (id) => document.getElementById(id);
+      const canvas = $("depth");
+      const pixels = canvas.getContext("2d").getImageData(0, 0, canvas.width, canvas.height).data;
+      let sum = 0, sum2 = 0;
+      const n = pixels.length / 4;
+      for (let i = 0; i < pixels.length; i += 4) {
+        const v = pixels[i] + pixels[i + 1] + pixels[i + 2];
+        sum += v; sum2 += v * v;
+      }
+      const mean = sum / n;
+      return { state: $("reading").dataset.state, distance: $("distance").textContent,
+               detail: $("detail").textContent, distance_colour: getComputedStyle($("distance")).color,
+               age: $("age").textContent, connection: $("connection").textContent,
+               connected: $("connection").dataset.connected,
+               depth_width: canvas.width, depth_height: canvas.height,
+               depth_variance: sum2 / n - mean * mean,
+               colourbar: $("colourbar").dataset.labels ?? "",
+               status: $("status").textContent, health: $("health").textContent,
+               health_state: $("health").dataset.state,
+               zones: [...$("zones").children].map((li) => ({ state: li.dataset.state, text: li.textContent })) };
+    });
+    if (first && (state === "valid" || state === "suspect")) {
+      // Hovering the depth image below its centre shows that pixel's depth and confidence.
+      const box = await page.locator("#depth").boundingBox();
+      await page.mouse.move(box.x + box.width * 0.5, box.y + box.height * 0.6);
+      await page.waitForFunction(() => document.getElementById("hover").style.display === "block",
+                                 null, { timeout: 5000 });
+      shown.hover = await page.evaluate(() => document.getElementById("hover").textContent);
+      await page.mouse.move(0, 0);
+    }
+    first = false;
+    shown.screenshot = `${outDir}/${name}-${state}.png`;
+    await page.screenshot({ path: shown.screenshot });
+    shown.errors = errors;
+    shown.failed_requests = failed;
+    await new Promise((done) => process.stdout.write(JSON.stringify(shown) + "\n", done));
+  }
 } finally {
   await browser.close();
 }

@@ -314,6 +314,58 @@ TEST_F(Processor, DepthAndCloudFollowTheGeometry)
     }
 }
 
+// output.max_depth_m: the depth image and the cloud leave out what lies beyond the cap; the
+// reading, made from the whole depth, is the same with or without it.
+TEST_F(Processor, OutputsLeaveOutDepthsBeyondTheCapAndTheReadingStays)
+{
+    // The default: where one pixel of disparity is a quarter of the depth, f*B / 4 px.
+    StereoProcessor automatic(calibration_, settings_);
+    EXPECT_DOUBLE_EQ(defaultMaxOutputDepth(calibration_.rectified), 2.5);
+    EXPECT_DOUBLE_EQ(automatic.maxOutputDepth(), 2.5);
+    ProcessorSettings whole = settings_;
+    whole.output.max_depth_m = 100.0;
+    ProcessorSettings capped = settings_;
+    capped.output.max_depth_m = 0.7; // tsukuba's 0.5 .. 1 m, cut in the middle
+    StereoProcessor p_whole(calibration_, whole);
+    StereoProcessor p_capped(calibration_, capped);
+    EXPECT_DOUBLE_EQ(p_capped.maxOutputDepth(), 0.7);
+    DepthResult all, cut;
+    p_whole.process(left_, right_, 0, 0, all);
+    p_capped.process(left_, right_, 0, 0, cut);
+
+    std::size_t kept = 0, dropped = 0;
+    for (int v = 0; v < all.depth_m.rows; ++v)
+        for (int u = 0; u < all.depth_m.cols; ++u) {
+            const float z = all.depth_m.at<float>(v, u);
+            const float c = cut.depth_m.at<float>(v, u);
+            if (z > 0.7f) {
+                ASSERT_EQ(c, 0.0f) << u << "," << v;
+                ++dropped;
+            } else {
+                ASSERT_EQ(c, z) << u << "," << v;
+                kept += z > 0.0f;
+            }
+        }
+    EXPECT_GT(dropped, 10000u);
+    EXPECT_GT(kept, 10000u);
+    ASSERT_EQ(cut.cloud.size(), kept);
+    for (const CloudPoint& point : cut.cloud)
+        ASSERT_LE(point.z, 0.7f);
+    // The same reading from both.
+    EXPECT_EQ(cut.reading.valid, all.reading.valid);
+    EXPECT_EQ(cut.reading.distance_m, all.reading.distance_m);
+    EXPECT_EQ(cut.reading.valid_fraction, all.reading.valid_fraction);
+    EXPECT_EQ(cut.reading.in_range_fraction, all.reading.in_range_fraction);
+
+    // Live: a new cap applies to the next pair; a cap of 0 is refused.
+    capped.output.max_depth_m = 0.6;
+    p_capped.updateSettings(capped);
+    EXPECT_DOUBLE_EQ(p_capped.maxOutputDepth(), 0.6);
+    capped.output.max_depth_m = 0.0;
+    EXPECT_THROW(p_capped.updateSettings(capped), std::invalid_argument);
+    EXPECT_DOUBLE_EQ(p_capped.maxOutputDepth(), 0.6);
+}
+
 TEST_F(Processor, NoReallocationAcrossFrames)
 {
     StereoProcessor p(calibration_, settings_);

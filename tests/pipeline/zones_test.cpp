@@ -129,6 +129,23 @@ TEST(Zones, BoxAroundAKnownObjectIsOccupiedAtTheTrueDistance)
     EXPECT_EQ(measured.frame, 3u);
 }
 
+// A box the back wall (2.68 m away, above the chair) cuts through: occupied, and in sight
+// as a whole. The part in front of the wall is seen empty, the part behind it is behind a
+// surface inside the box: what fills the box there. Hidden it would be only behind
+// something in front of the box (that read "11495 points, 0 % in sight").
+TEST(Zones, BoxThatAWallCutsThroughIsInSight)
+{
+    const ZonesSettings settings = oneZone({2.5, -0.2, 0.35}, {3.5, 0.2, 0.55});
+    const ZoneReading truth = once(settings, scene().truth_m);
+    const ZoneReading measured = once(settings, scene().measured_m);
+    print("box the wall cuts through (truth)", truth);
+    print("box the wall cuts through (measured)", measured);
+    ASSERT_EQ(truth.state, ZoneState::Occupied);
+    EXPECT_EQ(measured.state, ZoneState::Occupied);
+    EXPECT_GT(truth.visible_fraction, 0.7);
+    EXPECT_GT(measured.visible_fraction, 0.7);
+}
+
 // Between the camera and the chair: nothing there, and the chair behind shows it.
 TEST(Zones, BoxInEmptySpaceIsClear)
 {
@@ -255,6 +272,40 @@ TEST(Zones, SettingsAreChecked)
     } catch (const std::invalid_argument& e) {
         EXPECT_NE(std::string(e.what()).find("zones[1].name"), std::string::npos) << e.what();
     }
+}
+
+// Issue 23: 5000 zones took a 10 fps service down to 4 fps, and a pose at 1e300 m made an
+// occupied zone's distance overflow to null. Both are refused, naming the setting.
+TEST(Zones, TooManyZonesAndCoordinatesFarAwayAreRefused)
+{
+    const auto refusal = [](const ZonesSettings& settings) {
+        try {
+            validateZonesSettings(settings);
+        } catch (const std::invalid_argument& e) {
+            return std::string(e.what());
+        }
+        return std::string("(accepted)");
+    };
+    ZonesSettings many = oneZone({0, 0, 0}, {1, 1, 1});
+    while (many.zones.size() < kMaxZones) {
+        many.zones.push_back(many.zones[0]);
+        many.zones.back().name = "zone" + std::to_string(many.zones.size());
+    }
+    EXPECT_EQ(refusal(many), "(accepted)");
+    many.zones.push_back(many.zones[0]);
+    many.zones.back().name = "one too many";
+    EXPECT_EQ(refusal(many).rfind("zones: 17 zones, more than the 16", 0), 0u) << refusal(many);
+
+    ZonesSettings far = oneZone({1e300 - 1, -1, -1}, {1e300, 1, 1});
+    EXPECT_EQ(refusal(far).rfind("zones[0].max: ", 0), 0u) << refusal(far);
+    far = oneZone({0, 0, 0}, {1, 1, 1});
+    far.camera_pose.translation_m = {1e300, 0, 0};
+    EXPECT_EQ(refusal(far).rfind("robot.camera_pose.translation_m: ", 0), 0u) << refusal(far);
+    far.camera_pose.translation_m = {0, 0, 0};
+    far.camera_pose.rpy_deg = {0, 1e9, 0};
+    EXPECT_EQ(refusal(far).rfind("robot.camera_pose.rpy_deg: ", 0), 0u) << refusal(far);
+    far.camera_pose.rpy_deg = {0, -360, 0};
+    EXPECT_EQ(refusal(far), "(accepted)");
 }
 
 } // namespace

@@ -47,7 +47,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
     // The same bytes as a reason message (exception texts end up there).
     stereod::ReadingReport report;
     report.reading.reason = stereod::NoReadingReason::BadFrame;
-    report.message = input;
+    report.detail = input;
     line.clear();
     stereod::appendReadingEvent(line, report, 0, 1);
     checkLine(line);

@@ -30,7 +30,8 @@ TEST(ProtocolReplies, HelloListsCommandsStreamsAndItems)
     EXPECT_FALSE(reply.contains("id"));
     EXPECT_EQ(reply["service"], "stereod");
     EXPECT_EQ(reply["protocol"], kProtocolVersion);
-    EXPECT_EQ(reply["commands"].size(), 8u);
+    EXPECT_EQ(reply["commands"].size(), 9u);
+    EXPECT_EQ(reply["commands"].back(), "view");
     EXPECT_EQ(reply["streams"], Json::parse(R"(["readings","depth","raw","zones"])"));
     EXPECT_EQ(
         reply["snapshot_items"],

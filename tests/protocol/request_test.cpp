@@ -60,6 +60,7 @@ TEST(ProtocolParse, RawFramesAndCalibration)
 {
     EXPECT_TRUE(
         std::holds_alternative<CalibrationRequest>(parseOk(R"({"cmd":"calibration"})").command));
+    EXPECT_TRUE(std::holds_alternative<ViewRequest>(parseOk(R"({"cmd":"view"})").command));
     const Request raw = parseOk(R"({"cmd":"subscribe","stream":"raw","max_hz":2})");
     ASSERT_TRUE(std::holds_alternative<SubscribeRequest>(raw.command));
     EXPECT_EQ(std::get<SubscribeRequest>(raw.command).stream, StreamKind::Raw);

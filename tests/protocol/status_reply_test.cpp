@@ -71,9 +71,10 @@ std::vector<std::string> keys(const Json& object)
 TEST(StatusReply, MembersInTheDocumentedOrder)
 {
     const Json status = statusToJson(runningStatus());
-    EXPECT_EQ(keys(status), (std::vector<std::string>{"uptime_s", "state", "source", "pipeline",
-                                                      "calibration_health", "calibration",
-                                                      "clients", "live_view", "reading"}));
+    EXPECT_EQ(keys(status),
+              (std::vector<std::string>{"uptime_s", "state", "source", "pipeline",
+                                        "calibration_health", "calibration", "clients", "live_view",
+                                        "reading", "max_reading_age_ms"}));
     EXPECT_EQ(status["state"], "running");
     EXPECT_EQ(
         keys(status["clients"]),

@@ -115,8 +115,15 @@ def test_snapshot_arrays(client):
     known = np.isfinite(depth)
     assert known.sum() > depth.size // 2
     assert np.all(depth[known] > 0)
-    # NaN only where there is no depth: never where the disparity gives a depth in range.
-    assert not np.any(np.isnan(depth) & np.isfinite(disparity) & (disparity > FB / 65.535))
+    # The outputs leave out depths beyond their cap (output.max_depth_m; here the default,
+    # f*B / 4 px = 2.5 m).
+    cap_m = client.status()["pipeline"]["max_output_depth_m"]
+    assert cap_m == pytest.approx(FB / 4)
+    assert np.all(depth[known] <= cap_m)
+    # NaN only where there is no depth: never where the disparity gives a depth in range
+    # (above the payload's millimetre floor, within the cap).
+    in_range = np.isfinite(disparity) & (disparity > FB / 65.535) & (disparity >= FB / cap_m * 1.0001)
+    assert not np.any(np.isnan(depth) & in_range)
     # Depth and disparity of one frame agree: Z = f*B/d, to the millimetre.
     both = known & np.isfinite(disparity) & (disparity > 0)
     np.testing.assert_allclose(depth[both], FB / disparity[both], atol=0.0011)
@@ -291,6 +298,31 @@ def test_malformed_or_cut_replies(tmp_path, answer, error):
     if error is ProtocolError:
         assert raised.value.code == "malformed"
     thread.join(5)
+
+
+def test_a_suspect_calibration_is_exposed_and_printed(tmp_path):
+    path = str(tmp_path / "fake.sock")
+    answer = (b'{"ok":true,"reading":{"valid":true,"distance_m":0.278,"stamp_ns":5,'
+              b'"stamp_realtime_ns":1764000000000000005,"age_ms":12.4,"frame":3,'
+              b'"calibration_suspect":true,"calibration_row_offset_px":1.523}}\n')
+    thread = _fake_service(path, answer)
+    reading = Client(path, timeout_s=5.0).distance()
+    thread.join(5)
+    assert reading.valid and reading.distance_m == 0.278
+    assert reading.calibration_suspect is True
+    assert reading.calibration_row_offset_px == 1.523
+    assert reading.stamp_realtime_ns == 1764000000000000005
+    # The example says so after the distance.
+    os.unlink(path)
+    thread = _fake_service(path, answer)
+    env = dict(os.environ, PYTHONPATH=str(SOURCE_DIR / "python"))
+    run = subprocess.run(
+        [sys.executable, str(SOURCE_DIR / "python" / "examples" / "nearest.py"),
+         "--socket", path, "--count", "1"],
+        capture_output=True, text=True, timeout=60, env=env)
+    thread.join(5)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout == "frame 3  0.278 m  age 12 ms  CALIBRATION SUSPECT: rows +1.52 px apart\n"
 
 
 def test_payload_cut_short_is_service_unavailable(tmp_path):

@@ -13,6 +13,7 @@
 #include <thread>
 #include <vector>
 
+#include <dirent.h>
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
@@ -23,7 +24,9 @@
 #include <unistd.h>
 
 #include "replay/replay_source.hpp"
+#include "tests/support/bags.hpp"
 #include "tests/support/data_paths.hpp"
+#include "tests/support/descriptor_exhaustion.hpp"
 #include "tests/support/process.hpp"
 #include "tests/support/recordings.hpp"
 #include "tests/support/temp_dir.hpp"
@@ -45,6 +48,16 @@ ReplayOptions lockstep(const std::string& path, bool loop = false)
     options.loop = loop;
     // Tests keep every pair they pop; the pool must cover that (a worker keeps one).
     options.pool_pairs = 16;
+    return options;
+}
+
+ReplayOptions paced(const std::string& path, bool loop, std::size_t pool_pairs)
+{
+    ReplayOptions options;
+    options.path = path;
+    options.pacing = ReplayPacing::Paced;
+    options.loop = loop;
+    options.pool_pairs = pool_pairs;
     return options;
 }
 
@@ -736,6 +749,129 @@ TEST_F(ReplaySourceTest, McapBagReplaysLikeARecording)
     EXPECT_NE(bad.source.status().last_error.find("/stereo/left/image_raw"), std::string::npos)
         << bad.source.status().last_error;
     bad.source.stop();
+}
+
+// Issue 23: Image messages that lie about their size, mid-replay, after good pairs: the
+// first faulted in cvtColor (SIGSEGV), the second threw out of the replay thread
+// (std::terminate), the third (another size) went to the worker. Each is now a bad frame,
+// counted and logged, and the replay goes on.
+TEST_F(ReplaySourceTest, McapImagesThatLieAreSkippedAndTheReplayGoesOn)
+{
+    pairs_ = test::tsukubaPairs(9);
+    test::stampPairs(pairs_, 7'000'000'000, 40 * kMs);
+    std::vector<std::pair<test::ImageMessage, test::ImageMessage>> messages;
+    for (const TestPair& p : pairs_)
+        messages.emplace_back(test::monoMessage(p.left, p.left_stamp_ns),
+                              test::monoMessage(p.right, p.right_stamp_ns));
+    // Pair 5: rgba8, 2^30 x 1, step 0, 64 bytes (2^30 * 4 is 0 in 32 bits).
+    test::ImageMessage& overflow = messages[5].first;
+    overflow.encoding = "rgba8";
+    overflow.width = 1u << 30;
+    overflow.height = 1;
+    overflow.step = 0;
+    overflow.data.assign(64, '\x40');
+    // Pair 6, right: rgb8, 0x55555556 x 1, step 2 (3 * width is 2 in 32 bits).
+    test::ImageMessage& wrapped = messages[6].second;
+    wrapped.encoding = "rgb8";
+    wrapped.width = 0x55555556u;
+    wrapped.height = 1;
+    wrapped.step = 2;
+    wrapped.data.assign(64, '\x40');
+    // Pair 7: a truthful pair of another size than the replay's.
+    const std::vector<TestPair> larger = test::tsukubaPairs(1, cv::Size(192, 144));
+    ASSERT_EQ(larger.size(), 1u);
+    messages[7] = {test::monoMessage(larger[0].left, pairs_[7].left_stamp_ns),
+                   test::monoMessage(larger[0].right, pairs_[7].right_stamp_ns)};
+    const std::string bag = tmp_.file("lies.mcap");
+    test::writeStereoBag(bag, messages);
+
+    auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(64);
+    auto previous = spdlog::default_logger();
+    spdlog::set_default_logger(std::make_shared<spdlog::logger>("replay-test", sink));
+    std::vector<std::size_t> delivered;
+    SourceStatus status;
+    {
+        Rig rig(lockstep(bag), 2);
+        ASSERT_EQ(rig.source.start(rig.ring), 0) << rig.source.status().last_error;
+        for (std::optional<StereoPair> pair; (pair = rig.ring.pop());) {
+            EXPECT_EQ(pair->left->image.size(), cv::Size(96, 72));
+            EXPECT_EQ(pair->right->image.size(), cv::Size(96, 72));
+            delivered.push_back(pair->index);
+            if (delivered.size() == 6)
+                break;
+        }
+        EXPECT_TRUE(waitForState(rig.source, SourceState::Finished));
+        status = rig.source.status();
+    }
+    spdlog::set_default_logger(previous);
+    EXPECT_EQ(delivered, (std::vector<std::size_t>{0, 1, 2, 3, 4, 8}));
+    EXPECT_EQ(status.cameras[0].bad_frames, 2u); // pairs 5 and 7
+    EXPECT_EQ(status.cameras[1].bad_frames, 1u); // pair 6
+    std::string log;
+    for (const std::string& line : sink->last_formatted())
+        log += line;
+    EXPECT_NE(log.find("1073741824x1 pixels, more than a frame may have"), std::string::npos)
+        << log;
+    EXPECT_NE(log.find("1431655766x1 pixels, more than a frame may have"), std::string::npos)
+        << log;
+    EXPECT_NE(log.find("is 192x144, 96x72 expected"), std::string::npos) << log;
+}
+
+// Issue 23: a bag whose stamps are all equal replayed as fast as it decoded (102 fps for a
+// 10 fps source). A stamp that repeats the one before now comes one frame period later.
+TEST_F(ReplaySourceTest, StampsThatRepeatComeOneFramePeriodApart)
+{
+    pairs_ = test::tsukubaPairs(6);
+    test::stampPairs(pairs_, 7'000'000'000, 0); // every left stamp the same
+    const std::string dir = tmp_.file("frozen");
+    test::writeRecording(dir, pairs_);
+    ReplayOptions options = paced(dir, false, 10);
+    options.fps = 50.0; // no step forward to measure: the nominal rate's period, 20 ms
+    Rig rig(options, 8);
+    const int64_t started_ns = monotonicNowNs();
+    ASSERT_EQ(rig.source.start(rig.ring), 0);
+    const std::vector<StereoPair> got = popPairs(rig.ring, 6);
+    ASSERT_EQ(got.size(), 6u);
+    for (std::size_t k = 0; k < got.size(); ++k)
+        EXPECT_GE(got[k].stampNs() - started_ns, static_cast<int64_t>(k) * 20 * kMs)
+            << "pair " << k;
+}
+
+// Issue 23: with the process out of descriptors the replay could not open its frames and
+// stopped for good ("no pair readable in a whole pass"). It must say so, try again, and go
+// on once descriptors are free again.
+TEST_F(ReplaySourceTest, RecoversWhenDescriptorsReturn)
+{
+    Rig rig(paced(makeRecording(3, 20 * kMs), true, 8), 4);
+    ASSERT_EQ(rig.source.start(rig.ring), 0);
+    // Drains the ring (the pairs go back to the pool) until `done` or about 15 s.
+    const auto drainUntil = [&](const auto& done) {
+        for (int i = 0; i < 3000; ++i) {
+            while (rig.ring.tryPop()) {
+            }
+            if (done())
+                return true;
+            std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        }
+        return false;
+    };
+    ASSERT_TRUE(drainUntil([&] { return rig.source.status().pairs >= 3; }));
+
+    test::DescriptorExhaustion exhaustion;
+    const bool failed =
+        drainUntil([&] { return rig.source.status().state == SourceState::Failed; });
+    const std::string error = rig.source.status().last_error;
+    exhaustion.release();
+    ASSERT_TRUE(failed) << "the replay went on without descriptors?";
+    EXPECT_NE(error.find("trying again"), std::string::npos) << error;
+
+    const uint64_t before = rig.source.status().pairs;
+    EXPECT_TRUE(drainUntil([&] {
+        const SourceStatus s = rig.source.status();
+        return s.state == SourceState::Running && s.pairs >= before + 3;
+    })) << "the replay did not recover: "
+        << rig.source.status().last_error;
+    EXPECT_TRUE(rig.source.status().last_error.empty());
 }
 
 } // namespace

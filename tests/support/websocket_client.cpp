@@ -12,13 +12,15 @@
 
 namespace stereod::test {
 
-WebSocketClient::WebSocketClient(uint16_t port, const std::string& subprotocol, int receive_buffer)
+WebSocketClient::WebSocketClient(uint16_t port, const std::string& subprotocol,
+                                 const Options& options)
     : fd_(::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0))
 {
     if (!fd_)
         throw std::runtime_error("websocket client: socket: " + errnoText(errno));
-    if (receive_buffer > 0)
-        ::setsockopt(fd_.get(), SOL_SOCKET, SO_RCVBUF, &receive_buffer, sizeof receive_buffer);
+    if (options.receive_buffer > 0)
+        ::setsockopt(fd_.get(), SOL_SOCKET, SO_RCVBUF, &options.receive_buffer,
+                     sizeof options.receive_buffer);
     sockaddr_in address{};
     address.sin_family = AF_INET;
     address.sin_port = htons(port);
@@ -26,11 +28,13 @@ WebSocketClient::WebSocketClient(uint16_t port, const std::string& subprotocol, 
     if (::connect(fd_.get(), reinterpret_cast<sockaddr*>(&address), sizeof address) != 0)
         throw std::runtime_error("websocket client: connect to 127.0.0.1:" + std::to_string(port) +
                                  ": " + errnoText(errno));
-    const std::string request = "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
+    const std::string request = "GET " + options.resource +
+                                " HTTP/1.1\r\nHost: 127.0.0.1:" + std::to_string(port) +
+                                "\r\nUpgrade: websocket\r\n"
                                 "Connection: Upgrade\r\nSec-WebSocket-Version: 13\r\n"
                                 "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
                                 "Sec-WebSocket-Protocol: " +
-                                subprotocol + "\r\n\r\n";
+                                subprotocol + "\r\n" + options.headers + "\r\n";
     if (::send(fd_.get(), request.data(), request.size(), MSG_NOSIGNAL) !=
         static_cast<ssize_t>(request.size()))
         throw std::runtime_error("websocket client: handshake not sent: " + errnoText(errno));
@@ -41,8 +45,14 @@ WebSocketClient::WebSocketClient(uint16_t port, const std::string& subprotocol, 
             throw std::runtime_error("websocket client: no handshake answer");
     const std::string answer = buffer_.substr(0, end);
     buffer_.erase(0, end + 4);
-    if (answer.rfind("HTTP/1.1 101", 0) != 0)
-        throw std::runtime_error("websocket client: handshake refused: " + answer);
+    if (answer.rfind("HTTP/1.1 101", 0) != 0) {
+        // The refusal's body too: what the server says is wrong.
+        const auto body_deadline = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+        while (!closed_ && fill(body_deadline)) {
+        }
+        throw std::runtime_error("websocket client: handshake refused: " + answer + "\r\n\r\n" +
+                                 buffer_);
+    }
 }
 
 void WebSocketClient::sendText(const std::string& text)

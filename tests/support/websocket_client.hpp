@@ -22,11 +22,23 @@ class WebSocketClient {
         std::string payload;
     };
 
-    // Connects and completes the handshake offering `subprotocol`. A `receive_buffer`
-    // above 0 sets the socket's receive buffer first (a small one makes a client that
-    // never reads fill the server's queue sooner). Throws std::runtime_error naming what
-    // failed.
-    WebSocketClient(uint16_t port, const std::string& subprotocol, int receive_buffer = 0);
+    // What the handshake asks beyond the subprotocol.
+    struct Options {
+        std::string resource = "/"; // the request's target: "/?token=..."
+        std::string headers;        // more header lines, each ending in \r\n ("Origin: ...")
+        // Above 0: the socket's receive buffer, set first (a small one makes a client that
+        // never reads fill the server's queue sooner).
+        int receive_buffer = 0;
+    };
+
+    // Connects and completes the handshake offering `subprotocol`. Throws
+    // std::runtime_error naming what failed; a refused handshake's message starts with
+    // "websocket client: handshake refused: " and the server's answer ("HTTP/1.1 401 ...").
+    WebSocketClient(uint16_t port, const std::string& subprotocol, const Options& options);
+    WebSocketClient(uint16_t port, const std::string& subprotocol, int receive_buffer = 0)
+        : WebSocketClient(port, subprotocol, Options{"/", "", receive_buffer})
+    {
+    }
 
     void sendText(const std::string& text);
     // Bytes as they are, framed or not: for the tests of what a server does with

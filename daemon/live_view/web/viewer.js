@@ -1,19 +1,24 @@
 // The live view page: speaks the Foxglove WebSocket protocol (foxglove.websocket.v1) to
-// the stereod that served it, and draws what the robot sees.
+// the stereod that served it, and draws what the robot sees. The reading is the first
+// thing on the page and says its state at a glance (reading_view.js): a distance, a
+// suspect calibration, something nearer than the range, no reading and why, or STALE once
+// it is older than the service's max_reading_age_ms.
 import * as THREE from "/three/build/three.module.js";
 import { OrbitControls } from "/three/examples/jsm/controls/OrbitControls.js";
 import { readImage, readPointCloud2 } from "./cdr.js";
+import { colourBarTicks, jet, level, metres, percentileRange } from "./depth_colours.js";
+import { readingView } from "./reading_view.js";
 
 const topics = ["/stereo/left/image_rect", "/stereo/depth", "/stereo/confidence",
-                "/stereo/points", "/stereo/nearest", "/stereo/status"];
+                "/stereo/points", "/stereo/nearest", "/stereo/status", "/stereo/zones"];
 const $ = (id) => document.getElementById(id);
-const state = { region: null, depth: null, confidence: null, reading: null, readingAt: 0 };
-
-// Depth to colour: near red, far blue, over 0.3..10 m on a log scale.
-function colour(z) {
-  const t = Math.min(1, Math.max(0, Math.log(z / 0.3) / Math.log(10 / 0.3)));
-  return [255 * (1 - t), 255 * (1 - Math.abs(2 * t - 1)), 255 * t];
-}
+const state = {
+  region: null, depth: null, confidence: null,
+  reading: null, readingAt: 0, // the reading, and when it was taken by the page's clock
+  maxAgeMs: 1000,              // publish.max_reading_age_ms, from the status
+  connected: false,
+  range: null,                 // the depth colours' range in force, {near, far} metres
+};
 
 function drawGrey(canvas, image) {
   canvas.width = image.width; canvas.height = image.height;
@@ -21,7 +26,7 @@ function drawGrey(canvas, image) {
   const out = ctx.createImageData(image.width, image.height);
   for (let i = 0; i < image.width * image.height; ++i) {
     const v = image.data[i];
-    out.data.set([v, v, v, 255], 4 * i);
+    out.data[4 * i] = v; out.data[4 * i + 1] = v; out.data[4 * i + 2] = v; out.data[4 * i + 3] = 255;
   }
   ctx.putImageData(out, 0, 0);
   if (state.region) {
@@ -31,48 +36,130 @@ function drawGrey(canvas, image) {
   }
 }
 
-function drawDepth(canvas, image) {
-  canvas.width = image.width; canvas.height = image.height;
-  const floats = new Float32Array(image.data.buffer.slice(image.data.byteOffset,
-                                                          image.data.byteOffset + image.data.byteLength));
-  state.depth = { width: image.width, height: image.height, values: floats };
-  const ctx = canvas.getContext("2d");
-  const out = ctx.createImageData(image.width, image.height);
-  for (let i = 0; i < floats.length; ++i) {
-    const z = floats[i];
-    const [r, g, b] = Number.isNaN(z) ? [0, 0, 0] : colour(z);
-    out.data.set([r, g, b, 255], 4 * i);
+// The range the depth colours follow: the frame's own (percentiles), or the fixed one.
+function colourRange(values) {
+  if ($("range-mode").value === "fixed") {
+    const near = Number($("range-near").value), far = Number($("range-far").value);
+    if (near > 0 && far > near) return { near, far };
   }
-  ctx.putImageData(out, 0, 0);
+  return percentileRange(values) ?? { near: 1, far: 10 };
 }
 
-function showReading(reading) {
+function drawDepth() {
+  const d = state.depth;
+  if (!d) return;
+  const canvas = $("depth");
+  canvas.width = d.width; canvas.height = d.height;
+  const range = colourRange(d.values);
+  state.range = range;
+  const ctx = canvas.getContext("2d");
+  const out = ctx.createImageData(d.width, d.height);
+  const pixels = out.data;
+  for (let i = 0; i < d.values.length; ++i) {
+    const z = d.values[i];
+    const o = 4 * i;
+    pixels[o + 3] = 255;
+    if (!(z > 0)) continue; // NaN: no depth, black
+    const [r, g, b] = jet(level(z, range.near, range.far));
+    pixels[o] = r; pixels[o + 1] = g; pixels[o + 2] = b;
+  }
+  ctx.putImageData(out, 0, 0);
+  drawColourBar(range);
+}
+
+// The colour bar under the depth image: far (blue) on the left to near (red) on the
+// right, as the colours spread (inverse depth), with ticks in metres.
+function drawColourBar(range) {
+  const canvas = $("colourbar");
+  const width = canvas.clientWidth || canvas.width;
+  canvas.width = width;
+  const ctx = canvas.getContext("2d");
+  ctx.clearRect(0, 0, width, canvas.height);
+  for (let x = 0; x < width; ++x) {
+    const [r, g, b] = jet(x / (width - 1));
+    ctx.fillStyle = `rgb(${r},${g},${b})`;
+    ctx.fillRect(x, 0, 1, 16);
+  }
+  ctx.fillStyle = "#ccc"; ctx.strokeStyle = "#ccc";
+  ctx.font = "12px system-ui, sans-serif";
+  const labels = [];
+  for (const tick of colourBarTicks(range.near, range.far)) {
+    const x = Math.round(tick.position * (width - 1));
+    ctx.fillRect(x, 16, 1, 5);
+    const text = metres(tick.depth_m);
+    const w = ctx.measureText(text).width;
+    ctx.fillText(text, Math.min(width - w, Math.max(0, x - w / 2)), 34);
+    labels.push(text);
+  }
+  canvas.dataset.labels = labels.join(" ");
+}
+
+function showReading() {
+  const ageMs = state.reading ? performance.now() - state.readingAt : 0;
+  const view = readingView(state.reading, ageMs, state.maxAgeMs, state.connected);
+  const el = $("reading");
+  el.dataset.state = view.state;
+  $("distance").textContent = view.text;
+  $("detail").textContent = view.detail;
+  $("age").textContent = state.reading && state.reading.age_ms !== undefined
+    ? `age ${(ageMs / 1000).toFixed(2)} s` : "";
+}
+
+function takeReading(reading) {
   // Its age: how old it was when sent (age_ms), plus the time since it arrived.
   state.reading = reading;
   state.readingAt = performance.now() - (reading.age_ms ?? 0);
-  const el = $("distance");
-  if (reading.valid) {
-    el.textContent = `${reading.distance_m.toFixed(3)} m`;
-    el.className = "";
-  } else {
-    const reason = reading.reason || {};
-    el.textContent = `NO READING: ${reason.code || "unknown"}` +
-                     (reason.message ? ` (${reason.message})` : "");
-    el.className = "none";
-  }
+  showReading();
 }
 
 function showStatus(status) {
   const p = status.pipeline || {};
   if (p.region) state.region = p.region;
+  if (typeof status.max_reading_age_ms === "number") state.maxAgeMs = status.max_reading_age_ms;
   const s = status.source || {};
   const stages = p.stage_ms ? Object.entries(p.stage_ms).map(([k, v]) => `${k} ${v} ms`).join(", ") : "";
   const cameras = (s.cameras || []).map((c) => `  ${c.name}: ${c.state}, ${c.fps} fps, ${c.dropped} dropped`).join("\n");
+  const live = status.live_view || {};
   $("status").textContent =
     `state ${status.state}, up ${status.uptime_s} s\n` +
     `pipeline ${p.fps} fps (${p.matcher}), ${stages}\n` +
     `latency (capture to result) p50 ${(p.latency_ms || {}).p50} ms, p99 ${(p.latency_ms || {}).p99} ms\n` +
-    `source ${s.kind} ${s.state}, pairs ${s.pairs}, ring drops ${s.ring_dropped}\n${cameras}`;
+    `source ${s.kind} ${s.state}, pairs ${s.pairs}, ring drops ${s.ring_dropped}\n${cameras}\n` +
+    `live view: ${live.clients} clients, ${live.readings_sent} readings sent, ` +
+    `${live.frames_dropped} frames dropped for slow clients`;
+  const health = status.calibration_health || {};
+  const healthEl = $("health");
+  healthEl.dataset.state = health.state || "unknown";
+  let text = `calibration health: ${health.state || "unknown"}`;
+  if (health.reason) text += ` (${health.reason})`;
+  if (typeof health.row_offset_px === "number") {
+    text += `, rows ${health.row_offset_px >= 0 ? "+" : ""}${health.row_offset_px.toFixed(2)} px apart` +
+            (typeof health.row_offset_p90_px === "number" ? `, 90 % within ${health.row_offset_p90_px.toFixed(2)} px` : "") +
+            (typeof health.matches === "number" ? `, ${health.matches} matches` : "");
+  }
+  healthEl.textContent = text;
+}
+
+function showZones(message) {
+  const list = $("zones");
+  list.replaceChildren();
+  const zones = message.zones || [];
+  if (zones.length === 0) {
+    const item = document.createElement("li");
+    item.textContent = "zones: none configured";
+    list.appendChild(item);
+    return;
+  }
+  for (const zone of zones) {
+    const item = document.createElement("li");
+    item.dataset.state = zone.state;
+    let text = `zone ${zone.name}: ${zone.state}`;
+    if (zone.reason) text += ` (${zone.reason})`;
+    if (zone.points > 0 && typeof zone.nearest_m === "number") text += `, nearest ${zone.nearest_m.toFixed(3)} m`;
+    text += `, ${zone.points} points, ${Math.round(100 * (zone.visible_fraction ?? 0))} % in sight`;
+    item.textContent = text;
+    list.appendChild(item);
+  }
 }
 
 // The 3D view; without WebGL (a headless browser, an old GPU) the page works without it.
@@ -112,7 +199,7 @@ function makeCloudView(el) {
       positions[3 * i + 1] = view.getFloat32(o + 4, true);
       positions[3 * i + 2] = view.getFloat32(o + 8, true);
       const v = view.getFloat32(o + 12, true) / 255;
-      colours.set([v, v, v], 3 * i);
+      colours[3 * i] = v; colours[3 * i + 1] = v; colours[3 * i + 2] = v;
     }
     geometry.setAttribute("position", new THREE.BufferAttribute(positions, 3));
     geometry.setAttribute("color", new THREE.BufferAttribute(colours, 3));
@@ -135,18 +222,26 @@ $("depth").addEventListener("mousemove", (event) => {
                       (c === undefined ? "" : `, confidence ${c}`);
 });
 $("depth").addEventListener("mouseleave", () => { $("hover").style.display = "none"; });
+for (const id of ["range-mode", "range-near", "range-far"]) $(id).addEventListener("input", drawDepth);
 
-setInterval(() => {
-  if (state.reading) $("age").textContent = `age ${((performance.now() - state.readingAt) / 1000).toFixed(2)} s`;
-}, 200);
+// The reading's age and state move on with the clock, between messages too.
+setInterval(showReading, 200);
+
+function showConnection(connected, text) {
+  state.connected = connected;
+  const el = $("connection");
+  el.dataset.connected = String(connected);
+  el.textContent = text;
+  showReading();
+}
 
 function connect() {
   const ws = new WebSocket(`ws://${location.host}/`, "foxglove.websocket.v1");
   ws.binaryType = "arraybuffer";
   const channels = new Map(); // subscription id -> topic
-  ws.onopen = () => { $("connection").textContent = `connected to ${location.host}`; };
+  ws.onopen = () => showConnection(true, `● connected to ${location.host}`);
   ws.onclose = () => {
-    $("connection").textContent = "disconnected; retrying…";
+    showConnection(false, "○ disconnected; retrying…");
     setTimeout(connect, 1000);
   };
   ws.onmessage = (event) => {
@@ -169,12 +264,19 @@ function connect() {
     const view = new DataView(event.data);
     const topic = channels.get(view.getUint32(1, true));
     const payload = bytes.subarray(13);
+    const json = () => JSON.parse(new TextDecoder().decode(payload));
     if (topic === "/stereo/left/image_rect") drawGrey($("left"), readImage(payload));
-    else if (topic === "/stereo/depth") drawDepth($("depth"), readImage(payload));
-    else if (topic === "/stereo/confidence") state.confidence = readImage(payload);
+    else if (topic === "/stereo/depth") {
+      const image = readImage(payload);
+      const floats = new Float32Array(image.data.buffer.slice(image.data.byteOffset,
+                                                              image.data.byteOffset + image.data.byteLength));
+      state.depth = { width: image.width, height: image.height, values: floats };
+      drawDepth();
+    } else if (topic === "/stereo/confidence") state.confidence = readImage(payload);
     else if (topic === "/stereo/points") cloudView(readPointCloud2(payload));
-    else if (topic === "/stereo/nearest") showReading(JSON.parse(new TextDecoder().decode(payload)));
-    else if (topic === "/stereo/status") showStatus(JSON.parse(new TextDecoder().decode(payload)));
+    else if (topic === "/stereo/nearest") takeReading(json());
+    else if (topic === "/stereo/status") showStatus(json());
+    else if (topic === "/stereo/zones") showZones(json());
   };
 }
 connect();
