@@ -80,7 +80,7 @@ class Checker {
         const KeyDef* def = schema().find(key);
         const std::string got = def != nullptr ? def->show(config_) : std::string("?");
         const auto line = locations_.lines.find(key);
-        problems_.push_back(Problem{line != locations_.lines.end() ? line->second : 0,
+        problems_.push_back(Problem{line != locations_.lines.end() ? line->second : 0, key,
                                     location(key) + ": " + key + ": " + std::string(problem) +
                                         " (got " + got + ", expected " + std::string(expected) +
                                         ")"});

@@ -7,7 +7,7 @@
 
 namespace stereod::config_detail {
 
-std::vector<std::string> inLineOrder(std::vector<Problem> problems)
+std::vector<ConfigProblem> inLineOrder(std::vector<Problem> problems)
 {
     std::stable_sort(problems.begin(), problems.end(), [](const Problem& a, const Problem& b) {
         const auto order = [](int line) {
@@ -15,11 +15,11 @@ std::vector<std::string> inLineOrder(std::vector<Problem> problems)
         };
         return order(a.line) < order(b.line);
     });
-    std::vector<std::string> texts;
+    std::vector<ConfigProblem> ordered;
     for (auto& problem : problems) {
-        texts.push_back(std::move(problem.text));
+        ordered.push_back(ConfigProblem{std::move(problem.key), std::move(problem.text)});
     }
-    return texts;
+    return ordered;
 }
 
 namespace {
@@ -53,7 +53,7 @@ class DocumentReader {
         if (!detail.empty()) {
             message += " (" + std::string(detail) + ")";
         }
-        problems_.push_back(Problem{mark.is_null() ? 0 : mark.line + 1, std::move(message)});
+        problems_.push_back(Problem{mark.is_null() ? 0 : mark.line + 1, key, std::move(message)});
     }
 
     void readSection(const YAML::Node& node, const SchemaNode& section, const std::string& prefix,

@@ -25,11 +25,12 @@ struct KeyLocations {
 // order of the file whichever check found them.
 struct Problem {
     int line = 0;
+    std::string key; // the key it is about; empty when about none (a syntax error)
     std::string text;
 };
 
-// The problems' texts, in the order of their lines (those with none last).
-std::vector<std::string> inLineOrder(std::vector<Problem> problems);
+// The problems, in the order of their lines (those with none last).
+std::vector<ConfigProblem> inLineOrder(std::vector<Problem> problems);
 
 // Reads `root` into `config` key by key: unknown keys, keys given twice and values that
 // cannot be read become problems; such keys keep their defaults.

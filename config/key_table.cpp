@@ -99,50 +99,25 @@ KeyDef powerLineKey()
             return std::string("?");
         });
 }
-// The matcher's name sets two fields: the OpenCV matcher and, for SGBM, its mode.
-struct AlgorithmName {
-    std::string name;
-    MatcherKind kind;
-    SgbmMode mode;
-};
-
-const std::vector<AlgorithmName>& algorithmNames()
-{
-    static const std::vector<AlgorithmName> names = {
-        {"census-sgm", MatcherKind::CensusSgm, SgbmMode::Sgbm},
-        {"sgbm", MatcherKind::Sgbm, SgbmMode::Sgbm},
-        {"sgbm-3way", MatcherKind::Sgbm, SgbmMode::ThreeWay},
-        {"sgbm-hh", MatcherKind::Sgbm, SgbmMode::Hh},
-        {"sgbm-hh4", MatcherKind::Sgbm, SgbmMode::Hh4},
-        {"bm", MatcherKind::Bm, SgbmMode::Sgbm},
-    };
-    return names;
-}
-
 std::string algorithmName(const MatcherSettings& matcher)
 {
-    for (const auto& entry : algorithmNames()) {
-        if (entry.kind == matcher.kind &&
-            (matcher.kind != MatcherKind::Sgbm || entry.mode == matcher.sgbm_mode)) {
-            return entry.name;
-        }
-    }
-    return "?";
+    return std::string(matcherAlgorithmName(matcher.kind, matcher.sgbm_mode));
 }
 
 KeyDef algorithmKey()
 {
     KeyDef def{"matcher.algorithm", kLive, {}, {}};
     def.read = [](const YAML::Node& node, ServiceConfig& config, const ReadContext&) -> ReadResult {
-        std::vector<std::string> known;
-        for (const auto& entry : algorithmNames()) {
-            if (node.IsScalar() && node.Scalar() == entry.name) {
-                config.processing.matcher.kind = entry.kind;
-                config.processing.matcher.sgbm_mode = entry.mode;
+        if (node.IsScalar()) {
+            if (const auto algorithm = matcherAlgorithmNamed(node.Scalar())) {
+                config.processing.matcher.kind = algorithm->kind;
+                config.processing.matcher.sgbm_mode = algorithm->mode;
                 return std::nullopt;
             }
-            known.push_back(entry.name);
         }
+        std::vector<std::string> known;
+        for (const MatcherAlgorithm& algorithm : kMatcherAlgorithms)
+            known.emplace_back(algorithm.name);
         return ReadFailure{"unknown matcher", expectedOneOf(known, scalarText(node))};
     };
     def.show = [](const ServiceConfig& config) { return algorithmName(config.processing.matcher); };

@@ -1,5 +1,6 @@
 #include "config/service_config.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <cstdio>
@@ -121,9 +122,10 @@ ServiceConfig parseDocument(const std::string& text, const std::string& origin,
         readDocument(YAML::Load(text), origin, context, config, locations, problems);
         if (const auto mark = secondDocumentStart(text)) {
             const int line = mark->is_null() ? 0 : mark->line + 1;
-            problems.push_back(Problem{line, origin + (line > 0 ? ":" + std::to_string(line) : "") +
-                                                 ": a second YAML document (expected one; "
-                                                 "remove the \"---\")"});
+            problems.push_back(Problem{line, "",
+                                       origin + (line > 0 ? ":" + std::to_string(line) : "") +
+                                           ": a second YAML document (expected one; "
+                                           "remove the \"---\")"});
         }
     } catch (const YAML::Exception& error) {
         // Syntax errors (ParserException) and anything else yaml-cpp refuses.
@@ -135,7 +137,7 @@ ServiceConfig parseDocument(const std::string& text, const std::string& origin,
         if (!error.mark.is_null()) {
             message += " at column " + std::to_string(error.mark.column + 1);
         }
-        problems.push_back(Problem{0, message + ": " + error.msg});
+        problems.push_back(Problem{0, "", message + ": " + error.msg});
         throw ConfigError(inLineOrder(std::move(problems)));
     }
     // The settings every matcher shares take the chosen matcher's own values where the
@@ -200,8 +202,34 @@ std::string readConfigFile(const std::string& path)
 ConfigError::ConfigError(std::vector<std::string> problems)
     : std::runtime_error(problems.empty() ? std::string("invalid configuration")
                                           : joinLines(problems)),
-      problems_(std::move(problems))
+      problems_(std::move(problems)), keys_(problems_.size())
 {
+}
+
+namespace {
+
+std::vector<std::string> textsOf(const std::vector<ConfigProblem>& problems)
+{
+    std::vector<std::string> texts;
+    texts.reserve(problems.size());
+    for (const ConfigProblem& problem : problems)
+        texts.push_back(problem.text);
+    return texts;
+}
+
+} // namespace
+
+ConfigError::ConfigError(const std::vector<ConfigProblem>& problems)
+    : ConfigError(textsOf(problems))
+{
+    for (std::size_t i = 0; i < problems.size(); ++i)
+        keys_[i] = problems[i].key;
+}
+
+bool ConfigError::onlyAbout(std::string_view key) const
+{
+    return !keys_.empty() && std::all_of(keys_.begin(), keys_.end(),
+                                         [key](const std::string& k) { return k == key; });
 }
 
 ServiceConfig defaultConfig()

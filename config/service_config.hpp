@@ -9,6 +9,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "capture/camera_settings.hpp"
@@ -18,15 +19,28 @@
 
 namespace stereod {
 
-// Every problem found in a configuration, each one "FILE:LINE: key: problem". what()
-// holds all of them, one per line, ready to print. Immutable, so thread-safe.
+// One problem of a configuration: the key it is about (empty when about none, a YAML
+// syntax error say) and its text, "FILE:LINE: key: problem".
+struct ConfigProblem {
+    std::string key;
+    std::string text;
+};
+
+// Every problem found in a configuration. what() holds all of them, one per line, ready
+// to print; onlyAbout() tells by their keys, not their words, what they are about (the
+// exit code of a bad replay path is a source problem's). Immutable, so thread-safe.
 class ConfigError : public std::runtime_error {
   public:
+    // Problems about no key (a file that cannot be read).
     explicit ConfigError(std::vector<std::string> problems);
+    explicit ConfigError(const std::vector<ConfigProblem>& problems);
     const std::vector<std::string>& problems() const noexcept { return problems_; }
+    // True when there are problems and every one is about `key` ("source.replay.path").
+    bool onlyAbout(std::string_view key) const;
 
   private:
     std::vector<std::string> problems_;
+    std::vector<std::string> keys_; // problems_[i] is about keys_[i]; empty: about none
 };
 
 enum class SourceKind {

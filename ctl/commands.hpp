@@ -71,7 +71,7 @@ struct DepthOptions {
     std::string calib_path;
     std::string config_path; // a service configuration whose processing to use
     RectifiedOptions geometry;
-    std::string matcher; // "", "census-sgm", "bm", "sgbm", "sgbm-3way"
+    std::string matcher; // "" (the configured one) or a name of kMatcherAlgorithms
     std::string tuning;  // "", "natural", "planar"
     std::optional<int> max_disparity;
     std::optional<double> min_depth_m;

@@ -16,6 +16,7 @@
 #include "ctl/client.hpp"
 #include "ctl/commands.hpp"
 #include "ctl/exit_codes.hpp"
+#include "pipeline/matcher_settings.hpp"
 
 namespace stereod {
 
@@ -200,9 +201,13 @@ CLI::App* declareDepth(CLI::App& app, DepthOptions& o)
     calib->excludes(rectified);
     cmd->add_option("--config", o.config_path,
                     "take the processing settings from this service configuration");
+    std::vector<std::string> algorithms;
+    for (const stereod::MatcherAlgorithm& algorithm : stereod::kMatcherAlgorithms)
+        algorithms.emplace_back(algorithm.name);
     cmd->add_option("--matcher", o.matcher,
-                    "our census-sgm (the default), or OpenCV's sgbm, sgbm-3way or bm")
-        ->check(CLI::IsMember({"census-sgm", "bm", "sgbm", "sgbm-3way"}));
+                    "our census-sgm (the default), or OpenCV's sgbm, sgbm-3way, sgbm-hh, "
+                    "sgbm-hh4 or bm")
+        ->check(CLI::IsMember(algorithms));
     cmd->add_option("--tuning", o.tuning,
                     "census-sgm's tuning: natural (textured scenes, the default) or planar "
                     "(man-made: uniform flat surfaces, repeating patterns)")

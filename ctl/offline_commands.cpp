@@ -106,16 +106,10 @@ ProcessorSettings depthSettings(const DepthOptions& options)
                                      : loadConfig(options.config_path).processing;
     MatcherSettings& matcher = settings.matcher;
     const MatcherKind configured = matcher.kind;
-    if (options.matcher == "census-sgm") {
-        matcher.kind = MatcherKind::CensusSgm;
-    } else if (options.matcher == "bm") {
-        matcher.kind = MatcherKind::Bm;
-    } else if (options.matcher == "sgbm") {
-        matcher.kind = MatcherKind::Sgbm;
-        matcher.sgbm_mode = SgbmMode::Sgbm;
-    } else if (options.matcher == "sgbm-3way") {
-        matcher.kind = MatcherKind::Sgbm;
-        matcher.sgbm_mode = SgbmMode::ThreeWay;
+    // --matcher is one of kMatcherAlgorithms' names (the option checks), or empty.
+    if (const auto algorithm = matcherAlgorithmNamed(options.matcher)) {
+        matcher.kind = algorithm->kind;
+        matcher.sgbm_mode = algorithm->mode;
     }
     const MatcherTuning configured_tuning = matcher.tuning;
     if (!options.tuning.empty())

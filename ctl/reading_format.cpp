@@ -11,20 +11,6 @@ namespace stereod {
 
 namespace {
 
-constexpr std::array kAllReasons = {
-    NoReadingReason::None,
-    NoReadingReason::NoFrameYet,
-    NoReadingReason::TooFewValidPixels,
-    NoReadingReason::NothingInRange,
-    NoReadingReason::OutOfSync,
-    NoReadingReason::SourceDown,
-    NoReadingReason::BadFrame,
-    NoReadingReason::Stale,
-    NoReadingReason::Uncalibrated,
-    NoReadingReason::NearerThanRange,
-    NoReadingReason::CalibrationSuspect,
-};
-
 bool isValid(const nlohmann::ordered_json& reading)
 {
     const auto valid = reading.find("valid");
@@ -54,12 +40,7 @@ std::string reasonMessage(const nlohmann::ordered_json& reading)
 
 std::optional<NoReadingReason> reasonFromCode(std::string_view code)
 {
-    for (const NoReadingReason reason : kAllReasons) {
-        if (code == reasonCode(reason)) {
-            return reason;
-        }
-    }
-    return std::nullopt;
+    return kReasonCodes.parse(code);
 }
 
 bool calibrationSuspect(const nlohmann::ordered_json& reading)

@@ -50,7 +50,7 @@ class ListeningSocket {
 
 // Removes the socket file a ListeningSocket of this process bound and still owns, if any
 // (never a file systemd handed over, nor one that replaced ours). Any thread: for a stop
-// that cannot wait for the server's destructor (daemon/stop_signal_watch.hpp).
+// that cannot wait for the server's destructor (abandonProcess(), daemon/signal_watch.hpp).
 void removeOwnedSocketFile() noexcept;
 
 } // namespace stereod

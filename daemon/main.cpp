@@ -15,7 +15,7 @@
 #include "config/service_config.hpp"
 #include "daemon/service.hpp"
 #include "daemon/service_launch.hpp"
-#include "daemon/stop_signal_watch.hpp"
+#include "daemon/signal_watch.hpp"
 
 namespace {
 
@@ -23,7 +23,7 @@ using stereod::ExitCode;
 
 // Runs before the initialisers of the shared libraries (OpenCV's take a good part of a
 // second on a loaded machine), so that a SIGTERM that early finds the service's signals
-// blocked and waits for the StopSignalWatch, instead of ending the process with 143.
+// blocked and waits for the SignalWatch, instead of ending the process with 143.
 // Every thread created later inherits the mask.
 void blockSignalsBeforeLibraries(int, char**, char**)
 {
@@ -81,8 +81,8 @@ int main(int argc, char** argv)
 {
     // Blocked already (blockSignalsBeforeLibraries()); again here in case the loader did
     // not run .preinit_array. Before any thread exists, so that every thread inherits
-    // the mask: these signals are taken from a signalfd in the I/O loop and by the
-    // StopSignalWatch, never by an asynchronous handler.
+    // the mask: these signals are taken by the SignalWatch alone, never by an asynchronous
+    // handler.
     stereod::blockServiceSignals();
     // A client that hangs up while we write must not kill the service (sends also use
     // MSG_NOSIGNAL; this covers every other write).
@@ -151,9 +151,10 @@ int main(int argc, char** argv)
     }
 
     // From here on SIGTERM and SIGINT stop the process within a second whatever it is
-    // doing, a start-up blocked in an open() included (daemon/stop_signal_watch.hpp).
+    // doing, a start-up blocked in an open() included, and SIGHUP reloads once the service
+    // runs (daemon/signal_watch.hpp).
     setUpLogging();
-    stereod::StopSignalWatch stop_signals;
+    stereod::SignalWatch signals;
     if (!check_path.empty())
         return checkConfig(check_path);
     if (list_devices) {
@@ -163,23 +164,20 @@ int main(int argc, char** argv)
     }
 
     try {
-        std::unique_ptr<stereod::Service> service = stereod::launchService(request, true);
-        stop_signals.setService(service.get());
+        std::unique_ptr<stereod::Service> service = stereod::launchService(request);
+        signals.setService(service.get());
         ExitCode code = ExitCode::Ok;
         try {
             code = service->run();
         } catch (...) {
-            stop_signals.setService(nullptr);
+            signals.setService(nullptr);
             throw;
         }
-        stop_signals.setService(nullptr);
-        if (service->workerAbandoned()) {
-            // The worker is still inside a pair that would outlast the stop: end now,
-            // without the destructors that would wait for it (docs/service.md, Signals).
-            spdlog::default_logger()->flush();
-            std::fflush(nullptr);
-            std::_Exit(exitCode(code));
-        }
+        signals.setService(nullptr);
+        // The worker is still inside a pair that would outlast the stop: end now, without
+        // the destructors that would wait for it (docs/service.md, Signals).
+        if (service->workerAbandoned())
+            stereod::abandonProcess(exitCode(code));
         return exitCode(code);
     } catch (const stereod::StartupError& e) {
         spdlog::critical("{}", e.what());

@@ -13,7 +13,6 @@
 #include <signal.h>
 #include <spdlog/spdlog.h>
 #include <sys/eventfd.h>
-#include <sys/signalfd.h>
 #include <unistd.h>
 
 #include "base/descriptor_budget.hpp"
@@ -22,16 +21,6 @@
 namespace stereod {
 
 namespace {
-
-sigset_t serviceSignals()
-{
-    sigset_t signals;
-    sigemptyset(&signals);
-    sigaddset(&signals, SIGTERM);
-    sigaddset(&signals, SIGINT);
-    sigaddset(&signals, SIGHUP);
-    return signals;
-}
 
 void applyLogLevel(const std::string& level)
 {
@@ -67,25 +56,11 @@ std::string processingProblem(const ProcessorSettings& settings,
 // with a DIR that does not exist is a source problem, whatever layer finds it.
 ExitCode exitCodeFor(const ConfigError& error)
 {
-    const auto all_about = [&](std::string_view key) {
-        const std::string needle = ": " + std::string(key) + ": ";
-        return !error.problems().empty() &&
-               std::all_of(error.problems().begin(), error.problems().end(),
-                           [&](const std::string& problem) {
-                               return problem.find(needle) != std::string::npos;
-                           });
-    };
-    if (all_about("source.replay.path"))
+    if (error.onlyAbout("source.replay.path"))
         return ExitCode::Source;
-    if (all_about("calibration"))
+    if (error.onlyAbout("calibration"))
         return ExitCode::Calibration;
     return ExitCode::InvalidConfig;
-}
-
-void blockServiceSignals()
-{
-    const sigset_t signals = serviceSignals();
-    pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 }
 
 Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
@@ -165,14 +140,10 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
         throw StartupError(ExitCode::Failure, "cannot create an eventfd: " + errnoText(errno));
     server_->watch(stop_fd_.get(), [this] { onStopRequest(); });
 
-    if (options_.handle_signals) {
-        blockServiceSignals();
-        const sigset_t signals = serviceSignals();
-        signal_fd_ = UniqueFd(::signalfd(-1, &signals, SFD_NONBLOCK | SFD_CLOEXEC));
-        if (!signal_fd_)
-            throw StartupError(ExitCode::Failure, "cannot create a signalfd: " + errnoText(errno));
-        server_->watch(signal_fd_.get(), [this] { onSignal(); });
-    }
+    reload_fd_ = UniqueFd(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
+    if (!reload_fd_)
+        throw StartupError(ExitCode::Failure, "cannot create an eventfd: " + errnoText(errno));
+    server_->watch(reload_fd_.get(), [this] { onReloadRequest(); });
 }
 
 Service::~Service()
@@ -222,13 +193,45 @@ void Service::onStopRequest()
     [[maybe_unused]] const ssize_t got = ::read(stop_fd_.get(), &value, sizeof value);
     if (stop_requested_ns_ == 0)
         stop_requested_ns_ = monotonicNowNs();
-    stop_seen_.store(true, std::memory_order_release);
+    markStopTaken();
     server_->requestStop();
+}
+
+void Service::markStopTaken() noexcept
+{
+    {
+        std::lock_guard lock(stop_taken_mutex_);
+        stop_taken_ = true;
+    }
+    stop_taken_changed_.notify_all();
+}
+
+bool Service::waitStopTaken(int64_t timeout_ms)
+{
+    std::unique_lock lock(stop_taken_mutex_);
+    return stop_taken_changed_.wait_for(lock, std::chrono::milliseconds(timeout_ms),
+                                        [this] { return stop_taken_; });
+}
+
+void Service::requestReload() noexcept
+{
+    const uint64_t one = 1;
+    [[maybe_unused]] const ssize_t written = ::write(reload_fd_.get(), &one, sizeof one);
+}
+
+void Service::onReloadRequest()
+{
+    uint64_t value = 0;
+    [[maybe_unused]] const ssize_t got = ::read(reload_fd_.get(), &value, sizeof value);
+    spdlog::info("SIGHUP: reloading {}", options_.config_path.empty()
+                                             ? std::string("(no configuration file)")
+                                             : options_.config_path);
+    reloadConfig();
 }
 
 void Service::shutdown() noexcept
 {
-    stop_seen_.store(true, std::memory_order_release);
+    markStopTaken();
     watchdog_pinger_.stop();
     if (running_)
         notifier_.stopping();
@@ -244,9 +247,7 @@ void Service::shutdown() noexcept
     if (worker_ && running_) {
         const int64_t since_ns = stop_requested_ns_ != 0 ? stop_requested_ns_ : monotonicNowNs();
         const int64_t deadline_ns = since_ns + options_.stop_timeout_ms * 1'000'000;
-        while (!worker_->finished() && monotonicNowNs() < deadline_ns)
-            std::this_thread::sleep_for(std::chrono::milliseconds(2));
-        if (!worker_->finished()) {
+        if (!worker_->waitFinished(deadline_ns)) {
             worker_abandoned_ = true;
             const int64_t busy_since_ns = worker_->busySinceNs();
             spdlog::warn("stopping without the worker: it has been on one pair for {:.0f} ms, "
@@ -264,26 +265,6 @@ void Service::shutdown() noexcept
     if (running_)
         spdlog::info("stopped");
     running_ = false;
-}
-
-void Service::onSignal()
-{
-    signalfd_siginfo info{};
-    while (::read(signal_fd_.get(), &info, sizeof info) == static_cast<ssize_t>(sizeof info)) {
-        const auto signal_number = static_cast<int>(info.ssi_signo);
-        if (signal_number == SIGHUP) {
-            spdlog::info("SIGHUP: reloading {}", options_.config_path.empty()
-                                                     ? std::string("(no configuration file)")
-                                                     : options_.config_path);
-            reloadConfig();
-        } else {
-            spdlog::info("{}: stopping", signal_number == SIGINT ? "SIGINT" : "SIGTERM");
-            if (stop_requested_ns_ == 0)
-                stop_requested_ns_ = monotonicNowNs();
-            stop_seen_.store(true, std::memory_order_release);
-            server_->requestStop();
-        }
-    }
 }
 
 SourceHealth Service::sourceHealth(int64_t now_ns)

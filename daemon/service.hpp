@@ -6,21 +6,25 @@
 // Life cycle: the constructor checks everything that can be checked before running
 // (frames against the calibration, the processor's settings, the socket) and throws
 // StartupError with the exit code for the problem; run() starts the source and the
-// worker and serves until SIGTERM/SIGINT or requestStop(), telling systemd how it goes
+// worker and serves until requestStop() (SIGTERM/SIGINT, through the signal watch,
+// daemon/signal_watch.hpp), telling systemd how it goes
 // (daemon/systemd_notifier.hpp); then it closes the socket and removes its file, stops
 // the source and the ring (which wakes the worker), and waits for the worker to finish
 // the pair in hand, but no longer than ServiceOptions::stop_timeout_ms after the stop
 // request: a full-size frame can take more than a second to match, and a stop must not.
 // A worker still busy then is left running (workerAbandoned()); `stereod` then exits at
-// once without destroying what the worker uses.
+// once without destroying what the worker uses (abandonProcess()). The stop sequence is
+// drawn in docs/architecture.md, "Stopping".
 //
 // Thread contract: construction, run() and destruction one after the other (run() on
-// the thread that becomes the I/O thread; the signal mask of that thread matters, see
-// blockServiceSignals()); requestStop() from any thread at any time.
+// the thread that becomes the I/O thread); requestStop(), waitStopTaken() and
+// requestReload() from any thread at any time.
 
 #include <atomic>
+#include <condition_variable>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -76,11 +80,6 @@ ExitCode exitCodeFor(const ConfigError& error);
 std::string processingProblem(const ProcessorSettings& settings,
                               const StereoCalibration& calibration, const std::string& origin);
 
-// Blocks SIGTERM, SIGINT and SIGHUP in the calling thread (and the threads it creates
-// later), so that they reach the service only through its signalfd. Call it first thing
-// in main(), before any thread exists.
-void blockServiceSignals();
-
 struct ServiceOptions {
     // The file `reload` and SIGHUP re-read; empty when running on built-in defaults.
     std::string config_path;
@@ -91,9 +90,6 @@ struct ServiceOptions {
     // The text of that file as loaded, for the `calibration` request (empty: the
     // calibration did not come from a file).
     std::string calibration_text;
-    // Handle SIGTERM, SIGINT (stop) and SIGHUP (reload) through a signalfd. The caller
-    // must have blocked them in every thread (block them first thing in main()).
-    bool handle_signals = false;
     // Talk to systemd (READY=1, STATUS=, WATCHDOG=1); harmless without systemd.
     bool notify_systemd = false;
     // How long after the stop request the worker may take to finish the pair in hand.
@@ -123,10 +119,13 @@ class Service final : private ServerBackend {
     // Makes run() return soon. Any thread.
     void requestStop() noexcept;
 
-    // Whether the event loop has taken a stop request (a signal, requestStop()) or the
-    // service is stopping anyway. Any thread: a stop request that stays untaken means the
-    // loop is not running (daemon/stop_signal_watch.hpp).
-    bool stopRequested() const noexcept { return stop_seen_.load(std::memory_order_acquire); }
+    // Waits up to `timeout_ms` for the event loop to take a stop request, or for the
+    // service to be stopping anyway; true when it has. Any thread: a stop request that
+    // stays untaken means the loop is not running (daemon/signal_watch.hpp).
+    bool waitStopTaken(int64_t timeout_ms);
+
+    // Makes the event loop re-read the configuration file soon (SIGHUP). Any thread.
+    void requestReload() noexcept;
 
     // Re-reads the configuration file and applies what can change live. I/O thread.
     ReloadOutcome reloadConfig();
@@ -157,7 +156,6 @@ class Service final : private ServerBackend {
     ReloadOutcome loadAndApply();
     // The STATUS= line for systemd now.
     std::string statusText(int64_t now_ns, const SourceHealth& health);
-    void onSignal();
     // Shares the descriptors left under RLIMIT_NOFILE between the socket's clients and
     // the live view's connections, each at most what the configuration asks; says so when
     // the limit makes them fewer (sets socket_max_clients_, live_view_connections_).
@@ -169,6 +167,9 @@ class Service final : private ServerBackend {
     // and the service runs on without it.
     void startRos2();
     void onStopRequest();
+    void onReloadRequest();
+    // Records that the service is stopping and wakes waitStopTaken().
+    void markStopTaken() noexcept;
     void shutdown() noexcept;
 
     ServiceConfig config_;
@@ -188,8 +189,8 @@ class Service final : private ServerBackend {
     std::unique_ptr<ros2::Ros2Publisher> ros2_;      // none when ros2.enabled is false
     std::unique_ptr<Ros2Observer> ros2_observer_;
     PublishObservers observers_; // the live view and the ROS 2 node, as they started
-    UniqueFd signal_fd_;
-    UniqueFd stop_fd_; // eventfd written by requestStop(); outlives server_
+    UniqueFd stop_fd_;           // eventfd written by requestStop(); outlives server_
+    UniqueFd reload_fd_;         // eventfd written by requestReload(); outlives server_
 
     DisparityRange initial_range_; // for `status` before the first frame
     std::string initial_matcher_;
@@ -207,7 +208,9 @@ class Service final : private ServerBackend {
     SourceCounterWatch source_counters_; // bad/dropped/unpaired frames into the log
     std::string last_error_; // the newest error for STATUS= (a refused reload), or empty
     int64_t stop_requested_ns_ = 0;
-    std::atomic<bool> stop_seen_{false}; // see stopRequested()
+    std::mutex stop_taken_mutex_;
+    std::condition_variable stop_taken_changed_;
+    bool stop_taken_ = false; // guarded by stop_taken_mutex_; see waitStopTaken()
     bool worker_abandoned_ = false;
 };
 

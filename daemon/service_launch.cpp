@@ -72,7 +72,7 @@ std::string checkConfiguration(const std::string& path)
     return calibration_path;
 }
 
-std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle_signals)
+std::unique_ptr<Service> launchService(const LaunchRequest& request)
 {
     ServiceConfig config;
     try {
@@ -165,7 +165,6 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle
     options.overrides = request.overrides;
     options.calibration_path = calibration_path;
     options.calibration_text = std::move(calibration_text);
-    options.handle_signals = handle_signals;
     options.notify_systemd = true;
     // An installed stereod finds the page next to it (PREFIX/share/stereod/live_view);
     // one run from the build tree uses the source tree's.

@@ -32,6 +32,6 @@ struct LaunchRequest {
 // recording's calibration.yaml; none of them: uncalibrated mode); builds the service.
 // Throws StartupError with the exit code for the problem (a calibration that is given but
 // unreadable, invalid or not the frame size among them).
-std::unique_ptr<Service> launchService(const LaunchRequest& request, bool handle_signals);
+std::unique_ptr<Service> launchService(const LaunchRequest& request);
 
 } // namespace stereod

@@ -4,8 +4,8 @@
 //
 // The loop serves the listening socket, the clients, the publisher's eventfd (a new
 // result: events to subscribers), a 100 ms timer (health, idle clients, the service's
-// periodic work) and descriptors the service adds with watch() (its signalfd). Nothing in
-// it blocks: a client's requests are answered into its output buffer, which is sent as
+// periodic work) and descriptors the service adds with watch() (its stop and reload eventfds).
+// Nothing in it blocks: a client's requests are answered into its output buffer, which is sent as
 // the socket takes it (EPOLLOUT while data is unsent). A subscriber with unsent data
 // skips frames (counted; its next event says how many); one whose unsent data exceed
 // publish.max_client_backlog_bytes is disconnected (counted). So no client can slow down

@@ -1,12 +1,17 @@
 #include "daemon/worker.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <exception>
 #include <limits>
+#include <system_error>
 
+#include <poll.h>
 #include <spdlog/spdlog.h>
+#include <sys/eventfd.h>
+#include <unistd.h>
 
 #include "pipeline/depth_io.hpp"
 
@@ -52,8 +57,11 @@ void copyRawPair(const StereoPair& pair, RawPair& raw)
 }
 
 Worker::Worker(PairRing& ring, Publisher& publisher, StereoProcessor* processor, double max_skew_ms)
-    : ring_(ring), publisher_(publisher), processor_(processor), max_skew_ms_(max_skew_ms)
+    : ring_(ring), publisher_(publisher), processor_(processor), max_skew_ms_(max_skew_ms),
+      finished_fd_(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC))
 {
+    if (!finished_fd_)
+        throw std::system_error(errno, std::generic_category(), "worker: eventfd");
     refreshRange();
 }
 
@@ -74,11 +82,6 @@ void Worker::join()
 {
     if (thread_.joinable())
         thread_.join();
-}
-
-void Worker::setMaxSkewMs(double max_skew_ms) noexcept
-{
-    max_skew_ms_.store(max_skew_ms, std::memory_order_relaxed);
 }
 
 void Worker::updateSettings(const ProcessorSettings& settings)
@@ -149,7 +152,26 @@ void Worker::run()
         }
         busy_since_ns_.store(0, std::memory_order_release);
     }
-    finished_.store(true, std::memory_order_release);
+    const uint64_t one = 1;
+    [[maybe_unused]] const ssize_t written = ::write(finished_fd_.get(), &one, sizeof one);
+}
+
+bool Worker::waitFinished(int64_t deadline_ns) const
+{
+    pollfd finished{finished_fd_.get(), POLLIN, 0};
+    for (;;) {
+        const int64_t left_ns = deadline_ns - monotonicNowNs();
+        // Rounded up, so that a wait never ends before the deadline it was given.
+        const int timeout_ms =
+            left_ns <= 0
+                ? 0
+                : static_cast<int>(std::min<int64_t>((left_ns + 999'999) / 1'000'000, 60'000));
+        const int ready = ::poll(&finished, 1, timeout_ms);
+        if (ready > 0)
+            return true;
+        if ((ready == 0 && timeout_ms == 0) || (ready < 0 && errno != EINTR))
+            return false;
+    }
 }
 
 void Worker::logFailure(uint64_t frame, const char* what)
@@ -215,7 +237,7 @@ void Worker::processPair(StereoPair& pair)
     facts.stamp_ns = stamp_ns;
     facts.frame = frame;
     facts.skew_ms = std::abs(static_cast<double>(slot.skew_ns)) / 1e6;
-    facts.max_skew_ms = max_skew_ms_.load(std::memory_order_relaxed);
+    facts.max_skew_ms = max_skew_ms_;
     // Calibration health: a suspect calibration marks the reading, and withholds it when it
     // failed and the configuration asks for that.
     facts.calibration_suspect = false;

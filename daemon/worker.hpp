@@ -20,8 +20,8 @@
 // frames, so that a calibration can be made from the running service.
 //
 // Thread contract: start(), join() and the destructor from the controlling thread;
-// setMaxSkewMs(), updateSettings(), busySinceNs() and finished() from any thread; the processor and
-// the publisher's write side are used by the worker thread only while it runs.
+// updateSettings(), busySinceNs() and waitFinished() from any thread; the processor
+// and the publisher's write side are used by the worker thread only while it runs.
 
 #include <array>
 #include <atomic>
@@ -30,6 +30,7 @@
 #include <string>
 #include <thread>
 
+#include "base/unique_fd.hpp"
 #include "capture/frame_source.hpp"
 #include "daemon/calibration_health_monitor.hpp"
 #include "daemon/log_limiter.hpp"
@@ -105,8 +106,6 @@ class Worker {
     // and the pair in hand is done. Idempotent.
     void join();
 
-    void setMaxSkewMs(double max_skew_ms) noexcept;
-
     // Calibration health (borrowed until the worker is destroyed; null: none): the worker
     // offers it a rectified pair when it is due, flags readings while it is degraded or
     // failed, and withholds them (calibration_suspect) while it is failed if asked to.
@@ -133,9 +132,12 @@ class Worker {
     // waits for a pair. For the watchdog: a worker stuck in one pair is not alive.
     int64_t busySinceNs() const noexcept { return busy_since_ns_.load(std::memory_order_acquire); }
 
-    // Whether the thread has left its loop (the ring is stopped and the pair in hand is
-    // done): join() then returns at once. Any thread; for a stop with a deadline.
-    bool finished() const noexcept { return finished_.load(std::memory_order_acquire); }
+    // Waits until the thread has left its loop (the ring is stopped and the pair in hand
+    // is done), or until `deadline_ns` (CLOCK_MONOTONIC) passes; true when it has left:
+    // join() then returns at once. Any thread; for a stop with a deadline. The thread
+    // says it is finished through an eventfd, so the wait is one poll(), not a polling
+    // loop.
+    bool waitFinished(int64_t deadline_ns) const;
 
   private:
     static constexpr std::size_t kWindow = 32;         // frames in the rolling means
@@ -153,11 +155,11 @@ class Worker {
     CalibrationHealthMonitor* health_ = nullptr;
     std::atomic<bool> withhold_when_failed_{false};
     std::thread thread_;
-    std::atomic<double> max_skew_ms_;
+    const double max_skew_ms_; // source.max_skew_ms, which needs a restart to change
     std::atomic<ProcessorSettings*> pending_settings_{nullptr}; // owned; see updateSettings()
     std::atomic<ZonesSettings*> pending_zones_{nullptr};        // owned; see updateZones()
     std::atomic<int64_t> busy_since_ns_{0};
-    std::atomic<bool> finished_{false};
+    UniqueFd finished_fd_; // eventfd the thread writes once when it leaves its loop
 
     // Worker thread only.
     ZoneMonitor zones_{ZonesSettings{}};

@@ -259,21 +259,9 @@ MatcherSettings matcherDefaults(MatcherKind kind, SgbmMode mode, MatcherTuning t
 
 std::string matcherName(const MatcherSettings& settings)
 {
-    if (settings.kind == MatcherKind::CensusSgm)
-        return settings.tuning == MatcherTuning::Planar ? "census-sgm (planar)" : "census-sgm";
-    if (settings.kind == MatcherKind::Bm)
-        return "bm";
-    switch (settings.sgbm_mode) {
-    case SgbmMode::Sgbm:
-        return "sgbm";
-    case SgbmMode::ThreeWay:
-        return "sgbm-3way";
-    case SgbmMode::Hh:
-        return "sgbm-hh";
-    case SgbmMode::Hh4:
-        return "sgbm-hh4";
-    }
-    return "sgbm";
+    if (settings.kind == MatcherKind::CensusSgm && settings.tuning == MatcherTuning::Planar)
+        return "census-sgm (planar)";
+    return std::string(matcherAlgorithmName(settings.kind, settings.sgbm_mode));
 }
 
 void fixedPointToPixels(const cv::Mat& fixed16, const DisparityRange& range, cv::Mat& disparity_px)

@@ -1,6 +1,10 @@
 #pragma once
 // What the correspondence search is told to do. Units: pixels unless a name says else.
 
+#include <array>
+#include <optional>
+#include <string_view>
+
 #include "pipeline/sgm/census_sgm.hpp"
 
 namespace stereod {
@@ -12,6 +16,42 @@ enum class MatcherKind {
 };
 
 enum class SgbmMode { Sgbm, ThreeWay, Hh, Hh4 };
+
+// The matcher's name (matcher.algorithm, stereoctl depth --matcher, status) sets two
+// fields: the matcher and, for OpenCV's SGBM, its mode.
+struct MatcherAlgorithm {
+    std::string_view name;
+    MatcherKind kind;
+    SgbmMode mode;
+};
+
+// The one table of the algorithms' names, in the order they are listed to users.
+inline constexpr std::array<MatcherAlgorithm, 6> kMatcherAlgorithms{{
+    {"census-sgm", MatcherKind::CensusSgm, SgbmMode::Sgbm},
+    {"sgbm", MatcherKind::Sgbm, SgbmMode::Sgbm},
+    {"sgbm-3way", MatcherKind::Sgbm, SgbmMode::ThreeWay},
+    {"sgbm-hh", MatcherKind::Sgbm, SgbmMode::Hh},
+    {"sgbm-hh4", MatcherKind::Sgbm, SgbmMode::Hh4},
+    {"bm", MatcherKind::Bm, SgbmMode::Sgbm},
+}};
+
+// The algorithm of that name; none when no algorithm has it.
+constexpr std::optional<MatcherAlgorithm> matcherAlgorithmNamed(std::string_view name)
+{
+    for (const MatcherAlgorithm& algorithm : kMatcherAlgorithms)
+        if (algorithm.name == name)
+            return algorithm;
+    return std::nullopt;
+}
+
+// The name of the algorithm `kind` and `mode` select (the mode counts for SGBM only).
+constexpr std::string_view matcherAlgorithmName(MatcherKind kind, SgbmMode mode)
+{
+    for (const MatcherAlgorithm& algorithm : kMatcherAlgorithms)
+        if (algorithm.kind == kind && (kind != MatcherKind::Sgbm || algorithm.mode == mode))
+            return algorithm.name;
+    return "?";
+}
 
 // What census-sgm's automatic settings are tuned for.
 enum class MatcherTuning {

@@ -4,31 +4,7 @@ namespace stereod {
 
 const char* reasonCode(NoReadingReason reason) noexcept
 {
-    switch (reason) {
-    case NoReadingReason::None:
-        return "none";
-    case NoReadingReason::NoFrameYet:
-        return "no_frame_yet";
-    case NoReadingReason::TooFewValidPixels:
-        return "too_few_valid_pixels";
-    case NoReadingReason::NothingInRange:
-        return "nothing_in_range";
-    case NoReadingReason::OutOfSync:
-        return "out_of_sync";
-    case NoReadingReason::SourceDown:
-        return "source_down";
-    case NoReadingReason::BadFrame:
-        return "bad_frame";
-    case NoReadingReason::Stale:
-        return "stale";
-    case NoReadingReason::Uncalibrated:
-        return "uncalibrated";
-    case NoReadingReason::NearerThanRange:
-        return "nearer_than_range";
-    case NoReadingReason::CalibrationSuspect:
-        return "calibration_suspect";
-    }
-    return "unknown";
+    return kReasonCodes.name(reason, "unknown");
 }
 
 const char* reasonText(NoReadingReason reason) noexcept

@@ -4,6 +4,8 @@
 
 #include <cstdint>
 
+#include "base/name_table.hpp"
+
 namespace stereod {
 
 enum class NoReadingReason {
@@ -21,6 +23,22 @@ enum class NoReadingReason {
     Stale,              // the latest reading is older than the caller allows
     Uncalibrated,       // the service runs without a calibration (raw frames only)
 };
+
+// The stable machine codes of the protocol, one table for naming and parsing them.
+inline constexpr NameTable<NoReadingReason, 11> kReasonCodes{{{
+    {NoReadingReason::None, "none"},
+    {NoReadingReason::NoFrameYet, "no_frame_yet"},
+    {NoReadingReason::TooFewValidPixels, "too_few_valid_pixels"},
+    {NoReadingReason::NothingInRange, "nothing_in_range"},
+    {NoReadingReason::OutOfSync, "out_of_sync"},
+    {NoReadingReason::SourceDown, "source_down"},
+    {NoReadingReason::BadFrame, "bad_frame"},
+    {NoReadingReason::NearerThanRange, "nearer_than_range"},
+    {NoReadingReason::CalibrationSuspect, "calibration_suspect"},
+    {NoReadingReason::Stale, "stale"},
+    {NoReadingReason::Uncalibrated, "uncalibrated"},
+}}};
+static_assert(kReasonCodes.wellFormed());
 
 // Stable machine code for the protocol ("too_few_valid_pixels", ...).
 const char* reasonCode(NoReadingReason reason) noexcept;

@@ -75,13 +75,7 @@ std::optional<std::string> readPositive(const Json& request, const char* key,
 
 std::optional<SnapshotItem> snapshotItemFromName(std::string_view name)
 {
-    for (const SnapshotItem item :
-         {SnapshotItem::Depth, SnapshotItem::Disparity, SnapshotItem::Left, SnapshotItem::Cloud,
-          SnapshotItem::RawLeft, SnapshotItem::RawRight, SnapshotItem::Confidence}) {
-        if (name == snapshotItemName(item))
-            return item;
-    }
-    return std::nullopt;
+    return kSnapshotItemNames.parse(name);
 }
 
 // Reads `key`, an array of strings each one of `known`, into `names`. Returns the
@@ -142,18 +136,11 @@ ParseResult parseSubscribe(const Json& request, const std::optional<Json>& id)
     if (!it->is_string())
         return badRequest(std::string("\"stream\" must be a string, not ") + it->type_name(), id);
     const std::string& name = it->get_ref<const std::string&>();
-    if (name == streamName(StreamKind::Readings)) {
-        subscribe.stream = StreamKind::Readings;
-    } else if (name == streamName(StreamKind::Depth)) {
-        subscribe.stream = StreamKind::Depth;
-    } else if (name == streamName(StreamKind::Raw)) {
-        subscribe.stream = StreamKind::Raw;
-    } else if (name == streamName(StreamKind::Zones)) {
-        subscribe.stream = StreamKind::Zones;
-    } else {
+    const std::optional<StreamKind> stream = kStreamNames.parse(name);
+    if (!stream)
         return badRequest(
             "unknown stream " + quoteText(name) + "; known: " + joinNames(knownStreams()), id);
-    }
+    subscribe.stream = *stream;
     if (std::optional<std::string> problem = readPositive(request, "max_hz", subscribe.max_hz))
         return badRequest(std::move(*problem), id);
     if (!present(request, "with"))
@@ -242,38 +229,12 @@ ParseResult parseObject(const Json& request)
 
 const char* streamName(StreamKind stream) noexcept
 {
-    switch (stream) {
-    case StreamKind::Readings:
-        return "readings";
-    case StreamKind::Depth:
-        return "depth";
-    case StreamKind::Raw:
-        return "raw";
-    case StreamKind::Zones:
-        return "zones";
-    }
-    return "readings";
+    return kStreamNames.name(stream, "readings");
 }
 
 const char* snapshotItemName(SnapshotItem item) noexcept
 {
-    switch (item) {
-    case SnapshotItem::Depth:
-        return "depth";
-    case SnapshotItem::Disparity:
-        return "disparity";
-    case SnapshotItem::Left:
-        return "left";
-    case SnapshotItem::Cloud:
-        return "cloud";
-    case SnapshotItem::RawLeft:
-        return "raw_left";
-    case SnapshotItem::RawRight:
-        return "raw_right";
-    case SnapshotItem::Confidence:
-        return "confidence";
-    }
-    return "depth";
+    return kSnapshotItemNames.name(item, "depth");
 }
 
 const std::vector<std::string>& knownCommands()
@@ -286,14 +247,13 @@ const std::vector<std::string>& knownCommands()
 
 const std::vector<std::string>& knownStreams()
 {
-    static const std::vector<std::string> names = {"readings", "depth", "raw", "zones"};
+    static const std::vector<std::string> names = kStreamNames.names();
     return names;
 }
 
 const std::vector<std::string>& knownSnapshotItems()
 {
-    static const std::vector<std::string> names = {"left",     "disparity", "depth",     "cloud",
-                                                   "raw_left", "raw_right", "confidence"};
+    static const std::vector<std::string> names = kSnapshotItemNames.names();
     return names;
 }
 

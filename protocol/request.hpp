@@ -11,6 +11,7 @@
 #include <variant>
 #include <vector>
 
+#include "base/name_table.hpp"
 #include "protocol/reply.hpp"
 
 namespace stereod {
@@ -18,11 +19,27 @@ namespace stereod {
 // Raw: the pairs as captured, before rectification (two u8_gray payloads per event).
 // Zones: the keep-out zones of every frame (`{"event":"zones",...}` lines).
 enum class StreamKind { Readings, Depth, Raw, Zones };
+inline constexpr NameTable<StreamKind, 4> kStreamNames{{{{StreamKind::Readings, "readings"},
+                                                         {StreamKind::Depth, "depth"},
+                                                         {StreamKind::Raw, "raw"},
+                                                         {StreamKind::Zones, "zones"}}}};
+static_assert(kStreamNames.wellFormed());
 const char* streamName(StreamKind stream) noexcept;
 
 // RawLeft, RawRight: the pair's frames as captured, before rectification.
 // Confidence: the matcher's per-pixel confidence (u8, 0 = no disparity, 1..255).
 enum class SnapshotItem { Depth, Disparity, Left, Cloud, RawLeft, RawRight, Confidence };
+// In the order `hello` lists them.
+inline constexpr NameTable<SnapshotItem, 7> kSnapshotItemNames{{{
+    {SnapshotItem::Left, "left"},
+    {SnapshotItem::Disparity, "disparity"},
+    {SnapshotItem::Depth, "depth"},
+    {SnapshotItem::Cloud, "cloud"},
+    {SnapshotItem::RawLeft, "raw_left"},
+    {SnapshotItem::RawRight, "raw_right"},
+    {SnapshotItem::Confidence, "confidence"},
+}}};
+static_assert(kSnapshotItemNames.wellFormed());
 const char* snapshotItemName(SnapshotItem item) noexcept;
 
 struct HelloRequest {};

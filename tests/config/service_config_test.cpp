@@ -164,7 +164,27 @@ TEST(ConfigExamples, AloeDemoWithoutItsRecordingNamesThePathAndLine)
                                      ": source.replay.path: does not exist (got " +
                                      (fs::path(tree.path()) / "build/demo/aloe").string();
         EXPECT_EQ(error.problems()[0].rfind(expected, 0), 0u) << error.problems()[0];
+        // The exit code's choice reads the keys, not the words.
+        EXPECT_TRUE(error.onlyAbout("source.replay.path"));
+        EXPECT_FALSE(error.onlyAbout("calibration"));
     }
+}
+
+// A problem whose text merely mentions a key is not about it: only the key it names is.
+TEST(ConfigError, TellsWhatItIsAboutByItsKeysNotItsWords)
+{
+    try {
+        parseConfig("log_level: \": source.replay.path: \"\n", "words.yaml");
+        FAIL() << "a bad log level was accepted";
+    } catch (const ConfigError& error) {
+        ASSERT_EQ(error.problems().size(), 1u) << error.what();
+        EXPECT_NE(error.problems()[0].find(": source.replay.path: "), std::string::npos)
+            << error.problems()[0];
+        EXPECT_FALSE(error.onlyAbout("source.replay.path"));
+        EXPECT_TRUE(error.onlyAbout("log_level"));
+    }
+    const ConfigError unreadable({std::string("x.yaml: cannot read the configuration")});
+    EXPECT_FALSE(unreadable.onlyAbout("source.replay.path"));
 }
 
 struct RejectedCase {

@@ -205,8 +205,11 @@ zones:
     }
     ASSERT_EQ(zones.size(), 1u) << zones.dump();
     EXPECT_EQ(zones[0]["name"], "front");
-    const ProcessResult after = ctl({"zones"});
-    EXPECT_EQ(after.exit_code, 0) << after.out << after.err; // all clear
+    // All clear. The zones may be a second old on a loaded 2-core machine (a 718x496 pair
+    // with 160 disparities and the extended range takes 0.3 s there, and the reload
+    // rebuilds the chain): their states are what is tested here, not their age.
+    const ProcessResult after = ctl({"zones", "--max-age-ms", "10000"});
+    EXPECT_EQ(after.exit_code, 0) << after.out << after.err;
 }
 
 // Issue 23: an occupied zone whose distance came as null made `stereoctl zones` exit 3

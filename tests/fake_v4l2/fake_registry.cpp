@@ -413,8 +413,9 @@ __attribute__((visibility("default"))) int stereod_fake_v4l2_load(const char* de
         r.control_fifo = fifo;
         r.fifo_stop_fd = eventfd(0, EFD_CLOEXEC);
         // The library may be loaded before the program blocks the signals it waits for
-        // (stereod takes SIGTERM through a signalfd): a thread started now must not be the
-        // one the kernel picks to deliver them, or the default action kills the process.
+        // (stereod takes SIGTERM on a thread of its own, with sigtimedwait): a thread started now
+        // must not be the one the kernel picks to deliver them, or the default action kills the
+        // process.
         sigset_t all;
         sigset_t previous;
         sigfillset(&all);

@@ -1,9 +1,10 @@
-#include "daemon/stop_signal_watch.hpp"
+#include "daemon/signal_watch.hpp"
 
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 
+#include <pthread.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
 #include <time.h>
@@ -13,40 +14,68 @@
 
 namespace stereod {
 
-StopSignalWatch::StopSignalWatch()
+namespace {
+
+sigset_t serviceSignals()
+{
+    sigset_t signals;
+    sigemptyset(&signals);
+    sigaddset(&signals, SIGTERM);
+    sigaddset(&signals, SIGINT);
+    sigaddset(&signals, SIGHUP);
+    return signals;
+}
+
+} // namespace
+
+void blockServiceSignals()
+{
+    const sigset_t signals = serviceSignals();
+    pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+}
+
+SignalWatch::SignalWatch()
 {
     thread_ = std::thread([this] { run(); });
 }
 
-StopSignalWatch::~StopSignalWatch()
+SignalWatch::~SignalWatch()
 {
     quit_.store(true, std::memory_order_release);
     if (thread_.joinable())
         thread_.join();
 }
 
-void StopSignalWatch::setService(Service* service)
+void SignalWatch::setService(Service* service)
 {
     std::lock_guard lock(mutex_);
     service_ = service;
 }
 
-void StopSignalWatch::run()
+void SignalWatch::run()
 {
-    sigset_t signals;
-    sigemptyset(&signals);
-    sigaddset(&signals, SIGTERM);
-    sigaddset(&signals, SIGINT);
+    const sigset_t signals = serviceSignals();
     // Short waits, so that the destructor does not wait long for the thread.
     const timespec step{0, 50'000'000};
     while (!quit_.load(std::memory_order_acquire)) {
         const int signal_number = ::sigtimedwait(&signals, nullptr, &step);
-        if (signal_number > 0)
+        if (signal_number == SIGHUP)
+            reload();
+        else if (signal_number > 0)
             stop(signal_number);
     }
 }
 
-void StopSignalWatch::stop(int signal_number)
+void SignalWatch::reload()
+{
+    std::lock_guard lock(mutex_);
+    if (service_ != nullptr)
+        service_->requestReload();
+    else
+        spdlog::info("SIGHUP during start-up: nothing to reload yet");
+}
+
+void SignalWatch::stop(int signal_number)
 {
     const char* name = signal_number == SIGINT ? "SIGINT" : "SIGTERM";
     {
@@ -54,20 +83,21 @@ void StopSignalWatch::stop(int signal_number)
         if (service_ != nullptr) {
             spdlog::info("{}: stopping", name);
             service_->requestStop();
-            const auto deadline =
-                std::chrono::steady_clock::now() + std::chrono::milliseconds(kHandOverMs);
-            while (!service_->stopRequested() && std::chrono::steady_clock::now() < deadline)
-                std::this_thread::sleep_for(std::chrono::milliseconds(2));
             // The event loop took it: the ordinary stop, with its own deadline.
-            if (service_->stopRequested())
+            if (service_->waitStopTaken(kHandOverMs))
                 return;
         }
     }
     spdlog::info("{} during start-up: stopping at once", name);
+    abandonProcess(0);
+}
+
+void abandonProcess(int exit_code) noexcept
+{
     removeOwnedSocketFile();
     spdlog::default_logger()->flush();
     std::fflush(nullptr);
-    std::_Exit(0);
+    std::_Exit(exit_code);
 }
 
 } // namespace stereod
