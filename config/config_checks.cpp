@@ -16,6 +16,7 @@
 #include "config/key_table.hpp"
 #include "pipeline/census_sgm_matcher.hpp"
 #include "pipeline/zones.hpp"
+#include "ros2/topic_names.hpp"
 
 namespace stereod::config_detail {
 
@@ -493,6 +494,14 @@ void checkLiveView(Checker& checker, const LiveViewConfig& live_view)
         checker.real(key, value, closed(0, 1000, " Hz (0: live_view.max_rate_hz)"));
 }
 
+void checkRos2(Checker& checker, const Ros2Config& ros2)
+{
+    if (const std::string problem = ros2::namespaceProblem(ros2.ns); !problem.empty())
+        checker.fail("ros2.namespace", problem, "a ROS 2 namespace such as /stereo");
+    checker.integer("ros2.points_step", ros2.points_step, 1, 1000, "");
+    checker.real("ros2.max_rate_hz", ros2.max_rate_hz, above(0, 1000, " Hz"));
+}
+
 } // namespace
 
 std::vector<Problem> checkValues(const ServiceConfig& config, const KeyLocations& locations)
@@ -515,6 +524,7 @@ std::vector<Problem> checkValues(const ServiceConfig& config, const KeyLocations
     checkSocket(checker, config.socket);
     checkPublish(checker, config.publish);
     checkLiveView(checker, config.live_view);
+    checkRos2(checker, config.ros2);
     const auto& levels = logLevelNames();
     if (std::find(levels.begin(), levels.end(), config.log_level) == levels.end()) {
         checker.fail("log_level", "unknown level", expectedOneOf(levels, config.log_level));

@@ -422,6 +422,16 @@ std::vector<KeyDef> buildKeyTable()
     add(realKey(
         "live_view.rate_hz.nearest", kRestart,
         [](auto& c) -> auto& { return c.live_view.rate_hz.nearest; }, "Hz"));
+    add(boolKey(
+        "ros2.enabled", kRestart, [](auto& c) -> auto& { return c.ros2.enabled; }));
+    add(textKey(
+        "ros2.namespace", kRestart, [](auto& c) -> auto& { return c.ros2.ns; }, false));
+    add(boolKey(
+        "ros2.localhost_only", kRestart, [](auto& c) -> auto& { return c.ros2.localhost_only; }));
+    add(integerKey(
+        "ros2.points_step", kRestart, [](auto& c) -> auto& { return c.ros2.points_step; }));
+    add(realKey(
+        "ros2.max_rate_hz", kRestart, [](auto& c) -> auto& { return c.ros2.max_rate_hz; }, "Hz"));
     add(textKey(
         "log_level", kLive, [](auto& c) -> auto& { return c.log_level; }, false));
     return keys;

@@ -127,6 +127,18 @@ struct LiveViewConfig {
     } rate_hz;
 };
 
+// stereod as a ROS 2 node on DDS (docs/ros2.md). The domain comes from ROS_DOMAIN_ID.
+struct Ros2Config {
+    bool enabled = false;
+    std::string ns = "/stereo"; // ros2.namespace: the topics' namespace
+    // Discovery on the loopback interface only; false leaves it to Cyclone DDS's own
+    // configuration (CYCLONEDDS_URI), unless ROS_LOCALHOST_ONLY=1 or
+    // ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST keep it local.
+    bool localhost_only = true;
+    int points_step = 4;       // every n-th point of the cloud is published
+    double max_rate_hz = 30.0; // image and cloud topics at most this often
+};
+
 // Calibration health while running (docs/configuration.md).
 struct HealthConfig {
     double interval_s = 2.0;           // between checks; 0 turns them off
@@ -145,6 +157,7 @@ struct ServiceConfig {
     SocketConfig socket;
     PublishConfig publish;
     LiveViewConfig live_view;
+    Ros2Config ros2;
     std::string log_level = "info"; // trace, debug, info, warn, error, critical, off
 };
 

@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <string_view>
+#include <vector>
 
 #include "daemon/publisher.hpp"
 
@@ -20,6 +21,29 @@ class PublishObserver {
     // (PublishedFrame::realtimeNs(); 0: none).
     virtual void onStatus(std::string_view status_json, std::string_view reading_json,
                           int64_t reading_realtime_ns) = 0;
+};
+
+// Several observers as one (the live view and the ROS 2 node), each called in turn.
+// Borrows them; they must outlive it. Set up before the socket server runs.
+class PublishObservers final : public PublishObserver {
+  public:
+    void add(PublishObserver& observer) { observers_.push_back(&observer); }
+    bool empty() const noexcept { return observers_.empty(); }
+
+    void onFrame(const PublishedFrame& frame, std::string_view reading_json) override
+    {
+        for (PublishObserver* observer : observers_)
+            observer->onFrame(frame, reading_json);
+    }
+    void onStatus(std::string_view status_json, std::string_view reading_json,
+                  int64_t reading_stamp_ns) override
+    {
+        for (PublishObserver* observer : observers_)
+            observer->onStatus(status_json, reading_json, reading_stamp_ns);
+    }
+
+  private:
+    std::vector<PublishObserver*> observers_;
 };
 
 } // namespace stereod

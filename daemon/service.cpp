@@ -131,6 +131,9 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
         throw StartupError(ExitCode::Socket, e.what());
     }
     startLiveView();
+    startRos2();
+    if (!observers_.empty())
+        server_->setPublishObserver(&observers_);
 
     stop_fd_ = UniqueFd(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
     if (!stop_fd_)
@@ -374,7 +377,7 @@ void Service::startLiveView()
                       config_.live_view.listen, error);
         return;
     }
-    server_->setPublishObserver(live_view_.get());
+    observers_.add(*live_view_);
     const std::string bound = live_view_->status().listen;
     // The address with the token is given only over the socket (`view`): logs are read
     // more widely than the socket may be used.
@@ -414,6 +417,36 @@ LiveViewLinks Service::liveViewLinks()
     return links;
 }
 
+void Service::startRos2()
+{
+    if (!config_.ros2.enabled)
+        return;
+    ros2::Ros2Settings settings;
+    settings.ns = config_.ros2.ns;
+    settings.points_step = config_.ros2.points_step;
+    settings.max_rate_hz = config_.ros2.max_rate_hz;
+    std::string error;
+    try {
+        settings.discovery = ros2::discoveryFromEnvironment(config_.ros2.localhost_only);
+    } catch (const std::invalid_argument& e) {
+        error = e.what();
+    }
+    ros2_ = std::make_unique<ros2::Ros2Publisher>(
+        settings, calibration_ ? calibration_->rectified : RectifiedGeometry{},
+        config_.processing.nearest, config_.zones.camera_pose);
+    if (error.empty())
+        error = ros2_->start();
+    if (!error.empty()) {
+        spdlog::error("ros2: cannot publish: {}; running without ROS 2 (ros2.enabled)", error);
+        return;
+    }
+    ros2_observer_ = std::make_unique<Ros2Observer>(*ros2_);
+    observers_.add(*ros2_observer_);
+    spdlog::info("ros2: publishing under {} in DDS domain {}{}", settings.ns,
+                 settings.discovery.domain_id,
+                 settings.discovery.localhost_only ? " on 127.0.0.1 only" : "");
+}
+
 ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceHealth& health,
                                      int64_t now_ns)
 {
@@ -422,6 +455,20 @@ ServiceStatus Service::serviceStatus(const PublishedFrame* latest, const SourceH
         status.live_view = live_view_->status();
     else
         status.live_view.listen = config_.live_view.listen; // "off"
+    status.ros2.enabled = config_.ros2.enabled;
+    status.ros2.ns = config_.ros2.ns;
+    if (ros2_) {
+        const ros2::Ros2Counters c = ros2_->counters();
+        status.ros2.publishing = c.publishing;
+        status.ros2.error = c.error;
+        status.ros2.domain_id = c.domain_id;
+        status.ros2.localhost_only = c.localhost_only;
+        status.ros2.readers = c.readers;
+        status.ros2.frames = c.frames;
+        status.ros2.frames_skipped = c.frames_skipped;
+        status.ros2.messages = c.messages;
+        status.ros2.write_errors = c.write_errors;
+    }
     status.uptime_s = static_cast<double>(now_ns - started_ns_) / 1e9;
     status.state = health.down         ? "source_down"
                    : !calibration_     ? "uncalibrated"
@@ -546,6 +593,8 @@ ReloadOutcome Service::loadAndApply()
     // settings are handed over as a whole (unchanged values stay what they were).
     if (change.changed.size() > change.restart_needed.size()) {
         worker_->updateSettings(proposed.processing);
+        if (ros2_)
+            ros2_->setNearest(proposed.processing.nearest);
         server_->setPublishConfig(proposed.publish);
         applyLogLevel(proposed.log_level);
         if (health_) {

@@ -35,6 +35,7 @@
 #include "daemon/calibration_health_monitor.hpp"
 #include "daemon/live_view/live_view.hpp"
 #include "daemon/publisher.hpp"
+#include "daemon/ros2_observer.hpp"
 #include "daemon/socket_server.hpp"
 #include "daemon/source_counter_watch.hpp"
 #include "daemon/systemd_notifier.hpp"
@@ -162,6 +163,9 @@ class Service final : private ServerBackend {
     // Listens for the live view when live_view.listen says so; a failure is logged and
     // the service runs on without it.
     void startLiveView();
+    // Joins the DDS domain as a ROS 2 node when ros2.enabled says so; a failure is logged
+    // and the service runs on without it.
+    void startRos2();
     void onStopRequest();
     void onReloadRequest();
     // Records that the service is stopping and wakes waitStopTaken().
@@ -182,8 +186,11 @@ class Service final : private ServerBackend {
     std::unique_ptr<live_view::LiveView> live_view_; // none when live_view.listen is off
     int socket_max_clients_ = 0;                     // socket.max_clients, within the budget
     std::size_t live_view_connections_ = 0;          // the live view's sockets, within the budget
-    UniqueFd stop_fd_;   // eventfd written by requestStop(); outlives server_
-    UniqueFd reload_fd_; // eventfd written by requestReload(); outlives server_
+    std::unique_ptr<ros2::Ros2Publisher> ros2_;      // none when ros2.enabled is false
+    std::unique_ptr<Ros2Observer> ros2_observer_;
+    PublishObservers observers_; // the live view and the ROS 2 node, as they started
+    UniqueFd stop_fd_;           // eventfd written by requestStop(); outlives server_
+    UniqueFd reload_fd_;         // eventfd written by requestReload(); outlives server_
 
     DisparityRange initial_range_; // for `status` before the first frame
     std::string initial_matcher_;

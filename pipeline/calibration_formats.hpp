@@ -16,7 +16,7 @@
 #include <opencv2/core/types.hpp>
 
 #include "pipeline/calibration.hpp"
-#include "replay/ros2_messages.hpp"
+#include "ros2/messages.hpp"
 
 namespace stereod {
 

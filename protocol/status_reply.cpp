@@ -160,6 +160,18 @@ Json statusToJson(const ServiceStatus& status)
                         {"frames_dropped", live.frames_dropped},
                         {"clients_dropped", live.clients_dropped},
                         {"refused", live.refused}};
+    const StatusRos2& ros2 = status.ros2;
+    out["ros2"] = {{"enabled", ros2.enabled},
+                   {"publishing", ros2.publishing},
+                   {"error", ros2.error},
+                   {"namespace", ros2.ns},
+                   {"domain_id", ros2.domain_id},
+                   {"localhost_only", ros2.localhost_only},
+                   {"readers", ros2.readers},
+                   {"frames", ros2.frames},
+                   {"frames_skipped", ros2.frames_skipped},
+                   {"messages", ros2.messages},
+                   {"write_errors", ros2.write_errors}};
     out["reading"] = readingToJson(status.reading, status.now_ns);
     out["max_reading_age_ms"] = status.max_reading_age_ms;
     return out;

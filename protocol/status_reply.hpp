@@ -126,6 +126,21 @@ struct StatusLiveView {
                                   // too many clients, out of descriptors
 };
 
+// stereod as a ROS 2 node (docs/ros2.md).
+struct StatusRos2 {
+    bool enabled = false;        // ros2.enabled
+    bool publishing = false;     // in the DDS domain, writers made
+    std::string error;           // why it is not publishing, when it should be
+    std::string ns;              // ros2.namespace
+    uint32_t domain_id = 0;      // from ROS_DOMAIN_ID
+    bool localhost_only = true;  // discovery on the loopback interface only
+    uint64_t readers = 0;        // DDS readers matched over all topics now
+    uint64_t frames = 0;         // results published
+    uint64_t frames_skipped = 0; // results replaced by a newer one before they went out
+    uint64_t messages = 0;       // DDS samples written
+    uint64_t write_errors = 0;
+};
+
 // Everything the `status` object says, as plain values. States are the protocol's names.
 struct ServiceStatus {
     double uptime_s = 0.0;
@@ -136,6 +151,7 @@ struct ServiceStatus {
     StatusCalibration calibration;
     ClientCounters clients;
     StatusLiveView live_view;
+    StatusRos2 ros2;
     ReadingReport reading; // its message is borrowed
     int64_t now_ns = 0;    // for the reading's age
     // publish.max_reading_age_ms: a reading older than this is stale (how a viewer that

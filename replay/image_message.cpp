@@ -5,7 +5,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "replay/ros2_messages.hpp"
+#include "ros2/messages.hpp"
 
 namespace stereod {
 

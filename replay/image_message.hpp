@@ -1,6 +1,6 @@
 #pragma once
 // A bag's camera image as the pipeline takes it: one serialized sensor_msgs/msg/Image
-// (CDR, replay/ros2_messages.hpp) decoded into 8-bit grayscale, after every size the
+// (CDR, ros2/messages.hpp) decoded into 8-bit grayscale, after every size the
 // message declares has been checked against the bytes it carries and against the largest
 // frame a replay may have, in 64-bit arithmetic, before anything is allocated or handed
 // to OpenCV. A pure function of its input, so that it is unit-tested and fuzzed on its own

@@ -1,5 +1,5 @@
 #pragma once
-// Stereo recordings as ROS 2 bags in MCAP (replay/mcap_writer.hpp, replay/ros2_messages.hpp):
+// Stereo recordings as ROS 2 bags in MCAP (replay/mcap_writer.hpp, ros2/messages.hpp):
 // what `stereoctl record --out FILE.mcap` writes and `stereod --replay FILE.mcap` reads.
 //
 // Written (profile `ros2`, message encoding `cdr`, schema encoding `ros2msg`):
@@ -34,7 +34,7 @@
 
 #include "replay/mcap_reader.hpp"
 #include "replay/mcap_writer.hpp"
-#include "replay/ros2_messages.hpp"
+#include "ros2/messages.hpp"
 
 namespace stereod {
 

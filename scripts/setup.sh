@@ -11,6 +11,8 @@ packages=(
   libzstd-dev zlib1g-dev   # MCAP recordings: zstd chunks, CRC-32
   libwebsocketpp-dev libasio-dev libjs-three   # the live view: Foxglove WebSocket server, the page's 3D view
   chromium   # the live view's page tested in a real browser (headless, tests/live_view/page.mjs)
+  cyclonedds-dev cyclonedds-tools   # ROS 2 on DDS: Eclipse Cyclone DDS and its IDL compiler (idlc)
+  libfastrtps-dev fastddsgen   # the ROS 2 interop test's peer: eProsima Fast DDS and its type generator
   libhwy-dev   # Highway: portable SIMD with run-time dispatch, for the census-sgm matcher
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-dev   # scripts/fuzz.sh: clang with libFuzzer and its sanitizer runtimes

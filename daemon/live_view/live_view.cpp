@@ -17,7 +17,8 @@
 #include "daemon/live_view/admission.hpp"
 #include "protocol/json_writer.hpp"
 #include "protocol/reading_json.hpp"
-#include "replay/ros2_messages.hpp"
+#include "ros2/conventions.hpp"
+#include "ros2/messages.hpp"
 
 namespace stereod::live_view {
 
@@ -102,24 +103,6 @@ bool safePath(const std::string& path)
 HttpResponse notFound(const std::string& path)
 {
     return HttpResponse{404, "text/plain; charset=utf-8", "not found: " + path + "\n"};
-}
-
-ros2::CameraInfo rectifiedInfo(const RectifiedGeometry& g, bool right, int64_t stamp_ns)
-{
-    ros2::CameraInfo info;
-    info.header = {ros2::Time::fromNs(stamp_ns), right ? kRightOpticalFrame : kLeftOpticalFrame};
-    info.width = static_cast<uint32_t>(g.image_size.width);
-    info.height = static_cast<uint32_t>(g.image_size.height);
-    info.distortion_model = "plumb_bob";
-    info.d = {0, 0, 0, 0, 0}; // rectified: no distortion left
-    const double cx = right ? g.cx_px + g.doffs_px : g.cx_px;
-    info.k = {g.focal_px, 0, cx, 0, g.focal_px, g.cy_px, 0, 0, 1};
-    info.r = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-    // REP 104: the right camera's P[3] is -fx' * baseline.
-    info.p = {g.focal_px, 0,          cx,      right ? -g.focal_px * g.baseline_m : 0.0,
-              0,          g.focal_px, g.cy_px, 0,
-              0,          0,          1,       0};
-    return info;
 }
 
 } // namespace
@@ -332,15 +315,8 @@ void LiveView::onFrame(const PublishedFrame& frame, std::string_view reading_jso
         m.stamp_ns = stamp_ns;
         if (subscribed(kLeftImage))
             r.left_rectified.copyTo(m.left);
-        if (subscribed(kDepth)) {
-            // Depth the reading refuses to trust goes out as "no depth" everywhere.
-            if (frame.depth_valid) {
-                r.depth_m.copyTo(m.depth_m);
-            } else {
-                m.depth_m.create(r.left_rectified.size(), CV_32FC1);
-                m.depth_m.setTo(0);
-            }
-        }
+        if (subscribed(kDepth))
+            ros2::copyTrustedDepth(r, frame.depth_valid, m.depth_m);
         if (subscribed(kConfidence))
             r.confidence.copyTo(m.confidence);
         if (subscribed(kDisparity))
@@ -433,10 +409,7 @@ void LiveView::feed()
                 send(kLeftImage, t, message);
             }
             if (!work.depth_m.empty() && due(kDepth)) {
-                depth_nan.resize(work.depth_m.total());
-                const auto* depth = work.depth_m.ptr<float>();
-                for (std::size_t i = 0; i < depth_nan.size(); ++i)
-                    depth_nan[i] = depth[i] > 0.0f ? depth[i] : std::nanf("");
+                ros2::depthWithNan(work.depth_m, depth_nan);
                 ros2::serializeImage(left_header, work.depth_m.rows, work.depth_m.cols, "32FC1",
                                      work.depth_m.cols * 4, depth_nan.data(), depth_nan.size() * 4,
                                      message);
@@ -449,11 +422,7 @@ void LiveView::feed()
                 send(kConfidence, t, message);
             }
             if (!work.disparity.empty() && due(kDisparity)) {
-                // ROS's convention: a disparity below min_disparity is invalid.
-                disparity_ros.resize(work.disparity.total());
-                const auto* d = work.disparity.ptr<float>();
-                for (std::size_t i = 0; i < disparity_ros.size(); ++i)
-                    disparity_ros[i] = std::isfinite(d[i]) ? d[i] : work.min_disparity - 1.0f;
+                ros2::disparityForRos(work.disparity, work.min_disparity, disparity_ros);
                 ros2::DisparityImage image;
                 image.header = left_header;
                 image.height = work.disparity.rows;
@@ -479,7 +448,7 @@ void LiveView::feed()
                 const Channel channel = right ? kRightInfo : kLeftInfo;
                 if (!due(channel))
                     continue;
-                ros2::serializeCameraInfo(rectifiedInfo(geometry_, right, t), message);
+                ros2::serializeCameraInfo(ros2::rectifiedCameraInfo(geometry_, right, t), message);
                 send(channel, t, message);
             }
             work.frame = false;

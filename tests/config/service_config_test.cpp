@@ -717,7 +717,8 @@ TEST(ConfigDiff, EveryKeyIsClassified)
     for (const auto& key : keys) {
         const bool restart = key.path.rfind("source.", 0) == 0 || key.path == "calibration" ||
                              key.path.rfind("socket.", 0) == 0 ||
-                             key.path.rfind("live_view.", 0) == 0;
+                             key.path.rfind("live_view.", 0) == 0 ||
+                             key.path.rfind("ros2.", 0) == 0;
         EXPECT_EQ(key.live, !restart) << key.path;
     }
 }

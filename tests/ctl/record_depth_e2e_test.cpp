@@ -13,7 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "replay/mcap_recording.hpp"
-#include "replay/ros2_messages.hpp"
+#include "ros2/messages.hpp"
 #include "tests/ctl/record_e2e_fixture.hpp"
 #include "tests/support/depth_values.hpp"
 

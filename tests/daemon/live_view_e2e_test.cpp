@@ -127,12 +127,8 @@ TEST_F(LiveViewE2e, FoxgloveClientGetsEveryChannelAndTheServicesOwnValues)
     ASSERT_TRUE(got["zones"].is_object());
     EXPECT_TRUE(got["zones"]["zones"].empty());
     EXPECT_TRUE(got["zones"].contains("stamp_realtime_ns"));
-    ProtocolClient client(socket_, 30000ms);
-    const Json snapshot = client.request({{"cmd", "snapshot"}, {"items", Json::array({"depth"})}});
-    ASSERT_EQ(snapshot["depth_valid"], true) << snapshot.dump();
-    cv::Mat depth_mm(288, 384, CV_16UC1);
-    ASSERT_EQ(snapshot["payloads"][0]["bytes"], depth_mm.total() * 2);
-    client.readPayload(depth_mm.data, depth_mm.total() * 2);
+    const cv::Mat depth_mm = snapshotDepthMm(cv::Size(384, 288));
+    ASSERT_FALSE(HasFailure());
     const Json& values = depth["data"];
     ASSERT_EQ(values.size(), depth_mm.total());
     const test::DepthAgreement agreement = test::compareDepth(depth_mm, values);

@@ -82,6 +82,19 @@ class LiveViewE2e : public ::testing::Test {
         FAIL() << "stereod gave no valid reading within 60 s";
     }
 
+    // The service's depth of its latest pair (snapshot), CV_16UC1 millimetres, 0 = none.
+    cv::Mat snapshotDepthMm(cv::Size size)
+    {
+        ProtocolClient client(socket_, 30000ms);
+        const auto snapshot = client.request(
+            {{"cmd", "snapshot"}, {"items", nlohmann::ordered_json::array({"depth"})}});
+        EXPECT_EQ(snapshot["depth_valid"], true) << snapshot.dump();
+        cv::Mat depth_mm(size, CV_16UC1);
+        EXPECT_EQ(snapshot["payloads"][0]["bytes"], depth_mm.total() * 2);
+        client.readPayload(depth_mm.data, depth_mm.total() * 2);
+        return depth_mm;
+    }
+
     // The live view's addresses with the token, as `stereoctl view` gets them.
     void readLinks()
     {

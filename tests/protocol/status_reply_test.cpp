@@ -74,7 +74,7 @@ TEST(StatusReply, MembersInTheDocumentedOrder)
     EXPECT_EQ(keys(status),
               (std::vector<std::string>{"uptime_s", "state", "source", "pipeline",
                                         "calibration_health", "calibration", "clients", "live_view",
-                                        "reading", "max_reading_age_ms"}));
+                                        "ros2", "reading", "max_reading_age_ms"}));
     EXPECT_EQ(status["state"], "running");
     EXPECT_EQ(
         keys(status["clients"]),

@@ -10,7 +10,7 @@
 #include <string_view>
 
 #include "replay/mcap_records.hpp"
-#include "replay/ros2_messages.hpp"
+#include "ros2/messages.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
 {

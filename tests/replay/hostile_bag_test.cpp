@@ -19,7 +19,7 @@
 #include "replay/image_message.hpp"
 #include "replay/mcap_reader.hpp"
 #include "replay/mcap_recording.hpp"
-#include "replay/ros2_messages.hpp"
+#include "ros2/messages.hpp"
 #include "tests/support/bags.hpp"
 #include "tests/support/recordings.hpp"
 #include "tests/support/temp_dir.hpp"

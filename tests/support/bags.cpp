@@ -4,7 +4,7 @@
 #include <fstream>
 
 #include "replay/mcap_records.hpp"
-#include "replay/ros2_messages.hpp"
+#include "ros2/messages.hpp"
 
 namespace stereod::test {
 

@@ -1,4 +1,4 @@
-#include "replay/ros2_messages.hpp"
+#include "ros2/messages.hpp"
 
 #include <cstring>
 #include <limits>

@@ -7,7 +7,7 @@
 
 #include <gtest/gtest.h>
 
-#include "replay/ros2_messages.hpp"
+#include "ros2/messages.hpp"
 
 namespace stereod::ros2 {
 namespace {

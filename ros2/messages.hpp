@@ -10,9 +10,9 @@
 // as uint32 length (with the terminating NUL) + bytes + NUL; sequences as uint32 count +
 // elements; fixed arrays as their elements.
 //
-// This lives beside the MCAP code, in a library with neither OpenCV nor threads
-// (stereod_mcap), so that the recorder, the replay source and the live view (Foxglove
-// WebSocket, which carries the same CDR messages) share one implementation.
+// A library with neither OpenCV nor threads (stereod_ros2_messages), low in the house, so
+// that the recorder, the replay source, the calibration formats (CameraInfo) and the live
+// view (Foxglove WebSocket, which carries the same CDR messages) share one implementation.
 //
 // Reentrant: no state outside the arguments. Malformed input throws CdrError.
 

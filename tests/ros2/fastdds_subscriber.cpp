@@ -1,0 +1,292 @@
+// A ROS 2 subscriber built from eProsima Fast DDS (ROS 2's default middleware), with types
+// that fastddsgen compiled from ros2/idl/ros2_dds_types.idl: nothing of stereod's DDS code.
+// It joins the domain on the loopback interface, subscribes to every topic stereod
+// publishes with ROS 2's names, types and QoS, and prints what it received as one JSON
+// object on stdout: per topic the matches and the count, and the decoded content of the
+// last message of each (depth values in full).
+//
+//   fastdds_subscriber DOMAIN NAMESPACE SECONDS MIN_EACH
+//
+// Ends when every topic has MIN_EACH messages (tf_static: one) or after SECONDS.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <functional>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/dds/subscriber/DataReader.hpp>
+#include <fastdds/dds/subscriber/SampleInfo.hpp>
+#include <fastdds/dds/subscriber/Subscriber.hpp>
+#include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
+#include <fastdds/dds/topic/TypeSupport.hpp>
+#include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
+#include <fastrtps/utils/IPLocator.h>
+#include <nlohmann/json.hpp>
+
+#include "ros2_dds_types.h"
+#include "ros2_dds_typesPubSubTypes.h"
+
+namespace {
+
+using namespace eprosima::fastdds::dds;
+using Json = nlohmann::ordered_json;
+
+Json headerJson(const std_msgs::msg::dds_::Header_& header)
+{
+    return {{"stamp_ns", int64_t{header.stamp().sec()} * 1'000'000'000 + header.stamp().nanosec()},
+            {"frame_id", header.frame_id()}};
+}
+
+// A float for JSON: NaN and the infinities by name.
+Json number(float value)
+{
+    if (std::isnan(value))
+        return "nan";
+    if (std::isinf(value))
+        return value > 0 ? "inf" : "-inf";
+    return value;
+}
+
+Json imageJson(const sensor_msgs::msg::dds_::Image_& image, bool with_floats)
+{
+    Json out = {{"header", headerJson(image.header())},
+                {"height", image.height()},
+                {"width", image.width()},
+                {"encoding", image.encoding()},
+                {"step", image.step()},
+                {"bytes", image.data().size()}};
+    if (with_floats && image.data().size() % 4 == 0) {
+        Json values = Json::array();
+        const auto* f = reinterpret_cast<const float*>(image.data().data());
+        for (std::size_t i = 0; i < image.data().size() / 4; ++i)
+            values.push_back(std::isnan(f[i]) ? Json(nullptr) : Json(f[i]));
+        out["data"] = std::move(values);
+    }
+    return out;
+}
+
+Json cameraInfoJson(const sensor_msgs::msg::dds_::CameraInfo_& info)
+{
+    return {{"header", headerJson(info.header())},
+            {"height", info.height()},
+            {"width", info.width()},
+            {"distortion_model", info.distortion_model()},
+            {"d", info.d()},
+            {"k", info.k()},
+            {"r", info.r()},
+            {"p", info.p()}};
+}
+
+struct Subscription {
+    std::string name; // DDS topic
+    std::string type;
+    int min_count = 1;
+    DataReader* reader = nullptr;
+    int count = 0;
+    Json last;
+    std::function<bool(DataReader*, Json&)> take; // one sample into `last`; false: none
+};
+
+template <typename Message>
+std::function<bool(DataReader*, Json&)> taker(std::function<Json(const Message&)> decode,
+                                              bool keep_all = false)
+{
+    return [decode, keep_all](DataReader* reader, Json& last) {
+        Message message;
+        SampleInfo info;
+        if (reader->take_next_sample(&message, &info) != ReturnCode_t::RETCODE_OK)
+            return false;
+        if (!info.valid_data)
+            return true;
+        if (keep_all) {
+            if (!last.is_array())
+                last = Json::array();
+            last.push_back(decode(message));
+        } else {
+            last = decode(message);
+        }
+        return true;
+    };
+}
+
+} // namespace
+
+int main(int argc, char** argv)
+{
+    if (argc != 5) {
+        std::fprintf(stderr, "usage: fastdds_subscriber DOMAIN NAMESPACE SECONDS MIN_EACH\n");
+        return 2;
+    }
+    const int domain = std::atoi(argv[1]);
+    const std::string ns = argv[2];
+    const double seconds = std::atof(argv[3]);
+    const int min_each = std::atoi(argv[4]);
+
+    // The loopback interface only; stereod is found at the well-known ports of the first
+    // participant indices on 127.0.0.1 (no multicast there).
+    DomainParticipantQos participant_qos;
+    participant_qos.name("fastdds_interop_subscriber");
+    participant_qos.transport().use_builtin_transports = false;
+    auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
+    udp->interfaceWhiteList.push_back("127.0.0.1");
+    udp->receiveBufferSize = 4 * 1024 * 1024;
+    udp->maxInitialPeersRange = 33;
+    participant_qos.transport().user_transports.push_back(udp);
+    eprosima::fastrtps::rtps::Locator_t peer;
+    peer.kind = LOCATOR_KIND_UDPv4;
+    eprosima::fastrtps::rtps::IPLocator::setIPv4(peer, "127.0.0.1");
+    participant_qos.wire_protocol().builtin.initialPeersList.push_back(peer);
+    DomainParticipant* participant =
+        DomainParticipantFactory::get_instance()->create_participant(domain, participant_qos);
+    if (participant == nullptr) {
+        std::fprintf(stderr, "fastdds_subscriber: cannot create a participant in domain %d\n",
+                     domain);
+        return 1;
+    }
+    Subscriber* subscriber = participant->create_subscriber(SUBSCRIBER_QOS_DEFAULT);
+
+    using namespace sensor_msgs::msg::dds_;
+    const std::string rt = "rt" + ns + "/";
+    std::vector<Subscription> topics;
+    const auto add = [&topics](std::string name, std::string type, int min_count,
+                               std::function<bool(DataReader*, Json&)> take) {
+        Subscription s;
+        s.name = std::move(name);
+        s.type = std::move(type);
+        s.min_count = min_count;
+        s.take = std::move(take);
+        topics.push_back(std::move(s));
+    };
+    add(rt + "left/image_rect", "sensor_msgs::msg::dds_::Image_", min_each,
+        taker<Image_>([](const Image_& m) { return imageJson(m, false); }));
+    add(rt + "depth", "sensor_msgs::msg::dds_::Image_", min_each,
+        taker<Image_>([](const Image_& m) { return imageJson(m, true); }));
+    add(rt + "disparity", "stereo_msgs::msg::dds_::DisparityImage_", min_each,
+        taker<stereo_msgs::msg::dds_::DisparityImage_>(
+            [](const stereo_msgs::msg::dds_::DisparityImage_& m) {
+                return Json{{"header", headerJson(m.header())},
+                            {"image", imageJson(m.image(), false)},
+                            {"f", m.f()},
+                            {"t", m.t()},
+                            {"min_disparity", m.min_disparity()},
+                            {"max_disparity", m.max_disparity()},
+                            {"delta_d", m.delta_d()}};
+            }));
+    add(rt + "points", "sensor_msgs::msg::dds_::PointCloud2_", min_each,
+        taker<PointCloud2_>([](const PointCloud2_& m) {
+            Json fields = Json::array();
+            for (const auto& f : m.fields())
+                fields.push_back({{"name", f.name()},
+                                  {"offset", f.offset()},
+                                  {"datatype", f.datatype()},
+                                  {"count", f.count()}});
+            return Json{{"header", headerJson(m.header())},
+                        {"height", m.height()},
+                        {"width", m.width()},
+                        {"fields", fields},
+                        {"point_step", m.point_step()},
+                        {"row_step", m.row_step()},
+                        {"bytes", m.data().size()},
+                        {"is_dense", m.is_dense()}};
+        }));
+    add(rt + "left/camera_info", "sensor_msgs::msg::dds_::CameraInfo_", min_each,
+        taker<CameraInfo_>(cameraInfoJson));
+    add(rt + "right/camera_info", "sensor_msgs::msg::dds_::CameraInfo_", min_each,
+        taker<CameraInfo_>(cameraInfoJson));
+    add(rt + "nearest", "sensor_msgs::msg::dds_::Range_", min_each,
+        taker<Range_>(
+            [](const Range_& m) {
+                return Json{{"header", headerJson(m.header())},
+                            {"radiation_type", m.radiation_type()},
+                            {"field_of_view", number(m.field_of_view())},
+                            {"min_range", number(m.min_range())},
+                            {"max_range", number(m.max_range())},
+                            {"range", number(m.range())}};
+            },
+            true));
+    add(rt + "reading", "std_msgs::msg::dds_::String_", min_each,
+        taker<std_msgs::msg::dds_::String_>(
+            [](const std_msgs::msg::dds_::String_& m) { return Json(m.data()); }, true));
+    add("rt/tf_static", "tf2_msgs::msg::dds_::TFMessage_", 1,
+        taker<tf2_msgs::msg::dds_::TFMessage_>([](const tf2_msgs::msg::dds_::TFMessage_& m) {
+            Json transforms = Json::array();
+            for (const auto& t : m.transforms()) {
+                const auto& tr = t.transform().translation();
+                const auto& q = t.transform().rotation();
+                transforms.push_back({{"parent", t.header().frame_id()},
+                                      {"child", t.child_frame_id()},
+                                      {"translation", {tr.x(), tr.y(), tr.z()}},
+                                      {"rotation", {q.x(), q.y(), q.z(), q.w()}}});
+            }
+            return transforms;
+        }));
+    std::vector<TypeSupport> types = {
+        TypeSupport(new Image_PubSubType()),
+        TypeSupport(new stereo_msgs::msg::dds_::DisparityImage_PubSubType()),
+        TypeSupport(new PointCloud2_PubSubType()),
+        TypeSupport(new CameraInfo_PubSubType()),
+        TypeSupport(new Range_PubSubType()),
+        TypeSupport(new std_msgs::msg::dds_::String_PubSubType()),
+        TypeSupport(new tf2_msgs::msg::dds_::TFMessage_PubSubType()),
+    };
+    for (TypeSupport& type : types)
+        type.register_type(participant);
+
+    for (std::size_t i = 0; i < topics.size(); ++i) {
+        Subscription& t = topics[i];
+        eprosima::fastdds::dds::Topic* topic =
+            participant->create_topic(t.name, t.type, TOPIC_QOS_DEFAULT);
+        DataReaderQos qos = DATAREADER_QOS_DEFAULT;
+        // ROS 2's profiles: sensor data for the images and the cloud, reliable for the
+        // rest, transient local for /tf_static (tf2's static listener).
+        const bool sensor = i < 4;
+        qos.reliability().kind = sensor ? BEST_EFFORT_RELIABILITY_QOS : RELIABLE_RELIABILITY_QOS;
+        qos.durability().kind =
+            t.name == "rt/tf_static" ? TRANSIENT_LOCAL_DURABILITY_QOS : VOLATILE_DURABILITY_QOS;
+        qos.history().kind = KEEP_LAST_HISTORY_QOS;
+        qos.history().depth = sensor ? 5 : 10;
+        qos.endpoint().history_memory_policy =
+            eprosima::fastrtps::rtps::PREALLOCATED_WITH_REALLOC_MEMORY_MODE;
+        t.reader = subscriber->create_datareader(topic, qos);
+        if (t.reader == nullptr) {
+            std::fprintf(stderr, "fastdds_subscriber: no reader for %s\n", t.name.c_str());
+            return 1;
+        }
+    }
+
+    const auto deadline = std::chrono::steady_clock::now() +
+                          std::chrono::milliseconds(static_cast<int64_t>(seconds * 1000));
+    Json result = {{"topics", Json::object()}};
+    std::vector<int> matched(topics.size(), 0);
+    while (std::chrono::steady_clock::now() < deadline) {
+        bool all = true;
+        for (std::size_t i = 0; i < topics.size(); ++i) {
+            Subscription& t = topics[i];
+            SubscriptionMatchedStatus status;
+            t.reader->get_subscription_matched_status(status);
+            matched[i] = std::max(matched[i], status.current_count);
+            while (t.take(t.reader, t.last))
+                ++t.count;
+            all = all && t.count >= t.min_count;
+        }
+        if (all)
+            break;
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    for (std::size_t i = 0; i < topics.size(); ++i) {
+        const Subscription& t = topics[i];
+        result["topics"][t.name] = {
+            {"type", t.type}, {"matched", matched[i]}, {"count", t.count}, {"last", t.last}};
+    }
+    std::cout << result.dump() << "\n";
+    participant->delete_contained_entities();
+    DomainParticipantFactory::get_instance()->delete_participant(participant);
+    return 0;
+}
