@@ -648,7 +648,9 @@ TEST_F(LiveViewE2e, ManyConnectionsUnderALowDescriptorLimitLeaveTheServiceServin
     std::this_thread::sleep_for(2s);
     const double busy_cpu = cpuSeconds(pid) - busy_cpu_start;
     EXPECT_GE(frames(), frames_before + 5) << "the replay stopped";
-    EXPECT_LT(busy_cpu, idle_cpu + 0.6)
+    // A spinning accept loop costs 85 % of a core (1.7 s in 2 s); the margin allows for
+    // the noise of a sanitizer's build, where the idle service already takes 1.7 s.
+    EXPECT_LT(busy_cpu, idle_cpu * 1.25 + 0.6)
         << "idle " << idle_cpu << " s, with 260 connections " << busy_cpu << " s of CPU in 2 s";
     ProtocolClient client(socket_, 10000ms);
     EXPECT_TRUE(client.request({{"cmd", "distance"}})["reading"].value("valid", false));

@@ -345,6 +345,8 @@ TEST_F(SocketServerTest, TooManyClientsAreTurnedAway)
 // next connection after descriptors return is served.
 TEST_F(SocketServerTest, OutOfDescriptorsAConnectionIsToldWhyAndClosed)
 {
+    if (test::sanitizersNeedDescriptors())
+        GTEST_SKIP() << "UBSan's vptr check needs descriptors of its own (a pipe)";
     start();
     // Kept open: a connection the server closed meanwhile would free a descriptor.
     const auto first = connect();
