@@ -977,6 +977,22 @@ TEST_F(ServiceTest, ConnectCloseChurnDoesNotCountClosedClientsAsOpen)
     EXPECT_EQ(clients["rejected"], 0) << clients.dump() << ", " << connected << " connected";
 }
 
+// How much slower the sanitizers' trees run the service's loop: every `status` the
+// flooders ask for costs several times as much there, and the polite client's requests
+// wait behind a turn of the loop (measured: p99 over 50 ms, at most 110 to 150 ms, on two
+// loaded cores under ASan and TSan).
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+constexpr double kSanitizerSlowdown = 4.0;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+constexpr double kSanitizerSlowdown = 4.0;
+#else
+constexpr double kSanitizerSlowdown = 1.0;
+#endif
+#else
+constexpr double kSanitizerSlowdown = 1.0;
+#endif
+
 TEST_F(ServiceTest, ClientsFloodingRequestsDelayNeitherAPoliteClientNorTheWatchdog)
 {
     // systemd's notify socket, with a watchdog of 400 ms: pings are due every 100 ms.
@@ -1048,8 +1064,8 @@ TEST_F(ServiceTest, ClientsFloodingRequestsDelayNeitherAPoliteClientNorTheWatchd
 
     std::sort(latencies_ms.begin(), latencies_ms.end());
     const double p99_ms = latencies_ms[latencies_ms.size() * 99 / 100];
-    EXPECT_LT(p99_ms, 50.0) << latencies_ms.size() << " requests, max " << latencies_ms.back()
-                            << " ms";
+    EXPECT_LT(p99_ms, 50.0 * kSanitizerSlowdown)
+        << latencies_ms.size() << " requests, max " << latencies_ms.back() << " ms";
 
     std::vector<std::chrono::steady_clock::time_point> pings;
     for (const auto& message : messages)
