@@ -178,6 +178,12 @@ static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__,
               "the CDR code writes and reads host-order values as little-endian");
 
 const std::string kTimeText = "int32 sec\nuint32 nanosec\n";
+const std::string kRegionOfInterestText = "MSG: sensor_msgs/RegionOfInterest\n"
+                                          "uint32 x_offset\n"
+                                          "uint32 y_offset\n"
+                                          "uint32 height\n"
+                                          "uint32 width\n"
+                                          "bool do_rectify\n";
 const std::string kHeaderText = "# Standard metadata for higher-level stamped data types.\n"
                                 "builtin_interfaces/Time stamp\n"
                                 "string frame_id\n";
@@ -226,36 +232,24 @@ const std::string& cameraInfoSchemaText()
                                                "uint32 binning_x\n"
                                                "uint32 binning_y\n"
                                                "RegionOfInterest roi\n",
-                                               kSeparator + "MSG: sensor_msgs/RegionOfInterest\n"
-                                                            "uint32 x_offset\n"
-                                                            "uint32 y_offset\n"
-                                                            "uint32 height\n"
-                                                            "uint32 width\n"
-                                                            "bool do_rectify\n");
+                                               kSeparator + kRegionOfInterestText);
     return text;
 }
 
 const std::string& disparityImageSchemaText()
 {
     static const std::string text =
-        "std_msgs/Header header\n"
-        "sensor_msgs/Image image\n"
-        "float32 f\n"
-        "float32 t\n"
-        "sensor_msgs/RegionOfInterest valid_window\n"
-        "float32 min_disparity\n"
-        "float32 max_disparity\n"
-        "float32 delta_d\n" +
-        kSeparator + "MSG: sensor_msgs/Image\n" +
-        imageSchemaText().substr(0, imageSchemaText().find(kSeparator)) + kSeparator +
-        "MSG: sensor_msgs/RegionOfInterest\n"
-        "uint32 x_offset\n"
-        "uint32 y_offset\n"
-        "uint32 height\n"
-        "uint32 width\n"
-        "bool do_rectify\n" +
-        kSeparator + "MSG: std_msgs/Header\n" + kHeaderText + kSeparator +
-        "MSG: builtin_interfaces/Time\n" + kTimeText;
+        withHeader("std_msgs/Header header\n"
+                   "sensor_msgs/Image image\n"
+                   "float32 f\n"
+                   "float32 t\n"
+                   "sensor_msgs/RegionOfInterest valid_window\n"
+                   "float32 min_disparity\n"
+                   "float32 max_disparity\n"
+                   "float32 delta_d\n",
+                   kSeparator + "MSG: sensor_msgs/Image\n" +
+                       imageSchemaText().substr(0, imageSchemaText().find(kSeparator)) +
+                       kSeparator + kRegionOfInterestText);
     return text;
 }
 
