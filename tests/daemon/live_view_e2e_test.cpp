@@ -220,12 +220,14 @@ class LiveViewPage : public LiveViewE2e {
 // The distance `stereoctl distance` gives, connected, the depth in colours that follow the
 // data with a colour bar in metres, the status with calibration health and zones; then,
 // with the service stopped (SIGSTOP: the connection stays, nothing comes), the distance
-// greys out as STALE once it is older than publish.max_reading_age_ms.
+// greys out as STALE once it is older than publish.max_reading_age_ms (3 s here: on two
+// loaded cores a reading of the running service can be over 1 s old).
 TEST_F(LiveViewPage, ShowsTheDistanceThenStaleWhenNothingComes)
 {
     const std::string config = dir_.file("zones.yaml");
     std::ofstream(config)
-        << "zones:\n  - {name: ahead, min: [0.3, -0.5, -0.5], max: [1.0, 0.5, 0.5]}\n";
+        << "zones:\n  - {name: ahead, min: [0.3, -0.5, -0.5], max: [1.0, 0.5, 0.5]}\n"
+        << "publish:\n  max_reading_age_ms: 3000\n";
     const uint16_t port = freePort();
     startService("127.0.0.1:" + std::to_string(port), config);
     ASSERT_FALSE(HasFailure());
@@ -282,14 +284,14 @@ TEST_F(LiveViewPage, ShowsTheDistanceThenStaleWhenNothingComes)
         }
     }
 
-    // Stopped: the reading ages on the page's clock past max_reading_age_ms (1000 ms).
+    // Stopped: the reading ages on the page's clock past max_reading_age_ms.
     service_->sendSignal(SIGSTOP);
     const Json stale = next();
     service_->sendSignal(SIGCONT);
     EXPECT_EQ(stale["distance"], "STALE " + shown["distance"].get<std::string>());
     EXPECT_EQ(stale["detail"].get<std::string>().rfind("no fresh reading: ", 0), 0u)
         << stale["detail"];
-    EXPECT_NE(stale["detail"].get<std::string>().find("1.0 s allowed"), std::string::npos)
+    EXPECT_NE(stale["detail"].get<std::string>().find("3.0 s allowed"), std::string::npos)
         << stale["detail"];
     EXPECT_NE(stale["distance_colour"], shown["distance_colour"]) << "not greyed out";
     EXPECT_EQ(stale["connected"], "true"); // still connected: the reading is what is old
@@ -341,7 +343,8 @@ TEST_F(LiveViewPage, SomethingNearerThanTheRangeShowsTheBound)
 }
 
 // A rig whose calibration no longer holds (the Baumer rig after it moved, checked every
-// half second; its scenes 1, 2, 3 and 7, which give a distance with 64 disparities): the
+// half second; its scenes 1, 2, 3 and 5, which give a distance with 64 disparities; in 4,
+// 6, 7 and 8 something is nearer than that range sees): the
 // distance, in amber, with CALIBRATION SUSPECT and the row offset; the status panel says
 // degraded; `stereoctl distance` prints the flag and exits 4.
 TEST_F(LiveViewPage, ASuspectCalibrationIsShownWithTheDistance)
@@ -352,7 +355,7 @@ TEST_F(LiveViewPage, ASuspectCalibrationIsShownWithTheDistance)
     std::filesystem::create_directories(recording_ + "/right");
     std::ofstream csv(recording_ + "/frames.csv");
     csv << "index,left_stamp_ns,right_stamp_ns,left,right\n";
-    const int scenes[] = {1, 2, 3, 7};
+    const int scenes[] = {1, 2, 3, 5};
     for (int i = 0; i < 4; ++i) {
         char number[8];
         std::snprintf(number, sizeof number, "%02d", scenes[i]);

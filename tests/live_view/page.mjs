@@ -34,11 +34,11 @@ try {
       await page.waitForFunction(() => document.getElementById("colourbar").dataset.labels,
                                  null, { timeout: 30000 });
     }
-    // What the page shows is read the moment it shows the state.
-    await page.waitForFunction((s) => document.getElementById("reading").dataset.state === s,
-                               state, { timeout: 45000, polling: 20 });
-    const shown = await page.evaluate(() => {
+    // What the page shows is read in the same evaluation that finds it in the state: a
+    // reading that ages into STALE a moment later must not be taken for the state asked.
+    const found = await page.waitForFunction((s) => {
       const $ = (id) => document.getElementById(id);
+      if ($("reading").dataset.state !== s) return false;
       const canvas = $("depth");
       const pixels = canvas.getContext("2d").getImageData(0, 0, canvas.width, canvas.height).data;
       let sum = 0, sum2 = 0;
@@ -58,7 +58,8 @@ try {
                status: $("status").textContent, health: $("health").textContent,
                health_state: $("health").dataset.state,
                zones: [...$("zones").children].map((li) => ({ state: li.dataset.state, text: li.textContent })) };
-    });
+    }, state, { timeout: 45000, polling: 20 });
+    const shown = await found.jsonValue();
     if (first && (state === "valid" || state === "suspect")) {
       // Hovering the depth image below its centre shows that pixel's depth and confidence.
       const box = await page.locator("#depth").boundingBox();
