@@ -42,29 +42,39 @@ class NearestObjectFinder {
     explicit NearestObjectFinder(size_t max_region_pixels = 0);
 
     // What the region of a depth map holds: its valid and in-range pixels, the configured
-    // percentile of the in-range depths, and the near-field evidence.
+    // percentile of the in-range depths (with the bounds of hidden surfaces), and the
+    // near-field evidence.
     // depth_m: CV_32FC1, metres, invalid = 0 (NaN and +inf count as invalid too);
     // confidence (CV_8UC1, or empty: all trusted) drops pixels below min_confidence;
     // near_field (CV_8UC1, or empty: none) holds the matcher's near-field evidence
-    // (MatchOutput::near_field: 1 nearer than the range, 2 nearer than the extended range).
+    // (MatchOutput::near_field: 1 nearer than the range, 2 nearer than the extended range);
+    // hidden_depth_m (CV_32FC1, or empty: none), where depth_m has none, the nearest a
+    // surface hidden from the right camera can be (pipeline/hidden_surfaces.hpp), 0
+    // elsewhere: not valid pixels, but the percentile is the nearer of the in-range
+    // depths' and of those depths with these bounds.
     RegionMeasurement measure(const cv::Mat& depth_m, const cv::Mat& confidence,
-                              const cv::Mat& near_field, const NearestSettings& settings);
+                              const cv::Mat& near_field, const cv::Mat& hidden_depth_m,
+                              const NearestSettings& settings);
 
     // The reading of a processed pair from its region alone (judgeReading() with the
     // region's facts; the worker adds the rest): stamp_ns, frame, the fractions, and either
     // distance_m or the reason there is none.
     Reading find(const cv::Mat& depth_m, const cv::Mat& confidence, const cv::Mat& near_field,
-                 const NearestSettings& settings, const NearFieldFacts& near, int64_t stamp_ns,
-                 uint64_t frame);
-    // The same without confidence or near-field evidence (OpenCV's matchers, tests).
+                 const cv::Mat& hidden_depth_m, const NearestSettings& settings,
+                 const NearFieldFacts& near, int64_t stamp_ns, uint64_t frame);
+    // The same from the depths alone: no confidence, near-field evidence or hidden surfaces.
     Reading find(const cv::Mat& depth_m, const NearestSettings& settings, int64_t stamp_ns,
                  uint64_t frame)
     {
-        return find(depth_m, cv::Mat(), cv::Mat(), settings, NearFieldFacts{}, stamp_ns, frame);
+        return find(depth_m, cv::Mat(), cv::Mat(), cv::Mat(), settings, NearFieldFacts{}, stamp_ns,
+                    frame);
     }
 
   private:
-    std::vector<float> in_range_; // the region's in-range depths, reused
+    // The region's in-range depths (then with the hidden bounds), and the hidden pixels'
+    // bounds within the range; reused.
+    std::vector<float> in_range_;
+    std::vector<float> hidden_;
 };
 
 } // namespace stereod

@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 #include <spdlog/spdlog.h>
 
+#include "pipeline/hidden_surfaces.hpp"
 #include "pipeline/matcher.hpp"
 #include "pipeline/nearest_object.hpp"
 #include "pipeline/rectifier.hpp"
@@ -216,6 +217,8 @@ struct StereoProcessor::Impl {
     cv::Mat left_bgr;              // a BGRA left without its alpha, reused
     cv::Mat right_rectified;       // full calibration only, reused
     cv::Mat last_right;            // what the matcher saw last (see lastRightRectified())
+    cv::Mat hidden_bound_px;       // hidden surfaces' nearest disparities, reused
+    cv::Mat hidden_depth_m;        // ... and depths, in the region's rows
     bool last_frame_bad = false;   // log a run of bad frames once
 };
 
@@ -296,9 +299,17 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& left_colour, c
     disparityToDepth(out.disparity, p.calibration.rectified, out.depth_m);
     const Clock::time_point t3 = Clock::now();
 
-    out.facts = regionFacts(
-        p.nearest.measure(out.depth_m, out.confidence, out.near_field, p.settings.nearest),
-        p.settings.nearest, p.nearFieldFacts(), stamp_ns, frame);
+    // What the right camera cannot see in the region's rows, at the nearest it can be.
+    const cv::Rect region = regionPixels(p.settings.nearest.roi, out.disparity.size());
+    hiddenSurfaceBounds(out.disparity, region.y, region.y + region.height, p.hidden_bound_px);
+    if (p.hidden_depth_m.size() != out.disparity.size())
+        p.hidden_depth_m = cv::Mat::zeros(out.disparity.size(), CV_32FC1);
+    const cv::Range rows(region.y, region.y + region.height);
+    cv::Mat hidden_rows = p.hidden_depth_m.rowRange(rows);
+    disparityToDepth(p.hidden_bound_px.rowRange(rows), p.calibration.rectified, hidden_rows);
+    out.facts = regionFacts(p.nearest.measure(out.depth_m, out.confidence, out.near_field,
+                                              p.hidden_depth_m, p.settings.nearest),
+                            p.settings.nearest, p.nearFieldFacts(), stamp_ns, frame);
     out.reading = judgeReading(out.facts);
     const Clock::time_point t4 = Clock::now();
 

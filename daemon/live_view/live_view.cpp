@@ -44,6 +44,8 @@ const char* kReadingSchema =
     R"("region_pixels":{"type":"integer"},)"
     R"("range_limit_fraction":{"type":"number","description":"share of the region with )"
     R"(evidence of a surface nearer than the range"},)"
+    R"("hidden_fraction":{"type":"number","description":"share of the region hidden from )"
+    R"(the right camera behind a nearer surface, counted at the nearest it can be"},)"
     R"("closest_m":{"type":"number","description":"the closest depth the matcher measures"},)"
     R"("near_field_guard":{"type":"boolean","description":"whether the matcher looks for )"
     R"(surfaces nearer than its range"},)"
