@@ -34,6 +34,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 namespace stereod::sgm {
 
@@ -228,5 +229,11 @@ struct SgmKernels {
 const SgmKernels& scalarKernels();
 // The SIMD implementation for the best target this processor supports.
 const SgmKernels& simdKernels();
+// The SIMD implementation for every target Highway compiled that this processor runs
+// (AVX2 and AVX-512 on one x86 machine, say), best last: what the kernel tests hold
+// against the scalar reference, so that a target this machine would not pick is tested
+// too. Not thread-safe: it switches Highway's chosen target while it collects them (and
+// sets it back); simdKernels() is chosen first, so matchers are not affected.
+std::vector<SgmKernels> simdKernelsOfEveryTarget();
 
 } // namespace stereod::sgm

@@ -15,6 +15,7 @@
 #include <bit>
 #include <cstring>
 #include <type_traits>
+#include <vector>
 
 #include <hwy/foreach_target.h> // IWYU pragma: keep
 #include <hwy/highway.h>
@@ -824,18 +825,46 @@ HWY_EXPORT(CostCurve);
 HWY_EXPORT(MedianRow);
 HWY_EXPORT(TargetName);
 
+namespace {
+
+// The kernels of the target Highway has chosen.
+SgmKernels chosenKernels()
+{
+    return SgmKernels{HWY_DYNAMIC_DISPATCH(TargetName)(),    HWY_DYNAMIC_DISPATCH(CensusRow),
+                      HWY_DYNAMIC_DISPATCH(CostRow),         HWY_DYNAMIC_DISPATCH(PathsForward),
+                      HWY_DYNAMIC_DISPATCH(WinnersBackward), HWY_DYNAMIC_DISPATCH(DecideRow),
+                      HWY_DYNAMIC_DISPATCH(CostCurve),       HWY_DYNAMIC_DISPATCH(MedianRow)};
+}
+
+} // namespace
+
 const SgmKernels& simdKernels()
 {
     static const SgmKernels kernels = [] {
         // Choose the target now, so that the table holds the chosen functions rather
         // than the first-call trampolines.
         hwy::GetChosenTarget().Update(hwy::SupportedTargets());
-        return SgmKernels{HWY_DYNAMIC_DISPATCH(TargetName)(),    HWY_DYNAMIC_DISPATCH(CensusRow),
-                          HWY_DYNAMIC_DISPATCH(CostRow),         HWY_DYNAMIC_DISPATCH(PathsForward),
-                          HWY_DYNAMIC_DISPATCH(WinnersBackward), HWY_DYNAMIC_DISPATCH(DecideRow),
-                          HWY_DYNAMIC_DISPATCH(CostCurve),       HWY_DYNAMIC_DISPATCH(MedianRow)};
+        return chosenKernels();
     }();
     return kernels;
+}
+
+std::vector<SgmKernels> simdKernelsOfEveryTarget()
+{
+    simdKernels();
+    std::vector<SgmKernels> every;
+    const std::vector<int64_t> targets = hwy::SupportedAndGeneratedTargets();
+    // Highway lists the best target first.
+    for (auto target = targets.rbegin(); target != targets.rend(); ++target) {
+        if (*target == HWY_SCALAR)
+            continue; // scalarKernels() is the reference
+        hwy::SetSupportedTargetsForTest(*target);
+        hwy::GetChosenTarget().Update(hwy::SupportedTargets());
+        every.push_back(chosenKernels());
+    }
+    hwy::SetSupportedTargetsForTest(0);
+    hwy::GetChosenTarget().Update(hwy::SupportedTargets());
+    return every;
 }
 
 } // namespace stereod::sgm

@@ -1,5 +1,6 @@
-// The SIMD kernels against the scalar reference, kernel by kernel: the contract in
-// sgm_kernels.hpp says both compute exactly the same integers. Rows are deterministic
+// The SIMD kernels against the scalar reference, kernel by kernel and on every target
+// Highway compiled that this processor runs: the contract in sgm_kernels.hpp says both
+// compute exactly the same integers. Rows are deterministic
 // pseudo-random texture; widths include tiny ones and ones that are no multiple of a
 // vector, disparity counts 16..256, and the first disparity zero, positive and negative.
 // Buffers are sized exactly as the contract asks (and no larger), so that the
@@ -9,6 +10,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -18,6 +20,13 @@
 #include "tests/pipeline/sgm/synthetic_pair.hpp"
 
 namespace stereod::sgm {
+
+// gtest prints a test's parameter: the target's name, not the table's bytes.
+void PrintTo(const SgmKernels& kernels, std::ostream* os)
+{
+    *os << kernels.target;
+}
+
 namespace {
 
 using test::Random;
@@ -165,6 +174,16 @@ bool searched(const std::vector<LaneSpan>& spans, int x, int k)
     return k >= kLaneAlign * span.first && k < kLaneAlign * span.end;
 }
 
+// Every kernel on every target Highway compiled that this processor runs, not only the
+// one it picks (an AVX-512 machine tests AVX2 too).
+class SgmKernelsOnEveryTarget : public ::testing::TestWithParam<SgmKernels> {};
+
+INSTANTIATE_TEST_SUITE_P(Targets, SgmKernelsOnEveryTarget,
+                         ::testing::ValuesIn(simdKernelsOfEveryTarget()),
+                         [](const ::testing::TestParamInfo<SgmKernels>& param_info) {
+                             return std::string(param_info.param.target);
+                         });
+
 TEST(SgmKernelsTest, SimdTargetIsNamed)
 {
     const char* target = simdKernels().target;
@@ -175,7 +194,7 @@ TEST(SgmKernelsTest, SimdTargetIsNamed)
     std::printf("simd target: %s\n", target);
 }
 
-TEST(SgmKernelsTest, CensusRowMatchesScalar)
+TEST_P(SgmKernelsOnEveryTarget, CensusRowMatchesScalar)
 {
     Random random(1);
     const int windows[][2] = {{7, 5}, {9, 7}, {3, 1}, {5, 5}, {3, 3}, {1, 3}};
@@ -207,8 +226,8 @@ TEST(SgmKernelsTest, CensusRowMatchesScalar)
                 }
                 scalarKernels().census_row(center, stride, width, census_width, census_height,
                                            expected_ptr.data());
-                simdKernels().census_row(center, stride, width, census_width, census_height,
-                                         actual_ptr.data());
+                GetParam().census_row(center, stride, width, census_width, census_height,
+                                      actual_ptr.data());
                 for (int p = 0; p < planes; ++p)
                     ASSERT_EQ(actual[static_cast<size_t>(p)], expected[static_cast<size_t>(p)])
                         << "plane " << p << ", row " << y;
@@ -218,7 +237,7 @@ TEST(SgmKernelsTest, CensusRowMatchesScalar)
 
 // Without spans every lane; with spans the lanes of each pixel's span, the others left as
 // they were.
-TEST(SgmKernelsTest, CostRowMatchesScalar)
+TEST_P(SgmKernelsOnEveryTarget, CostRowMatchesScalar)
 {
     Random random(2);
     for (const CostModel& model : kCostModels)
@@ -240,8 +259,8 @@ TEST(SgmKernelsTest, CostRowMatchesScalar)
                         scalarKernels().cost_row(census.rows, width, min_disparity, num_disparities,
                                                  lanes, invalid, expected.data(),
                                                  spansOrNull(spans));
-                        simdKernels().cost_row(census.rows, width, min_disparity, num_disparities,
-                                               lanes, invalid, actual.data(), spansOrNull(spans));
+                        GetParam().cost_row(census.rows, width, min_disparity, num_disparities,
+                                            lanes, invalid, actual.data(), spansOrNull(spans));
                         ASSERT_EQ(actual, expected);
                     }
 }
@@ -288,7 +307,7 @@ void expectBlocksMatch(const std::vector<uint8_t>& actual, const std::vector<uin
 
 // The paths from above (none, the vertical one, or all three) and the left->right path,
 // over a few rows: each implementation keeps its own previous row, as the matcher does.
-TEST(SgmKernelsTest, PathsForwardMatchesScalar)
+TEST_P(SgmKernelsOnEveryTarget, PathsForwardMatchesScalar)
 {
     Random random(3);
     constexpr int kRows = 4; // the paths' first row (no previous row), then three more
@@ -344,7 +363,7 @@ TEST(SgmKernelsTest, PathsForwardMatchesScalar)
                                                spansOrNull(prev_spans)},
                                     p2_along.data(), along ? expected_along.data() : nullptr,
                                     spansOrNull(spans));
-                                simdKernels().paths_forward(
+                                GetParam().paths_forward(
                                     cost.data(), model.p1, width, lanes,
                                     AbovePaths{above, kDx, p2_ptr, actual_prev, actual_cur,
                                                spansOrNull(prev_spans)},
@@ -365,7 +384,7 @@ TEST(SgmKernelsTest, PathsForwardMatchesScalar)
                         }
 }
 
-TEST(SgmKernelsTest, WinnersBackwardMatchesScalar)
+TEST_P(SgmKernelsOnEveryTarget, WinnersBackwardMatchesScalar)
 {
     Random random(6);
     for (const CostModel& model : kCostModels)
@@ -425,7 +444,7 @@ TEST(SgmKernelsTest, WinnersBackwardMatchesScalar)
                                 fillRandom(sum_scratch, random, 0, 65535);
                                 fillRandom(scratch, random, 0, 65535);
                                 std::fill(path_scratch.begin(), path_scratch.end(), uint8_t{255});
-                                simdKernels().winners_backward(
+                                GetParam().winners_backward(
                                     cost.data(), p2.data(), model.p1, width, lanes, path_rows,
                                     min_disparity, num_disparities, path_scratch.data(),
                                     sum_scratch.data(), actual.rows, actual_right.data(),
@@ -478,7 +497,7 @@ struct DecideCase {
     }
 };
 
-TEST(SgmKernelsTest, DecideRowMatchesScalar)
+TEST_P(SgmKernelsOnEveryTarget, DecideRowMatchesScalar)
 {
     Random random(8);
     int reported = 0, at_range_limit = 0, sub_pixel = 0, refused = 0;
@@ -509,9 +528,9 @@ TEST(SgmKernelsTest, DecideRowMatchesScalar)
                                                    settings, expected_disparity.data(),
                                                    expected_confidence.data(),
                                                    expected_range.data());
-                        simdKernels().decide_row(c.winners.rows, c.right_lane.data(), width,
-                                                 settings, actual_disparity.data(),
-                                                 actual_confidence.data(), actual_range.data());
+                        GetParam().decide_row(c.winners.rows, c.right_lane.data(), width, settings,
+                                              actual_disparity.data(), actual_confidence.data(),
+                                              actual_range.data());
                         ASSERT_EQ(actual_disparity, expected_disparity);
                         ASSERT_EQ(actual_confidence, expected_confidence);
                         ASSERT_EQ(actual_range, expected_range);
@@ -532,7 +551,7 @@ TEST(SgmKernelsTest, DecideRowMatchesScalar)
 
 // A tile's cost curve over a run of disparities: the same sums from both kernels, added to
 // what the curve already held, for runs of every length around a vector's.
-TEST(SgmKernelsTest, CostCurveMatchesScalar)
+TEST_P(SgmKernelsOnEveryTarget, CostCurveMatchesScalar)
 {
     Random random(23);
     for (const CostModel& model : kCostModels)
@@ -554,7 +573,7 @@ TEST(SgmKernelsTest, CostCurveMatchesScalar)
                     std::copy(expected.begin(), expected.end(), actual.begin());
                     scalarKernels().cost_curve(census.rows, x, width, first, count,
                                                expected.data());
-                    simdKernels().cost_curve(census.rows, x, width, first, count, actual.data());
+                    GetParam().cost_curve(census.rows, x, width, first, count, actual.data());
                     for (int k = 0; k < count; ++k)
                         ASSERT_EQ(actual[static_cast<size_t>(k)], expected[static_cast<size_t>(k)])
                             << "x " << x << ", first " << first << ", k " << k;
@@ -562,7 +581,7 @@ TEST(SgmKernelsTest, CostCurveMatchesScalar)
             }
 }
 
-TEST(SgmKernelsTest, MedianRowMatchesScalar)
+TEST_P(SgmKernelsOnEveryTarget, MedianRowMatchesScalar)
 {
     Random random(7);
     constexpr int16_t kNone = -32768;
@@ -581,7 +600,7 @@ TEST(SgmKernelsTest, MedianRowMatchesScalar)
             const int16_t* row = up + width;
             const int16_t* down = row + width;
             scalarKernels().median_row(up, row, down, width, kNone, expected.data());
-            simdKernels().median_row(up, row, down, width, kNone, actual.data());
+            GetParam().median_row(up, row, down, width, kNone, actual.data());
             ASSERT_EQ(actual, expected);
         }
 }
