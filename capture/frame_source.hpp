@@ -9,6 +9,7 @@
 
 #include <opencv2/core/types.hpp>
 
+#include "base/name_table.hpp"
 #include "capture/frame.hpp"
 #include "capture/spsc_ring.hpp"
 
@@ -25,6 +26,18 @@ enum class SourceState {
     Finished, // a replay that reached its end without looping
 };
 
+// The states as status writes them.
+inline constexpr NameTable<SourceState, 6> kSourceStates{{{
+    {SourceState::Stopped, "stopped"},
+    {SourceState::Starting, "starting"},
+    {SourceState::Running, "running"},
+    {SourceState::Stalled, "stalled"},
+    {SourceState::Failed, "failed"},
+    {SourceState::Finished, "finished"},
+}}};
+static_assert(kSourceStates.wellFormed());
+
+// "stopped", "starting", ...
 const char* toString(SourceState state) noexcept;
 
 // What one camera (or one side of a recording) is doing, for `status`.

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -159,9 +160,10 @@ int checkRunningService(const CheckCalibrationOptions& options)
                         static_cast<unsigned long long>(health.value("state_changes", 0ULL)));
         std::printf("\n");
     }
-    if (state == "ok")
+    const std::optional<HealthState> parsed = kHealthStates.parse(state);
+    if (parsed == HealthState::Ok)
         return kExitOk;
-    if (state == "degraded" || state == "failed")
+    if (parsed == HealthState::Degraded || parsed == HealthState::Failed)
         return kExitNoReading;
     return kExitUsage;
 }

@@ -87,8 +87,10 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
         throw StartupError(ExitCode::InvalidConfig,
                            std::string("processing settings refused: ") + e.what());
     } catch (const std::exception& e) {
-        throw StartupError(ExitCode::Calibration, "cannot set up the stereo chain with " +
-                                                      calibration_origin + ": " + e.what());
+        // Not the calibration's fault as far as anything can tell (memory, a library's
+        // failure): the calibration's exit code would send the user to the wrong file.
+        throw StartupError(ExitCode::Failure, "cannot set up the stereo chain with " +
+                                                  calibration_origin + ": " + e.what());
     }
     if (processor_) {
         initial_range_ = processor_->disparityRange();

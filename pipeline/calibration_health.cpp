@@ -403,17 +403,7 @@ HealthMeasurement figures(const std::vector<RowMatch>& candidates,
 
 const char* healthStateName(HealthState state) noexcept
 {
-    switch (state) {
-    case HealthState::Unknown:
-        return "unknown";
-    case HealthState::Ok:
-        return "ok";
-    case HealthState::Degraded:
-        return "degraded";
-    case HealthState::Failed:
-        return "failed";
-    }
-    return "unknown";
+    return kHealthStates.name(state, "unknown");
 }
 
 double RowOffsetModel::rowOffsetAt(cv::Point2d right) const

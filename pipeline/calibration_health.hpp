@@ -56,6 +56,7 @@
 #include <opencv2/core/mat.hpp>
 #include <opencv2/core/types.hpp>
 
+#include "base/name_table.hpp"
 #include "pipeline/calibration.hpp"
 
 namespace stereod {
@@ -80,6 +81,16 @@ struct HealthSettings {
 };
 
 enum class HealthState { Unknown, Ok, Degraded, Failed };
+
+// The states as status and `check-calibration` write them, one table for naming and
+// parsing them.
+inline constexpr NameTable<HealthState, 4> kHealthStates{{{
+    {HealthState::Unknown, "unknown"},
+    {HealthState::Ok, "ok"},
+    {HealthState::Degraded, "degraded"},
+    {HealthState::Failed, "failed"},
+}}};
+static_assert(kHealthStates.wellFormed());
 
 // "unknown", "ok", "degraded", "failed".
 const char* healthStateName(HealthState state) noexcept;

@@ -11,29 +11,7 @@ const char* serviceVersion() noexcept
 
 const char* errorCodeName(ErrorCode code) noexcept
 {
-    switch (code) {
-    case ErrorCode::BadJson:
-        return "bad_json";
-    case ErrorCode::BadRequest:
-        return "bad_request";
-    case ErrorCode::UnknownCommand:
-        return "unknown_command";
-    case ErrorCode::RequestTooLarge:
-        return "request_too_large";
-    case ErrorCode::TooManyClients:
-        return "too_many_clients";
-    case ErrorCode::NotAvailable:
-        return "not_available";
-    case ErrorCode::InvalidConfig:
-        return "invalid_config";
-    case ErrorCode::Internal:
-        return "internal";
-    case ErrorCode::NotAllowed:
-        return "not_allowed";
-    case ErrorCode::IdleTimeout:
-        return "idle_timeout";
-    }
-    return "internal";
+    return kErrorCodes.name(code, "internal");
 }
 
 Json okReply(const std::optional<Json>& id)

@@ -11,6 +11,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "base/name_table.hpp"
+
 namespace stereod {
 
 // Replies keep their fields in the order written ("ok" first), which people reading a
@@ -35,6 +37,21 @@ enum class ErrorCode {
     NotAllowed,      // the peer is not in socket.allow_uids / socket.allow_gids
     IdleTimeout,     // nothing received for socket.idle_timeout_s
 };
+
+// The codes as the protocol writes them, one table for naming and parsing them.
+inline constexpr NameTable<ErrorCode, 10> kErrorCodes{{{
+    {ErrorCode::BadJson, "bad_json"},
+    {ErrorCode::BadRequest, "bad_request"},
+    {ErrorCode::UnknownCommand, "unknown_command"},
+    {ErrorCode::RequestTooLarge, "request_too_large"},
+    {ErrorCode::TooManyClients, "too_many_clients"},
+    {ErrorCode::NotAvailable, "not_available"},
+    {ErrorCode::InvalidConfig, "invalid_config"},
+    {ErrorCode::Internal, "internal"},
+    {ErrorCode::NotAllowed, "not_allowed"},
+    {ErrorCode::IdleTimeout, "idle_timeout"},
+}}};
+static_assert(kErrorCodes.wellFormed());
 
 // "bad_json", "bad_request", ...
 const char* errorCodeName(ErrorCode code) noexcept;
