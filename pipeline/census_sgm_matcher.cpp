@@ -30,12 +30,18 @@ class CensusSgmMatcher final : public Matcher {
         out.disparity_px.create(left.size(), CV_32FC1);
         out.confidence.create(left.size(), CV_8UC1);
         out.near_field.create(left.size(), CV_8UC1);
+        if (settings_.extended_range)
+            out.coarse_only_px.create(left.size(), CV_32FC1);
+        else
+            out.coarse_only_px.release();
         CV_Assert(out.disparity_px.isContinuous() && out.confidence.isContinuous() &&
-                  out.near_field.isContinuous());
+                  out.near_field.isContinuous() &&
+                  (out.coarse_only_px.empty() || out.coarse_only_px.isContinuous()));
         core_->compute(left.data, left.step, right.data, right.step,
                        {watched.x, watched.y, watched.width, watched.height},
                        {out.disparity_px.ptr<float>(), out.confidence.ptr<uint8_t>(),
-                        out.near_field.ptr<uint8_t>()});
+                        out.near_field.ptr<uint8_t>(),
+                        out.coarse_only_px.empty() ? nullptr : out.coarse_only_px.ptr<float>()});
     }
 
     void configure(const MatcherSettings& settings, const DisparityRange& range) override

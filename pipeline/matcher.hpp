@@ -30,6 +30,10 @@ struct MatchOutput {
     // pipeline/sgm/near_field_probe.hpp). Only census-sgm looks for it; OpenCV's matchers
     // leave it 0 (pipeline/reading_verdict.hpp: their readings say the guard is off).
     cv::Mat near_field;
+    // CV_32FC1 where disparity_px has none: another estimate, of less precision, that a
+    // reading may count when it brings it nearer (census-sgm: its coarse level's match on
+    // texture); +inf elsewhere. Empty: the matcher has none (OpenCV's).
+    cv::Mat coarse_only_px;
 };
 
 class Matcher {

@@ -71,7 +71,7 @@ size_t percentileIndex(double percentile, size_t count)
 NearestObjectFinder::NearestObjectFinder(size_t max_region_pixels)
 {
     in_range_.reserve(max_region_pixels);
-    hidden_.reserve(max_region_pixels);
+    inferred_.reserve(max_region_pixels);
 }
 
 namespace {
@@ -105,7 +105,7 @@ ReadingFacts regionFacts(const RegionMeasurement& region, const NearestSettings&
 
 RegionMeasurement NearestObjectFinder::measure(const cv::Mat& depth_m, const cv::Mat& confidence,
                                                const cv::Mat& near_field,
-                                               const cv::Mat& hidden_depth_m,
+                                               const cv::Mat& inferred_depth_m,
                                                const NearestSettings& settings)
 {
     CV_Assert(depth_m.type() == CV_32FC1);
@@ -113,8 +113,8 @@ RegionMeasurement NearestObjectFinder::measure(const cv::Mat& depth_m, const cv:
               (confidence.type() == CV_8UC1 && confidence.size() == depth_m.size()));
     CV_Assert(near_field.empty() ||
               (near_field.type() == CV_8UC1 && near_field.size() == depth_m.size()));
-    CV_Assert(hidden_depth_m.empty() ||
-              (hidden_depth_m.type() == CV_32FC1 && hidden_depth_m.size() == depth_m.size()));
+    CV_Assert(inferred_depth_m.empty() ||
+              (inferred_depth_m.type() == CV_32FC1 && inferred_depth_m.size() == depth_m.size()));
     RegionMeasurement m;
     const cv::Rect region = regionPixels(settings.roi, depth_m.size());
     const size_t region_pixels = static_cast<size_t>(region.area());
@@ -124,21 +124,22 @@ RegionMeasurement NearestObjectFinder::measure(const cv::Mat& depth_m, const cv:
     // Grows once when the region is larger than reserved; after that clear() keeps it.
     if (in_range_.capacity() < region_pixels)
         in_range_.reserve(region_pixels);
-    if (hidden_.capacity() < region_pixels)
-        hidden_.reserve(region_pixels);
+    if (inferred_.capacity() < region_pixels)
+        inferred_.reserve(region_pixels);
     in_range_.clear();
-    hidden_.clear();
+    inferred_.clear();
 
     const float lo = static_cast<float>(settings.min_depth_m);
     const float hi = static_cast<float>(settings.max_depth_m);
     const uint8_t min_confidence =
         static_cast<uint8_t>(std::clamp(settings.min_confidence, 0, 255));
-    uint32_t valid = 0, in_range = 0, hidden = 0, nearer = 0, nearer_extended = 0;
+    uint32_t valid = 0, in_range = 0, inferred = 0, nearer = 0, nearer_extended = 0;
     for (int y = region.y; y < region.y + region.height; ++y) {
         const float* z = depth_m.ptr<float>(y);
         const uint8_t* conf = confidence.empty() ? nullptr : confidence.ptr<uint8_t>(y);
         const uint8_t* near = near_field.empty() ? nullptr : near_field.ptr<uint8_t>(y);
-        const float* hidden_z = hidden_depth_m.empty() ? nullptr : hidden_depth_m.ptr<float>(y);
+        const float* inferred_z =
+            inferred_depth_m.empty() ? nullptr : inferred_depth_m.ptr<float>(y);
         for (int x = region.x; x < region.x + region.width; ++x) {
             if (near != nullptr && near[x] != 0) {
                 ++nearer;
@@ -146,11 +147,11 @@ RegionMeasurement NearestObjectFinder::measure(const cv::Mat& depth_m, const cv:
             }
             const float depth = z[x];
             if (!(depth > 0.0f) || !std::isfinite(depth)) {
-                // Unmeasured, hidden from the right camera: the nearest it can be.
-                if (hidden_z != nullptr && hidden_z[x] > 0.0f && std::isfinite(hidden_z[x])) {
-                    ++hidden;
-                    if (hidden_z[x] >= lo && hidden_z[x] <= hi)
-                        hidden_.push_back(hidden_z[x]);
+                // Unmeasured, but other evidence says how near it may be.
+                if (inferred_z != nullptr && inferred_z[x] > 0.0f && std::isfinite(inferred_z[x])) {
+                    ++inferred;
+                    if (inferred_z[x] >= lo && inferred_z[x] <= hi)
+                        inferred_.push_back(inferred_z[x]);
                 }
                 continue;
             }
@@ -165,29 +166,29 @@ RegionMeasurement NearestObjectFinder::measure(const cv::Mat& depth_m, const cv:
     }
     m.valid_pixels = valid;
     m.in_range_pixels = in_range;
-    m.hidden_pixels = hidden;
+    m.inferred_pixels = inferred;
     m.nearer_than_range_pixels = nearer;
     m.nearer_than_extended_pixels = nearer_extended;
     if (!in_range_.empty())
         m.percentile_depth_m = percentileOf(in_range_, settings.percentile);
-    // The hidden pixels' bounds can only bring the reading nearer: a bound beyond the
-    // measured percentile must not carry it farther by adding to the count.
-    if (!hidden_.empty()) {
-        in_range_.insert(in_range_.end(), hidden_.begin(), hidden_.end());
-        const double with_hidden = percentileOf(in_range_, settings.percentile);
-        if (m.percentile_depth_m == 0.0 || with_hidden < m.percentile_depth_m)
-            m.percentile_depth_m = with_hidden;
+    // The inferred depths can only bring the reading nearer: one beyond the measured
+    // percentile must not carry it farther by adding to the count.
+    if (!inferred_.empty()) {
+        in_range_.insert(in_range_.end(), inferred_.begin(), inferred_.end());
+        const double with_inferred = percentileOf(in_range_, settings.percentile);
+        if (m.percentile_depth_m == 0.0 || with_inferred < m.percentile_depth_m)
+            m.percentile_depth_m = with_inferred;
     }
     return m;
 }
 
 Reading NearestObjectFinder::find(const cv::Mat& depth_m, const cv::Mat& confidence,
-                                  const cv::Mat& near_field, const cv::Mat& hidden_depth_m,
+                                  const cv::Mat& near_field, const cv::Mat& inferred_depth_m,
                                   const NearestSettings& settings, const NearFieldFacts& near,
                                   int64_t stamp_ns, uint64_t frame)
 {
     return judgeReading(
-        regionFacts(measure(depth_m, confidence, near_field, hidden_depth_m, settings), settings,
+        regionFacts(measure(depth_m, confidence, near_field, inferred_depth_m, settings), settings,
                     near, stamp_ns, frame));
 }
 

@@ -42,27 +42,28 @@ class NearestObjectFinder {
     explicit NearestObjectFinder(size_t max_region_pixels = 0);
 
     // What the region of a depth map holds: its valid and in-range pixels, the configured
-    // percentile of the in-range depths (with the bounds of hidden surfaces), and the
+    // percentile of the in-range depths (with the inferred ones when nearer), and the
     // near-field evidence.
     // depth_m: CV_32FC1, metres, invalid = 0 (NaN and +inf count as invalid too);
     // confidence (CV_8UC1, or empty: all trusted) drops pixels below min_confidence;
     // near_field (CV_8UC1, or empty: none) holds the matcher's near-field evidence
     // (MatchOutput::near_field: 1 nearer than the range, 2 nearer than the extended range);
-    // hidden_depth_m (CV_32FC1, or empty: none), where depth_m has none, the nearest a
-    // surface hidden from the right camera can be (pipeline/hidden_surfaces.hpp), 0
-    // elsewhere: not valid pixels, but the percentile is the nearer of the in-range
-    // depths' and of those depths with these bounds.
+    // inferred_depth_m (CV_32FC1, or empty: none), where depth_m has none, the nearest the
+    // pixel may be by other evidence, 0 elsewhere: the ray past a near edge for a surface
+    // hidden from the right camera (pipeline/hidden_surfaces.hpp), or the matcher's coarser
+    // estimate (MatchOutput::coarse_only_px). Not valid pixels; the percentile is the
+    // nearer of the in-range depths' and of those depths with the inferred ones.
     RegionMeasurement measure(const cv::Mat& depth_m, const cv::Mat& confidence,
-                              const cv::Mat& near_field, const cv::Mat& hidden_depth_m,
+                              const cv::Mat& near_field, const cv::Mat& inferred_depth_m,
                               const NearestSettings& settings);
 
     // The reading of a processed pair from its region alone (judgeReading() with the
     // region's facts; the worker adds the rest): stamp_ns, frame, the fractions, and either
     // distance_m or the reason there is none.
     Reading find(const cv::Mat& depth_m, const cv::Mat& confidence, const cv::Mat& near_field,
-                 const cv::Mat& hidden_depth_m, const NearestSettings& settings,
+                 const cv::Mat& inferred_depth_m, const NearestSettings& settings,
                  const NearFieldFacts& near, int64_t stamp_ns, uint64_t frame);
-    // The same from the depths alone: no confidence, near-field evidence or hidden surfaces.
+    // The same from the depths alone: no confidence, near-field evidence or inferred depths.
     Reading find(const cv::Mat& depth_m, const NearestSettings& settings, int64_t stamp_ns,
                  uint64_t frame)
     {
@@ -71,10 +72,10 @@ class NearestObjectFinder {
     }
 
   private:
-    // The region's in-range depths (then with the hidden bounds), and the hidden pixels'
-    // bounds within the range; reused.
+    // The region's in-range depths (then with the inferred ones), and the inferred depths
+    // within the range; reused.
     std::vector<float> in_range_;
-    std::vector<float> hidden_;
+    std::vector<float> inferred_;
 };
 
 } // namespace stereod

@@ -62,10 +62,11 @@ struct Reading {
     // Of the region's pixels, those that are near-field evidence: something there may be
     // nearer than the disparity range sees (pipeline/reading_verdict.hpp).
     double range_limit_fraction = 0.0;
-    // Of the region's pixels, those hidden from the right camera behind a nearer surface:
-    // unmeasured, counted in the distance at the nearest they can be
-    // (pipeline/hidden_surfaces.hpp).
-    double hidden_fraction = 0.0;
+    // Of the region's pixels, those without a measured depth whose nearest possible depth
+    // other evidence gives (hidden from the right camera behind a nearer surface, or
+    // matched at the coarse level only), counted in the distance when that brings it
+    // nearer (pipeline/nearest_object.hpp).
+    double inferred_fraction = 0.0;
     // NearerThanRange: the closest depth the disparity range can see, in metres; the
     // obstacle is nearer than this.
     double nearer_than_m = 0.0;

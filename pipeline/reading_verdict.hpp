@@ -18,10 +18,9 @@ struct RegionMeasurement {
     uint32_t region_pixels = 0;
     uint32_t valid_pixels = 0;    // with a depth (and confidence enough)
     uint32_t in_range_pixels = 0; // of those, within [min_depth_m, max_depth_m]
-    // Unmeasured pixels hidden from the right camera behind a nearer surface
-    // (pipeline/hidden_surfaces.hpp).
-    uint32_t hidden_pixels = 0;
-    // The configured percentile of the in-range depths, or of those with the hidden
+    // Unmeasured pixels with an inferred nearest depth (NearestObjectFinder::measure()).
+    uint32_t inferred_pixels = 0;
+    // The configured percentile of the in-range depths, or of those with the inferred
     // pixels' bounds when that is nearer, metres; 0 when none is in range.
     double percentile_depth_m = 0.0;
     // Near-field evidence (the matcher's near_field plane): pixels that may show a surface

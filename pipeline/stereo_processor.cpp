@@ -17,6 +17,19 @@
 namespace stereod {
 namespace {
 
+// In rows [begin, end): `into` takes the larger (nearer) of its disparity and `from`'s
+// where `from` has one (+inf: none).
+void nearerOf(const cv::Mat& from, int begin, int end, cv::Mat& into)
+{
+    for (int y = begin; y < end; ++y) {
+        const float* f = from.ptr<float>(y);
+        float* t = into.ptr<float>(y);
+        for (int x = 0; x < from.cols; ++x)
+            if (std::isfinite(f[x]) && !(std::isfinite(t[x]) && t[x] >= f[x]))
+                t[x] = f[x];
+    }
+}
+
 using Clock = std::chrono::steady_clock;
 
 constexpr int kDisparityStep = 16; // OpenCV's matchers search multiples of 16
@@ -217,8 +230,9 @@ struct StereoProcessor::Impl {
     cv::Mat left_bgr;              // a BGRA left without its alpha, reused
     cv::Mat right_rectified;       // full calibration only, reused
     cv::Mat last_right;            // what the matcher saw last (see lastRightRectified())
-    cv::Mat hidden_bound_px;       // hidden surfaces' nearest disparities, reused
-    cv::Mat hidden_depth_m;        // ... and depths, in the region's rows
+    cv::Mat coarse_only_px;        // MatchOutput::coarse_only_px, reused
+    cv::Mat inferred_px;           // unmeasured pixels' nearest disparities, reused
+    cv::Mat inferred_depth_m;      // ... as depths, in the region's rows
     bool last_frame_bad = false;   // log a run of bad frames once
 };
 
@@ -287,28 +301,32 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& left_colour, c
     const Clock::time_point t1 = Clock::now();
 
     // The matcher writes into the result's buffers (headers shared, nothing copied).
-    MatchOutput match{out.disparity, out.confidence, out.near_field};
+    MatchOutput match{out.disparity, out.confidence, out.near_field, p.coarse_only_px};
     p.last_right = right_rectified;
     p.matcher->compute(out.left_rectified, right_rectified,
                        regionPixels(p.settings.nearest.roi, out.left_rectified.size()), match);
     out.disparity = match.disparity_px;
     out.confidence = match.confidence;
     out.near_field = match.near_field;
+    p.coarse_only_px = match.coarse_only_px;
     const Clock::time_point t2 = Clock::now();
 
     disparityToDepth(out.disparity, p.calibration.rectified, out.depth_m);
     const Clock::time_point t3 = Clock::now();
 
-    // What the right camera cannot see in the region's rows, at the nearest it can be.
+    // The region's unmeasured pixels, at the nearest other evidence says they may be: the
+    // right camera cannot see them, or the coarse level alone matched them.
     const cv::Rect region = regionPixels(p.settings.nearest.roi, out.disparity.size());
-    hiddenSurfaceBounds(out.disparity, region.y, region.y + region.height, p.hidden_bound_px);
-    if (p.hidden_depth_m.size() != out.disparity.size())
-        p.hidden_depth_m = cv::Mat::zeros(out.disparity.size(), CV_32FC1);
+    hiddenSurfaceBounds(out.disparity, region.y, region.y + region.height, p.inferred_px);
+    if (!p.coarse_only_px.empty())
+        nearerOf(p.coarse_only_px, region.y, region.y + region.height, p.inferred_px);
+    if (p.inferred_depth_m.size() != out.disparity.size())
+        p.inferred_depth_m = cv::Mat::zeros(out.disparity.size(), CV_32FC1);
     const cv::Range rows(region.y, region.y + region.height);
-    cv::Mat hidden_rows = p.hidden_depth_m.rowRange(rows);
-    disparityToDepth(p.hidden_bound_px.rowRange(rows), p.calibration.rectified, hidden_rows);
+    cv::Mat inferred_rows = p.inferred_depth_m.rowRange(rows);
+    disparityToDepth(p.inferred_px.rowRange(rows), p.calibration.rectified, inferred_rows);
     out.facts = regionFacts(p.nearest.measure(out.depth_m, out.confidence, out.near_field,
-                                              p.hidden_depth_m, p.settings.nearest),
+                                              p.inferred_depth_m, p.settings.nearest),
                             p.settings.nearest, p.nearFieldFacts(), stamp_ns, frame);
     out.reading = judgeReading(out.facts);
     const Clock::time_point t4 = Clock::now();

@@ -185,6 +185,33 @@ struct PyramidSgm::Impl {
                 out.confidence[i] = static_cast<uint8_t>(std::max(2, coarse_confidence[c] / 2));
             }
         }
+        if (out.coarse_only_px != nullptr)
+            writeCoarseOnly(out);
+    }
+
+    // PyramidSgmOutput::coarse_only_px, after the merge.
+    void writeCoarseOnly(const PyramidSgmOutput& out) const
+    {
+        const int w = settings.full.width, h = settings.full.height;
+        const CensusSgmSettings& c = coarse->settings();
+        constexpr float kNone = std::numeric_limits<float>::infinity();
+        for (int y = 0; y < h; ++y) {
+            const int cy = std::min(y / 2, c.height - 1);
+            for (int x = 0; x < w; ++x) {
+                const size_t i =
+                    static_cast<size_t>(y) * static_cast<size_t>(w) + static_cast<size_t>(x);
+                out.coarse_only_px[i] = kNone;
+                if (std::isfinite(out.disparity_px[i]))
+                    continue;
+                const int cx = std::min(x / 2, c.width - 1);
+                const size_t ci = static_cast<size_t>(cy) * static_cast<size_t>(c.width) +
+                                  static_cast<size_t>(cx);
+                if (std::isfinite(coarse_disparity[ci]) && coarse_limit[ci] == 0 &&
+                    isTextured(half_left.data(), static_cast<size_t>(c.width), c.width, c.height,
+                               cx, cy, c.textured_min_range))
+                    out.coarse_only_px[i] = 2.0f * coarse_disparity[ci];
+            }
+        }
     }
 
     // coarse_near: the coarse pixels that measured a surface at or beyond the near end of

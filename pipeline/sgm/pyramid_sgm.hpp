@@ -22,7 +22,9 @@
 //    board, whose edges were measured), and takes the nearest disparity measured
 //    around it with the confidence kExplainedConfidence.
 // Inside the full range the full level decides: the coarse level's edges are a pixel
-// wider, and natural scenes keep the accuracy of the full-resolution match.
+// wider, and natural scenes keep the accuracy of the full-resolution match. Where the
+// full level found nothing, the coarse level's textured match is given apart
+// (PyramidSgmOutput::coarse_only_px): not a depth, but what the reading may count.
 //
 // With the guided search the coarse level runs first, and the full level searches only
 // around what it measured (guided_spans.hpp): the whole range where the prediction is
@@ -94,6 +96,10 @@ struct PyramidSgmOutput {
     float* disparity_px; // pixels; +inf where nothing trustworthy was found
     uint8_t* confidence; // 0 where invalid, else 1..255 (see docs/protocol.md)
     uint8_t* near_field; // kNoNearEvidence, kNearerThanRange or kNearerThanExtendedRange
+    // Where disparity_px has none: the coarse level's match on texture (full-resolution
+    // pixels), +inf elsewhere. Not part of the depth map (a coarse pixel's edges are a
+    // pixel wider); what the reading may count when it brings it nearer. Null: not written.
+    float* coarse_only_px = nullptr;
 };
 
 class PyramidSgm {

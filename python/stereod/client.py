@@ -166,7 +166,7 @@ class Reading:
     in_range_fraction: Optional[float] = None
     region_pixels: Optional[int] = None
     range_limit_fraction: Optional[float] = None
-    hidden_fraction: Optional[float] = None
+    inferred_fraction: Optional[float] = None
     #: Why there is no reading (a code of docs/protocol.md), ``None`` when valid.
     reason: Optional[str] = None
     #: The reason in words, for logs and people; may change between versions.
@@ -221,7 +221,7 @@ class Reading:
                 in_range_fraction=_opt_float(obj.get("in_range_fraction")),
                 region_pixels=_opt_int(obj.get("region_pixels")),
                 range_limit_fraction=_opt_float(obj.get("range_limit_fraction")),
-                hidden_fraction=_opt_float(obj.get("hidden_fraction")),
+                inferred_fraction=_opt_float(obj.get("inferred_fraction")),
                 reason=code,
                 message=message,
                 nearer_than_m=_opt_float(obj.get("nearer_than_m")),

@@ -1,6 +1,8 @@
-// Surfaces hidden from the right camera: which unmeasured runs are shadows, the bound each
-// pixel of one gets, and what the bounds do to a reading (never farther); then the real
-// Baumer rig's scene where a chair hidden behind a block read as the wall behind it.
+// What the depth map leaves out, counted in the reading. Surfaces hidden from the right
+// camera: which unmeasured runs are shadows, the bound each pixel of one gets, and what
+// the bounds do to a reading (never farther); the real Baumer rig's scene where a chair
+// hidden behind a block read as the wall behind it; and its scenes whose near surface
+// only the coarse level matches, read alike whatever the range.
 
 #include <cmath>
 #include <limits>
@@ -94,7 +96,7 @@ TEST(HiddenSurfaces, BoundsBringAReadingNearerNeverFarther)
     ASSERT_TRUE(without.valid && with.valid);
     EXPECT_FLOAT_EQ(without.distance_m, 3.0);
     EXPECT_FLOAT_EQ(with.distance_m, 1.0);
-    EXPECT_DOUBLE_EQ(with.hidden_fraction, 0.06);
+    EXPECT_DOUBLE_EQ(with.inferred_fraction, 0.06);
     EXPECT_DOUBLE_EQ(with.valid_fraction, 0.94) << "a bound is not a measured pixel";
 
     // An obstacle at 0.5 m on 6 % of the measured pixels; bounds (far ones, 2.5 m, on 30 %)
@@ -110,6 +112,31 @@ TEST(HiddenSurfaces, BoundsBringAReadingNearerNeverFarther)
     EXPECT_FLOAT_EQ(obstacle.distance_m, 0.5);
 }
 
+StereoCalibration baumerCalibration()
+{
+    const std::string baumer = test::sharedDataDir() + "/real-rig/baumer/";
+    return importOpenCvStereoCalib(baumer + "Checkerboard_Baumer/intrinsics.yml",
+                                   baumer + "Checkerboard_Baumer/extrinsics.yml", {696, 524});
+}
+
+// One of the Baumer rig's scenes (its files named "right" come from the calibration's left
+// camera) through the default chain with `num_disparities`.
+DepthResult baumerScene(const StereoCalibration& calibration, const char* scene,
+                        int num_disparities)
+{
+    const std::string samples = test::sharedDataDir() + "/real-rig/baumer/samples_baumer/";
+    ProcessorSettings settings;
+    settings.matcher = matcherDefaults(MatcherKind::CensusSgm);
+    settings.matcher.num_disparities = num_disparities;
+    settings.compute_cloud = false;
+    StereoProcessor processor(calibration, settings);
+    DepthResult out;
+    processor.process(cv::imread(samples + "right" + scene + ".png", cv::IMREAD_GRAYSCALE),
+                      cv::imread(samples + "left" + scene + ".png", cv::IMREAD_GRAYSCALE), 1, 0,
+                      out);
+    return out;
+}
+
 // The Baumer rig's scene 7 (shared/data/README.md; its files named "right" come from the
 // calibration's left camera; its T is in the board's squares, read here as metres): a
 // styrofoam block in the region's lower right corner, 0.5 away, hides from the right camera
@@ -119,34 +146,45 @@ TEST(HiddenSurfaces, BoundsBringAReadingNearerNeverFarther)
 // counted at the nearest it can be.
 TEST(HiddenSurfaces, AChairHiddenBehindABlockIsNotReadAsTheWallBehindIt)
 {
-    const std::string baumer = test::sharedDataDir() + "/real-rig/baumer/";
-    const StereoCalibration calibration =
-        importOpenCvStereoCalib(baumer + "Checkerboard_Baumer/intrinsics.yml",
-                                baumer + "Checkerboard_Baumer/extrinsics.yml", {696, 524});
-    ProcessorSettings settings;
-    settings.matcher = matcherDefaults(MatcherKind::CensusSgm);
-    settings.matcher.num_disparities = 256;
-    settings.compute_cloud = false;
-    StereoProcessor processor(calibration, settings);
-    DepthResult out;
-    processor.process(cv::imread(baumer + "samples_baumer/right07.png", cv::IMREAD_GRAYSCALE),
-                      cv::imread(baumer + "samples_baumer/left07.png", cv::IMREAD_GRAYSCALE), 1, 0,
-                      out);
+    const DepthResult out = baumerScene(baumerCalibration(), "07", 256);
     // The measured pixels alone: the wall.
     NearestObjectFinder measured_only;
     const Reading wall = measured_only.find(out.depth_m, out.confidence, out.near_field, cv::Mat(),
-                                            settings.nearest, NearFieldFacts{}, 1, 0);
+                                            NearestSettings{}, NearFieldFacts{}, 1, 0);
     ASSERT_TRUE(wall.valid);
     EXPECT_GT(wall.distance_m, 3.0);
-    // With the hidden surfaces: nearer than the chair can be (behind the block's edge, no
+    // With what the depth map leaves out: nearer than the chair can be (behind the block's edge, no
     // nearer than about 1.1) and not nearer than the block.
     ASSERT_TRUE(out.reading.valid) << reasonCode(out.reading.reason);
     EXPECT_LT(out.reading.distance_m, 1.1);
     EXPECT_GT(out.reading.distance_m, 0.45);
-    EXPECT_GT(out.reading.hidden_fraction, 0.02);
-    std::printf("[hidden] Baumer scene 7, 256 disparities: %.3f m with %.1f %% of the region "
-                "hidden (the measured pixels alone: %.3f m)\n",
-                out.reading.distance_m, 100.0 * out.reading.hidden_fraction, wall.distance_m);
+    EXPECT_GT(out.reading.inferred_fraction, 0.02);
+    std::printf("[inferred] Baumer scene 7, 256 disparities: %.3f with %.1f %% of the region "
+                "inferred (the measured pixels alone: %.3f)\n",
+                out.reading.distance_m, 100.0 * out.reading.inferred_fraction, wall.distance_m);
+}
+
+// Scenes 5 and 6: a near surface at the region's foot (a desk in 6) that the full
+// resolution leaves mostly empty and the coarse level matches. With 128 disparities it
+// lies beyond the full range and the coarse level's match is in the depth map; with 256
+// it lies within it, and the coarse level's match counts only in the reading. Either way
+// the reading is the same: with the depth map's pixels alone, scene 6 read 0.81 at 128
+// and 1.04 at 256, scene 5 1.25 and 1.35.
+TEST(HiddenSurfaces, ANearSurfaceOnlyTheCoarseLevelMatchesReadsAlikeAtEveryRange)
+{
+    const StereoCalibration calibration = baumerCalibration();
+    for (const char* scene : {"05", "06"}) {
+        const DepthResult narrow = baumerScene(calibration, scene, 128);
+        const DepthResult wide = baumerScene(calibration, scene, 256);
+        ASSERT_TRUE(narrow.reading.valid && wide.reading.valid) << scene;
+        EXPECT_NEAR(wide.reading.distance_m, narrow.reading.distance_m,
+                    0.03 * narrow.reading.distance_m)
+            << "scene " << scene;
+        std::printf("[inferred] Baumer scene %s: %.3f with 128 disparities, %.3f with 256 "
+                    "(%.1f %% of the region inferred)\n",
+                    scene, narrow.reading.distance_m, wide.reading.distance_m,
+                    100.0 * wide.reading.inferred_fraction);
+    }
 }
 
 } // namespace

@@ -71,8 +71,8 @@ std::string describe(const Reading& r)
 {
     char text[96];
     if (r.valid)
-        std::snprintf(text, sizeof text, "%.3f m (%.1f %% hidden)", r.distance_m,
-                      100.0 * r.hidden_fraction);
+        std::snprintf(text, sizeof text, "%.3f m (%.1f %% inferred)", r.distance_m,
+                      100.0 * r.inferred_fraction);
     else if (r.reason == NoReadingReason::NearerThanRange)
         std::snprintf(text, sizeof text, "nearer than %.3f m", r.nearer_than_m);
     else

@@ -31,6 +31,7 @@ struct Output {
     std::vector<float> disparity_px;
     std::vector<uint8_t> confidence;
     std::vector<uint8_t> near_field;
+    std::vector<float> coarse_only_px;
 };
 
 PyramidSgmSettings settingsFor(bool extended, bool simd = true, bool guided = false)
@@ -51,10 +52,11 @@ Output match(const SyntheticPair& pair, const PyramidSgmSettings& settings,
     PyramidSgm matcher(settings);
     const size_t area = pair.left.size();
     Output out{std::vector<float>(area, -1.0f), std::vector<uint8_t>(area, 77),
-               std::vector<uint8_t>(area, 77)};
+               std::vector<uint8_t>(area, 77), std::vector<float>(area, -1.0f)};
     const auto stride = static_cast<size_t>(pair.width);
     matcher.compute(pair.left.data(), stride, pair.right.data(), stride, probe,
-                    {out.disparity_px.data(), out.confidence.data(), out.near_field.data()});
+                    {out.disparity_px.data(), out.confidence.data(), out.near_field.data(),
+                     settings.extended_range ? out.coarse_only_px.data() : nullptr});
     return out;
 }
 
@@ -103,6 +105,30 @@ TEST(PyramidSgmTest, TheExtendedRangeMeasuresASurfaceBeyondTheFullRange)
     EXPECT_LT(evidence, inside / 20);
 }
 
+// The coarse level's matches where the full level found none, for the reading: only
+// there, and within a coarse pixel of the truth on the rectangle (within the full range:
+// not in the depth map).
+TEST(PyramidSgmTest, TheCoarseLevelsMatchesWhereTheFullLevelHasNoneAreGivenApart)
+{
+    const SyntheticPair pair = sceneWith(40);
+    const Output out = match(pair, settingsFor(true));
+    int given = 0;
+    for (size_t i = 0; i < out.disparity_px.size(); ++i) {
+        const float coarse = out.coarse_only_px[i];
+        ASSERT_NE(coarse, -1.0f) << "pixel " << i << " not written";
+        if (std::isfinite(out.disparity_px[i])) {
+            EXPECT_FALSE(std::isfinite(coarse)) << "pixel " << i << " has both";
+        }
+        given += std::isfinite(coarse);
+    }
+    EXPECT_GT(given, 0);
+    forEachInside(pair, [&](size_t i) {
+        if (std::isfinite(out.coarse_only_px[i])) {
+            EXPECT_NEAR(out.coarse_only_px[i], 40.0f, 2.5f);
+        }
+    });
+}
+
 TEST(PyramidSgmTest, ASurfaceBeyondTheExtendedRangeIsNearEvidenceNeverANumber)
 {
     const SyntheticPair pair = sceneWith(150); // beyond 126
@@ -124,7 +150,8 @@ TEST(PyramidSgmTest, WithoutTheExtendedRangeTheFullLevelIsCensusSgm)
     const Output pyramid = match(pair, settings, PixelRect{});
     CensusSgm core(settings.full);
     const size_t area = pair.left.size();
-    Output alone{std::vector<float>(area), std::vector<uint8_t>(area), std::vector<uint8_t>(area)};
+    Output alone{
+        std::vector<float>(area), std::vector<uint8_t>(area), std::vector<uint8_t>(area), {}};
     core.compute(pair.left.data(), kWidth, pair.right.data(), kWidth,
                  {alone.disparity_px.data(), alone.confidence.data(), alone.near_field.data()});
     for (size_t i = 0; i < area; ++i) {
@@ -165,8 +192,8 @@ TEST(PyramidSgmTest, TheGuidedSearchFindsWhatTheFullSearchFinds)
         const SyntheticPair pair = sceneWith(disparity);
         PyramidSgm guided(settingsFor(true, true, true));
         const size_t area = pair.left.size();
-        Output out{std::vector<float>(area), std::vector<uint8_t>(area),
-                   std::vector<uint8_t>(area)};
+        Output out{
+            std::vector<float>(area), std::vector<uint8_t>(area), std::vector<uint8_t>(area), {}};
         guided.compute(pair.left.data(), kWidth, pair.right.data(), kWidth, kWholeImage,
                        {out.disparity_px.data(), out.confidence.data(), out.near_field.data()});
         EXPECT_LT(guided.searchedShare(), 0.75);
