@@ -525,6 +525,9 @@ struct CensusSgm::Impl {
         const int w = settings.width, h = settings.height;
         for (int y = y0; y < y1; ++y) {
             const size_t row = static_cast<size_t>(y) * static_cast<size_t>(w);
+            const uint8_t* mask = settings.textured_max_cost >= 0 ? nullptr : periodicRow(y);
+            if (mask != nullptr && std::find(mask, mask + w, uint8_t{1}) == mask + w)
+                continue; // no pattern in this row: nothing to check
             uint8_t state = 0;
             const auto edge = [&](int x) -> uint8_t {
                 const size_t i = row + static_cast<size_t>(x);
@@ -536,7 +539,6 @@ struct CensusSgm::Impl {
                 edge_state[static_cast<size_t>(x)] = state;
             }
             state = 0;
-            const uint8_t* mask = settings.textured_max_cost >= 0 ? nullptr : periodicRow(y);
             for (int x = w - 1; x >= 0; --x) {
                 int16_t& d = disparity[row + static_cast<size_t>(x)];
                 if (mask != nullptr && mask[x] == 0) {

@@ -72,8 +72,7 @@ void markPeriodicRows(const uint8_t* image, size_t stride, int width, int y0, in
     }
 }
 
-void spreadPeriodicRows(const uint8_t* raw, int width, int height, int y0, int y1,
-                        uint8_t* mask)
+void spreadPeriodicRows(const uint8_t* raw, int width, int height, int y0, int y1, uint8_t* mask)
 {
     const size_t w = static_cast<size_t>(width);
     for (int y = y0; y < y1; ++y) {
