@@ -88,10 +88,12 @@ struct MatcherChoice {
 const MatcherChoice kGuidedChoice{kOurMatcherGuided, MatcherKind::CensusSgm, SgbmMode::Sgbm,
                                   MatcherTuning::Natural, true};
 
-// census-sgm's planar tuning runs on the chessboard rig only: the man-made scene it is for.
+// census-sgm's planar tuning runs on the chessboard rig only: the man-made scene it is for;
+// the patterns tuning, made for scenes holding both, on every scene.
 const std::vector<MatcherChoice> kMatchers = {
     {kOurMatcher, MatcherKind::CensusSgm, SgbmMode::Sgbm},
     {kOurMatcherPlanar, MatcherKind::CensusSgm, SgbmMode::Sgbm, MatcherTuning::Planar},
+    {kOurMatcherPatterns, MatcherKind::CensusSgm, SgbmMode::Sgbm, MatcherTuning::Patterns},
     kGuidedChoice,
     {kSgbm5Path, MatcherKind::Sgbm, SgbmMode::Sgbm},
     {kSgbm3Way, MatcherKind::Sgbm, SgbmMode::ThreeWay},

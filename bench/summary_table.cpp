@@ -207,7 +207,7 @@ void SummaryTable::printAllocations(std::ostream& out) const
             const double alone_cpp = counter(alone, "allocs_per_frame");
             const double alone_mat = counter(alone, "mat_allocs_per_frame");
             if (r.matcher == kOurMatcher || r.matcher == kOurMatcherPlanar ||
-                r.matcher == kOurMatcherGuided) {
+                r.matcher == kOurMatcherPatterns || r.matcher == kOurMatcherGuided) {
                 for (const double v : {cpp, mat, alone_cpp, alone_mat}) {
                     if (!std::isnan(v)) {
                         ours_measured = true;

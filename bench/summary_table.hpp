@@ -28,7 +28,8 @@ namespace stereod::bench {
 // The matcher labels the ratios are about (StereoProcessor::matcherName()).
 inline constexpr const char* kOurMatcher = "census-sgm";
 inline constexpr const char* kOurMatcherPlanar = "census-sgm-planar";
-inline constexpr const char* kOurMatcherGuided = "census-sgm-guided"; // matcher.guided_search
+inline constexpr const char* kOurMatcherPatterns = "census-sgm-patterns"; // tuning: patterns
+inline constexpr const char* kOurMatcherGuided = "census-sgm-guided";     // matcher.guided_search
 inline constexpr const char* kSgbm3Way = "sgbm-3way";
 inline constexpr const char* kSgbm5Path = "sgbm";
 

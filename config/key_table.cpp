@@ -288,7 +288,8 @@ std::vector<KeyDef> buildKeyTable()
     add(choiceKey(
         "matcher.tuning", kLive, [](auto& c) -> auto& { return c.processing.matcher.tuning; },
         Names<MatcherTuning>{{"natural", MatcherTuning::Natural},
-                             {"planar", MatcherTuning::Planar}}));
+                             {"planar", MatcherTuning::Planar},
+                             {"patterns", MatcherTuning::Patterns}}));
     add(autoIntegerKey(
         "matcher.threads", kLive, [](auto& c) -> auto& { return c.processing.matcher.threads; },
         "auto (the cores available) or a number of threads"));

@@ -72,7 +72,7 @@ struct DepthOptions {
     std::string config_path; // a service configuration whose processing to use
     RectifiedOptions geometry;
     std::string matcher; // "" (the configured one) or a name of kMatcherAlgorithms
-    std::string tuning;  // "", "natural", "planar"
+    std::string tuning;  // "", "natural", "planar", "patterns"
     std::optional<int> max_disparity;
     std::optional<double> min_depth_m;
     std::string roi; // "x,y,w,h" in fractions of the image

@@ -209,9 +209,10 @@ CLI::App* declareDepth(CLI::App& app, DepthOptions& o)
                     "sgbm-hh4 or bm")
         ->check(CLI::IsMember(algorithms));
     cmd->add_option("--tuning", o.tuning,
-                    "census-sgm's tuning: natural (textured scenes, the default) or planar "
-                    "(man-made: uniform flat surfaces, repeating patterns)")
-        ->check(CLI::IsMember({"natural", "planar"}));
+                    "census-sgm's tuning: natural (textured scenes, the default), planar "
+                    "(man-made: uniform flat surfaces, repeating patterns) or patterns "
+                    "(natural, and planar's steps where a pattern repeats along the rows)")
+        ->check(CLI::IsMember({"natural", "planar", "patterns"}));
     cmd->add_option("--max-disparity", o.max_disparity,
                     "disparities searched, rounded up to a multiple of 16 (instead of deriving "
                     "them from the closest depth)")

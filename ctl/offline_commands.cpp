@@ -130,8 +130,9 @@ ProcessorSettings depthSettings(const DepthOptions& options)
     }
     const MatcherTuning configured_tuning = matcher.tuning;
     if (!options.tuning.empty())
-        matcher.tuning =
-            options.tuning == "planar" ? MatcherTuning::Planar : MatcherTuning::Natural;
+        matcher.tuning = options.tuning == "planar"     ? MatcherTuning::Planar
+                         : options.tuning == "patterns" ? MatcherTuning::Patterns
+                                                        : MatcherTuning::Natural;
     // Switched from census-sgm to OpenCV's or back here, or to another tuning: the new
     // matcher's (tuning's) own values for the settings they share.
     if ((configured == MatcherKind::CensusSgm) != (matcher.kind == MatcherKind::CensusSgm) ||

@@ -261,6 +261,8 @@ std::string matcherName(const MatcherSettings& settings)
 {
     if (settings.kind == MatcherKind::CensusSgm && settings.tuning == MatcherTuning::Planar)
         return "census-sgm (planar)";
+    if (settings.kind == MatcherKind::CensusSgm && settings.tuning == MatcherTuning::Patterns)
+        return "census-sgm (patterns)";
     return std::string(matcherAlgorithmName(settings.kind, settings.sgbm_mode));
 }
 

@@ -60,15 +60,26 @@ enum class MatcherTuning {
     // Man-made scenes of uniform planar surfaces and repeating patterns (walls, boxes,
     // boards, tiles): tuned on a real rig's chessboard (opencv-doc's 13 pairs).
     Planar,
+    // Natural, and planar's steps only where a row runs through a pattern that repeats
+    // along it (pipeline/sgm/periodic_pattern.hpp): for scenes that hold both.
+    Patterns,
 };
 
 // census-sgm's settings as tuned on the real scenes of shared/data.
 inline constexpr sgm::CensusSgmSettings kCensusSgmTuned{};
 
-// The automatic values of census-sgm for a tuning (the planar one: census_sgm.hpp).
+// The automatic values of census-sgm for a tuning (planar and patterns: census_sgm.hpp).
 constexpr const sgm::CensusSgmSettings& censusSgmTuning(MatcherTuning tuning)
 {
-    return tuning == MatcherTuning::Planar ? sgm::kPlanarSceneSettings : kCensusSgmTuned;
+    switch (tuning) {
+    case MatcherTuning::Planar:
+        return sgm::kPlanarSceneSettings;
+    case MatcherTuning::Patterns:
+        return sgm::kPatternSceneSettings;
+    case MatcherTuning::Natural:
+        break;
+    }
+    return kCensusSgmTuned;
 }
 
 struct MatcherSettings {

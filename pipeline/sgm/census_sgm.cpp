@@ -13,6 +13,7 @@
 
 #include "pipeline/sgm/band_pool.hpp"
 #include "pipeline/sgm/gap_bridge.hpp"
+#include "pipeline/sgm/periodic_pattern.hpp"
 #include "pipeline/sgm/speckle_filter.hpp"
 #include "pipeline/sgm/texture.hpp"
 
@@ -54,6 +55,7 @@ struct BandScratch {
     std::vector<uint16_t> right_lane; // rightLaneEntries()
     std::vector<uint16_t> winners_scratch;
     std::vector<uint8_t> edge_state; // width: dropFlatBetweenUnmatchedEdges()
+    std::vector<int> edges;          // 2 * width: markPeriodicRows()
 };
 
 } // namespace
@@ -106,6 +108,16 @@ void validateCensusSgmSettings(const CensusSgmSettings& s)
     if (s.textured_min_range < 0 || s.textured_min_range > 255)
         invalid("textured_min_range",
                 "must be within 0..255 grey levels, got " + std::to_string(s.textured_min_range));
+    if (s.periodic_uniqueness_percent < 0 || s.periodic_uniqueness_percent > 100)
+        invalid("periodic_uniqueness_percent",
+                "must be within 0..100, got " + std::to_string(s.periodic_uniqueness_percent));
+    if (s.periodic_textured_max_cost < 0 || s.periodic_textured_max_cost > censusBits(s))
+        invalid("periodic_textured_max_cost", "must be within 0.." + std::to_string(censusBits(s)) +
+                                                  " census bits, got " +
+                                                  std::to_string(s.periodic_textured_max_cost));
+    if (s.periodic_gap_fill_px < 0)
+        invalid("periodic_gap_fill_px",
+                "must be >= 0, got " + std::to_string(s.periodic_gap_fill_px));
     if (s.edge_margin_px < 0)
         invalid("edge_margin_px", "must be >= 0, got " + std::to_string(s.edge_margin_px));
     if (s.threads < 1 || s.threads > 64)
@@ -132,7 +144,10 @@ size_t censusSgmMemoryBytes(const CensusSgmSettings& s)
         (above * 2 + 1) * w * pathBlockBytes(static_cast<int>(lanes)) + w * (above + 1) + 1 +
         (5 * w + rightLaneEntries(s.width)) * sizeof(uint16_t) +
         winnersScratch(s.width, s.min_disparity, static_cast<int>(lanes)) * sizeof(uint16_t);
-    return image + output + band * static_cast<size_t>(s.threads);
+    // The pattern masks (raw and spread) and each band's edge lists.
+    const size_t patterns = s.periodic_patterns ? 2 * w * h : 0;
+    const size_t edges = s.periodic_patterns ? 2 * w * sizeof(int) : 0;
+    return image + output + patterns + (band + edges) * static_cast<size_t>(s.threads);
 }
 
 struct CensusSgm::Impl {
@@ -179,10 +194,16 @@ struct CensusSgm::Impl {
             b.right_lane.assign(rightLaneEntries(s.width), 0);
             b.winners_scratch.assign(winnersScratch(s.width, s.min_disparity, lanes), 0);
             b.edge_state.assign(static_cast<size_t>(s.width), 0);
+            if (s.periodic_patterns)
+                b.edges.assign(2 * static_cast<size_t>(s.width), 0);
         }
-        decide = DecideSettings{s.min_disparity,      s.num_disparities,
-                                s.uniqueness_percent, s.lr_max_diff_px,
-                                s.edge_margin_px,     static_cast<float>(2 * s.p1 * s.paths)};
+        if (s.periodic_patterns) {
+            periodic_raw.assign(area, 0);
+            periodic.assign(area, 0);
+        }
+        decide = DecideSettings{s.min_disparity,     s.num_disparities,
+                                decideUniqueness(s), s.lr_max_diff_px,
+                                s.edge_margin_px,    static_cast<float>(2 * s.p1 * s.paths)};
         // P2 by intensity step along the path (see CensusSgmSettings::p2_gradient_scale).
         for (int g = 0; g < 256; ++g) {
             double p2 = s.p2;
@@ -194,6 +215,19 @@ struct CensusSgm::Impl {
     }
 
     int abovePaths() const { return settings.paths == 5 ? 3 : 1; }
+
+    static int decideUniqueness(const CensusSgmSettings& s)
+    {
+        return s.periodic_patterns ? std::min(s.uniqueness_percent, s.periodic_uniqueness_percent)
+                                   : s.uniqueness_percent;
+    }
+
+    const uint8_t* periodicRow(int y) const
+    {
+        return periodic.empty()
+                   ? nullptr
+                   : periodic.data() + static_cast<size_t>(y) * static_cast<size_t>(settings.width);
+    }
 
     // Copies an image into its padded buffer, replicating the border pixels.
     void pad(const uint8_t* image, size_t stride, std::vector<uint8_t>& padded, int y0, int y1)
@@ -327,6 +361,8 @@ struct CensusSgm::Impl {
             uint8_t* cur_rows[3];
             for (int i = 0; i < above; ++i) {
                 penaltiesFromAbove(left, stride, y, kAboveDx[i], b.p2_above[i].data());
+                if (s.periodic_patterns)
+                    keepFullP2(periodicRow(y), b.p2_above[i].data(), 0);
                 p2_rows[i] = b.p2_above[i].data();
                 prev_rows[i] = y == first_row ? nullptr : b.above[i][parity ^ 1].data();
                 cur_rows[i] = b.above[i][parity].data();
@@ -340,6 +376,8 @@ struct CensusSgm::Impl {
                 continue;
             }
             penaltiesAlong(left, stride, y, b.p2_along.data());
+            if (s.periodic_patterns)
+                keepFullP2(periodicRow(y), b.p2_along.data(), 1);
             kernels->paths_forward(b.cost.data(), static_cast<uint8_t>(s.p1), s.width, lanes,
                                    above_paths, b.p2_along.data(), b.forward.data(), row_spans);
             others[above] = b.forward.data();
@@ -350,6 +388,41 @@ struct CensusSgm::Impl {
                 b.winners_scratch.data(), row_spans);
             kernels->decide_row(b.winners, b.right_lane.data(), s.width, decide, fixed.data() + row,
                                 out.confidence + row, out.range_limit + row);
+            if (decide.uniqueness_percent != s.uniqueness_percent)
+                holdUniqueness(b.winners, periodicRow(y), fixed.data() + row, out.confidence + row);
+        }
+    }
+
+    // P2 at its full height where a repeating pattern runs (periodic_pattern.hpp): p2[x]
+    // is the step onto pixel x - shift (0 for the paths from above, 1 along the row, whose
+    // p2[x] is the step from x - 1 onto x: full when either end lies in the pattern).
+    void keepFullP2(const uint8_t* mask, uint8_t* p2, int shift) const
+    {
+        const int w = settings.width;
+        const auto full = static_cast<uint8_t>(settings.p2);
+        for (int x = 0; x < w; ++x)
+            if (mask[x] != 0)
+                p2[x + shift] = full;
+        if (shift != 0)
+            for (int x = 1; x < w; ++x)
+                if (mask[x - 1] != 0)
+                    p2[x] = full;
+    }
+
+    // Outside a repeating pattern, the uniqueness the settings ask for: decide_row() took
+    // the pattern's lower one for every pixel.
+    void holdUniqueness(const WinnerRows& w, const uint8_t* mask, int16_t* disparity,
+                        uint8_t* confidence) const
+    {
+        const auto margin = static_cast<uint32_t>(100 + settings.uniqueness_percent);
+        for (int x = 0; x < settings.width; ++x) {
+            if (disparity[x] == kNoDisparity || mask[x] != 0)
+                continue;
+            if (static_cast<uint32_t>(w.second_sum[x]) * 100u <=
+                static_cast<uint32_t>(w.best_sum[x]) * margin) {
+                disparity[x] = kNoDisparity;
+                confidence[x] = 0;
+            }
         }
     }
 
@@ -380,11 +453,13 @@ struct CensusSgm::Impl {
                               int y0, int y1, const uint8_t* inferred, uint8_t* range_limit)
     {
         const int w = settings.width, h = settings.height;
+        const int max_cost = textureMaxCost();
         for (int y = y0; y < y1; ++y) {
             const size_t row = static_cast<size_t>(y) * static_cast<size_t>(w);
+            const uint8_t* mask = settings.textured_max_cost >= 0 ? nullptr : periodicRow(y);
             for (int x = 0; x < w; ++x) {
                 int16_t& d = disparity[row + static_cast<size_t>(x)];
-                if (d == kNoDisparity ||
+                if (d == kNoDisparity || (mask != nullptr && mask[x] == 0) ||
                     (inferred != nullptr &&
                      inferred[row + static_cast<size_t>(x)] != kInferredConfidence))
                     continue;
@@ -399,7 +474,7 @@ struct CensusSgm::Impl {
                     if (xr >= 0 && xr < w)
                         cost = std::min(cost, censusCost(x, xr, y));
                 }
-                if (cost != INT32_MAX && cost > settings.textured_max_cost &&
+                if (cost != INT32_MAX && cost > max_cost &&
                     isTextured(left, stride, w, h, x, y, settings.textured_min_range)) {
                     d = kNoDisparity;
                     // A textured pixel that matches nothing in the range is evidence of a
@@ -412,6 +487,13 @@ struct CensusSgm::Impl {
         }
     }
 
+    // The texture check's threshold: everywhere, or inside repeating patterns only.
+    int textureMaxCost() const
+    {
+        return settings.textured_max_cost >= 0 ? settings.textured_max_cost
+                                               : settings.periodic_textured_max_cost;
+    }
+
     // Whether left pixel (x, y) matches some disparity of the range within
     // textured_max_cost bits.
     bool matchesInRange(int x, int y)
@@ -419,7 +501,7 @@ struct CensusSgm::Impl {
         const int first = std::max(settings.min_disparity, x - (settings.width - 1));
         const int last = std::min(settings.min_disparity + settings.num_disparities - 1, x);
         for (int d = first; d <= last; ++d)
-            if (censusCost(x, x - d, y) <= settings.textured_max_cost)
+            if (censusCost(x, x - d, y) <= textureMaxCost())
                 return true;
         return false;
     }
@@ -443,6 +525,9 @@ struct CensusSgm::Impl {
         const int w = settings.width, h = settings.height;
         for (int y = y0; y < y1; ++y) {
             const size_t row = static_cast<size_t>(y) * static_cast<size_t>(w);
+            const uint8_t* mask = settings.textured_max_cost >= 0 ? nullptr : periodicRow(y);
+            if (mask != nullptr && std::find(mask, mask + w, uint8_t{1}) == mask + w)
+                continue; // no pattern in this row: nothing to check
             uint8_t state = 0;
             const auto edge = [&](int x) -> uint8_t {
                 const size_t i = row + static_cast<size_t>(x);
@@ -456,6 +541,11 @@ struct CensusSgm::Impl {
             state = 0;
             for (int x = w - 1; x >= 0; --x) {
                 int16_t& d = disparity[row + static_cast<size_t>(x)];
+                if (mask != nullptr && mask[x] == 0) {
+                    if (isTextured(left, stride, w, h, x, y, settings.textured_min_range))
+                        state = edge(x);
+                    continue;
+                }
                 const bool textured =
                     isTextured(left, stride, w, h, x, y, settings.textured_min_range);
                 if (textured) {
@@ -518,6 +608,7 @@ struct CensusSgm::Impl {
     std::vector<uint8_t> census_left, census_right; // planes x (margin, height x width, margin)
     std::vector<uint8_t> census_right_reversed;     // each row backwards
     std::vector<int16_t> fixed, filtered;           // 16 x disparity, kNoDisparity = none
+    std::vector<uint8_t> periodic_raw, periodic;    // periodic_pattern.hpp, width x height
     std::vector<BandScratch> bands;
     BandPool pool;
     SpeckleFilter speckle;
@@ -551,7 +642,17 @@ void CensusSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* 
         m.censusRows(m.padded_left, m.census_left, y0, y1);
         m.censusRows(m.padded_right, m.census_right, y0, y1);
         m.reverseRightRows(y0, y1);
+        if (s.periodic_patterns)
+            markPeriodicRows(left, left_stride, s.width, y0, y1, s.census_width,
+                             s.num_disparities + std::abs(s.min_disparity),
+                             m.bands[static_cast<size_t>(band)].edges.data(),
+                             m.periodic_raw.data());
     });
+    if (s.periodic_patterns)
+        m.pool.run(bands, [&](int band) {
+            spreadPeriodicRows(m.periodic_raw.data(), s.width, s.height, s.height * band / bands,
+                               s.height * (band + 1) / bands, m.periodic.data());
+        });
     m.pool.run(bands, [&](int band) { m.matchBand(band, left, left_stride, spans, out); });
 
     const auto band_start = [&](int band) { return s.height * band / bands; };
@@ -559,7 +660,7 @@ void CensusSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* 
     const int max_step = s.speckle_range_px * kSubpixel;
     // The median reads the rows around its band, which the other bands have finished;
     // the speckle labels only the band's own rows.
-    const bool checks_texture = s.textured_max_cost >= 0;
+    const bool checks_texture = s.textured_max_cost >= 0 || s.periodic_patterns;
     m.pool.run(bands, [&](int band) {
         if (s.median)
             m.medianRows(band_start(band), band_start(band + 1));
@@ -584,7 +685,7 @@ void CensusSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* 
     }
     // The gaps run along columns too, across the bands: bridged between the speckle
     // removal and the last pass, on this thread.
-    const bool bridges = s.gap_fill_px > 0;
+    const bool bridges = s.gap_fill_px > 0 || s.periodic_patterns;
     m.pool.run(bands, [&](int band) {
         if (s.speckle_window_px > 0)
             m.speckle.removeBand(result->data(), kNoDisparity, s.speckle_window_px,
@@ -594,7 +695,12 @@ void CensusSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* 
     });
     if (!bridges)
         return;
-    bridgeGaps(result->data(), out.confidence, out.range_limit, s.width, s.height, s.gap_fill_px);
+    if (s.gap_fill_px > 0)
+        bridgeGaps(result->data(), out.confidence, out.range_limit, s.width, s.height,
+                   s.gap_fill_px);
+    else
+        bridgeGaps(result->data(), out.confidence, out.range_limit, s.width, s.height,
+                   s.periodic_gap_fill_px, m.periodic.data());
     m.pool.run(bands, [&](int band) {
         if (checks_texture)
             m.dropUnmatchedTexture(*result, left, left_stride, band_start(band),

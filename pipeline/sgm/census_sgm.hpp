@@ -76,6 +76,17 @@ struct CensusSgmSettings {
     // 0) carry the disparity around a surface nearer than the range into it. < 0: off.
     int textured_max_cost = -1;
     int textured_min_range = 20;
+    // Where a row runs through a pattern that repeats along it (periodic_pattern.hpp):
+    // there P2 keeps its full height across edges (so the paths carry what the pattern's
+    // ends say), the best match need be only periodic_uniqueness_percent better than the
+    // next, a textured pixel whose census does not match its disparity within
+    // periodic_textured_max_cost bits is dropped (as textured_max_cost does everywhere),
+    // and gaps of up to periodic_gap_fill_px inside the pattern are bridged. Elsewhere the
+    // settings above hold. false: no pattern is looked for.
+    bool periodic_patterns = false;
+    int periodic_uniqueness_percent = 2;
+    int periodic_textured_max_cost = 8;
+    int periodic_gap_fill_px = 15;
     int threads = 1;      // worker threads inside compute()
     bool use_simd = true; // false: the scalar reference kernels
 };
@@ -98,6 +109,16 @@ inline constexpr CensusSgmSettings kPlanarSceneSettings = [] {
     s.speckle_range_px = 2;
     s.gap_fill_px = 15;
     s.textured_max_cost = 8;
+    return s;
+}();
+
+// The natural scenes' settings, and inside a pattern that repeats along the rows the
+// planar tuning's steps (`matcher.tuning: patterns`): one matcher for scenes that hold
+// both. Measured on the real rig's chessboard and the 17 natural scenes, it lies between
+// the two tunings (docs/configuration.md).
+inline constexpr CensusSgmSettings kPatternSceneSettings = [] {
+    CensusSgmSettings s;
+    s.periodic_patterns = true;
     return s;
 }();
 

@@ -9,13 +9,13 @@ namespace stereod::sgm {
 namespace {
 
 // One line of `count` values `step` apart: a row or a column.
-void bridgeLine(int16_t* d, uint8_t* confidence, const uint8_t* range_limit, int count, size_t step,
-                int max_gap)
+void bridgeLine(int16_t* d, uint8_t* confidence, const uint8_t* range_limit, const uint8_t* only,
+                int count, size_t step, int max_gap)
 {
     int last = -1; // the last position with a disparity, -1 after a barrier
     for (int k = 0; k < count; ++k) {
         const size_t at = static_cast<size_t>(k) * step;
-        if (range_limit[at] != 0) {
+        if (range_limit[at] != 0 || (only != nullptr && only[at] == 0)) {
             last = -1;
             continue;
         }
@@ -44,15 +44,17 @@ void bridgeLine(int16_t* d, uint8_t* confidence, const uint8_t* range_limit, int
 } // namespace
 
 void bridgeGaps(int16_t* disparity, uint8_t* confidence, const uint8_t* range_limit, int width,
-                int height, int max_gap)
+                int height, int max_gap, const uint8_t* only)
 {
     const size_t w = static_cast<size_t>(width);
     for (int y = 0; y < height; ++y) {
         const size_t row = static_cast<size_t>(y) * w;
-        bridgeLine(disparity + row, confidence + row, range_limit + row, width, 1, max_gap);
+        bridgeLine(disparity + row, confidence + row, range_limit + row,
+                   only != nullptr ? only + row : nullptr, width, 1, max_gap);
     }
     for (int x = 0; x < width; ++x)
-        bridgeLine(disparity + x, confidence + x, range_limit + x, height, w, max_gap);
+        bridgeLine(disparity + x, confidence + x, range_limit + x,
+                   only != nullptr ? only + x : nullptr, height, w, max_gap);
 }
 
 } // namespace stereod::sgm

@@ -21,7 +21,9 @@ inline constexpr uint8_t kInferredConfidence = 1;
 
 // disparity: width * height values, row-major, fixed point (kSubpixel per pixel),
 // kNoDisparity where none; confidence and range_limit (1: flagged): the same layout.
+// only (the same layout, or nullptr: everywhere): a gap is bridged only where every pixel
+// of it and both its ends are non-zero in `only`.
 void bridgeGaps(int16_t* disparity, uint8_t* confidence, const uint8_t* range_limit, int width,
-                int height, int max_gap);
+                int height, int max_gap, const uint8_t* only = nullptr);
 
 } // namespace stereod::sgm

@@ -268,7 +268,7 @@ INSTANTIATE_TEST_SUITE_P(
         RejectedCase{"matcher:\n  algorithm: bm\n  block_size: 3\n", "matcher.block_size", 3,
                      "5 to 255 px for bm"},
         RejectedCase{"matcher:\n  tuning: flat\n", "matcher.tuning", 2,
-                     "unknown value (got flat, expected natural or planar"},
+                     "unknown value (got flat, expected natural, planar or patterns"},
         RejectedCase{"matcher:\n  uniqueness_ratio: 101\n", "matcher.uniqueness_ratio", 2,
                      "0 to 100 percent"},
         RejectedCase{"matcher:\n  speckle_window_px: -1\n", "matcher.speckle_window_px", 2,

@@ -117,9 +117,12 @@ std::vector<SceneScores> scoreEveryScene(MatcherTuning tuning, bool guided = fal
         std::printf("[accuracy] %s%s%-10s %3d disp | census-sgm bad-2 %5.2f %% density %5.1f %% "
                     "too far %4.2f %% correct %5.1f %% | sgbm-3way bad-2 %5.2f %% density "
                     "%5.1f %% too far %4.2f %% correct %5.1f %%\n",
-                    tuning == MatcherTuning::Planar ? "planar " : "", guided ? "guided " : "",
-                    r.name.c_str(), n, r.ours.bad2, r.ours.density, r.ours.too_far,
-                    r.ours.correct(), r.ref.bad2, r.ref.density, r.ref.too_far, r.ref.correct());
+                    tuning == MatcherTuning::Planar     ? "planar "
+                    : tuning == MatcherTuning::Patterns ? "patterns "
+                                                        : "",
+                    guided ? "guided " : "", r.name.c_str(), n, r.ours.bad2, r.ours.density,
+                    r.ours.too_far, r.ours.correct(), r.ref.bad2, r.ref.density, r.ref.too_far,
+                    r.ref.correct());
         scored.push_back(r);
     }
     return scored;
@@ -139,6 +142,28 @@ MeanScores meanScores(const std::vector<SceneScores>& list)
         m.ref_bad2 += r.ref.bad2 / static_cast<double>(list.size());
         m.ref_far += r.ref.too_far / static_cast<double>(list.size());
     }
+    return m;
+}
+
+// Checks each scene of a variant that reports less than the full search or resolves
+// more: bad-2 no worse than the reference's, at most `fewer_points` points fewer correct
+// pixels, more than 5 points fewer on one scene at most. Prints and returns the means.
+MeanScores checkEachScene(const char* label, const std::vector<SceneScores>& list,
+                          double fewer_points)
+{
+    int fewer_correct = 0;
+    for (const SceneScores& r : list) {
+        EXPECT_LE(r.ours.bad2, r.ref.bad2) << label << ": " << r.name;
+        EXPECT_GE(r.ours.correct(), r.ref.correct() - fewer_points) << label << ": " << r.name;
+        fewer_correct += r.ours.correct() < r.ref.correct() - 5.0;
+    }
+    EXPECT_LE(fewer_correct, 1) << label;
+    const MeanScores m = meanScores(list);
+    std::printf("[accuracy] %s: mean over %zu scenes: bad-2 %.2f %% too far %.2f %% | "
+                "sgbm-3way bad-2 %.2f %% too far %.2f %% | ratio %.2f, %.2f | %d with over 5 "
+                "points fewer correct\n",
+                label, list.size(), m.ours_bad2, m.ours_far, m.ref_bad2, m.ref_far,
+                m.ours_bad2 / m.ref_bad2, m.ours_far / m.ref_far, fewer_correct);
     return m;
 }
 
@@ -178,19 +203,7 @@ TEST(CensusSgmAccuracy, GuidedSearchOnNaturalScenes)
 {
     const std::vector<SceneScores> list = scoreEveryScene(MatcherTuning::Natural, true);
     ASSERT_GE(list.size(), 17u);
-    int fewer_correct = 0;
-    for (const SceneScores& r : list) {
-        EXPECT_LE(r.ours.bad2, r.ref.bad2) << r.name;
-        EXPECT_GE(r.ours.correct(), r.ref.correct() - 10.0) << r.name;
-        fewer_correct += r.ours.correct() < r.ref.correct() - 5.0;
-    }
-    EXPECT_LE(fewer_correct, 1);
-    const MeanScores m = meanScores(list);
-    std::printf("[accuracy] guided: mean over %zu scenes: bad-2 %.2f %% too far %.2f %% | "
-                "sgbm-3way bad-2 %.2f %% too far %.2f %% | ratio %.2f, %.2f | %d with over 5 "
-                "points fewer correct\n",
-                list.size(), m.ours_bad2, m.ours_far, m.ref_bad2, m.ref_far,
-                m.ours_bad2 / m.ref_bad2, m.ours_far / m.ref_far, fewer_correct);
+    const MeanScores m = checkEachScene("guided", list, 10.0);
     EXPECT_LE(m.ours_bad2, 0.46 * m.ref_bad2);
     EXPECT_LE(m.ours_far, 0.4 * m.ref_far);
 }
@@ -215,6 +228,22 @@ TEST(CensusSgmAccuracy, PlanarTuningOnNaturalScenesIsAboutOpenCvThreeWay)
     EXPECT_LE(m.ours_bad2, m.ref_bad2);
     EXPECT_LE(m.ours_far, 1.1 * m.ref_far);
     EXPECT_GE(more_correct, 12);
+}
+
+// The patterns tuning (natural, with planar's steps where a strong pattern repeats along
+// the rows) on the natural scenes: what it finds there (a basket's slats, books' spines,
+// texture that happens to repeat) gets the planar steps, so it lies between the two
+// tunings. Measured: mean bad-2 4.54 % and too far 0.87 % (natural 3.78 and 0.77, planar
+// 7.95 and 1.99, SGBM 3-way 8.46 and 2.01), bad-2 below SGBM 3-way's on every scene;
+// Laundry's basket, a real fence of slats before a farther background, the worst (10.2 %
+// against 5.5 % natural); Playroom 5.3 points fewer correct pixels than SGBM 3-way.
+TEST(CensusSgmAccuracy, PatternsTuningOnNaturalScenesLiesBetweenTheTwo)
+{
+    const std::vector<SceneScores> list = scoreEveryScene(MatcherTuning::Patterns);
+    ASSERT_GE(list.size(), 17u);
+    const MeanScores m = checkEachScene("patterns tuning", list, 6.0);
+    EXPECT_LE(m.ours_bad2, 0.6 * m.ref_bad2);
+    EXPECT_LE(m.ours_far, 0.5 * m.ref_far);
 }
 
 // The hostile case: Tsukuba enlarged 3x seen by a rig with f 3000 px and B 0.1 m, its
@@ -269,10 +298,13 @@ TEST_P(CensusSgmTunings, SurfaceNearerThanTheRangeReadsNearerThanRange)
     EXPECT_GT(out.reading.distance_m, 6.5);
 }
 
-INSTANTIATE_TEST_SUITE_P(Both, CensusSgmTunings,
-                         ::testing::Values(MatcherTuning::Natural, MatcherTuning::Planar),
+INSTANTIATE_TEST_SUITE_P(Each, CensusSgmTunings,
+                         ::testing::Values(MatcherTuning::Natural, MatcherTuning::Planar,
+                                           MatcherTuning::Patterns),
                          [](const ::testing::TestParamInfo<MatcherTuning>& tuning) {
-                             return tuning.param == MatcherTuning::Planar ? "planar" : "natural";
+                             return tuning.param == MatcherTuning::Planar     ? "planar"
+                                    : tuning.param == MatcherTuning::Patterns ? "patterns"
+                                                                              : "natural";
                          });
 
 } // namespace

@@ -452,6 +452,26 @@ TEST_F(ChessboardCalibrationTest, PlanarTuningReportsThreeQuartersOfTheBoardOnIt
     EXPECT_GT(board.density(), 4.0 * natural.density());
 }
 
+// The patterns tuning: the natural one, with planar's steps only where a row runs
+// through a strong pattern that repeats along it (pipeline/sgm/periodic_pattern.hpp), so
+// that one matcher serves scenes holding both. Measured: 68.2 % of the board, 2.2 % of it
+// more than 5 % off (planar 75.5 % and 2.1 %, natural 16.2 % and 4.1 %): about 2 points
+// are rows where a tilted board's corners meet and too few regular edges are seen, the
+// rest planar's larger speckles (400 px, 2 px steps), which the natural scenes pay for.
+// The target for one default (75 %) is not met by it.
+TEST_F(ChessboardCalibrationTest, PatternsTuningReportsTwoThirdsOfTheBoard)
+{
+    MatcherSettings patterns =
+        matcherDefaults(MatcherKind::CensusSgm, SgbmMode::Sgbm, MatcherTuning::Patterns);
+    patterns.threads = 2;
+    const BoardPixels board = boardPixels(result(), patterns, "patterns");
+    EXPECT_GE(board.density(), 66.0);
+    EXPECT_LE(board.off(), 3.0);
+    const BoardPixels natural =
+        boardPixels(result(), matcherDefaults(MatcherKind::CensusSgm), "natural");
+    EXPECT_GT(board.density(), 4.0 * natural.density());
+}
+
 TEST_F(ChessboardCalibrationTest, PreviewShowsTheFirstPairRectifiedWithRowLines)
 {
     test::TempDir dir;

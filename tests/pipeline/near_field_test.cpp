@@ -200,16 +200,30 @@ TEST_P(NearerThanTheRange, ReadsNearerThanRangeOrTheSurfaceNeverTheBackground)
     }
 }
 
+const char* tuningName(MatcherTuning tuning)
+{
+    switch (tuning) {
+    case MatcherTuning::Planar:
+        return "planar";
+    case MatcherTuning::Patterns:
+        return "patterns";
+    case MatcherTuning::Natural:
+        break;
+    }
+    return "natural";
+}
+
 std::string syntheticCaseName(const ::testing::TestParamInfo<NearerThanTheRange::ParamType>& info)
 {
     const auto& [tuning, surface, disparity] = info.param;
-    return std::string(tuning == MatcherTuning::Planar ? "planar_" : "natural_") +
-           surfaceName(surface) + "_d" + std::to_string(disparity);
+    return std::string(tuningName(tuning)) + "_" + surfaceName(surface) + "_d" +
+           std::to_string(disparity);
 }
 
 INSTANTIATE_TEST_SUITE_P(
     SurfacesBeyondEitherRange, NearerThanTheRange,
-    ::testing::Combine(::testing::Values(MatcherTuning::Natural, MatcherTuning::Planar),
+    ::testing::Combine(::testing::Values(MatcherTuning::Natural, MatcherTuning::Planar,
+                                         MatcherTuning::Patterns),
                        ::testing::Values(Surface::Uniform, Surface::Periodic, Surface::Textured),
                        // Between the full and the extended range; beyond both.
                        ::testing::Values(48, 90)),
@@ -310,9 +324,8 @@ class RealRig : public ::testing::Test {
         }
         std::printf("[near-field] real rig, %s, %d disparities (sees from %.3f m): lies %d, "
                     "within 5 %% %d, other valid %d, no reading %d |%s\n",
-                    tuning == MatcherTuning::Planar ? "planar" : "natural", range.num_disparities,
-                    range.closest_depth_m, tally.lies, tally.within, tally.off, tally.none,
-                    line.c_str());
+                    tuningName(tuning), range.num_disparities, range.closest_depth_m, tally.lies,
+                    tally.within, tally.off, tally.none, line.c_str());
         return tally;
     }
 
@@ -324,7 +337,8 @@ ChessboardCalibrationResult* RealRig::result_ = nullptr;
 TEST_F(RealRig, NoReadingFartherThanTheBoardAtAnyRangeOrTuning)
 {
     ASSERT_EQ(result_->pairs_used, 13);
-    for (const MatcherTuning tuning : {MatcherTuning::Natural, MatcherTuning::Planar})
+    for (const MatcherTuning tuning :
+         {MatcherTuning::Natural, MatcherTuning::Planar, MatcherTuning::Patterns})
         for (const int n : {64, 96, 128, 0})
             EXPECT_EQ(readings(tuning, n).lies, 0);
 }

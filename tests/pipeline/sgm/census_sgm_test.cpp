@@ -87,6 +87,14 @@ CensusSgmSettings planarSettings()
     return s;
 }
 
+// The patterns tuning's (natural, planar's steps inside repeating patterns).
+CensusSgmSettings patternSettings()
+{
+    CensusSgmSettings s = kPatternSceneSettings;
+    s.num_disparities = kNumDisparities;
+    return s;
+}
+
 // The default settings' output on the scene, computed once for the tests that only read it.
 const Output& sceneOutput()
 {
@@ -141,7 +149,8 @@ TEST(CensusSgmTest, SimdAndScalarGiveIdenticalOutput)
     // A smaller pair than the scene: the scalar reference is slow under the sanitizers.
     const SyntheticPair pair = makeSyntheticPair(
         160, 64, {{-1000, 0, 1160, 64, 6}, {70, 8, 120, 40, 20}, {20, 30, 60, 60, 45}}, 3);
-    for (const CensusSgmSettings& base : {sceneSettings(), narrow, wide, planarSettings()})
+    for (const CensusSgmSettings& base :
+         {sceneSettings(), narrow, wide, planarSettings(), patternSettings()})
         for (int threads : {1, 2}) {
             SCOPED_TRACE("min_disparity " + std::to_string(base.min_disparity) + ", threads " +
                          std::to_string(threads));
@@ -299,9 +308,11 @@ SyntheticPair nearSurfacePair(int disparity_px)
 TEST(CensusSgmAccuracyTest, SurfaceNearerThanRangeReadsNoNumberDeepInside)
 {
     for (int d : kNearerThanRange)
-        for (const CensusSgmSettings& settings : {sceneSettings(), planarSettings()}) {
+        for (const CensusSgmSettings& settings :
+             {sceneSettings(), planarSettings(), patternSettings()}) {
             SCOPED_TRACE("surface at " + std::to_string(d) + " px, P2 adapted by " +
-                         std::to_string(settings.p2_gradient_scale));
+                         std::to_string(settings.p2_gradient_scale) + ", patterns " +
+                         std::to_string(settings.periodic_patterns));
             const SyntheticPair pair = nearSurfacePair(d);
             const RectCount c = countInside(pair, match(pair, settings), kNearSurface, 10);
             EXPECT_EQ(c.valid, 0) << "valid at" << c.valid_at;
@@ -529,6 +540,19 @@ TEST(CensusSgmSettingsTest, RejectsATextureCheckBeyondTheCensusBits)
     s.textured_max_cost = 8;
     s.textured_min_range = 256;
     expectRejected(s, "textured_min_range");
+}
+
+TEST(CensusSgmSettingsTest, RejectsPatternStepsOutOfRange)
+{
+    CensusSgmSettings s = smallSettings();
+    s.periodic_uniqueness_percent = 101;
+    expectRejected(s, "periodic_uniqueness_percent");
+    s = smallSettings();
+    s.periodic_textured_max_cost = 33; // 11x3: 32 bits
+    expectRejected(s, "periodic_textured_max_cost");
+    s = smallSettings();
+    s.periodic_gap_fill_px = -1;
+    expectRejected(s, "periodic_gap_fill_px");
 }
 
 TEST(CensusSgmSettingsTest, RejectsZeroThreads)

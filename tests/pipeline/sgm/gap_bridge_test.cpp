@@ -150,6 +150,23 @@ TEST(GapBridgeTest, BridgesColumnsAfterRows)
     EXPECT_EQ(image.confidenceAt(2, 3), kInferredConfidence);
 }
 
+TEST(GapBridgeTest, WithAMaskBridgesOnlyGapsLyingWhollyInsideIt)
+{
+    Image image(16, 1);
+    image.set(1, 0, 160);
+    image.set(5, 0, 160);
+    image.set(9, 0, 160);
+    image.set(13, 0, 160);
+    std::vector<uint8_t> only(16, 1);
+    only[11] = 0; // inside the third gap
+    bridgeGaps(image.disparity.data(), image.confidence.data(), image.range_limit.data(), 16, 1, 5,
+               only.data());
+    EXPECT_EQ(image.at(3, 0), 160);
+    EXPECT_EQ(image.at(7, 0), 160);
+    EXPECT_EQ(image.at(10, 0), kNone);
+    EXPECT_EQ(image.at(12, 0), kNone);
+}
+
 TEST(GapBridgeTest, ZeroLimitChangesNothing)
 {
     Image image(6, 1);
