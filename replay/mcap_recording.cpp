@@ -430,4 +430,10 @@ bool decodeMcapImage(mcap::Reader& reader, const mcap::MessageRef& ref, cv::Mat&
     return decodeImageMessage(reader.message(ref).data, expected, out, reason);
 }
 
+bool decodeMcapImage(mcap::Reader& reader, const mcap::MessageRef& ref, cv::Mat& out,
+                     cv::Mat& colour, std::string& reason, cv::Size expected)
+{
+    return decodeImageMessage(reader.message(ref).data, expected, out, colour, reason);
+}
+
 } // namespace stereod
