@@ -154,8 +154,8 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
 // Decodes one Image message of the bag into `out` as 8-bit grayscale (mono8 as is,
 // rgb8/bgr8/rgba8/bgra8 converted, yuv422/yuv422_yuy2 their luma), of `expected` size
 // when that is not empty (replay/image_message.hpp says what is checked). False, with the
-// reason, for other encodings or bad messages; throws mcap::McapError when the message cannot be read (a
-// chunk that does not decompress).
+// reason, for other encodings or bad messages; throws mcap::McapError when the message
+// cannot be read (a chunk that does not decompress).
 bool decodeMcapImage(mcap::Reader& reader, const mcap::MessageRef& ref, cv::Mat& out,
                      std::string& reason, cv::Size expected = {});
 // The same, and the image's colour into `colour` (BGR) where its encoding has colour

@@ -171,9 +171,9 @@ class ReplaySource final : public FrameSource {
     // When each pair is due, in ns after the pass's first pair: the recorded spacing,
     // except that a stamp stepping back counts as one period (planSchedule()).
     std::vector<int64_t> schedule_ns_;
-    int64_t period_ns_ = 0; // the mean recorded step forward (or the nominal rate's)
-    int open_error_ = 0;    // negative errno when nothing is readable
-    std::unique_ptr<FramePool> pool_;        // grey frames: the right's, and the left's
+    int64_t period_ns_ = 0;           // the mean recorded step forward (or the nominal rate's)
+    int open_error_ = 0;              // negative errno when nothing is readable
+    std::unique_ptr<FramePool> pool_; // grey frames: the right's, and the left's
     std::unique_ptr<FramePool> colour_pool_; // left frames with a colour plane, or none
 
     // Replay thread only (the controlling thread touches them only while it is not running).
