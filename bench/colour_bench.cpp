@@ -5,12 +5,19 @@
 // benchmarks (bench_data: f = 0.9 x width, 0.5 degree rotation, 6 cm baseline) and the
 // Aloe photograph in colour, simulated as the rig's raw left view. Every case counts the
 // allocations per frame (bench/alloc_counter). Results: bench/README.md, "Colour".
+//
+// The stages around the processor too: the capture decoders (FrameDecoder) with and without
+// the colour beside the grey, for YUYV, MJPEG and RGB24 buffers made from the photograph;
+// a bag's rgb8 image decoded for replay with and without its colour; and what the outputs
+// add: the rectified colour as u8_rgb socket bytes, as a ROS rgb8 image, and the coloured
+// cloud packed for PointCloud2.
 
 #include <cstdint>
 #include <stdexcept>
 #include <string>
 
 #include <benchmark/benchmark.h>
+#include <linux/videodev2.h>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -18,9 +25,14 @@
 
 #include "bench/alloc_counter.hpp"
 #include "bench/bench_data.hpp"
+#include "capture/frame_decoder.hpp"
 #include "pipeline/rectifier.hpp"
 #include "pipeline/stereo_processor.hpp"
 #include "pipeline/triangulation.hpp"
+#include "protocol/payload.hpp"
+#include "replay/image_message.hpp"
+#include "ros2/conventions.hpp"
+#include "ros2/messages.hpp"
 
 namespace {
 
@@ -127,6 +139,190 @@ void BM_ProcessColour(benchmark::State& state)
     process(state, true);
 }
 
+// --- capture: one camera buffer to grey, and to grey and colour -------------------------
+
+// The photograph (not the simulated raw view: the decoders do not care) as a camera would
+// put it in its buffer.
+std::vector<uint8_t> cameraBuffer(uint32_t fourcc)
+{
+    const cv::Mat& bgr = inputs().raw_left_colour;
+    if (fourcc == V4L2_PIX_FMT_MJPEG) {
+        std::vector<uint8_t> jpeg;
+        cv::imencode(".jpg", bgr, jpeg, {cv::IMWRITE_JPEG_QUALITY, 90});
+        return jpeg;
+    }
+    if (fourcc == V4L2_PIX_FMT_RGB24) {
+        cv::Mat rgb;
+        cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
+        return {rgb.data, rgb.data + rgb.total() * 3};
+    }
+    // YUYV: luma and each pair's chroma, full range (what the decoder is told).
+    cv::Mat gray, ycrcb;
+    cv::cvtColor(bgr, gray, cv::COLOR_BGR2GRAY);
+    cv::cvtColor(bgr, ycrcb, cv::COLOR_BGR2YCrCb);
+    std::vector<uint8_t> out(bgr.total() * 2);
+    for (std::size_t i = 0; i < bgr.total(); i += 2) {
+        const auto* c = ycrcb.ptr<cv::Vec3b>() + i;
+        out[2 * i] = gray.data[i];
+        out[2 * i + 1] = c[0][2];
+        out[2 * i + 2] = gray.data[i + 1];
+        out[2 * i + 3] = c[0][1];
+    }
+    return out;
+}
+
+void decode(benchmark::State& state, uint32_t fourcc, bool colour)
+{
+    const std::vector<uint8_t> buffer = cameraBuffer(fourcc);
+    const uint32_t bytes_per_line = fourcc == V4L2_PIX_FMT_MJPEG  ? 0
+                                    : fourcc == V4L2_PIX_FMT_YUYV ? 2 * kSize.width
+                                                                  : 3 * kSize.width;
+    FrameDecoder decoder(fourcc, kSize.width, kSize.height, bytes_per_line, true);
+    cv::Mat gray(kSize, CV_8UC1);
+    cv::Mat bgr;
+    if (colour)
+        bgr.create(kSize, CV_8UC3);
+    timed(state, [&] {
+        if (decoder.decode(buffer.data(), buffer.size(), gray, bgr) != DecodeStatus::Ok)
+            throw std::runtime_error(decoder.lastError());
+    });
+}
+
+void BM_CaptureYuyvGrey(benchmark::State& state)
+{
+    decode(state, V4L2_PIX_FMT_YUYV, false);
+}
+void BM_CaptureYuyvColour(benchmark::State& state)
+{
+    decode(state, V4L2_PIX_FMT_YUYV, true);
+}
+void BM_CaptureMjpegGrey(benchmark::State& state)
+{
+    decode(state, V4L2_PIX_FMT_MJPEG, false);
+}
+void BM_CaptureMjpegColour(benchmark::State& state)
+{
+    decode(state, V4L2_PIX_FMT_MJPEG, true);
+}
+void BM_CaptureRgb24Grey(benchmark::State& state)
+{
+    decode(state, V4L2_PIX_FMT_RGB24, false);
+}
+void BM_CaptureRgb24Colour(benchmark::State& state)
+{
+    decode(state, V4L2_PIX_FMT_RGB24, true);
+}
+
+// --- replay: a bag's rgb8 image to grey, and to grey and colour ------------------------
+
+void replayBag(benchmark::State& state, bool colour)
+{
+    const cv::Mat& bgr = inputs().raw_left_colour;
+    cv::Mat rgb;
+    cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
+    std::string message;
+    ros2::serializeImage({}, kSize.height, kSize.width, "rgb8", kSize.width * 3, rgb.data,
+                         rgb.total() * 3, message);
+    cv::Mat gray;
+    cv::Mat out_colour;
+    std::string reason;
+    timed(state, [&] {
+        const bool ok = colour ? decodeImageMessage(message, kSize, gray, out_colour, reason)
+                               : decodeImageMessage(message, kSize, gray, reason);
+        if (!ok)
+            throw std::runtime_error(reason);
+    });
+}
+
+void BM_ReplayBagRgb8Grey(benchmark::State& state)
+{
+    replayBag(state, false);
+}
+void BM_ReplayBagRgb8Colour(benchmark::State& state)
+{
+    replayBag(state, true);
+}
+
+// --- outputs: the rectified colour and the coloured cloud as they leave the service -----
+
+const DepthResult& colourResult()
+{
+    static const DepthResult made = [] {
+        ProcessorSettings settings;
+        settings.matcher.num_disparities = 128;
+        StereoProcessor processor(inputs().calibration, settings);
+        DepthResult result;
+        processor.process(inputs().raw.left, inputs().raw_left_colour, inputs().raw.right, 0, 0,
+                          result);
+        return result;
+    }();
+    return made;
+}
+
+void BM_SocketLeftColourRgb(benchmark::State& state)
+{
+    const DepthResult& result = colourResult();
+    std::string out;
+    out.reserve(result.left_rectified_colour.total() * 3);
+    timed(state, [&] {
+        out.clear();
+        appendBgrAsRgb(out, result.left_rectified_colour);
+    });
+}
+
+void BM_Ros2LeftImageRgb8(benchmark::State& state)
+{
+    const DepthResult& result = colourResult();
+    cv::Mat image;
+    std::string message;
+    timed(state, [&] {
+        const char* encoding = ros2::leftImageForRos(result, image);
+        ros2::serializeImage({}, image.rows, image.cols, encoding, image.cols * 3, image.data,
+                             image.total() * 3, message);
+    });
+}
+
+void BM_Ros2CloudRgb(benchmark::State& state)
+{
+    const DepthResult& result = colourResult();
+    std::vector<CloudPoint> points;
+    std::vector<CloudColour> colours;
+    std::vector<float> packed;
+    std::string message;
+    timed(state, [&] {
+        ros2::subsampleCloud(result, 1, points, colours);
+        ros2::xyziRgbCloud(points, colours, packed);
+        ros2::serializeXyziRgbCloud({}, packed.data(), points.size(), message);
+    });
+    state.counters["points"] = static_cast<double>(points.size());
+}
+
+void BM_Ros2CloudGrey(benchmark::State& state)
+{
+    DepthResult result = colourResult();
+    result.cloud_colour.clear();
+    std::vector<CloudPoint> points;
+    std::vector<CloudColour> colours;
+    std::string message;
+    timed(state, [&] {
+        ros2::subsampleCloud(result, 1, points, colours);
+        ros2::serializeXyziCloud({}, reinterpret_cast<const float*>(points.data()), points.size(),
+                                 message);
+    });
+}
+
+BENCHMARK(BM_CaptureYuyvGrey)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_CaptureYuyvColour)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_CaptureMjpegGrey)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_CaptureMjpegColour)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_CaptureRgb24Grey)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_CaptureRgb24Colour)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ReplayBagRgb8Grey)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ReplayBagRgb8Colour)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_SocketLeftColourRgb)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Ros2LeftImageRgb8)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Ros2CloudGrey)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Ros2CloudRgb)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_RectifyLeftGrey)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_RectifyLeftColour)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_ProcessGrey)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);

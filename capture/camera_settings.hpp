@@ -10,12 +10,14 @@
 namespace stereod {
 
 // Pixel format asked of the device. `Auto` takes the first the device offers at the
-// asked size and rate, in the order GREY > YUYV > MJPEG: GREY needs no work and no copy,
-// YUYV only a luma copy, MJPEG a decode (and JPEG artefacts hurt matching).
-enum class PixelFormatChoice { Auto, Grey, Yuyv, Mjpeg };
+// asked size and rate, in the order GREY > YUYV > MJPEG > RGB24 > BGR24: GREY needs no
+// work and no copy, YUYV only a luma copy, MJPEG a decode (and JPEG artefacts hurt
+// matching), packed RGB/BGR a grey conversion of three times the bytes.
+enum class PixelFormatChoice { Auto, Grey, Yuyv, Mjpeg, Rgb24, Bgr24 };
 
 const char* toString(PixelFormatChoice format) noexcept;
-// "auto", "grey", "yuyv", "mjpeg" (case-insensitive); nothing for anything else.
+// "auto", "grey", "yuyv", "mjpeg", "rgb24", "bgr24" (case-insensitive); nothing for
+// anything else.
 std::optional<PixelFormatChoice> parsePixelFormatChoice(const std::string& text) noexcept;
 
 // V4L2_CID_POWER_LINE_FREQUENCY menu (anti-flicker under mains lighting).
@@ -54,18 +56,25 @@ struct CameraSettings {
     int stall_timeout_ms = 0;
     int reopen_min_ms = 100;  // first reopen delay after a failure
     int reopen_max_ms = 2000; // the delay doubles up to this
+    // Keep the camera's colour beside the grey image (Frame::colour) when its format has
+    // colour (YUYV, MJPEG, RGB24, BGR24); a GREY camera has none to keep, at no cost.
+    bool keep_colour = false;
 };
 
 // What the device settled on after negotiation.
 struct NegotiatedFormat {
-    uint32_t fourcc = 0;     // V4L2_PIX_FMT_GREY / _YUYV / _MJPEG
-    std::string format_name; // "GREY", "YUYV", "MJPG"
+    uint32_t fourcc = 0;     // V4L2_PIX_FMT_GREY / _YUYV / _MJPEG / _RGB24 / _BGR24
+    std::string format_name; // "GREY", "YUYV", "MJPG", "RGB3", "BGR3"
     int width = 0;
     int height = 0;
     uint32_t bytes_per_line = 0; // 0 for compressed formats
     uint32_t size_image = 0;     // bytes of one buffer as the driver sized it
     double fps = 0.0;            // the rate the driver set (from S_PARM)
     std::string reason;          // why this format (auto choice, or as asked)
+    bool colour = false; // frames carry the camera's colour (keep_colour and a colour format)
+    // YUYV uses the whole 0..255 range (V4L2_QUANTIZATION_FULL_RANGE, or the JPEG
+    // colorspace); false: BT.601 limited range (16..235), V4L2's default for YUV.
+    bool full_range = false;
 };
 
 // One control after apply and read-back.

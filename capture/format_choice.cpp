@@ -11,7 +11,8 @@ namespace stereod {
 namespace {
 
 // The formats we can turn into grayscale, in the order `auto` prefers them.
-constexpr uint32_t kAutoOrder[] = {V4L2_PIX_FMT_GREY, V4L2_PIX_FMT_YUYV, V4L2_PIX_FMT_MJPEG};
+constexpr uint32_t kAutoOrder[] = {V4L2_PIX_FMT_GREY, V4L2_PIX_FMT_YUYV, V4L2_PIX_FMT_MJPEG,
+                                   V4L2_PIX_FMT_RGB24, V4L2_PIX_FMT_BGR24};
 
 constexpr double kRateTolerance = 0.01; // a rate matches within 1 %
 
@@ -24,6 +25,10 @@ uint32_t choiceFourcc(PixelFormatChoice choice) noexcept
         return V4L2_PIX_FMT_YUYV;
     case PixelFormatChoice::Mjpeg:
         return V4L2_PIX_FMT_MJPEG;
+    case PixelFormatChoice::Rgb24:
+        return V4L2_PIX_FMT_RGB24;
+    case PixelFormatChoice::Bgr24:
+        return V4L2_PIX_FMT_BGR24;
     case PixelFormatChoice::Auto:
         break;
     }
@@ -31,6 +36,27 @@ uint32_t choiceFourcc(PixelFormatChoice choice) noexcept
 }
 
 } // namespace
+
+uint32_t bytesPerPixel(uint32_t fourcc) noexcept
+{
+    switch (fourcc) {
+    case V4L2_PIX_FMT_GREY:
+        return 1;
+    case V4L2_PIX_FMT_YUYV:
+        return 2;
+    case V4L2_PIX_FMT_RGB24:
+    case V4L2_PIX_FMT_BGR24:
+        return 3;
+    default:
+        return 0;
+    }
+}
+
+bool carriesColour(uint32_t fourcc) noexcept
+{
+    return fourcc == V4L2_PIX_FMT_YUYV || fourcc == V4L2_PIX_FMT_MJPEG ||
+           fourcc == V4L2_PIX_FMT_RGB24 || fourcc == V4L2_PIX_FMT_BGR24;
+}
 
 bool sameRate(double a, double b) noexcept
 {
@@ -153,10 +179,10 @@ FormatChoice chooseFormat(const std::vector<FormatDescription>& offered,
         listing += fmt::format("{}{}{}", listing.empty() ? "" : "; ", describeFormat(f),
                                usable ? "" : " (not usable)");
     }
-    choice.refusal = fmt::format("cannot deliver {} {}x{} @ {} fps; it offers: {}",
-                                 is_auto ? "GREY, YUYV or MJPG" : fourccName(candidates[0]),
-                                 settings.width, settings.height, formatRate(settings.fps),
-                                 listing.empty() ? "no formats" : listing);
+    choice.refusal = fmt::format(
+        "cannot deliver {} {}x{} @ {} fps; it offers: {}",
+        is_auto ? "GREY, YUYV, MJPG, RGB3 or BGR3" : fourccName(candidates[0]), settings.width,
+        settings.height, formatRate(settings.fps), listing.empty() ? "no formats" : listing);
     return choice;
 }
 

@@ -41,14 +41,21 @@ std::string fourccName(uint32_t fourcc);
 // "YUYV 640x480 @ 30/15 fps, 1280x720 @ 10 fps": what a format offers, for messages.
 std::string describeFormat(const FormatDescription& format);
 
+// Bytes per pixel of an uncompressed format's rows: GREY 1, YUYV 2, RGB3/BGR3 3; 0 for
+// MJPEG (compressed) and formats we do not take.
+uint32_t bytesPerPixel(uint32_t fourcc) noexcept;
+// Whether a format carries colour: YUYV, MJPEG (colour JPEG), RGB3, BGR3.
+bool carriesColour(uint32_t fourcc) noexcept;
+
 // 30 -> "30", 29.97 -> "29.97".
 std::string formatRate(double fps);
 // Equal within 1 %.
 bool sameRate(double a, double b) noexcept;
 
 // The format to ask for, among those a device offers: the configured one, or for `auto`
-// the first of GREY > YUYV > MJPEG offered at the asked size and rate (GREY needs no
-// work, YUYV a luma copy, MJPEG a decode).
+// the first of GREY > YUYV > MJPEG > RGB3 > BGR3 offered at the asked size and rate (GREY
+// needs no work, YUYV a luma copy, MJPEG a decode, packed RGB a conversion of 3 bytes a
+// pixel).
 struct FormatChoice {
     const FormatDescription* format = nullptr; // into the offered list; nullptr: none fits
     std::string passed_over; // for `auto`: the better formats and why they were not taken

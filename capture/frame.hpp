@@ -26,10 +26,14 @@ class FrameRecycler {
     virtual void recycle(Frame* frame) noexcept = 0;
 };
 
-// One grayscale image from one camera. The pixels belong to the recycler that handed the
-// frame out; a Frame is never copied, it travels as a FrameHandle.
+// One grayscale image from one camera, and the camera's colour beside it when the source
+// keeps it. The pixels belong to the recycler that handed the frame out; a Frame is never
+// copied, it travels as a FrameHandle.
 struct Frame {
-    cv::Mat image;               // CV_8UC1, header over a buffer owned by `owner`
+    cv::Mat image; // CV_8UC1, header over a buffer owned by `owner`
+    // The same picture in colour: CV_8UC3, BGR (OpenCV's order), same size, a header over a
+    // buffer owned by `owner`; empty for grey cameras and sources that keep no colour.
+    cv::Mat colour;
     int64_t stamp_ns = 0;        // capture time on CLOCK_MONOTONIC
     int64_t source_stamp_ns = 0; // the source's own stamp (recorded stamp on replay)
     uint64_t sequence = 0;       // per-camera sequence number from the source

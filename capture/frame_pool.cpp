@@ -5,11 +5,13 @@
 
 namespace stereod {
 
-FramePool::FramePool(std::size_t count, cv::Size size, int type)
+FramePool::FramePool(std::size_t count, cv::Size size, int type, bool colour)
     : size_(size), frames_(count), in_use_(std::make_unique<std::atomic<bool>[]>(count))
 {
     for (std::size_t i = 0; i < count; ++i) {
         frames_[i].image.create(size, type);
+        if (colour)
+            frames_[i].colour.create(size, CV_8UC3);
         frames_[i].owner = this;
         in_use_[i].store(false, std::memory_order_relaxed);
     }

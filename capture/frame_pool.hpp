@@ -20,8 +20,9 @@ namespace stereod {
 
 class FramePool final : public FrameRecycler {
   public:
-    // `count` buffers of `size` and OpenCV `type` (CV_8UC1 for grayscale frames).
-    FramePool(std::size_t count, cv::Size size, int type = CV_8UC1);
+    // `count` buffers of `size` and OpenCV `type` (CV_8UC1 for grayscale frames); with
+    // `colour`, each frame also has a CV_8UC3 colour plane of that size (Frame::colour).
+    FramePool(std::size_t count, cv::Size size, int type = CV_8UC1, bool colour = false);
     ~FramePool() override;
 
     FramePool(const FramePool&) = delete;
@@ -36,6 +37,7 @@ class FramePool final : public FrameRecycler {
     std::size_t capacity() const noexcept { return frames_.size(); }
     std::size_t inUse() const noexcept;
     cv::Size frameSize() const noexcept { return size_; }
+    bool hasColour() const noexcept { return !frames_.empty() && !frames_[0].colour.empty(); }
     // How many acquire() calls found every buffer taken.
     uint64_t exhausted() const noexcept { return exhausted_.load(std::memory_order_relaxed); }
 

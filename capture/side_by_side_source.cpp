@@ -6,8 +6,8 @@
 
 namespace stereod {
 
-FrameSplitter::FrameSplitter(std::size_t slots)
-    : slots_(std::make_unique<Slot[]>(slots)), count_(slots)
+FrameSplitter::FrameSplitter(std::size_t slots, bool right_colour)
+    : slots_(std::make_unique<Slot[]>(slots)), count_(slots), right_colour_(right_colour)
 {
     for (std::size_t i = 0; i < count_; ++i) {
         slots_[i].halves[0].owner = this;
@@ -31,7 +31,12 @@ bool FrameSplitter::split(FrameHandle whole, StereoPair& pair) noexcept
         for (int side = 0; side < 2; ++side) {
             Frame& half = slot.halves[side];
             // A header over the whole frame's pixels: no copy, no allocation.
-            half.image = whole->image(cv::Rect(side * half_width, 0, half_width, rows));
+            const cv::Rect rect(side * half_width, 0, half_width, rows);
+            half.image = whole->image(rect);
+            if (!whole->colour.empty() && (side == 0 || right_colour_))
+                half.colour = whole->colour(rect);
+            else
+                half.colour.release();
             half.stamp_ns = whole->stamp_ns;
             half.source_stamp_ns = whole->source_stamp_ns;
             half.sequence = whole->sequence;
@@ -52,8 +57,10 @@ void FrameSplitter::recycle(Frame* half) noexcept
         if (half != &slot.halves[0] && half != &slot.halves[1])
             continue;
         if (slot.holders.fetch_sub(1, std::memory_order_acq_rel) == 1) {
-            slot.halves[0].image.release();
-            slot.halves[1].image.release();
+            for (Frame& each : slot.halves) {
+                each.image.release();
+                each.colour.release();
+            }
             slot.whole.reset(); // back to the camera
             slot.in_use.store(false, std::memory_order_release);
         }
@@ -86,7 +93,7 @@ SideBySideSource::SideBySideSource(SideBySideOptions options)
     : options_(checked(options)),
       // Every frame the camera can have out at once: the inbox, the one in hand, the
       // ring's pairs and the worker's.
-      splitter_(options_.inbox_capacity + options_.ring_capacity + 3),
+      splitter_(options_.inbox_capacity + options_.ring_capacity + 3, options_.right_colour),
       inbox_(options_.inbox_capacity), camera_(options_.camera, 0, "side-by-side")
 {
 }

@@ -6,8 +6,9 @@
 //
 // Frame path: the camera's capture thread -> its inbox (SPSC, drop-oldest) -> split thread
 // -> PairRing (drop-oldest) -> worker. The split copies nothing: the two halves are views
-// (cv::Mat ROIs) into the camera's frame, which goes back to the camera when both halves
-// are released. No lock and no allocation on the frame path.
+// (cv::Mat ROIs) into the camera's frame (its grey image, and its colour when the camera
+// keeps it), which goes back to the camera when both halves are released. No lock and no allocation
+// on the frame path.
 //
 // Faults: as StereoCameraSource, for its one camera (reopened by the camera itself with
 // backoff; the source reports Failed/Stalled with the reason meanwhile).
@@ -38,7 +39,9 @@ namespace stereod {
 // Lock-free and allocation-free.
 class FrameSplitter final : public FrameRecycler {
   public:
-    explicit FrameSplitter(std::size_t slots);
+    // With `right_colour`, the right half keeps the frame's colour too; the left half
+    // always does when the frame has it.
+    explicit FrameSplitter(std::size_t slots, bool right_colour = false);
     ~FrameSplitter() override;
 
     FrameSplitter(const FrameSplitter&) = delete;
@@ -61,10 +64,12 @@ class FrameSplitter final : public FrameRecycler {
     };
     std::unique_ptr<Slot[]> slots_;
     std::size_t count_;
+    bool right_colour_;
 };
 
 struct SideBySideOptions {
     CameraSettings camera;          // width/height: the whole frame (both halves)
+    bool right_colour = false;      // with camera.keep_colour: the right half keeps it too
     std::size_t inbox_capacity = 4; // frames queued before the split thread
     std::size_t ring_capacity = 4;  // of the PairRing it will deliver into (sizes slots)
 };

@@ -16,6 +16,7 @@
 
 #include "base/system_error.hpp"
 #include "base/unique_fd.hpp"
+#include "capture/format_choice.hpp"
 #include "capture/frame_decoder.hpp"
 #include "capture/frame_pool.hpp"
 #include "capture/v4l2_device.hpp"
@@ -242,10 +243,14 @@ class V4l2Camera::Impl {
         }
 
         decoder_ = std::make_unique<FrameDecoder>(format.fourcc, format.width, format.height,
-                                                  format.bytes_per_line);
+                                                  format.bytes_per_line, format.full_range);
+        format.colour = settings_.keep_colour && carriesColour(format.fourcc);
+        // Every format but GREY carries colour, so a reopen that negotiates another one
+        // needs the same pool (which may not go while frames of it are held).
         if (!decoder_->inPlace() && !pool_)
             pool_ = std::make_unique<FramePool>(set->device.bufferCount() + kExtraPoolFrames,
-                                                cv::Size(format.width, format.height));
+                                                cv::Size(format.width, format.height), CV_8UC1,
+                                                format.colour);
         stall_timeout_ms_ = stallTimeoutMs(format.fps);
         frame_period_ns_ = static_cast<int64_t>(
             1e9 / (format.fps > 0.0 ? format.fps : std::max(settings_.fps, 1.0)));
@@ -262,10 +267,10 @@ class V4l2Camera::Impl {
                 spdlog::warn("camera {} ({}): control {}: {}", name_, settings_.device,
                              control.name, control.error);
         }
-        spdlog::info("camera {} ({}, {}): {} {}x{} @ {:.2f} fps, {} buffers; {}", name_,
+        spdlog::info("camera {} ({}, {}): {} {}x{} @ {:.2f} fps, {} buffers{}; {}", name_,
                      settings_.device, set->device.identity().card, format.format_name,
                      format.width, format.height, format.fps, set->device.bufferCount(),
-                     format.reason);
+                     format.colour ? ", colour kept" : "", format.reason);
         {
             std::lock_guard lock(status_mutex_);
             format_ = std::move(format);
@@ -485,8 +490,9 @@ class V4l2Camera::Impl {
                 }
                 return requeue(set, buffer.index);
             }
-            const DecodeStatus decoded = decoder_->decode(set.device.buffer(buffer.index).data,
-                                                          buffer.bytes_used, frame->image);
+            const DecodeStatus decoded =
+                decoder_->decode(set.device.buffer(buffer.index).data, buffer.bytes_used,
+                                 frame->image, frame->colour);
             if (decoded != DecodeStatus::Ok)
                 return skipBad(set, buffer.index, decoder_->lastError());
             if (!requeue(set, buffer.index))
@@ -577,7 +583,7 @@ class V4l2Camera::Impl {
     std::unique_ptr<BufferSet> active_;
     std::vector<std::unique_ptr<BufferSet>> retired_; // closed opens with frames still held
     std::unique_ptr<FrameDecoder> decoder_;
-    std::unique_ptr<FramePool> pool_; // decoded frames (YUYV, MJPEG)
+    std::unique_ptr<FramePool> pool_; // decoded frames (YUYV, MJPEG, RGB24, BGR24)
     int stall_timeout_ms_ = kMinStallTimeoutMs;
     int64_t frame_period_ns_ = 0;
     int64_t empty_since_ns_ = 0; // when the last buffer left the driver; 0: one is queued

@@ -4,9 +4,11 @@
 // A V4l2Camera opens its device through libv4l2, negotiates the format, applies the
 // controls, streams with mmap buffers and hands every frame to its consumer through an
 // SpscRing<CapturedFrame> the consumer owns. GREY frames are zero-copy (the frame is the
-// kernel buffer, queued again when its last holder lets go); YUYV and MJPEG frames are
-// turned into grayscale in a FramePool buffer and the kernel buffer is queued again at
-// once. A camera that vanishes (ENODEV, EIO) or stalls is reopened with backoff.
+// kernel buffer, queued again when its last holder lets go); YUYV, MJPEG, RGB24 and BGR24
+// frames are turned into grayscale in a FramePool buffer (and, with
+// CameraSettings::keep_colour, into BGR colour beside it: Frame::colour) and the kernel
+// buffer is queued again at once. A camera that vanishes (ENODEV, EIO) or stalls is
+// reopened with backoff.
 //
 // Interface changes after the first version are additive only and listed here.
 

@@ -224,6 +224,9 @@ int V4l2Device::negotiate(const CameraSettings& settings, NegotiatedFormat& out)
     format.fmt.pix.width = static_cast<uint32_t>(settings.width);
     format.fmt.pix.height = static_cast<uint32_t>(settings.height);
     format.fmt.pix.field = V4L2_FIELD_NONE;
+    // The extended fields (quantization: how to turn YUYV into colour) are filled in only
+    // when asked for.
+    format.fmt.pix.priv = V4L2_PIX_FMT_PRIV_MAGIC;
     if (const int rc = xioctl(VIDIOC_S_FMT, &format); rc < 0)
         return fail("VIDIOC_S_FMT", -rc);
     if (format.fmt.pix.pixelformat != chosen->fourcc ||
@@ -235,8 +238,7 @@ int V4l2Device::negotiate(const CameraSettings& settings, NegotiatedFormat& out)
                              format.fmt.pix.height, describeFormat(*chosen));
         return -EINVAL;
     }
-    const uint32_t min_line =
-        chosen->fourcc == V4L2_PIX_FMT_YUYV ? 2 * format.fmt.pix.width : format.fmt.pix.width;
+    const uint32_t min_line = bytesPerPixel(chosen->fourcc) * format.fmt.pix.width;
     if (chosen->fourcc != V4L2_PIX_FMT_MJPEG &&
         (format.fmt.pix.bytesperline < min_line ||
          format.fmt.pix.sizeimage < format.fmt.pix.bytesperline * format.fmt.pix.height)) {
@@ -253,6 +255,9 @@ int V4l2Device::negotiate(const CameraSettings& settings, NegotiatedFormat& out)
     out.height = settings.height;
     out.bytes_per_line = chosen->fourcc == V4L2_PIX_FMT_MJPEG ? 0 : format.fmt.pix.bytesperline;
     out.size_image = format.fmt.pix.sizeimage;
+    const bool extended = format.fmt.pix.priv == V4L2_PIX_FMT_PRIV_MAGIC;
+    out.full_range = format.fmt.pix.colorspace == V4L2_COLORSPACE_JPEG ||
+                     (extended && format.fmt.pix.quantization == V4L2_QUANTIZATION_FULL_RANGE);
 
     v4l2_streamparm parm{};
     parm.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
@@ -274,12 +279,13 @@ int V4l2Device::negotiate(const CameraSettings& settings, NegotiatedFormat& out)
 
     if (is_auto) {
         out.reason =
-            fmt::format("auto chose {} at {}x{} @ {} fps (preference GREY > YUYV > MJPG: "
-                        "{}){}{}",
+            fmt::format("auto chose {} at {}x{} @ {} fps (preference GREY > YUYV > MJPG > "
+                        "RGB3 > BGR3: {}){}{}",
                         chosen->name, settings.width, settings.height, formatRate(settings.fps),
-                        chosen->fourcc == V4L2_PIX_FMT_GREY   ? "no conversion, no copy"
-                        : chosen->fourcc == V4L2_PIX_FMT_YUYV ? "luma plane copied, no decode"
-                                                              : "decoded to grayscale",
+                        chosen->fourcc == V4L2_PIX_FMT_GREY    ? "no conversion, no copy"
+                        : chosen->fourcc == V4L2_PIX_FMT_YUYV  ? "luma plane copied, no decode"
+                        : chosen->fourcc == V4L2_PIX_FMT_MJPEG ? "decoded"
+                                                               : "converted to grayscale",
                         passed_over.empty() ? "" : "; " + passed_over, rate_note);
     } else {
         out.reason = fmt::format("{} as configured{}", chosen->name, rate_note);

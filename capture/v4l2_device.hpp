@@ -8,8 +8,9 @@
 // V4L2_DISABLE_CONVERSION): libv4l2's format emulation would list formats the camera
 // does not have (RGB24, YUV420, ... converted in software into libv4l2's own buffers)
 // and, when such a format is chosen, decode every frame with a copy. We only ask for
-// GREY, YUYV and MJPEG, which we handle ourselves (zero-copy, luma plane, a grayscale
-// JPEG decode), so the raw format and the driver's own buffers are what we want.
+// GREY, YUYV, MJPEG and packed RGB24/BGR24 the camera itself offers, which we handle
+// ourselves (zero-copy, luma plane, a JPEG decode, a grey conversion), so the raw format
+// and the driver's own buffers are what we want.
 
 #include <cstddef>
 #include <cstdint>

@@ -190,7 +190,14 @@ std::vector<KeyDef> buildKeyTable()
         Names<PixelFormatChoice>{{"auto", PixelFormatChoice::Auto},
                                  {"grey", PixelFormatChoice::Grey},
                                  {"yuyv", PixelFormatChoice::Yuyv},
-                                 {"mjpeg", PixelFormatChoice::Mjpeg}}));
+                                 {"mjpeg", PixelFormatChoice::Mjpeg},
+                                 {"rgb24", PixelFormatChoice::Rgb24},
+                                 {"bgr24", PixelFormatChoice::Bgr24}}));
+    add(choiceKey(
+        "source.cameras.colour", kRestart, [](auto& c) -> auto& { return c.source.cameras.colour; },
+        Names<CameraColour>{{"left", CameraColour::Left},
+                            {"both", CameraColour::Both},
+                            {"none", CameraColour::None}}));
     add(integerKey(
         "source.cameras.width", kRestart, [](auto& c) -> auto& { return c.source.cameras.width; }));
     add(integerKey(

@@ -61,6 +61,11 @@ struct ReplayConfig {
     bool loop = true;
 };
 
+// Which cameras keep their colour beside the grey image the matcher sees
+// (source.cameras.colour). The left camera's colour is what the outputs carry (rectified
+// left image, cloud colours); the right's only reaches recordings.
+enum class CameraColour { None, Left, Both };
+
 // The V4L2 cameras of source.type v4l2 (two devices) or side_by_side (one device). The
 // controls are applied alike to both cameras; an unset control keeps the device's value.
 struct CamerasConfig {
@@ -68,6 +73,7 @@ struct CamerasConfig {
     std::string right;
     std::string device; // side_by_side: the one device
     PixelFormatChoice format = PixelFormatChoice::Auto;
+    CameraColour colour = CameraColour::Left; // kept where the format has colour
     int width = 640; // px of each device's frame (side_by_side: both halves)
     int height = 480;
     double fps = 30.0; // asked frame rate

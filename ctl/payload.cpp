@@ -4,6 +4,7 @@
 #include <utility>
 
 #include <fmt/format.h>
+#include <opencv2/imgproc.hpp>
 
 namespace stereod {
 
@@ -48,17 +49,54 @@ void readImagePayload(ProtocolClient& client, const Payload& payload, int type, 
     client.readPayload(image.data, payload.bytes);
 }
 
+namespace {
+
+// One value per point into `values`, after `adds_up` says the bytes fit the points.
+template <typename Value>
+void readPerPoint(ProtocolClient& client, const Payload& payload, bool adds_up, const char* what,
+                  std::vector<Value>& values)
+{
+    if (!adds_up) {
+        throw ClientError(fmt::format("the service announced {} {} in {} bytes, which does not "
+                                      "add up",
+                                      payload.points, what, payload.bytes),
+                          0);
+    }
+    values.resize(payload.points);
+    client.readPayload(values.data(), payload.bytes);
+}
+
+} // namespace
+
 void readCloudPayload(ProtocolClient& client, const Payload& payload,
                       std::vector<CloudPoint>& cloud)
 {
-    if (!cloudPayloadAddsUp(payload)) {
-        throw ClientError(fmt::format("the service announced {} cloud points in {} bytes, "
-                                      "which does not add up",
-                                      payload.points, payload.bytes),
+    readPerPoint(client, payload, cloudPayloadAddsUp(payload), "cloud points", cloud);
+}
+
+void readColourPayload(ProtocolClient& client, const Payload& payload, cv::Mat& bgr)
+{
+    if (payload.per_point || !colourPayloadAddsUp(payload)) {
+        throw ClientError(fmt::format("the service announced a {} payload of {}x{} {} in {} "
+                                      "bytes, which does not add up",
+                                      payload.name, payload.width, payload.height, payload.format,
+                                      payload.bytes),
                           0);
     }
-    cloud.resize(payload.points);
-    client.readPayload(cloud.data(), payload.bytes);
+    if (payload.bytes == 0) {
+        bgr.release();
+        return;
+    }
+    bgr.create(payload.height, payload.width, CV_8UC3);
+    client.readPayload(bgr.data, payload.bytes);
+    cv::cvtColor(bgr, bgr, cv::COLOR_RGB2BGR);
+}
+
+void readCloudColourPayload(ProtocolClient& client, const Payload& payload,
+                            std::vector<CloudColour>& colours)
+{
+    readPerPoint(client, payload, payload.per_point && colourPayloadAddsUp(payload),
+                 "cloud colours", colours);
 }
 
 } // namespace stereod

@@ -34,4 +34,13 @@ void readImagePayload(ProtocolClient& client, const Payload& payload, int type, 
 void readCloudPayload(ProtocolClient& client, const Payload& payload,
                       std::vector<CloudPoint>& cloud);
 
+// Reads a u8_rgb image payload into `bgr` as CV_8UC3 BGR (OpenCV's order), empty for a
+// 0 x 0 one (a camera that kept no colour). Throws ClientError when it does not add up.
+void readColourPayload(ProtocolClient& client, const Payload& payload, cv::Mat& bgr);
+
+// Reads a u8_rgb per-point payload (cloud_colour) into `colours`. Throws ClientError when
+// its bytes are not 3 per point.
+void readCloudColourPayload(ProtocolClient& client, const Payload& payload,
+                            std::vector<CloudColour>& colours);
+
 } // namespace stereod

@@ -50,6 +50,10 @@ namespace fs = std::filesystem;
 struct PairBuffer {
     cv::Mat left;
     cv::Mat right;
+    // The cameras' colour as captured (CV_8UC3, BGR), empty where a camera kept none: what
+    // is recorded in its place (a colour PNG, a bgr8 image in a bag).
+    cv::Mat left_colour;
+    cv::Mat right_colour;
     // Each camera's own capture stamps (the source's: CLOCK_MONOTONIC for cameras, the
     // recorded ones on replay): what a CSV+PNG recording keeps, to be replayed as it was.
     int64_t left_stamp_ns = 0;
@@ -350,6 +354,8 @@ bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair,
     if (pair != nullptr) {
         pair->depth_present = false;
         pair->cloud_present = false;
+        pair->left_colour.release();
+        pair->right_colour.release();
         const auto stamp = [&event](const char* key) -> std::optional<int64_t> {
             const auto it = event.find(key);
             if (it == event.end() || !it->is_number_integer())
@@ -375,13 +381,21 @@ bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair,
             pair->cloud_present = true;
             continue;
         }
+        const bool left_colour = name == snapshotItemName(SnapshotItem::RawLeftColour);
+        const bool right_colour = name == snapshotItemName(SnapshotItem::RawRightColour);
+        if (pair != nullptr && (left_colour || right_colour) && payload.format == kFormatRgb) {
+            readColourPayload(client, payload,
+                              left_colour ? pair->left_colour : pair->right_colour);
+            continue;
+        }
         const bool left = name == snapshotItemName(SnapshotItem::RawLeft);
         const bool right = name == snapshotItemName(SnapshotItem::RawRight);
         if (pair == nullptr || (!left && !right) || payload.format != kFormatGray) {
             client.skipPayload(payload.bytes);
-            complete =
-                complete && (left || right || name == snapshotItemName(SnapshotItem::Depth) ||
-                             name == snapshotItemName(SnapshotItem::Cloud));
+            complete = complete && (left || right || left_colour || right_colour ||
+                                    name == snapshotItemName(SnapshotItem::Depth) ||
+                                    name == snapshotItemName(SnapshotItem::Cloud) ||
+                                    name == snapshotItemName(SnapshotItem::CloudColour));
             continue;
         }
         readImagePayload(client, payload, CV_8UC1, left ? pair->left : pair->right);
@@ -406,6 +420,17 @@ void checkResultsPresent(const json& event, const Results& results, const std::s
                          " sends no depth or points with its raw pairs (a stereod older than "
                          "`subscribe` `with`); record without --with");
     }
+}
+
+// Whether the service sends the cameras' colour with raw pairs (`with` colour): its hello
+// lists the raw colour items.
+bool serviceSendsColour(ProtocolClient& client)
+{
+    const json hello = client.request({{"cmd", "hello"}});
+    const auto items = hello.find("snapshot_items");
+    return items != hello.end() && items->is_array() &&
+           std::find(items->begin(), items->end(),
+                     json(snapshotItemName(SnapshotItem::RawLeftColour))) != items->end();
 }
 
 // The calibration in force in the service, as file text; empty when it runs uncalibrated.
@@ -490,7 +515,8 @@ int runRecord(const RecordOptions& options)
         write = [&bag, results](const PairBuffer& p) {
             const int64_t left = p.left_realtime_ns.value_or(p.left_stamp_ns);
             const int64_t right = p.right_realtime_ns.value_or(p.right_stamp_ns);
-            bag->write(p.left, p.right, left, right);
+            bag->write(p.left_colour.empty() ? p.left : p.left_colour,
+                       p.right_colour.empty() ? p.right : p.right_colour, left, right);
             if (results.depth && p.depth_present)
                 bag->writeDepth(p.depth_m, left);
             if (results.points && p.cloud_present)
@@ -507,7 +533,9 @@ int runRecord(const RecordOptions& options)
                                "calibration.yaml\n");
         }
         write = [&csv](const PairBuffer& p) {
-            csv->write(p.left, p.right, p.left_stamp_ns, p.right_stamp_ns);
+            csv->write(p.left_colour.empty() ? p.left : p.left_colour,
+                       p.right_colour.empty() ? p.right : p.right_colour, p.left_stamp_ns,
+                       p.right_stamp_ns);
         };
     }
 
@@ -520,14 +548,17 @@ int runRecord(const RecordOptions& options)
 
     try {
         json subscribe = {{"cmd", "subscribe"}, {"stream", "raw"}};
-        if (results.any()) {
-            json with = json::array();
-            if (results.depth)
-                with.push_back(snapshotItemName(SnapshotItem::Depth));
-            if (results.points)
-                with.push_back(snapshotItemName(SnapshotItem::Cloud));
+        json with = json::array();
+        if (results.depth)
+            with.push_back(snapshotItemName(SnapshotItem::Depth));
+        if (results.points)
+            with.push_back(snapshotItemName(SnapshotItem::Cloud));
+        // The cameras' colour, recorded as captured, from a service that sends it (an
+        // older one would refuse the name).
+        if (serviceSendsColour(client))
+            with.push_back("colour");
+        if (!with.empty())
             subscribe["with"] = std::move(with);
-        }
         client.request(subscribe);
         bool results_checked = !results.any();
         // Pairs come as fast as the cameras deliver, or not at all while the source is

@@ -1,5 +1,6 @@
 // The commands that talk to the running service: distance, status, watch, snapshot.
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <vector>
@@ -347,6 +348,20 @@ int runSnapshot(const SnapshotOptions& options)
     }
 
     ProtocolClient client = connect(options.service);
+    // The colour beside the left image and the cloud, from a service that has it (an
+    // older one would refuse the unknown items).
+    const json hello = client.request({{"cmd", "hello"}});
+    const auto offers = [&hello](const char* item) {
+        const auto list = hello.find("snapshot_items");
+        return list != hello.end() && list->is_array() &&
+               std::find(list->begin(), list->end(), json(item)) != list->end();
+    };
+    if (want_left && offers("left_colour")) {
+        items.push_back("left_colour");
+    }
+    if (want_cloud && offers("cloud_colour")) {
+        items.push_back("cloud_colour");
+    }
     const json reply = client.request({{"cmd", "snapshot"}, {"items", items}});
     const json& payloads = member(reply, "payloads");
     if (!payloads.is_array()) {
@@ -359,8 +374,10 @@ int runSnapshot(const SnapshotOptions& options)
     cv::Mat depth_mm;
     cv::Mat disparity;
     cv::Mat left;
+    cv::Mat left_colour;
     cv::Mat confidence;
     std::vector<CloudPoint> cloud;
+    std::vector<CloudColour> cloud_colour;
     bool have_depth = false, have_disparity = false, have_left = false, have_cloud = false;
     bool have_confidence = false;
     for (const json& header : payloads) {
@@ -377,6 +394,12 @@ int runSnapshot(const SnapshotOptions& options)
                    payload.format == kFormatGray) {
             readImagePayload(client, payload, CV_8UC1, left);
             have_left = true;
+        } else if (payload.name == snapshotItemName(SnapshotItem::LeftColour) &&
+                   payload.format == kFormatRgb) {
+            readColourPayload(client, payload, left_colour);
+        } else if (payload.name == snapshotItemName(SnapshotItem::CloudColour) &&
+                   payload.format == kFormatRgb) {
+            readCloudColourPayload(client, payload, cloud_colour);
         } else if (payload.name == snapshotItemName(SnapshotItem::Confidence) &&
                    payload.format == kFormatConfidence) {
             readImagePayload(client, payload, CV_8UC1, confidence);
@@ -425,14 +448,20 @@ int runSnapshot(const SnapshotOptions& options)
                    disparity.rows, frame);
     }
     if (want_left) {
-        writeImagePng(options.left_path, left);
-        fmt::print("wrote left {} ({}x{}, frame {})\n", options.left_path, left.cols, left.rows,
-                   frame);
+        // In colour where the camera kept it, else the grey the matcher saw.
+        const bool colour = !left_colour.empty() && left_colour.size() == left.size();
+        writeImagePng(options.left_path, colour ? left_colour : left);
+        fmt::print("wrote left {} ({}x{}{}, frame {})\n", options.left_path, left.cols, left.rows,
+                   colour ? ", colour" : "", frame);
     }
     if (want_cloud) {
-        writePly(options.cloud_path, cloud);
-        fmt::print("wrote cloud {} ({} points, frame {})\n", options.cloud_path, cloud.size(),
-                   frame);
+        // Coloured where every point has its colour.
+        if (cloud_colour.size() != cloud.size()) {
+            cloud_colour.clear();
+        }
+        writePly(options.cloud_path, cloud, cloud_colour);
+        fmt::print("wrote cloud {} ({} points{}, frame {})\n", options.cloud_path, cloud.size(),
+                   cloud_colour.empty() ? "" : ", coloured", frame);
     }
     if (want_confidence) {
         writeConfidencePng(options.confidence_path, confidence);

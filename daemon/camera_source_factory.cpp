@@ -21,7 +21,8 @@ SyncSettings syncSettings(const SourceConfig& source)
 
 } // namespace
 
-CameraSettings cameraSettings(const SourceConfig& source, const std::string& device)
+CameraSettings cameraSettings(const SourceConfig& source, const std::string& device,
+                              bool keep_colour)
 {
     const CamerasConfig& cameras = source.cameras;
     CameraSettings settings;
@@ -32,6 +33,7 @@ CameraSettings cameraSettings(const SourceConfig& source, const std::string& dev
     settings.fps = cameras.fps;
     settings.controls = cameras.controls;
     settings.lock_exposure = cameras.lock_exposure;
+    settings.keep_colour = keep_colour;
     const auto ring = static_cast<std::size_t>(source.ring_capacity);
     settings.buffer_count = cameraBufferCount(
         ring, source.kind == SourceKind::V4l2 ? syncSettings(source) : SyncSettings{0, 0},
@@ -44,15 +46,19 @@ std::unique_ptr<FrameSource> makeCameraSource(const SourceConfig& source)
     switch (source.kind) {
     case SourceKind::V4l2: {
         StereoCameraOptions options;
-        options.left = cameraSettings(source, source.cameras.left);
-        options.right = cameraSettings(source, source.cameras.right);
+        const CameraColour colour = source.cameras.colour;
+        options.left = cameraSettings(source, source.cameras.left, colour != CameraColour::None);
+        options.right = cameraSettings(source, source.cameras.right, colour == CameraColour::Both);
         options.sync = syncSettings(source);
         options.inbox_capacity = kInboxCapacity;
         return std::make_unique<StereoCameraSource>(std::move(options));
     }
     case SourceKind::SideBySide: {
         SideBySideOptions options;
-        options.camera = cameraSettings(source, source.cameras.device);
+        const CameraColour colour = source.cameras.colour;
+        options.camera =
+            cameraSettings(source, source.cameras.device, colour != CameraColour::None);
+        options.right_colour = colour == CameraColour::Both;
         options.inbox_capacity = kInboxCapacity;
         options.ring_capacity = static_cast<std::size_t>(source.ring_capacity);
         return std::make_unique<SideBySideSource>(std::move(options));

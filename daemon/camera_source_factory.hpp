@@ -11,8 +11,10 @@
 namespace stereod {
 
 // The settings of one camera of `source` (buffer count sized for the ring and the sync).
-// `device` is the camera's path.
-CameraSettings cameraSettings(const SourceConfig& source, const std::string& device);
+// `device` is the camera's path; `keep_colour` whether it keeps its colour (where its format
+// has one).
+CameraSettings cameraSettings(const SourceConfig& source, const std::string& device,
+                              bool keep_colour);
 
 // The two-camera source or the side-by-side source, not started. Throws
 // std::invalid_argument when the configuration is not of a camera source.

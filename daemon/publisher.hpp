@@ -73,9 +73,13 @@ struct PipelineStats {
 // while raw frames are wanted (Publisher::wantRawUntil()). The buffers keep their size
 // from frame to frame, so copying allocates only for the first frames of a size.
 struct RawPair {
-    bool present = false;      // false: the pair was not copied (nobody asked for raw frames)
-    cv::Mat left;              // CV_8UC1, continuous
-    cv::Mat right;             // CV_8UC1, continuous
+    bool present = false; // false: the pair was not copied (nobody asked for raw frames)
+    cv::Mat left;         // CV_8UC1, continuous
+    cv::Mat right;        // CV_8UC1, continuous
+    // The cameras' colour as captured (CV_8UC3, BGR, continuous), each empty when that
+    // camera kept none (Frame::colour).
+    cv::Mat left_colour;
+    cv::Mat right_colour;
     int64_t left_stamp_ns = 0; // each camera's own capture stamp (Frame::source_stamp_ns)
     int64_t right_stamp_ns = 0;
 };

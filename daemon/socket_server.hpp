@@ -117,6 +117,7 @@ class SocketServer {
         uint64_t last_sequence = 0;   // publisher sequence of the last frame considered
         bool with_depth = false;      // raw only: each event carries the pair's depth
         bool with_cloud = false;      // raw only: each event carries the pair's cloud
+        bool with_colour = false;     // raw only: and the colour (frames', cloud's)
     };
 
     // A snapshot with raw items that waits for the next pair carrying raw frames (raw

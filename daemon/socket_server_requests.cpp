@@ -15,13 +15,19 @@ namespace {
 
 struct SnapshotImage {
     const cv::Mat& mat;
-    std::string_view format;
+    std::string_view format; // u8_rgb: `mat` is BGR, sent as RGB
 };
 
 // The image a snapshot item sends, and its payload format. Not for the cloud.
 SnapshotImage snapshotImage(const PublishedFrame& frame, SnapshotItem item)
 {
     switch (item) {
+    case SnapshotItem::LeftColour:
+        return {frame.result.left_rectified_colour, kFormatRgb};
+    case SnapshotItem::RawLeftColour:
+        return {frame.raw.left_colour, kFormatRgb};
+    case SnapshotItem::RawRightColour:
+        return {frame.raw.right_colour, kFormatRgb};
     case SnapshotItem::Depth:
         return {frame.depth_mm, kFormatDepthMm};
     case SnapshotItem::Disparity:
@@ -35,6 +41,7 @@ SnapshotImage snapshotImage(const PublishedFrame& frame, SnapshotItem item)
     case SnapshotItem::Confidence:
         return {frame.result.confidence, kFormatConfidence};
     case SnapshotItem::Cloud:
+    case SnapshotItem::CloudColour:
         break;
     }
     throw std::logic_error("a snapshot's cloud is not an image");
@@ -45,11 +52,13 @@ Payload snapshotPayload(const PublishedFrame& frame, SnapshotItem item)
 {
     if (item == SnapshotItem::Cloud)
         return cloudPayload(frame.result.cloud.size());
+    if (item == SnapshotItem::CloudColour)
+        return cloudColourPayload(frame.result.cloud_colour.size());
     const SnapshotImage image = snapshotImage(frame, item);
     Payload payload = imagePayload(snapshotItemName(item), image.format, image.mat);
-    if (item == SnapshotItem::RawLeft)
+    if (item == SnapshotItem::RawLeft || item == SnapshotItem::RawLeftColour)
         payload.stamp_ns = frame.raw.left_stamp_ns;
-    else if (item == SnapshotItem::RawRight)
+    else if (item == SnapshotItem::RawRight || item == SnapshotItem::RawRightColour)
         payload.stamp_ns = frame.raw.right_stamp_ns;
     return payload;
 }
@@ -166,7 +175,8 @@ void SocketServer::handle(Client& client, const SnapshotRequest& request,
 {
     const bool wants_raw =
         std::any_of(request.items.begin(), request.items.end(), [](SnapshotItem item) {
-            return item == SnapshotItem::RawLeft || item == SnapshotItem::RawRight;
+            return item == SnapshotItem::RawLeft || item == SnapshotItem::RawRight ||
+                   item == SnapshotItem::RawLeftColour || item == SnapshotItem::RawRightColour;
         });
     const int64_t now_ns = monotonicNowNs();
     const PublishedFrame* latest = publisher_.latest();
@@ -198,7 +208,10 @@ void SocketServer::sendSnapshot(Client& client, const SnapshotRequest& request,
         const char* name;
     } images[] = {{latest->depth_mm, CV_16UC1, "depth"},
                   {result.disparity, CV_32FC1, "disparity"},
-                  {result.left_rectified, CV_8UC1, "left"}};
+                  {result.left_rectified, CV_8UC1, "left"},
+                  {result.left_rectified_colour, CV_8UC3, "left colour"},
+                  {latest->raw.left_colour, CV_8UC3, "raw left colour"},
+                  {latest->raw.right_colour, CV_8UC3, "raw right colour"}};
     for (const auto& image : images) {
         if (!image.mat.empty() && image.mat.type() != image.type)
             throw std::logic_error(std::string("the ") + image.name +
@@ -228,11 +241,19 @@ void SocketServer::sendSnapshot(Client& client, const SnapshotRequest& request,
     if (client.dead)
         return;
     for (const SnapshotItem item : request.items) {
-        if (item == SnapshotItem::Cloud)
+        if (item == SnapshotItem::Cloud) {
             client.out.append(reinterpret_cast<const char*>(result.cloud.data()),
                               result.cloud.size() * sizeof(CloudPoint));
-        else
-            appendMatBytes(client.out, snapshotImage(frame, item).mat);
+        } else if (item == SnapshotItem::CloudColour) {
+            client.out.append(reinterpret_cast<const char*>(result.cloud_colour.data()),
+                              result.cloud_colour.size() * sizeof(CloudColour));
+        } else {
+            const SnapshotImage image = snapshotImage(frame, item);
+            if (image.format == kFormatRgb)
+                appendBgrAsRgb(client.out, image.mat);
+            else
+                appendMatBytes(client.out, image.mat);
+        }
     }
 }
 

@@ -32,6 +32,7 @@ void SocketServer::handle(Client& client, const SubscribeRequest& request,
     subscription.last_sequence = last_dispatched_sequence_;
     subscription.with_depth = request.with_depth;
     subscription.with_cloud = request.with_cloud;
+    subscription.with_colour = request.with_colour;
     Json answer = okReply(id);
     answer["stream"] = streamName(request.stream);
     reply(client, answer);
@@ -112,6 +113,11 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
     raw_header.depth_width = depth_m.empty() ? 0 : depth_m.cols;
     raw_header.depth_height = depth_m.empty() ? 0 : depth_m.rows;
     raw_header.cloud_points = frame.result.cloud.size();
+    raw_header.left_colour_width = raw.left_colour.cols;
+    raw_header.left_colour_height = raw.left_colour.rows;
+    raw_header.right_colour_width = raw.right_colour.cols;
+    raw_header.right_colour_height = raw.right_colour.rows;
+    raw_header.cloud_colour_points = frame.result.cloud_colour.size();
 
     serveWaitingSnapshots(&frame, nullptr, now_ns);
 
@@ -171,10 +177,12 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
                     client.out.append(zones_event_);
                 }
             } else if (is_raw) {
-                const bool with = subscription.with_depth || subscription.with_cloud;
+                const bool with =
+                    subscription.with_depth || subscription.with_cloud || subscription.with_colour;
                 if (subscription.skipped > 0 || with) {
                     appendRawEventHeader(client.out, raw_header, subscription.skipped,
-                                         subscription.with_depth, subscription.with_cloud);
+                                         subscription.with_depth, subscription.with_cloud,
+                                         subscription.with_colour);
                 } else {
                     if (raw_header_.empty())
                         appendRawEventHeader(raw_header_, raw_header, 0);
@@ -182,11 +190,19 @@ void SocketServer::dispatchFrame(const PublishedFrame& frame, int64_t now_ns)
                 }
                 appendMatBytes(client.out, raw.left);
                 appendMatBytes(client.out, raw.right);
+                if (subscription.with_colour) {
+                    appendBgrAsRgb(client.out, raw.left_colour);
+                    appendBgrAsRgb(client.out, raw.right_colour);
+                }
                 if (subscription.with_depth)
                     appendMatBytes(client.out, depth_m);
                 if (subscription.with_cloud)
                     client.out.append(reinterpret_cast<const char*>(frame.result.cloud.data()),
                                       frame.result.cloud.size() * sizeof(CloudPoint));
+                if (subscription.with_cloud && subscription.with_colour)
+                    client.out.append(
+                        reinterpret_cast<const char*>(frame.result.cloud_colour.data()),
+                        frame.result.cloud_colour.size() * sizeof(CloudColour));
             } else if (!is_depth) {
                 if (subscription.skipped > 0) {
                     appendReadingEvent(client.out, report, now_ns, subscription.skipped);

@@ -51,6 +51,14 @@ void copyRawPair(const StereoPair& pair, RawPair& raw)
         return;
     pair.left->image.copyTo(raw.left);
     pair.right->image.copyTo(raw.right);
+    // Colour as captured, where the camera kept it; a grey source never allocates it.
+    for (auto [frame, colour] : {std::pair{pair.left.get(), &raw.left_colour},
+                                 std::pair{pair.right.get(), &raw.right_colour}}) {
+        if (frame->colour.empty())
+            colour->release();
+        else
+            frame->colour.copyTo(*colour);
+    }
     raw.left_stamp_ns = pair.left->source_stamp_ns;
     raw.right_stamp_ns = pair.right->source_stamp_ns;
     raw.present = true;
@@ -205,7 +213,8 @@ void Worker::processPair(StereoPair& pair)
         slot.reason_message.assign("a frame is missing");
     } else {
         try {
-            processor_->process(pair.left->image, pair.right->image, stamp_ns, frame, result);
+            processor_->process(pair.left->image, pair.left->colour, pair.right->image, stamp_ns,
+                                frame, result);
             processed = facts.pair == PairOutcome::Processed;
             // Before the frames go back: with a rectified-only calibration the right image
             // the matcher saw is the frame itself.

@@ -54,8 +54,27 @@ void appendDepthEventHeader(std::string& out, const DepthEventHeader& header,
     out.push_back('\n');
 }
 
+namespace {
+
+// A raw frame's colour descriptor, as appendPayloadJson() writes it, from the item's name
+// in place: "raw_right_colour" is longer than a std::string holds without allocating.
+void appendRawColourJson(std::string& out, SnapshotItem item, int width, int height,
+                         int64_t stamp_ns)
+{
+    JsonObjectWriter object(out);
+    object.field("name", snapshotItemName(item));
+    object.field("format", kFormatRgb);
+    object.field("width", width);
+    object.field("height", height);
+    object.field("bytes", static_cast<uint64_t>(width) * static_cast<uint64_t>(height) * 3);
+    object.field("stamp_ns", stamp_ns);
+    object.close();
+}
+
+} // namespace
+
 void appendRawEventHeader(std::string& out, const RawEventHeader& header, uint64_t skipped,
-                          bool with_depth, bool with_cloud)
+                          bool with_depth, bool with_cloud, bool with_colour)
 {
     JsonObjectWriter object(out);
     object.field("event", "raw");
@@ -79,6 +98,14 @@ void appendRawEventHeader(std::string& out, const RawEventHeader& header, uint64
     side.name = snapshotItemName(SnapshotItem::RawRight);
     side.stamp_ns = header.right_stamp_ns;
     appendPayloadJson(payloads, side);
+    if (with_colour) {
+        payloads.push_back(',');
+        appendRawColourJson(payloads, SnapshotItem::RawLeftColour, header.left_colour_width,
+                            header.left_colour_height, header.left_stamp_ns);
+        payloads.push_back(',');
+        appendRawColourJson(payloads, SnapshotItem::RawRightColour, header.right_colour_width,
+                            header.right_colour_height, header.right_stamp_ns);
+    }
     if (with_depth) {
         Payload depth;
         depth.name = snapshotItemName(SnapshotItem::Depth);
@@ -93,6 +120,10 @@ void appendRawEventHeader(std::string& out, const RawEventHeader& header, uint64
     if (with_cloud) {
         payloads.push_back(',');
         appendPayloadJson(payloads, cloudPayload(header.cloud_points));
+    }
+    if (with_cloud && with_colour) {
+        payloads.push_back(',');
+        appendPayloadJson(payloads, cloudColourPayload(header.cloud_colour_points));
     }
     payloads.push_back(']');
     if (with_depth || with_cloud)

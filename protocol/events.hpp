@@ -49,7 +49,10 @@ void appendDepthEventHeader(std::string& out, const DepthEventHeader& header,
 // CLOCK_REALTIME (for a replay: when the pair was delivered), which bags carry.
 // A subscription `with` depth or cloud adds, after them, `depth` (f32_m, depth_width x
 // depth_height float32) and `cloud` (f32_xyzi, cloud_points x 16 bytes), and the pair's
-// `depth_valid`.
+// `depth_valid`. A subscription `with` colour adds, right after raw_right, the frames'
+// colour as captured (raw_left_colour, raw_right_colour: u8_rgb, 0 x 0 where that camera
+// kept none) and, after the cloud when it is asked for, `cloud_colour` (u8_rgb,
+// cloud_colour_points x 3 bytes: the cloud's points in order, or none for a grey source).
 struct RawEventHeader {
     uint64_t frame = 0;
     int64_t left_stamp_ns = 0;
@@ -62,12 +65,18 @@ struct RawEventHeader {
     int depth_width = 0;
     int depth_height = 0;
     std::size_t cloud_points = 0;
+    int left_colour_width = 0; // 0 x 0: the camera kept no colour
+    int left_colour_height = 0;
+    int right_colour_width = 0;
+    int right_colour_height = 0;
+    std::size_t cloud_colour_points = 0;
 };
 
 // Appends the raw event's header line (always with "skipped"), without the payloads; with
-// the depth and cloud descriptors when asked for. Allocates nothing once `out` has the
-// capacity.
+// the depth, cloud and colour descriptors when asked for. Allocates nothing once `out` has
+// the capacity.
 void appendRawEventHeader(std::string& out, const RawEventHeader& header, uint64_t skipped,
-                          bool with_depth = false, bool with_cloud = false);
+                          bool with_depth = false, bool with_cloud = false,
+                          bool with_colour = false);
 
 } // namespace stereod

@@ -17,14 +17,35 @@ Payload imagePayload(std::string_view name, std::string_view format, const cv::M
     return payload;
 }
 
-Payload cloudPayload(std::size_t points)
+namespace {
+
+Payload perPointPayload(std::string_view name, std::string_view format, std::size_t points,
+                        std::size_t bytes_per_point)
 {
     Payload payload;
-    payload.name = "cloud";
-    payload.format = kFormatCloud;
+    payload.name = name;
+    payload.format = format;
+    payload.per_point = true;
     payload.points = points;
-    payload.bytes = points * sizeof(CloudPoint);
+    payload.bytes = points * bytes_per_point;
     return payload;
+}
+
+} // namespace
+
+Payload cloudPayload(std::size_t points)
+{
+    return perPointPayload("cloud", kFormatCloud, points, sizeof(CloudPoint));
+}
+
+Payload cloudColourPayload(std::size_t points)
+{
+    return perPointPayload("cloud_colour", kFormatRgb, points, sizeof(CloudColour));
+}
+
+Payload colourPayload(std::string_view name, const cv::Mat& bgr)
+{
+    return imagePayload(name, kFormatRgb, bgr);
 }
 
 uint64_t matBytes(const cv::Mat& mat)
@@ -46,12 +67,31 @@ void appendMatBytes(std::string& out, const cv::Mat& mat)
         out.append(reinterpret_cast<const char*>(mat.ptr(row)), row_bytes);
 }
 
+void appendBgrAsRgb(std::string& out, const cv::Mat& bgr)
+{
+    if (bgr.empty())
+        return;
+    const std::size_t row_bytes = static_cast<std::size_t>(bgr.cols) * 3;
+    std::size_t at = out.size();
+    out.resize(at + row_bytes * static_cast<std::size_t>(bgr.rows));
+    for (int row = 0; row < bgr.rows; ++row) {
+        const uint8_t* in = bgr.ptr<uint8_t>(row);
+        char* dst = out.data() + at;
+        for (std::size_t i = 0; i < row_bytes; i += 3) {
+            dst[i] = static_cast<char>(in[i + 2]);
+            dst[i + 1] = static_cast<char>(in[i + 1]);
+            dst[i + 2] = static_cast<char>(in[i]);
+        }
+        at += row_bytes;
+    }
+}
+
 void appendPayloadJson(std::string& out, const Payload& payload)
 {
     JsonObjectWriter object(out);
     object.field("name", payload.name);
     object.field("format", payload.format);
-    if (payload.format == kFormatCloud) {
+    if (payload.per_point) {
         object.field("points", static_cast<uint64_t>(payload.points));
     } else {
         object.field("width", payload.width);
@@ -91,6 +131,7 @@ std::optional<Payload> payloadFromJson(const Json& header)
     payload.format = header.value("format", std::string());
     payload.width = header.value("width", 0);
     payload.height = header.value("height", 0);
+    payload.per_point = header.contains("points");
     payload.points = header.value("points", std::size_t{0});
     payload.bytes = *bytes;
     if (const auto stamp = header.find("stamp_ns"); stamp != header.end())
@@ -109,6 +150,15 @@ bool imagePayloadAddsUp(const Payload& payload, int type)
 bool cloudPayloadAddsUp(const Payload& payload)
 {
     return payload.bytes == payload.points * sizeof(CloudPoint);
+}
+
+bool colourPayloadAddsUp(const Payload& payload)
+{
+    if (payload.per_point)
+        return payload.bytes == payload.points * sizeof(CloudColour);
+    if (payload.width == 0 && payload.height == 0)
+        return payload.bytes == 0;
+    return imagePayloadAddsUp(payload, CV_8UC3);
 }
 
 } // namespace stereod

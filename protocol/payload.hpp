@@ -36,13 +36,18 @@ inline constexpr std::string_view kFormatDisparityPx = "f32_px";       // float3
 inline constexpr std::string_view kFormatGray = "u8_gray";             // uint8 intensity
 inline constexpr std::string_view kFormatConfidence = "u8_confidence"; // 0 = no disparity
 inline constexpr std::string_view kFormatCloud = "f32_xyzi";           // CloudPoint, 16 bytes
+// Colour, 3 bytes a pixel or a point in the order red, green, blue.
+inline constexpr std::string_view kFormatRgb = "u8_rgb";
+static_assert(sizeof(CloudColour) == 3, "a cloud colour travels as three bytes r, g, b");
 
-// One payload's descriptor. Images have a width and a height; the cloud has points.
+// One payload's descriptor. Images have a width and a height; the cloud and its colours
+// have points.
 struct Payload {
     std::string name; // a snapshot item's name (protocol/request.hpp), raw_left, ...
     std::string format;
     int width = 0;
     int height = 0;
+    bool per_point = false; // a cloud or its colours: `points`, no width and height
     std::size_t points = 0;
     std::size_t bytes = 0;
     std::optional<int64_t> stamp_ns; // capture time of a raw frame
@@ -54,11 +59,21 @@ Payload imagePayload(std::string_view name, std::string_view format, const cv::M
 // The descriptor of `points` cloud points.
 Payload cloudPayload(std::size_t points);
 
+// The descriptor of the colours of `points` cloud points (cloud_colour, u8_rgb).
+Payload cloudColourPayload(std::size_t points);
+
+// The descriptor of a BGR colour image sent as u8_rgb (an empty image: 0 bytes).
+Payload colourPayload(std::string_view name, const cv::Mat& bgr);
+
 // Bytes of `mat`'s pixels; 0 for an empty image.
 uint64_t matBytes(const cv::Mat& mat);
 
 // Appends `mat`'s pixels row by row, without padding.
 void appendMatBytes(std::string& out, const cv::Mat& mat);
+
+// Appends a CV_8UC3 BGR image's pixels as u8_rgb (red first), row by row; nothing for an
+// empty image. Allocates nothing once `out` has the capacity.
+void appendBgrAsRgb(std::string& out, const cv::Mat& bgr);
 
 // Appends the descriptor as a JSON object: name, format, then points and bytes (the
 // cloud) or width, height and bytes (an image), then stamp_ns when there is one.
@@ -80,5 +95,9 @@ bool imagePayloadAddsUp(const Payload& payload, int type);
 
 // Whether a cloud payload has 16 bytes per point.
 bool cloudPayloadAddsUp(const Payload& payload);
+
+// Whether a u8_rgb payload has 3 bytes per pixel (an image) or per point (cloud colours);
+// an empty image (0 x 0, 0 bytes: a grey source) adds up.
+bool colourPayloadAddsUp(const Payload& payload);
 
 } // namespace stereod

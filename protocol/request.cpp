@@ -147,14 +147,15 @@ ParseResult parseSubscribe(const Json& request, const std::optional<Json>& id)
         return Request{subscribe, id};
     if (subscribe.stream != StreamKind::Raw)
         return badRequest("\"with\" applies to the raw stream only", id);
-    static const std::vector<std::string> known_with = {snapshotItemName(SnapshotItem::Depth),
-                                                        snapshotItemName(SnapshotItem::Cloud)};
+    static const std::vector<std::string> known_with = {
+        snapshotItemName(SnapshotItem::Depth), snapshotItemName(SnapshotItem::Cloud), "colour"};
     std::vector<std::string> with;
     if (std::optional<std::string> problem = readNames(request, "with", known_with, with))
         return badRequest(std::move(*problem), id);
     for (const std::string& item : with) {
         subscribe.with_depth = subscribe.with_depth || item == known_with[0];
         subscribe.with_cloud = subscribe.with_cloud || item == known_with[1];
+        subscribe.with_colour = subscribe.with_colour || item == known_with[2];
     }
     return Request{subscribe, id};
 }

@@ -28,9 +28,24 @@ const char* streamName(StreamKind stream) noexcept;
 
 // RawLeft, RawRight: the pair's frames as captured, before rectification.
 // Confidence: the matcher's per-pixel confidence (u8, 0 = no disparity, 1..255).
-enum class SnapshotItem { Depth, Disparity, Left, Cloud, RawLeft, RawRight, Confidence };
+// LeftColour, CloudColour, RawLeftColour, RawRightColour: the colour beside the grey
+// (u8_rgb): the rectified left image, one colour per cloud point, the frames as captured;
+// empty (0 x 0, no point) where the camera kept no colour.
+enum class SnapshotItem {
+    Depth,
+    Disparity,
+    Left,
+    Cloud,
+    RawLeft,
+    RawRight,
+    Confidence,
+    LeftColour,
+    CloudColour,
+    RawLeftColour,
+    RawRightColour,
+};
 // In the order `hello` lists them.
-inline constexpr NameTable<SnapshotItem, 7> kSnapshotItemNames{{{
+inline constexpr NameTable<SnapshotItem, 11> kSnapshotItemNames{{{
     {SnapshotItem::Left, "left"},
     {SnapshotItem::Disparity, "disparity"},
     {SnapshotItem::Depth, "depth"},
@@ -38,6 +53,10 @@ inline constexpr NameTable<SnapshotItem, 7> kSnapshotItemNames{{{
     {SnapshotItem::RawLeft, "raw_left"},
     {SnapshotItem::RawRight, "raw_right"},
     {SnapshotItem::Confidence, "confidence"},
+    {SnapshotItem::LeftColour, "left_colour"},
+    {SnapshotItem::CloudColour, "cloud_colour"},
+    {SnapshotItem::RawLeftColour, "raw_left_colour"},
+    {SnapshotItem::RawRightColour, "raw_right_colour"},
 }}};
 static_assert(kSnapshotItemNames.wellFormed());
 const char* snapshotItemName(SnapshotItem item) noexcept;
@@ -59,11 +78,13 @@ struct SnapshotRequest {
 struct SubscribeRequest {
     StreamKind stream = StreamKind::Readings;
     std::optional<double> max_hz; // > 0 and finite when present
-    // The raw stream only (`"with": ["depth", "cloud"]`): each raw event also carries the
-    // pair's depth (f32_m) and point cloud (f32_xyzi), so a recorder gets a pair and its
-    // results in one event, under one frame number.
+    // The raw stream only (`"with": ["depth", "cloud", "colour"]`): each raw event also
+    // carries the pair's depth (f32_m) and point cloud (f32_xyzi), so a recorder gets a pair
+    // and its results in one event, under one frame number; with colour, the frames' colour
+    // as captured (raw_left_colour, raw_right_colour) and the cloud's (cloud_colour).
     bool with_depth = false;
     bool with_cloud = false;
+    bool with_colour = false;
 };
 
 struct ReloadRequest {};

@@ -50,6 +50,8 @@ ImageHeader parsePng(std::span<const uint8_t> bytes)
         return header;
     }
     header.size = boundedSize(bigEndian32(bytes, 16), bigEndian32(bytes, 20));
+    // Colour type (after the bit depth): 2 RGB, 3 palette, 6 RGB with alpha; 0 and 4 grey.
+    header.colour = bytes.size() > 25 && (bytes[25] == 2 || bytes[25] == 3 || bytes[25] == 6);
     // The last chunk is IEND: length 0, "IEND", CRC.
     const std::size_t n = bytes.size();
     header.complete = n >= 24 + 12 && bytes[n - 8] == 'I' && bytes[n - 7] == 'E' &&
@@ -87,6 +89,8 @@ ImageHeader parseJpeg(std::span<const uint8_t> bytes)
                 return header;
             }
             header.size = boundedSize(bigEndian16(bytes, at + 7), bigEndian16(bytes, at + 5));
+            // Components after the width: 1 grey, 3 YCbCr (or RGB), 4 CMYK.
+            header.colour = at + 9 < bytes.size() && bytes[at + 9] >= 3;
             break;
         }
         if (marker == 0xDA || marker == 0xD9 || length < 2) {

@@ -27,6 +27,7 @@ struct ImageHeader {
     ImageFormat format = ImageFormat::Other;
     cv::Size size;        // from the header; empty when unknown (Other, or unreadable)
     bool complete = true; // PNG ends with IEND, JPEG with its EOI marker
+    bool colour = false;  // PNG of colour type RGB, RGBA or palette; JPEG of 3 or more components
     std::string problem;  // a PNG or JPEG whose header cannot be read: why
 };
 

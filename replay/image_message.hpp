@@ -1,6 +1,7 @@
 #pragma once
 // A bag's camera image as the pipeline takes it: one serialized sensor_msgs/msg/Image
-// (CDR, ros2/messages.hpp) decoded into 8-bit grayscale, after every size the
+// (CDR, ros2/messages.hpp) decoded into 8-bit grayscale (and, on request, its colour as
+// BGR beside it), after every size the
 // message declares has been checked against the bytes it carries and against the largest
 // frame a replay may have, in 64-bit arithmetic, before anything is allocated or handed
 // to OpenCV. A pure function of its input, so that it is unit-tested and fuzzed on its own
@@ -30,6 +31,13 @@ inline constexpr int64_t kMaxReplayPixels = int64_t{8192} * 8192;
 // or overflow, an image larger than allowed or not of `expected` size (none of these is
 // decoded), and for what OpenCV refuses or cannot allocate.
 bool decodeImageMessage(std::string_view message, cv::Size expected, cv::Mat& out,
+                        std::string& reason) noexcept;
+
+// The same, and the image's colour into `colour` (CV_8UC3, BGR) when its encoding has
+// colour: rgb8, bgr8, rgba8, bgra8, and YUV 4:2:2 (yuv422: UYVY, yuv422_yuy2: YUYV; BT.601
+// limited range, their grey the luma plane; the width must be even); `colour` is released
+// for mono8. The grey is exactly what the call above gives.
+bool decodeImageMessage(std::string_view message, cv::Size expected, cv::Mat& out, cv::Mat& colour,
                         std::string& reason) noexcept;
 
 } // namespace stereod

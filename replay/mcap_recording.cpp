@@ -100,13 +100,15 @@ void McapRecordingWriter::writeImage(uint16_t channel, const cv::Mat& image, int
     const auto width = static_cast<uint32_t>(image.cols);
     const auto height = static_cast<uint32_t>(image.rows);
     const ros2::Header header{ros2::Time::fromNs(stamp_ns), frame_id};
+    // Grey as mono8, colour as captured: OpenCV's BGR order is ROS's bgr8.
+    const char* encoding = image.type() == CV_8UC3 ? "bgr8" : "mono8";
+    const auto step = static_cast<uint32_t>(image.cols * image.elemSize());
+    const std::size_t bytes = image.total() * image.elemSize();
     if (image.isContinuous()) {
-        ros2::serializeImage(header, height, width, "mono8", width, image.data, image.total(),
-                             message_);
+        ros2::serializeImage(header, height, width, encoding, step, image.data, bytes, message_);
     } else {
         const cv::Mat packed = image.clone();
-        ros2::serializeImage(header, height, width, "mono8", width, packed.data, packed.total(),
-                             message_);
+        ros2::serializeImage(header, height, width, encoding, step, packed.data, bytes, message_);
     }
     const auto t = static_cast<uint64_t>(stamp_ns);
     writer_.write(channel, t, t, message_, static_cast<uint32_t>(pairs_));
@@ -115,10 +117,12 @@ void McapRecordingWriter::writeImage(uint16_t channel, const cv::Mat& image, int
 uint64_t McapRecordingWriter::write(const cv::Mat& left, const cv::Mat& right,
                                     int64_t left_stamp_ns, int64_t right_stamp_ns)
 {
-    if (left.type() != CV_8UC1 || right.type() != CV_8UC1 || left.size() != right.size() ||
-        left.empty()) {
-        throw mcap::McapError(writer_.path() +
-                              ": a pair must be two 8-bit grayscale images of one size");
+    const auto eightBit = [](const cv::Mat& image) {
+        return image.type() == CV_8UC1 || image.type() == CV_8UC3;
+    };
+    if (!eightBit(left) || !eightBit(right) || left.size() != right.size() || left.empty()) {
+        throw mcap::McapError(writer_.path() + ": a pair must be two 8-bit grey or BGR colour "
+                                               "images of one size");
     }
     if (size_.empty()) {
         size_ = left.size();
@@ -424,6 +428,12 @@ bool decodeMcapImage(mcap::Reader& reader, const mcap::MessageRef& ref, cv::Mat&
                      std::string& reason, cv::Size expected)
 {
     return decodeImageMessage(reader.message(ref).data, expected, out, reason);
+}
+
+bool decodeMcapImage(mcap::Reader& reader, const mcap::MessageRef& ref, cv::Mat& out,
+                     cv::Mat& colour, std::string& reason, cv::Size expected)
+{
+    return decodeImageMessage(reader.message(ref).data, expected, out, colour, reason);
 }
 
 } // namespace stereod

@@ -3,7 +3,8 @@
 // what `stereoctl record --out FILE.mcap` writes and `stereod --replay FILE.mcap` reads.
 //
 // Written (profile `ros2`, message encoding `cdr`, schema encoding `ros2msg`):
-//   /stereo/left/image_raw     sensor_msgs/msg/Image, mono8 as captured
+//   /stereo/left/image_raw     sensor_msgs/msg/Image, as captured: mono8, or bgr8 for a
+//                              camera that kept its colour
 //   /stereo/right/image_raw    sensor_msgs/msg/Image
 //   /stereo/left/camera_info   sensor_msgs/msg/CameraInfo, with every pair when the
 //   /stereo/right/camera_info  calibration is known (the right one's p[3] = -fx' * B)
@@ -65,7 +66,8 @@ class McapRecordingWriter {
     // like the pair). The header stamps and frame ids are set here.
     void setCameraInfo(const ros2::CameraInfo& left, const ros2::CameraInfo& right);
 
-    // Appends one pair: two CV_8UC1 images of the same size with their capture times.
+    // Appends one pair: two images of the same size, each CV_8UC1 (mono8) or CV_8UC3 BGR
+    // (bgr8, a colour camera's), with their capture times.
     // Returns its index (0, 1, ...). Throws mcap::McapError (EINVAL for a wrong image).
     uint64_t write(const cv::Mat& left, const cv::Mat& right, int64_t left_stamp_ns,
                    int64_t right_stamp_ns);
@@ -150,11 +152,15 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
                                 const std::string& right_topic);
 
 // Decodes one Image message of the bag into `out` as 8-bit grayscale (mono8 as is,
-// rgb8/bgr8/rgba8/bgra8 converted), of `expected` size when that is not empty
-// (replay/image_message.hpp says what is checked). False, with the reason, for other
-// encodings or bad messages; throws mcap::McapError when the message cannot be read (a
-// chunk that does not decompress).
+// rgb8/bgr8/rgba8/bgra8 converted, yuv422/yuv422_yuy2 their luma), of `expected` size
+// when that is not empty (replay/image_message.hpp says what is checked). False, with the
+// reason, for other encodings or bad messages; throws mcap::McapError when the message
+// cannot be read (a chunk that does not decompress).
 bool decodeMcapImage(mcap::Reader& reader, const mcap::MessageRef& ref, cv::Mat& out,
                      std::string& reason, cv::Size expected = {});
+// The same, and the image's colour into `colour` (BGR) where its encoding has colour
+// (released for mono8).
+bool decodeMcapImage(mcap::Reader& reader, const mcap::MessageRef& ref, cv::Mat& out,
+                     cv::Mat& colour, std::string& reason, cv::Size expected = {});
 
 } // namespace stereod

@@ -394,9 +394,13 @@ void RecordingWriter::writeImage(const std::string& relative_name, const cv::Mat
 uint64_t RecordingWriter::write(const cv::Mat& left, const cv::Mat& right, int64_t left_stamp_ns,
                                 int64_t right_stamp_ns)
 {
-    if (left.empty() || right.empty() || left.type() != CV_8UC1 || right.type() != CV_8UC1)
+    const auto eightBit = [](const cv::Mat& image) {
+        return image.type() == CV_8UC1 || image.type() == CV_8UC3;
+    };
+    if (left.empty() || right.empty() || !eightBit(left) || !eightBit(right))
         throw RecordingError(EINVAL, dir_ + ": pair " + std::to_string(next_index_) +
-                                         ": images must be non-empty 8-bit grayscale (CV_8UC1)");
+                                         ": images must be non-empty 8-bit grey (CV_8UC1) or "
+                                         "BGR colour (CV_8UC3)");
     if (left.size() != right.size())
         throw RecordingError(EINVAL, dir_ + ": pair " + std::to_string(next_index_) + ": left " +
                                          std::to_string(left.cols) + "x" +

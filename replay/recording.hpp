@@ -93,7 +93,8 @@ class RecordingWriter {
     RecordingWriter(const RecordingWriter&) = delete;
     RecordingWriter& operator=(const RecordingWriter&) = delete;
 
-    // Appends one pair: two CV_8UC1 images of the same size (the size of the first pair)
+    // Appends one pair: two images of the same size (the size of the first pair), each
+    // CV_8UC1 or CV_8UC3 BGR (a colour camera's: written as a colour PNG),
     // with their capture times. Returns the pair's index (0, 1, ...). Throws
     // RecordingError (EINVAL for a wrong image, EIO when writing fails); a failed pair
     // leaves no row behind.

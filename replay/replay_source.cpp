@@ -14,6 +14,7 @@
 #include <fcntl.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <spdlog/details/console_globals.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
@@ -41,7 +42,8 @@ std::string sizeText(cv::Size size)
 // `printed` instead of letting it reach stderr beside the log, unlimited, once per frame.
 // fd 2 is pointed at a pipe for the call, under spdlog's console mutex, so that no log
 // line of another thread goes into the pipe meanwhile. Throws what imdecode throws.
-void decodeQuietly(const std::vector<uint8_t>& bytes, cv::Mat& out, std::string& printed)
+void decodeQuietly(const std::vector<uint8_t>& bytes, cv::Mat& out, std::string& printed,
+                   int flags = cv::IMREAD_GRAYSCALE)
 {
     // Non-blocking on both ends: a library printing more than the pipe holds loses the
     // rest rather than blocking this thread, which reads only after the call.
@@ -55,14 +57,14 @@ void decodeQuietly(const std::vector<uint8_t>& bytes, cv::Mat& out, std::string&
     const cv::Mat encoded(1, static_cast<int>(bytes.size()), CV_8UC1,
                           const_cast<uint8_t*>(bytes.data()));
     if (pipe_fds[0] < 0) {
-        out = cv::imdecode(encoded, cv::IMREAD_GRAYSCALE);
+        out = cv::imdecode(encoded, flags);
         return;
     }
     std::lock_guard console(spdlog::details::console_mutex::mutex());
     std::fflush(stderr);
     const UniqueFd saved(::dup(STDERR_FILENO));
     if (!saved || ::dup2(pipe_fds[1], STDERR_FILENO) < 0) {
-        out = cv::imdecode(encoded, cv::IMREAD_GRAYSCALE);
+        out = cv::imdecode(encoded, flags);
         return;
     }
     struct Restore {
@@ -75,7 +77,7 @@ void decodeQuietly(const std::vector<uint8_t>& bytes, cv::Mat& out, std::string&
     };
     {
         const Restore restore{saved};
-        out = cv::imdecode(encoded, cv::IMREAD_GRAYSCALE);
+        out = cv::imdecode(encoded, flags);
     }
     char chunk[512];
     for (;;) {
@@ -99,9 +101,12 @@ constexpr std::size_t kMaxImageFileBytes = 64u << 20;
 // short. On failure says why, with the errno: ENOENT when missing, EINVAL for a file
 // that is no usable image.
 bool decodeImage(const std::string& path, cv::Size expected, const std::string& expected_what,
-                 std::vector<uint8_t>& bytes, cv::Mat& out, std::string& reason, int& code)
+                 std::vector<uint8_t>& bytes, cv::Mat& out, std::string& reason, int& code,
+                 cv::Mat* colour = nullptr)
 {
     out.release();
+    if (colour != nullptr)
+        colour->release();
     code = readImageFile(path, kMaxImageFileBytes, bytes, reason);
     if (code != 0)
         return false;
@@ -156,6 +161,17 @@ bool decodeImage(const std::string& path, cv::Size expected, const std::string& 
         out.release();
         return false;
     }
+    // The colour beside the grey, decoded once more: the grey stays exactly the decoder's
+    // own (a JPEG's luma, libpng's grey), as for a grey replay.
+    if (colour != nullptr && header.colour) {
+        try {
+            decodeQuietly(bytes, *colour, printed, cv::IMREAD_COLOR);
+        } catch (const std::exception&) {
+            colour->release();
+        }
+        if (colour->size() != out.size() || colour->type() != CV_8UC3)
+            colour->release();
+    }
     code = 0;
     return true;
 }
@@ -208,10 +224,18 @@ ReplaySource::ReplaySource(ReplayOptions options) : options_(std::move(options))
              " pairs is readable (first: " + first_problem + ")");
         return;
     }
-    pool_ =
-        std::make_unique<FramePool>(2 * std::max<std::size_t>(options_.pool_pairs, 1), frame_size_);
-    spdlog::info("replay: {}: {} pairs of {}{}, {}{}", recording_.dir, recording_.entries.size(),
-                 sizeText(frame_size_), recording_.has_index ? "" : " (plain folder)",
+    // A colour first pair gives the left frames a colour plane (a grey pair later in the
+    // same recording fills it with its grey); the right frames stay grey.
+    const std::size_t pairs = std::max<std::size_t>(options_.pool_pairs, 1);
+    if (left_colour_.empty()) {
+        pool_ = std::make_unique<FramePool>(2 * pairs, frame_size_);
+    } else {
+        pool_ = std::make_unique<FramePool>(pairs, frame_size_);
+        colour_pool_ = std::make_unique<FramePool>(pairs, frame_size_, CV_8UC1, true);
+    }
+    spdlog::info("replay: {}: {} pairs of {}{}{}, {}{}", recording_.dir, recording_.entries.size(),
+                 sizeText(frame_size_), colour_pool_ ? " (left in colour)" : "",
+                 recording_.has_index ? "" : " (plain folder)",
                  options_.pacing == ReplayPacing::Paced ? "paced" : "lockstep",
                  options_.loop ? ", looping" : "");
 }
@@ -219,13 +243,15 @@ ReplaySource::ReplaySource(ReplayOptions options) : options_(std::move(options))
 ReplaySource::~ReplaySource()
 {
     stop();
-    if (pool_ && pool_->inUse() > 0) {
-        // Frames still out (a ring not drained): freeing the pool would leave them
-        // pointing into freed memory. Leaking it is the lesser evil; say so loudly.
-        spdlog::error("replay: {}: destroyed with {} frames still in use; their pool is "
-                      "leaked (drain the ring before destroying the source)",
-                      recording_.dir, pool_->inUse());
-        static_cast<void>(pool_.release());
+    for (std::unique_ptr<FramePool>* pool : {&pool_, &colour_pool_}) {
+        if (*pool && (*pool)->inUse() > 0) {
+            // Frames still out (a ring not drained): freeing the pool would leave them
+            // pointing into freed memory. Leaking it is the lesser evil; say so loudly.
+            spdlog::error("replay: {}: destroyed with {} frames still in use; their pool is "
+                          "leaked (drain the ring before destroying the source)",
+                          recording_.dir, (*pool)->inUse());
+            static_cast<void>(pool->release());
+        }
     }
 }
 
@@ -390,7 +416,12 @@ bool ReplaySource::decodePair(std::size_t i, BadPair& bad)
         // it is decoded, so the message blamed is the one at fault.
         bad.code = EINVAL;
         try {
-            if (!decodeMcapImage(*bag_, bag_pairs_[i].left, left_image_, bad.reason, frame_size_)) {
+            const bool decoded = options_.keep_colour
+                                     ? decodeMcapImage(*bag_, bag_pairs_[i].left, left_image_,
+                                                       left_colour_, bad.reason, frame_size_)
+                                     : decodeMcapImage(*bag_, bag_pairs_[i].left, left_image_,
+                                                       bad.reason, frame_size_);
+            if (!decoded) {
                 bad.side = kLeft;
                 bad.path = entry.left_path;
                 return false;
@@ -419,7 +450,7 @@ bool ReplaySource::decodePair(std::size_t i, BadPair& bad)
                 ? std::string()
                 : "the replay is " + sizeText(frame_size_) + " (its first readable pair)";
         if (!decodeImage(entry.left_path, frame_size_, replay_size, file_bytes_, left_image_,
-                         bad.reason, bad.code)) {
+                         bad.reason, bad.code, options_.keep_colour ? &left_colour_ : nullptr)) {
             bad.side = kLeft;
             bad.path = entry.left_path;
             return false;
@@ -449,10 +480,10 @@ void ReplaySource::reportBadPair(std::size_t i, const BadPair& bad)
     camera_error_[bad.side] = bad.path + ": " + bad.reason;
 }
 
-FrameHandle ReplaySource::acquireFrame(bool wait)
+FrameHandle ReplaySource::acquireFrame(FramePool& pool, bool wait)
 {
     for (;;) {
-        FrameHandle frame = pool_->acquire();
+        FrameHandle frame = pool.acquire();
         if (frame || !wait)
             return frame;
         // Lockstep with every buffer held downstream (pool_pairs smaller than the ring
@@ -550,9 +581,9 @@ void ReplaySource::run() noexcept
             // Frames from the pool: lock-free; lockstep waits for a free one instead of
             // dropping the pair.
             StereoPair pair;
-            pair.left = acquireFrame(!paced);
+            pair.left = acquireFrame(colour_pool_ ? *colour_pool_ : *pool_, !paced);
             if (pair.left)
-                pair.right = acquireFrame(!paced);
+                pair.right = acquireFrame(*pool_, !paced);
             if (!pair.right) {
                 if (stop_requested_.load(std::memory_order_acquire))
                     return;
@@ -562,6 +593,12 @@ void ReplaySource::run() noexcept
             // Same size and type: copyTo() writes into the pooled buffers, no allocation.
             left_image_.copyTo(pair.left->image);
             right_image_.copyTo(pair.right->image);
+            if (!pair.left->colour.empty()) {
+                if (left_colour_.empty())
+                    cv::cvtColor(left_image_, pair.left->colour, cv::COLOR_GRAY2BGR);
+                else
+                    left_colour_.copyTo(pair.left->colour);
+            }
             const uint64_t number = pass * count + i;
             pair.index = number;
             pair.left->sequence = number;

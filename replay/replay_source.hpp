@@ -79,6 +79,10 @@ struct ReplayOptions {
     // held by the worker). At least ring capacity + 2, or paced replay drops pairs for
     // want of buffers (lockstep waits for them instead).
     std::size_t pool_pairs = 8;
+    // Keep the left camera's colour where the recording has it (colour PNG/JPEG files,
+    // rgb8/bgr8/yuv422 bag images): Frame::colour, at the cost of a second decode of each
+    // colour left file. Grey recordings are unaffected either way.
+    bool keep_colour = true;
 };
 
 class ReplaySource final : public FrameSource {
@@ -140,9 +144,9 @@ class ReplaySource final : public FrameSource {
     // warns once when the stamps step back.
     void planSchedule();
     void reportBadPair(std::size_t i, const BadPair& bad);
-    // Takes a free frame; with `wait` (lockstep) waits for one, and gives an empty handle
-    // only when stopping.
-    FrameHandle acquireFrame(bool wait);
+    // Takes a free frame of `pool`; with `wait` (lockstep) waits for one, and gives an empty
+    // handle only when stopping.
+    FrameHandle acquireFrame(FramePool& pool, bool wait);
     // Sleeps until CLOCK_MONOTONIC reaches `deadline_ns` or stop() is called; false when
     // stopping.
     bool sleepUntil(int64_t deadline_ns);
@@ -167,16 +171,18 @@ class ReplaySource final : public FrameSource {
     // When each pair is due, in ns after the pass's first pair: the recorded spacing,
     // except that a stamp stepping back counts as one period (planSchedule()).
     std::vector<int64_t> schedule_ns_;
-    int64_t period_ns_ = 0; // the mean recorded step forward (or the nominal rate's)
-    int open_error_ = 0;    // negative errno when nothing is readable
-    std::unique_ptr<FramePool> pool_;
+    int64_t period_ns_ = 0;           // the mean recorded step forward (or the nominal rate's)
+    int open_error_ = 0;              // negative errno when nothing is readable
+    std::unique_ptr<FramePool> pool_; // grey frames: the right's, and the left's
+    std::unique_ptr<FramePool> colour_pool_; // left frames with a colour plane, or none
 
     // Replay thread only (the controlling thread touches them only while it is not running).
     std::vector<uint8_t> warned_; // per entry and side: already logged
     cv::Mat left_image_;          // last decoded images (imdecode's buffers)
     cv::Mat right_image_;
-    std::vector<uint8_t> file_bytes_;            // the image file being decoded, capacity kept
-    uint64_t next_pass_ = 0;                     // loops continue the numbering after a restart
+    cv::Mat left_colour_;             // the left image's colour (BGR); empty when it has none
+    std::vector<uint8_t> file_bytes_; // the image file being decoded, capacity kept
+    uint64_t next_pass_ = 0;          // loops continue the numbering after a restart
     std::array<int64_t, 32> recent_stamps_ns_{}; // delivery times, for the measured fps
     std::size_t recent_count_ = 0;
 

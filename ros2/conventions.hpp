@@ -29,6 +29,26 @@ void depthWithNan(const cv::Mat& depth_m, std::vector<float>& out);
 // `disparity` (CV_32FC1, px, invalid = +inf) with min_disparity - 1 for invalid.
 void disparityForRos(const cv::Mat& disparity, float min_disparity, std::vector<float>& out);
 
+// The rectified left image as a ROS Image's pixels: the colour (CV_8UC3, BGR) converted
+// to rgb8 into `out` when the result has it, else the grey (mono8) copied. Returns the
+// encoding, "rgb8" or "mono8".
+const char* leftImageForRos(const DepthResult& result, cv::Mat& out);
+
+// A cloud colour as PointCloud2's `rgb` field carries it (PCL's and RViz's convention):
+// 0x00RRGGBB, its bits read as a float32.
+float packedRgb(CloudColour colour) noexcept;
+
+// Every `step`-th point of the cloud (from the first) into `points`, and when the result
+// has its colours, theirs into `colours` (else `colours` is cleared): the subsampled cloud
+// the live view and ROS 2 send.
+void subsampleCloud(const DepthResult& result, int step, std::vector<CloudPoint>& points,
+                    std::vector<CloudColour>& colours);
+
+// `points` with their `colours` interleaved as x, y, z, intensity, rgb float32 (20 bytes a
+// point; rgb as packedRgb()), the data of a PointCloud2 with those five fields.
+void xyziRgbCloud(const std::vector<CloudPoint>& points, const std::vector<CloudColour>& colours,
+                  std::vector<float>& out);
+
 // The CameraInfo of the rectified left (or right) camera, stamped `stamp_ns` (on the
 // clock the caller chose) in its optical frame.
 CameraInfo rectifiedCameraInfo(const RectifiedGeometry& geometry, bool right, int64_t stamp_ns);

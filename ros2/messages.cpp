@@ -344,18 +344,41 @@ void serializePointCloud2(const Header& header, uint32_t height, uint32_t width,
     w.put(static_cast<uint8_t>(is_dense ? 1 : 0));
 }
 
+namespace {
+
+// The service's cloud: x, y, z, intensity and, with `rgb`, the packed colour, float32 each.
+void serializeFloatCloud(const Header& header, const float* values, std::size_t points, bool rgb,
+                         std::string& out)
+{
+    static const std::vector<PointField> xyzi = {{"x", 0, PointField::FLOAT32, 1},
+                                                 {"y", 4, PointField::FLOAT32, 1},
+                                                 {"z", 8, PointField::FLOAT32, 1},
+                                                 {"intensity", 12, PointField::FLOAT32, 1}};
+    static const std::vector<PointField> xyzirgb = [] {
+        std::vector<PointField> fields = xyzi;
+        fields.push_back({"rgb", 16, PointField::FLOAT32, 1});
+        return fields;
+    }();
+    const std::vector<PointField>& fields = rgb ? xyzirgb : xyzi;
+    const auto point_step = static_cast<uint32_t>(fields.size() * sizeof(float));
+    const auto width = static_cast<uint32_t>(points);
+    // Dense: the cloud holds only points with a depth, none NaN.
+    serializePointCloud2(header, 1, width, fields, point_step, width * point_step, values,
+                         points * point_step, true, out);
+}
+
+} // namespace
+
 void serializeXyziCloud(const Header& header, const float* xyzi, std::size_t points,
                         std::string& out)
 {
-    static const std::vector<PointField> fields = {{"x", 0, PointField::FLOAT32, 1},
-                                                   {"y", 4, PointField::FLOAT32, 1},
-                                                   {"z", 8, PointField::FLOAT32, 1},
-                                                   {"intensity", 12, PointField::FLOAT32, 1}};
-    constexpr uint32_t kPointStep = 4 * sizeof(float);
-    const auto width = static_cast<uint32_t>(points);
-    // Dense: the cloud holds only points with a depth, none NaN.
-    serializePointCloud2(header, 1, width, fields, kPointStep, width * kPointStep, xyzi,
-                         points * kPointStep, true, out);
+    serializeFloatCloud(header, xyzi, points, false, out);
+}
+
+void serializeXyziRgbCloud(const Header& header, const float* xyzirgb, std::size_t points,
+                           std::string& out)
+{
+    serializeFloatCloud(header, xyzirgb, points, true, out);
 }
 
 ImageView parseImage(std::string_view message)

@@ -156,6 +156,10 @@ void serializePointCloud2(const Header& header, uint32_t height, uint32_t width,
 // `xyzi` holding them in that order: the service's point cloud.
 void serializeXyziCloud(const Header& header, const float* xyzi, std::size_t points,
                         std::string& out);
+// The same with a fifth float32 field `rgb` (0x00RRGGBB's bits, PCL's packing; point_step
+// 20), `xyzirgb` holding the five values of each point: the service's coloured cloud.
+void serializeXyziRgbCloud(const Header& header, const float* xyzirgb, std::size_t points,
+                           std::string& out);
 
 // Parsers: take the whole message (encapsulation header first). Only little-endian XCDR1
 // is accepted (what ROS 2 writes); big-endian or XCDR2 payloads are refused by name.

@@ -157,7 +157,7 @@ void Ros2Publisher::offerFrame(const DepthResult& r, int64_t stamp_realtime_ns, 
         m.depth_m.release();
         m.disparity.release();
         if (wanted(kImageChannel))
-            r.left_rectified.copyTo(m.left);
+            m.left_encoding = leftImageForRos(r, m.left);
         if (wanted(kDepthChannel))
             copyTrustedDepth(r, depth_valid, m.depth_m);
         if (wanted(kDisparityChannel))
@@ -165,11 +165,9 @@ void Ros2Publisher::offerFrame(const DepthResult& r, int64_t stamp_realtime_ns, 
         m.min_disparity = static_cast<float>(range.min_disparity);
         m.max_disparity = static_cast<float>(range.min_disparity + range.num_disparities);
         m.cloud.clear();
-        if (wanted(kPointsChannel) && depth_valid) {
-            const auto step = static_cast<std::size_t>(std::max(1, settings_.points_step));
-            for (std::size_t i = 0; i < r.cloud.size(); i += step)
-                m.cloud.push_back(r.cloud[i]);
-        }
+        m.cloud_colour.clear();
+        if (wanted(kPointsChannel) && depth_valid)
+            subsampleCloud(r, settings_.points_step, m.cloud, m.cloud_colour);
         m.reading = r.reading;
         m.reading_json.assign(reading_json);
         m.pose = pose;
@@ -308,8 +306,8 @@ void Ros2Publisher::publishFrame(const Mailbox& work, Scratch& scratch, int64_t 
 
     if (!work.left.empty() && due(kImageChannel)) {
         sensor_msgs_msg_dds__Image_ image{};
-        fillImage(image, stamp, kLeftOpticalFrame, work.left, "mono8",
-                  static_cast<uint32_t>(work.left.cols), work.left.data);
+        fillImage(image, stamp, kLeftOpticalFrame, work.left, work.left_encoding,
+                  static_cast<uint32_t>(work.left.cols * work.left.elemSize()), work.left.data);
         countWrite(dds_write(w[kImageChannel], &image));
     }
     if (!work.depth_m.empty() && due(kDepthChannel)) {
@@ -337,21 +335,32 @@ void Ros2Publisher::publishFrame(const Mailbox& work, Scratch& scratch, int64_t 
     }
     if (due(kPointsChannel)) {
         static_assert(sizeof(CloudPoint) == 4 * sizeof(float));
-        std::array<sensor_msgs_msg_dds__PointField_, 4> fields = {{
+        // With colours, a fifth field `rgb` (PCL's packed float); the points interleaved.
+        const bool coloured =
+            !work.cloud_colour.empty() && work.cloud_colour.size() == work.cloud.size();
+        std::array<sensor_msgs_msg_dds__PointField_, 5> fields = {{
             {borrow("x"), 0, PointField::FLOAT32, 1},
             {borrow("y"), 4, PointField::FLOAT32, 1},
             {borrow("z"), 8, PointField::FLOAT32, 1},
             {borrow("intensity"), 12, PointField::FLOAT32, 1},
+            {borrow("rgb"), 16, PointField::FLOAT32, 1},
         }};
+        const uint32_t field_count = coloured ? 5 : 4;
+        const uint32_t point_step = coloured ? 5 * sizeof(float) : sizeof(CloudPoint);
+        const void* data = work.cloud.data();
+        if (coloured) {
+            xyziRgbCloud(work.cloud, work.cloud_colour, scratch.cloud_rgb);
+            data = scratch.cloud_rgb.data();
+        }
         sensor_msgs_msg_dds__PointCloud2_ cloud{};
         fillHeader(cloud.header, stamp, kLeftOpticalFrame);
         cloud.height = 1;
         cloud.width = static_cast<uint32_t>(work.cloud.size());
-        cloud.fields = {4, 4, fields.data(), false};
+        cloud.fields = {field_count, field_count, fields.data(), false};
         cloud.is_bigendian = false;
-        cloud.point_step = sizeof(CloudPoint);
-        cloud.row_step = static_cast<uint32_t>(sizeof(CloudPoint) * work.cloud.size());
-        cloud.data = borrowBytes(work.cloud.data(), sizeof(CloudPoint) * work.cloud.size());
+        cloud.point_step = point_step;
+        cloud.row_step = static_cast<uint32_t>(point_step * work.cloud.size());
+        cloud.data = borrowBytes(data, point_step * work.cloud.size());
         cloud.is_dense = true;
         countWrite(dds_write(w[kPointsChannel], &cloud));
     }

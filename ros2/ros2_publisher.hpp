@@ -118,7 +118,9 @@ class Ros2Publisher {
         bool frame = false;
         int64_t stamp_realtime_ns = 0; // the pair's capture time, CLOCK_REALTIME
         cv::Mat left, depth_m, disparity;
+        const char* left_encoding = "mono8"; // "rgb8" where the left camera has colour
         std::vector<CloudPoint> cloud;
+        std::vector<CloudColour> cloud_colour; // one per cloud point, or none (grey)
         float min_disparity = 0.0f;
         float max_disparity = 0.0f;
         Reading reading;
@@ -133,6 +135,7 @@ class Ros2Publisher {
     struct Scratch {
         std::array<int64_t, kRos2ChannelCount> last_sent_ns{}; // per channel, CLOCK_MONOTONIC
         std::vector<float> depth, disparity;
+        std::vector<float> cloud_rgb; // x, y, z, intensity, rgb per point
     };
     struct Writers;
 

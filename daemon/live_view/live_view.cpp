@@ -316,7 +316,7 @@ void LiveView::onFrame(const PublishedFrame& frame, std::string_view reading_jso
         m.frame = true;
         m.stamp_ns = stamp_ns;
         if (subscribed(kLeftImage))
-            r.left_rectified.copyTo(m.left);
+            m.left_encoding = ros2::leftImageForRos(r, m.left);
         if (subscribed(kDepth))
             ros2::copyTrustedDepth(r, frame.depth_valid, m.depth_m);
         if (subscribed(kConfidence))
@@ -327,11 +327,9 @@ void LiveView::onFrame(const PublishedFrame& frame, std::string_view reading_jso
         m.max_disparity =
             static_cast<float>(frame.stats.range.min_disparity + frame.stats.range.num_disparities);
         m.cloud.clear();
-        if (subscribed(kPoints) && frame.depth_valid) {
-            const auto step = static_cast<std::size_t>(std::max(1, settings_.points_step));
-            for (std::size_t i = 0; i < r.cloud.size(); i += step)
-                m.cloud.push_back(r.cloud[i]);
-        }
+        m.cloud_colour.clear();
+        if (subscribed(kPoints) && frame.depth_valid)
+            ros2::subsampleCloud(r, settings_.points_step, m.cloud, m.cloud_colour);
     }
     wake_.notify_one();
 }
@@ -356,6 +354,7 @@ void LiveView::feed()
     std::string message;
     std::vector<float> depth_nan;
     std::vector<float> disparity_ros;
+    std::vector<float> cloud_rgb;
     // Per channel: the least time between two messages, and when the last one went.
     std::array<int64_t, kChannelEnd> interval_ns{};
     std::array<int64_t, kChannelEnd> last_sent_ns{};
@@ -395,6 +394,8 @@ void LiveView::feed()
                 std::swap(work.confidence, mailbox_.confidence);
                 std::swap(work.disparity, mailbox_.disparity);
                 std::swap(work.cloud, mailbox_.cloud);
+                std::swap(work.cloud_colour, mailbox_.cloud_colour);
+                work.left_encoding = mailbox_.left_encoding;
                 work.stamp_ns = mailbox_.stamp_ns;
                 work.min_disparity = mailbox_.min_disparity;
                 work.max_disparity = mailbox_.max_disparity;
@@ -406,8 +407,10 @@ void LiveView::feed()
             const int64_t t = work.stamp_ns;
             const ros2::Header left_header{ros2::Time::fromNs(t), kLeftOpticalFrame};
             if (!work.left.empty() && due(kLeftImage)) {
-                ros2::serializeImage(left_header, work.left.rows, work.left.cols, "mono8",
-                                     work.left.cols, work.left.data, work.left.total(), message);
+                const auto step = static_cast<uint32_t>(work.left.cols * work.left.elemSize());
+                ros2::serializeImage(left_header, work.left.rows, work.left.cols,
+                                     work.left_encoding, step, work.left.data,
+                                     work.left.total() * work.left.elemSize(), message);
                 send(kLeftImage, t, message);
             }
             if (!work.depth_m.empty() && due(kDepth)) {
@@ -441,9 +444,15 @@ void LiveView::feed()
             }
             if (due(kPoints)) {
                 static_assert(sizeof(CloudPoint) == 4 * sizeof(float));
-                ros2::serializeXyziCloud(left_header,
-                                         reinterpret_cast<const float*>(work.cloud.data()),
-                                         work.cloud.size(), message);
+                if (!work.cloud_colour.empty() && work.cloud_colour.size() == work.cloud.size()) {
+                    ros2::xyziRgbCloud(work.cloud, work.cloud_colour, cloud_rgb);
+                    ros2::serializeXyziRgbCloud(left_header, cloud_rgb.data(), work.cloud.size(),
+                                                message);
+                } else {
+                    ros2::serializeXyziCloud(left_header,
+                                             reinterpret_cast<const float*>(work.cloud.data()),
+                                             work.cloud.size(), message);
+                }
                 send(kPoints, t, message);
             }
             for (const bool right : {false, true}) {

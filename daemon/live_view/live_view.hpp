@@ -140,8 +140,10 @@ class LiveView final : public PublishObserver {
     struct Mailbox {
         bool frame = false; // the frame channels below hold a result not sent yet
         cv::Mat left, depth_m, confidence, disparity;
+        const char* left_encoding = "mono8"; // "rgb8" where the left camera has colour
         std::vector<CloudPoint> cloud;
-        int64_t stamp_ns = 0; // the pair's realtime stamp
+        std::vector<CloudColour> cloud_colour; // one per cloud point, or none (grey)
+        int64_t stamp_ns = 0;                  // the pair's realtime stamp
         float min_disparity = 0.0f;
         float max_disparity = 0.0f;
     };

@@ -260,6 +260,10 @@ class Snapshot(Dict[str, np.ndarray]):
     - ``left``, ``raw_left``, ``raw_right``: uint8, H x W;
     - ``cloud``: float32, N x 4 (x, y, z in metres in the rectified left camera:
       x right, y down, z forward; intensity 0..255);
+    - ``left_colour``, ``raw_left_colour``, ``raw_right_colour``: uint8, H x W x 3, red
+      first (0 x 0 x 3 when the camera keeps no colour);
+    - ``cloud_colour``: uint8, N x 3, red first, one row per ``cloud`` point in its order
+      (0 rows for a grey source);
     - other items (e.g. ``confidence``): uint8 H x W for one byte per pixel, else the
       payload's bytes as a flat uint8 array.
     """
@@ -308,6 +312,21 @@ def decode_payload(descriptor: Json, data: Union[bytes, bytearray, memoryview]) 
         if size % 16:
             raise ProtocolError("malformed", f"f32_xyzi payload of {size} bytes is not N x 16")
         return np.frombuffer(data, dtype="<f4").reshape(-1, 4)
+    if fmt == "u8_rgb":
+        # Colour: an image (height x width x 3) or, with ``points``, one colour per cloud
+        # point (N x 3), red first. A grey source sends an empty one.
+        if "points" in descriptor:
+            points = int(descriptor.get("points") or 0)
+            if points * 3 != size:
+                raise ProtocolError(
+                    "malformed", f"u8_rgb payload of {size} bytes is not {points} points x 3")
+            return np.frombuffer(data, dtype=np.uint8).reshape(points, 3)
+        if size == 0:
+            return np.zeros((0, 0, 3), dtype=np.uint8)
+        if width * height * 3 != size:
+            raise ProtocolError(
+                "malformed", f"u8_rgb payload of {size} bytes is not {width}x{height}x3")
+        return np.frombuffer(data, dtype=np.uint8).reshape(height, width, 3)
     if fmt in _FORMATS:
         dtype = np.dtype(_FORMATS[fmt][0])
         if size == 0:
@@ -672,7 +691,8 @@ class Client:
         ``right_stamp_ns``, ``skipped``, ``raw_left``, ``raw_right`` (uint8) and ``header``.
         ``max_hz`` (> 0) lowers the event rate.
 
-        ``results`` (``raw`` only): ``["depth", "cloud"]`` or either; each raw event then
+        ``results`` (``raw`` only): ``["depth", "cloud"]`` or either (and ``"colour"``,
+        the frames' and, with the cloud, the cloud's colour); each raw event then
         also holds that pair's ``depth`` (float32 metres, NaN = none, not rounded to the
         millimetre), ``cloud`` (N x 4 float32) and ``depth_valid``.
 

@@ -98,13 +98,32 @@ TEST(FormatChoice, RefusalNamesWhatWasAskedAndWhatIsOffered)
     std::vector<FormatDescription> offered = {
         format(V4L2_PIX_FMT_YUYV, {size(1280, 720, {10})}),
         format(V4L2_PIX_FMT_RGB24, {size(640, 480, {30})}),
+        format(V4L2_PIX_FMT_NV12, {size(640, 480, {30})}),
     };
     const FormatChoice choice = chooseFormat(offered, asked(PixelFormatChoice::Yuyv, 640, 480, 30));
     EXPECT_EQ(choice.format, nullptr);
     EXPECT_EQ(choice.refusal, "cannot deliver YUYV 640x480 @ 30 fps; it offers: YUYV 1280x720 @ "
-                              "10 fps; RGB3 640x480 @ 30 fps (not usable)");
-    EXPECT_EQ(chooseFormat({}, asked(PixelFormatChoice::Auto, 640, 480, 30)).refusal,
-              "cannot deliver GREY, YUYV or MJPG 640x480 @ 30 fps; it offers: no formats");
+                              "10 fps; RGB3 640x480 @ 30 fps; NV12 640x480 @ 30 fps (not usable)");
+    EXPECT_EQ(
+        chooseFormat({}, asked(PixelFormatChoice::Auto, 640, 480, 30)).refusal,
+        "cannot deliver GREY, YUYV, MJPG, RGB3 or BGR3 640x480 @ 30 fps; it offers: no formats");
+}
+
+TEST(FormatChoice, AutoTakesPackedRgbAfterTheOthersAndNamesWhatItPassedOver)
+{
+    const std::vector<FormatDescription> offered = {
+        format(V4L2_PIX_FMT_BGR24, {size(640, 480, {30})}),
+        format(V4L2_PIX_FMT_RGB24, {size(640, 480, {30})}),
+        format(V4L2_PIX_FMT_MJPEG, {size(1280, 720, {30})}),
+    };
+    const FormatChoice choice = chooseFormat(offered, asked(PixelFormatChoice::Auto, 640, 480, 30));
+    ASSERT_NE(choice.format, nullptr);
+    EXPECT_EQ(choice.format->fourcc, V4L2_PIX_FMT_RGB24);
+    EXPECT_EQ(choice.passed_over,
+              "GREY not offered; YUYV not offered; MJPG not at 640x480 @ 30 fps");
+    const FormatChoice bgr = chooseFormat(offered, asked(PixelFormatChoice::Bgr24, 640, 480, 30));
+    ASSERT_NE(bgr.format, nullptr);
+    EXPECT_EQ(bgr.format->fourcc, V4L2_PIX_FMT_BGR24);
 }
 
 } // namespace

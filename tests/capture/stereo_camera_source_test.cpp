@@ -351,6 +351,7 @@ TEST_F(CameraSourceTest, SideBySideFramesSplitIntoTheTwoImagesWithoutCopy)
     o.camera.height = kHeight;
     o.camera.fps = 30.0;
     o.camera.buffer_count = 12;
+    o.camera.keep_colour = true; // the left half's colour, not the right's
     PairRing ring(4);
     SideBySideSource source(o);
     EXPECT_EQ(source.frameSize(), cv::Size(kWidth, kHeight));
@@ -367,6 +368,14 @@ TEST_F(CameraSourceTest, SideBySideFramesSplitIntoTheTwoImagesWithoutCopy)
         EXPECT_EQ(pair->skewNs(), 0);
         // Views into one buffer: the right half starts half a row after the left.
         EXPECT_EQ(pair->right->image.data, pair->left->image.data + kWidth);
+        // The left half's colour is a view too, of the same picture (a grey scene: its
+        // colour's grey is the luma within rounding); the right keeps none.
+        ASSERT_EQ(pair->left->colour.type(), CV_8UC3);
+        ASSERT_EQ(pair->left->colour.size(), pair->left->image.size());
+        cv::Mat grey_of_colour;
+        cv::cvtColor(pair->left->colour, grey_of_colour, cv::COLOR_BGR2GRAY);
+        EXPECT_LE(cv::norm(grey_of_colour, pair->left->image, cv::NORM_INF), 1.0);
+        EXPECT_TRUE(pair->right->colour.empty());
         if (previous) {
             EXPECT_GT(pair->index, previous->index);
         }
@@ -401,6 +410,27 @@ TEST(FrameSplitter, GivesTheWholeFrameBackWhenBothHalvesAreReleased)
     pair.right.reset();
     EXPECT_EQ(pool.inUse(), 0u);
     EXPECT_EQ(splitter.inUse(), 0u);
+}
+
+TEST(FrameSplitter, SplitsTheColourAsTheGreyWhereItIsKept)
+{
+    FramePool pool(2, cv::Size(8, 2), CV_8UC1, true);
+    for (const bool right_colour : {false, true}) {
+        FrameSplitter splitter(1, right_colour);
+        FrameHandle whole = pool.acquire();
+        ASSERT_TRUE(whole);
+        const uint8_t* colour = whole->colour.data;
+        StereoPair pair;
+        ASSERT_TRUE(splitter.split(std::move(whole), pair));
+        EXPECT_EQ(pair.left->colour.size(), cv::Size(4, 2));
+        EXPECT_EQ(pair.left->colour.data, colour);
+        if (right_colour)
+            EXPECT_EQ(pair.right->colour.data, colour + 4 * 3);
+        else
+            EXPECT_TRUE(pair.right->colour.empty());
+        pair = StereoPair{};
+        EXPECT_EQ(pool.inUse(), 0u);
+    }
 }
 
 } // namespace

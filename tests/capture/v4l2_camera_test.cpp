@@ -15,6 +15,8 @@
 #include <gtest/gtest.h>
 #include <linux/videodev2.h>
 #include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "capture/v4l2_camera.hpp"
 #include "tests/support/fake_cameras.hpp"
@@ -120,6 +122,73 @@ TEST_F(V4l2CameraTest, EachFormatDeliversTheSourceImage)
         EXPECT_EQ(status.camera.bad_frames, 0u);
         EXPECT_GE(status.camera.frames, 10u);
     }
+}
+
+TEST_F(V4l2CameraTest, ColourFormatsKeepTheCamerasColourWhenAsked)
+{
+    // The Aloe cut in colour: each format carries it as a camera would.
+    const cv::Mat aloe = cv::imread(test::opencvSamplesDir() + "/aloeL.jpg", cv::IMREAD_COLOR);
+    ASSERT_FALSE(aloe.empty());
+    cv::Mat colour;
+    cv::resize(aloe, colour, scene_.size(), 0, 0, cv::INTER_AREA);
+    ASSERT_TRUE(cv::imwrite((dir_ / "scene.png").string(), colour));
+    cv::Mat luma;
+    cv::cvtColor(colour, luma, cv::COLOR_BGR2GRAY);
+
+    struct Case {
+        PixelFormatChoice format;
+        const char* fourcc;
+        double grey_error;   // mean grey levels
+        double colour_error; // mean levels per channel
+    };
+    // YUYV's luma and packed RGB/BGR are exact, YUYV's colour shares its chroma between
+    // pixel pairs; JPEG at quality 90 loses a few levels (4.8 per channel here).
+    for (const Case& c : {Case{PixelFormatChoice::Yuyv, "YUYV", 0.0, 2.5},
+                          Case{PixelFormatChoice::Mjpeg, "MJPG", 4.0, 6.0},
+                          Case{PixelFormatChoice::Rgb24, "RGB3", 0.0, 0.0},
+                          Case{PixelFormatChoice::Bgr24, "BGR3", 0.0, 0.0}}) {
+        for (const bool keep : {true, false}) {
+            SCOPED_TRACE(std::string(c.fourcc) + (keep ? " with colour" : " grey only"));
+            stopCamera();
+            loadFake(std::string("      - { fourcc: ") + c.fourcc + ", sizes: [320x240] }\n");
+            CameraSettings s = settings(c.format);
+            s.keep_colour = keep;
+            V4l2Camera& camera = start(s);
+            ASSERT_EQ(start_rc_, 0);
+            for (int i = 0; i < 3; ++i) {
+                std::optional<CapturedFrame> captured = nextFrame(ring_);
+                ASSERT_TRUE(captured) << camera.status().camera.last_error;
+                const Frame& frame = *captured->frame;
+                cv::Mat diff;
+                cv::absdiff(frame.image, luma, diff);
+                EXPECT_LE(cv::mean(diff)[0], c.grey_error);
+                if (!keep) {
+                    EXPECT_TRUE(frame.colour.empty());
+                    continue;
+                }
+                ASSERT_EQ(frame.colour.type(), CV_8UC3);
+                ASSERT_EQ(frame.colour.size(), colour.size());
+                cv::absdiff(frame.colour, colour, diff);
+                const cv::Scalar mean = cv::mean(diff);
+                EXPECT_LE((mean[0] + mean[1] + mean[2]) / 3.0, c.colour_error);
+            }
+            EXPECT_EQ(camera.status().format.colour, keep);
+            EXPECT_EQ(camera.status().format.format_name, c.fourcc);
+        }
+    }
+}
+
+TEST_F(V4l2CameraTest, GreyCamerasHaveNoColourToKeep)
+{
+    loadFake(kAllFormats);
+    CameraSettings s = settings(PixelFormatChoice::Grey);
+    s.keep_colour = true;
+    V4l2Camera& camera = start(s);
+    ASSERT_EQ(start_rc_, 0);
+    std::optional<CapturedFrame> captured = nextFrame(ring_);
+    ASSERT_TRUE(captured);
+    EXPECT_TRUE(captured->frame->colour.empty());
+    EXPECT_FALSE(camera.status().format.colour);
 }
 
 TEST_F(V4l2CameraTest, StartRefusesWhatTheDeviceCannotDeliver)

@@ -102,7 +102,7 @@ TEST_F(V4l2DeviceTest, RefusalNamesWhatTheDeviceOffers)
     s.width = 1920;
     s.height = 1080;
     negotiate(s, -EINVAL);
-    EXPECT_NE(error_.find("cannot deliver GREY, YUYV or MJPG 1920x1080 @ 100 fps"),
+    EXPECT_NE(error_.find("cannot deliver GREY, YUYV, MJPG, RGB3 or BGR3 1920x1080 @ 100 fps"),
               std::string::npos)
         << error_;
     EXPECT_NE(error_.find("YUYV 320x240 @ 100/30 fps, 640x480 @ 15 fps"), std::string::npos)

@@ -135,7 +135,7 @@ TEST(CamerasConfig, BadValuesAreRefusedWithWhatIsExpected)
       auto_exposure: maybe
 )");
     EXPECT_TRUE(has(problems, "rig.yaml:3: source.cameras.format: unknown value (got rgb, "
-                              "expected auto, grey, yuyv or mjpeg"))
+                              "expected auto, grey, yuyv, mjpeg, rgb24 or bgr24"))
         << joined(problems);
     EXPECT_TRUE(has(problems, "rig.yaml:4: source.cameras.width: out of range (got 0"))
         << joined(problems);

@@ -291,7 +291,7 @@ INSTANTIATE_TEST_SUITE_P(
                      "unknown key (did you mean block_size?)"},
         RejectedCase{"matcher:\n  min_pixels: 5\n", "matcher.min_pixels", 2,
                      "did you mean nearest.min_pixels?"},
-        RejectedCase{"matcher:\n  colour: red\n", "matcher.colour", 2,
+        RejectedCase{"matcher:\n  wavelength: red\n", "matcher.wavelength", 2,
                      "known keys here: algorithm, min_depth_m"},
         // nearest
         RejectedCase{"nearset:\n  min_pixels: 5\n", "nearset", 1, "did you mean nearest?"},

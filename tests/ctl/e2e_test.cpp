@@ -273,8 +273,9 @@ TEST_F(StereodE2e, SnapshotWritesReadableFiles)
         EXPECT_NEAR(depth_mm.at<uint16_t>(probe),
                     1000.0 * test::kTsukubaFocalPx * test::kTsukubaBaselineM / d, 1.0);
     }
+    // Tsukuba's left image is in colour, and so is the rectified left of its replay.
     const cv::Mat left_image = cv::imread(left, cv::IMREAD_UNCHANGED);
-    EXPECT_EQ(left_image.type(), CV_8UC1);
+    EXPECT_EQ(left_image.type(), CV_8UC3);
     EXPECT_EQ(left_image.size(), kTsukubaSize);
     const cv::Mat colormap_image = cv::imread(colormap, cv::IMREAD_UNCHANGED);
     EXPECT_EQ(colormap_image.type(), CV_8UC3);

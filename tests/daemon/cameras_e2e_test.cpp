@@ -24,6 +24,10 @@
 
 #include "ctl/client.hpp"
 #include "pipeline/calibration.hpp"
+#include "replay/image_message.hpp"
+#include "replay/mcap_reader.hpp"
+#include "replay/mcap_recording.hpp"
+#include "ros2/messages.hpp"
 #include "tests/fake_v4l2/fake_v4l2.hpp"
 #include "tests/support/data_paths.hpp"
 #include "tests/support/process.hpp"
@@ -262,6 +266,71 @@ TEST_F(StereodCamerasE2e, EachPixelFormatGivesTheOfflineDistance)
 
         // Only that it ends: the clean exit status on SIGTERM is checked by
         // tests/ctl/e2e_test.cpp; here the preloaded fake's own threads may take the signal.
+        service_->sendSignal(SIGTERM);
+        ASSERT_TRUE(service_->waitFor(10s).has_value()) << serviceLog();
+        service_.reset();
+    }
+}
+
+// A colour camera's colour reaches the outputs: `stereoctl snapshot` writes the rectified
+// left image in colour (tsukuba's own colours, within YUYV's shared chroma) and a PLY
+// coloured point by point; with `colour: none` the same cameras give the grey image, as
+// before colour.
+TEST_F(StereodCamerasE2e, ColourCamerasGiveAColourLeftImageAndCloud)
+{
+    const cv::Mat photograph = cv::imread(left_, cv::IMREAD_COLOR);
+    ASSERT_FALSE(photograph.empty());
+    for (const bool keep : {true, false}) {
+        SCOPED_TRACE(keep ? "colour: left" : "colour: none");
+        startService(withPaths(cameraDevices("YUYV")),
+                     cameraSource("yuyv") + (keep ? "" : "    colour: none\n"));
+        ASSERT_TRUE(waitForDistance().is_object());
+        const std::string left_png = dir_.file(keep ? "snap-colour.png" : "snap-grey.png");
+        const std::string cloud_ply = dir_.file(keep ? "snap-colour.ply" : "snap-grey.ply");
+        const ProcessResult snapshot =
+            runProcess({test::stereoctlPath(), "snapshot", "--socket", socket_, "--left", left_png,
+                        "--cloud", cloud_ply});
+        ASSERT_EQ(snapshot.exit_code, 0) << snapshot.err;
+        const cv::Mat written = cv::imread(left_png, cv::IMREAD_UNCHANGED);
+        ASSERT_EQ(written.size(), size_);
+        std::ifstream ply(cloud_ply);
+        std::stringstream ply_text;
+        ply_text << ply.rdbuf();
+        const bool coloured_ply = ply_text.str().find("property uchar red") != std::string::npos;
+        if (keep) {
+            // A rectified-only calibration: the rectified image is the captured one.
+            ASSERT_EQ(written.type(), CV_8UC3);
+            cv::Mat diff;
+            cv::absdiff(written, photograph, diff);
+            const cv::Scalar mean = cv::mean(diff);
+            EXPECT_LT((mean[0] + mean[1] + mean[2]) / 3.0, 4.0);
+            EXPECT_TRUE(coloured_ply) << snapshot.out;
+
+            // Recorded as captured: the bag's left image is bgr8, the camera's colour; the
+            // right camera (colour: left) stays mono8.
+            const std::string bag = dir_.file("colour.mcap");
+            const ProcessResult record = runProcess({test::stereoctlPath(), "record", "--socket",
+                                                     socket_, "--out", bag, "--frames", "2"});
+            ASSERT_EQ(record.exit_code, 0) << record.err;
+            mcap::Reader reader(bag);
+            const McapStereoIndex index = indexMcapStereo(reader, "", "");
+            ASSERT_FALSE(index.pairs.empty());
+            // A message's data lasts until the reader's next call: copied.
+            const std::string left_message(reader.message(index.pairs[0].left).data);
+            EXPECT_EQ(ros2::parseImage(left_message).encoding, "bgr8");
+            EXPECT_EQ(ros2::parseImage(reader.message(index.pairs[0].right).data).encoding,
+                      "mono8");
+            cv::Mat grey;
+            cv::Mat colour;
+            std::string why;
+            ASSERT_TRUE(decodeImageMessage(left_message, size_, grey, colour, why)) << why;
+            cv::absdiff(colour, photograph, diff);
+            const cv::Scalar bag_mean = cv::mean(diff);
+            EXPECT_LT((bag_mean[0] + bag_mean[1] + bag_mean[2]) / 3.0, 4.0);
+        } else {
+            EXPECT_EQ(written.type(), CV_8UC1);
+            EXPECT_FALSE(coloured_ply) << snapshot.out;
+        }
         service_->sendSignal(SIGTERM);
         ASSERT_TRUE(service_->waitFor(10s).has_value()) << serviceLog();
         service_.reset();

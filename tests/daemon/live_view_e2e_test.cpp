@@ -95,6 +95,18 @@ TEST_F(LiveViewE2e, FoxgloveClientGetsEveryChannelAndTheServicesOwnValues)
     EXPECT_GE(got["counts"].value("/stereo/status", 0), 2);
     EXPECT_TRUE(got["statuses"].empty()) << got["statuses"].dump();
 
+    // The replayed left image is in colour: rgb8, and points with PCL's packed rgb, as a
+    // Foxglove client decodes them.
+    ASSERT_TRUE(got["left"].is_object()) << got.dump().substr(0, 2000);
+    EXPECT_EQ(got["left"]["encoding"], "rgb8");
+    EXPECT_EQ(got["left"]["step"], 384 * 3);
+    EXPECT_EQ(got["left"]["bytes"], 384 * 288 * 3);
+    ASSERT_TRUE(got["points"].is_object());
+    EXPECT_EQ(got["points"]["point_step"], 20);
+    ASSERT_EQ(got["points"]["fields"].size(), 5u);
+    EXPECT_EQ(got["points"]["fields"][4],
+              Json::parse(R"({"name":"rgb","offset":16,"datatype":7})"));
+
     // Depth: 32FC1 metres, NaN where none, equal to the snapshot's within 1 mm. The
     // replayed pairs are one pair three times, so every frame's depth is the same.
     const Json& depth = got["depth"];

@@ -40,7 +40,11 @@ uint32_t parseFourcc(const std::string& file, const YAML::Node& node)
         return V4L2_PIX_FMT_YUYV;
     if (text == "MJPG")
         return V4L2_PIX_FMT_MJPEG;
-    fail(file, node, "fourcc '" + text + "' is not GREY, YUYV or MJPG");
+    if (text == "RGB3")
+        return V4L2_PIX_FMT_RGB24;
+    if (text == "BGR3")
+        return V4L2_PIX_FMT_BGR24;
+    fail(file, node, "fourcc '" + text + "' is not GREY, YUYV, MJPG, RGB3 or BGR3");
 }
 
 // "640x480" or "640x480@30,15".

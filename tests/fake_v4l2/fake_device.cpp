@@ -59,6 +59,10 @@ const char* formatDescription(uint32_t fourcc)
         return "8-bit Greyscale";
     case V4L2_PIX_FMT_YUYV:
         return "YUYV 4:2:2";
+    case V4L2_PIX_FMT_RGB24:
+        return "24-bit RGB 8-8-8";
+    case V4L2_PIX_FMT_BGR24:
+        return "24-bit BGR 8-8-8";
     default:
         return "Motion-JPEG";
     }
@@ -191,6 +195,12 @@ void Device::adjustFormat(v4l2_pix_format& pix) const
     pix.colorspace =
         format->fourcc == V4L2_PIX_FMT_MJPEG ? V4L2_COLORSPACE_JPEG : V4L2_COLORSPACE_SRGB;
     pix.priv = priv == V4L2_PIX_FMT_PRIV_MAGIC ? V4L2_PIX_FMT_PRIV_MAGIC : 0;
+    // The extended fields, for callers that ask for them: YUYV is full range here, as its
+    // luma is exactly COLOR_BGR2GRAY's and its chroma COLOR_BGR2YUV's.
+    if (pix.priv == V4L2_PIX_FMT_PRIV_MAGIC && format->fourcc == V4L2_PIX_FMT_YUYV) {
+        pix.ycbcr_enc = V4L2_YCBCR_ENC_601;
+        pix.quantization = V4L2_QUANTIZATION_FULL_RANGE;
+    }
 }
 
 const ControlSpec* Device::findControl(uint32_t id) const

@@ -29,7 +29,7 @@ struct SizeSpec {
 };
 
 struct FormatSpec {
-    uint32_t fourcc = 0; // V4L2_PIX_FMT_GREY / YUYV / MJPEG
+    uint32_t fourcc = 0; // V4L2_PIX_FMT_GREY / YUYV / MJPEG / RGB24 / BGR24
     std::vector<SizeSpec> sizes;
 };
 
@@ -78,8 +78,8 @@ Description loadDescription(const std::string& path);
 
 // ---- frames -----------------------------------------------------------------------
 
-// Bytes of one frame in `fourcc` at the size: GREY w*h, YUYV 2*w*h, MJPG the buffer
-// size a driver would allocate (2*w*h).
+// Bytes of one frame in `fourcc` at the size: GREY w*h, YUYV 2*w*h, RGB3/BGR3 3*w*h, MJPG
+// the buffer size a driver would allocate (2*w*h).
 uint32_t imageBufferSize(uint32_t fourcc, uint32_t width, uint32_t height);
 uint32_t bytesPerLine(uint32_t fourcc, uint32_t width);
 

@@ -36,9 +36,10 @@
 //   device_caps, plus V4L2_CAP_DEVICE_CAPS in capabilities; no read()/write() I/O.
 // - ENUM_FMT, ENUM_FRAMESIZES (discrete), ENUM_FRAMEINTERVALS (discrete); G/S/TRY_FMT
 //   adjust to an offered format (an unknown pixelformat becomes the first offered one)
-//   and the nearest offered size, as drivers do; S_FMT is EBUSY while buffers exist.
-//   G/S_PARM with V4L2_CAP_TIMEPERFRAME, the nearest offered interval; frames are
-//   produced at the negotiated rate.
+//   and the nearest offered size, as drivers do; with V4L2_PIX_FMT_PRIV_MAGIC in priv,
+//   YUYV says it is full range (V4L2_QUANTIZATION_FULL_RANGE, BT.601); S_FMT is EBUSY while buffers
+//   exist. G/S_PARM with V4L2_CAP_TIMEPERFRAME, the nearest offered interval; frames are produced
+//   at the negotiated rate.
 // - Controls: QUERYCTRL (with V4L2_CTRL_FLAG_NEXT_CTRL), QUERY_EXT_CTRL, QUERYMENU,
 //   G/S_CTRL, G/S/TRY_EXT_CTRLS (error_idx set). Integer values are clamped to
 //   [min,max] and rounded to step (read the value back to see what was accepted);
@@ -78,12 +79,13 @@
 //       bus_info: usb-0000:00:14.0-1 # QUERYCAP bus_info (default usb-fake-N, N = 1-based index)
 //       images: /data/left*.png      # glob, sorted; served in a loop; converted to the
 //                                    # negotiated format and size (resized with INTER_AREA;
-//                                    # luma = cv::COLOR_BGR2GRAY; MJPG encoded at
-//                                    # STREAMON with jpeg_quality)
+//                                    # luma = cv::COLOR_BGR2GRAY, YUYV chroma the mean
+//                                    # of each pixel pair; RGB3/BGR3 the image's colour;
+//                                    # MJPG colour, encoded at STREAMON with jpeg_quality)
 //       jpeg_quality: 90
 //       fps: [30, 15]                # offered rates, for sizes that list none (first = default)
 //       formats:                     # first format and its first size are the default
-//         - fourcc: YUYV             # GREY, YUYV or MJPG
+//         - fourcc: YUYV             # GREY, YUYV, MJPG, RGB3 or BGR3 (packed 24-bit)
 //           sizes: [640x480, 1280x720@10]   # WxH, optional @fps,fps,... overriding fps
 //         - fourcc: MJPG
 //           sizes: [640x480, 1280x720]

@@ -58,6 +58,14 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
               step: m.step, frame_id: m.header.frame_id,
               stamp_ns: (BigInt(m.header.stamp.sec) * 1000000000n + BigInt(m.header.stamp.nanosec)).toString(),
               data: Array.from(floats, (v) => (Number.isNaN(v) ? null : v)) };
+  } else if (channel.topic === "/stereo/left/image_rect" && out.left === undefined) {
+    const m = readers.get(channel.id).readMessage(bytes);
+    out.left = { encoding: m.encoding, width: m.width, height: m.height, step: m.step,
+                 bytes: m.data.byteLength };
+  } else if (channel.topic === "/stereo/points" && out.points === undefined) {
+    const m = readers.get(channel.id).readMessage(bytes);
+    out.points = { fields: m.fields.map((f) => ({ name: f.name, offset: f.offset, datatype: f.datatype })),
+                   point_step: m.point_step, width: m.width, bytes: m.data.byteLength };
   } else if (readers.has(channel.id)) {
     readers.get(channel.id).readMessage(bytes); // every CDR message must decode
   } else if (channel.topic === "/stereo/nearest") {

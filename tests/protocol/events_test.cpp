@@ -91,6 +91,33 @@ TEST(ProtocolEvents, RawEventHeaderFollowsTheContract)
                           R"("bytes":1165600})"));
     EXPECT_EQ(event["payloads"][3],
               Json::parse(R"({"name":"cloud","format":"f32_xyzi","points":1000,"bytes":16000})"));
+
+    // With colour: the frames' colour right after them (a grey right camera: 0 x 0), and
+    // the cloud's after the cloud.
+    header.left_colour_width = 640;
+    header.left_colour_height = 480;
+    header.cloud_colour_points = 1000;
+    out.clear();
+    appendRawEventHeader(out, header, 0, true, true, true);
+    event = Json::parse(out);
+    ASSERT_EQ(event["payloads"].size(), 7u);
+    EXPECT_EQ(event["payloads"][2],
+              Json::parse(R"({"name":"raw_left_colour","format":"u8_rgb","width":640,)"
+                          R"("height":480,"bytes":921600,"stamp_ns":81263511234})"));
+    EXPECT_EQ(event["payloads"][3],
+              Json::parse(R"({"name":"raw_right_colour","format":"u8_rgb","width":0,)"
+                          R"("height":0,"bytes":0,"stamp_ns":81263512001})"));
+    EXPECT_EQ(event["payloads"][4]["name"], "depth");
+    EXPECT_EQ(event["payloads"][5]["name"], "cloud");
+    EXPECT_EQ(event["payloads"][6],
+              Json::parse(R"({"name":"cloud_colour","format":"u8_rgb","points":1000,)"
+                          R"("bytes":3000})"));
+    // Colour without the cloud: no cloud colours either.
+    out.clear();
+    appendRawEventHeader(out, header, 0, false, false, true);
+    event = Json::parse(out);
+    ASSERT_EQ(event["payloads"].size(), 4u);
+    EXPECT_EQ(event["payloads"][3]["name"], "raw_right_colour");
 }
 
 } // namespace

@@ -90,5 +90,43 @@ TEST(Payload, ImageBytesAreRowsWithoutPadding)
     EXPECT_EQ(matBytes(cv::Mat()), 0u);
 }
 
+TEST(Payload, ColourTravelsAsRgbBytes)
+{
+    // Two BGR pixels a row, the second row padded away by a view.
+    cv::Mat bgr(2, 3, CV_8UC3);
+    for (int i = 0; i < 6; ++i)
+        bgr.at<cv::Vec3b>(i / 3, i % 3) =
+            cv::Vec3b(static_cast<uint8_t>(10 * i), static_cast<uint8_t>(10 * i + 1),
+                      static_cast<uint8_t>(10 * i + 2));
+    const cv::Mat view = bgr(cv::Rect(0, 0, 2, 2));
+    std::string bytes = "x";
+    appendBgrAsRgb(bytes, view);
+    const std::string expected = {'x', 2, 1, 0, 12, 11, 10, 32, 31, 30, 42, 41, 40};
+    EXPECT_EQ(bytes, expected);
+
+    const Payload image = colourPayload("left_colour", view);
+    EXPECT_EQ(payloadToJson(image), Json::parse(R"({"name":"left_colour","format":"u8_rgb",)"
+                                                R"("width":2,"height":2,"bytes":12})"));
+    EXPECT_TRUE(colourPayloadAddsUp(image));
+    // A grey source: an empty colour image adds up as 0 bytes; a colour that does not
+    // fill its size does not.
+    EXPECT_TRUE(colourPayloadAddsUp(colourPayload("left_colour", cv::Mat())));
+    Payload short_image = image;
+    short_image.bytes = 11;
+    EXPECT_FALSE(colourPayloadAddsUp(short_image));
+
+    const Payload points = cloudColourPayload(5);
+    const Json json = payloadToJson(points);
+    EXPECT_EQ(json, Json::parse(R"({"name":"cloud_colour","format":"u8_rgb","points":5,)"
+                                R"("bytes":15})"));
+    const std::optional<Payload> back = payloadFromJson(json);
+    ASSERT_TRUE(back);
+    EXPECT_TRUE(back->per_point);
+    EXPECT_TRUE(colourPayloadAddsUp(*back));
+    Payload wrong = *back;
+    wrong.bytes = 16;
+    EXPECT_FALSE(colourPayloadAddsUp(wrong));
+}
+
 } // namespace
 } // namespace stereod

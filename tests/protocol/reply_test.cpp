@@ -35,7 +35,8 @@ TEST(ProtocolReplies, HelloListsCommandsStreamsAndItems)
     EXPECT_EQ(reply["streams"], Json::parse(R"(["readings","depth","raw","zones"])"));
     EXPECT_EQ(
         reply["snapshot_items"],
-        Json::parse(R"(["left","disparity","depth","cloud","raw_left","raw_right","confidence"])"));
+        Json::parse(R"(["left","disparity","depth","cloud","raw_left","raw_right","confidence",
+                       "left_colour","cloud_colour","raw_left_colour","raw_right_colour"])"));
 }
 
 TEST(ProtocolReplies, ErrorCodeNamesAreTheDocumentedOnes)

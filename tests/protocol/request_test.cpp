@@ -80,6 +80,18 @@ TEST(ProtocolParse, RawFramesAndCalibration)
         parseOk(R"({"cmd":"subscribe","stream":"raw","with":["depth"]})").command);
     EXPECT_TRUE(depth_only.with_depth);
     EXPECT_FALSE(depth_only.with_cloud);
+    EXPECT_FALSE(depth_only.with_colour);
+    // And the cameras' colour with the frames.
+    const SubscribeRequest colour = std::get<SubscribeRequest>(
+        parseOk(R"({"cmd":"subscribe","stream":"raw","with":["colour"]})").command);
+    EXPECT_TRUE(colour.with_colour);
+    EXPECT_FALSE(colour.with_cloud);
+    const Request colours = parseOk(
+        R"({"cmd":"snapshot","items":["left_colour","cloud_colour","raw_left_colour","raw_right_colour"]})");
+    const std::vector<SnapshotItem> colour_items = {
+        SnapshotItem::LeftColour, SnapshotItem::CloudColour, SnapshotItem::RawLeftColour,
+        SnapshotItem::RawRightColour};
+    EXPECT_EQ(std::get<SnapshotRequest>(colours.command).items, colour_items);
 }
 
 TEST(ProtocolParse, SnapshotItemsKeepTheirOrderWithoutRepeats)

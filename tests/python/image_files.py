@@ -43,6 +43,12 @@ def _unfilter(raw: bytes, height: int, stride: int, bpp: int) -> np.ndarray:
 
 
 def read_png_gray(path: Path) -> np.ndarray:
+    return read_png(path, colour_ok=False)
+
+
+def read_png(path: Path, colour_ok: bool = True) -> np.ndarray:
+    """A non-interlaced grey (H x W, 8 or 16 bit) or, with colour_ok, 8-bit RGB PNG
+    (H x W x 3, red first)."""
     data = Path(path).read_bytes()
     if data[:8] != b"\x89PNG\r\n\x1a\n":
         raise ValueError(f"{path}: not a PNG")
@@ -59,6 +65,9 @@ def read_png_gray(path: Path) -> np.ndarray:
             idat += body
         elif kind == b"IEND":
             break
+    if colour_ok and colour == 2 and depth == 8 and interlace == 0:
+        rows = _unfilter(zlib.decompress(idat), height, width * 3, 3)
+        return rows.reshape(height, width, 3)
     if colour != 0 or interlace != 0 or depth not in (8, 16):
         raise ValueError(f"{path}: only non-interlaced 8/16-bit grayscale PNG is read here")
     bpp = depth // 8

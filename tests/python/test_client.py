@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from conftest import BASELINE_M, FOCAL_PX, SIZE, SOURCE_DIR
-from image_files import read_pfm, read_png_gray
+from image_files import read_pfm, read_png, read_png_gray
 from stereod import (Client, ProtocolError, Reading, ServiceUnavailable, Snapshot,
                      StaleReading)
 
@@ -140,7 +140,7 @@ def test_snapshot_matches_stereoctl_files(service, client, ctl, tmp_path):
     run = ctl(service, "snapshot", "--depth", str(depth_png), "--disparity",
               str(disparity_pfm), "--left", str(left_png))
     assert run.returncode == 0, run.stderr
-    snap = client.snapshot(("depth", "disparity", "left"))
+    snap = client.snapshot(("depth", "disparity", "left", "left_colour"))
 
     depth_mm = read_png_gray(depth_png)
     assert depth_mm.dtype == np.uint16 and depth_mm.shape == (HEIGHT, WIDTH)
@@ -154,7 +154,21 @@ def test_snapshot_matches_stereoctl_files(service, client, ctl, tmp_path):
     finite = np.isfinite(disparity)
     np.testing.assert_allclose(snap["disparity"][finite], disparity[finite], atol=1e-4)
 
-    np.testing.assert_array_equal(snap["left"], read_png_gray(left_png))
+    # The recording's left images are colour: stereoctl writes the left in colour.
+    np.testing.assert_array_equal(snap["left_colour"], read_png(left_png))
+
+
+def test_colour_of_a_colour_recording(client):
+    snap = client.snapshot(("left", "left_colour", "cloud", "cloud_colour"))
+    colour = snap["left_colour"]
+    assert colour.dtype == np.uint8 and colour.shape == (HEIGHT, WIDTH, 3)
+    # Red first: its BT.601 grey is the grey the matcher saw, within rounding.
+    grey = colour[..., 0] * 0.299 + colour[..., 1] * 0.587 + colour[..., 2] * 0.114
+    assert np.abs(grey - snap["left"].astype(np.float64)).mean() < 1.0
+    # A colour scene, not grey in three channels.
+    assert np.abs(colour[..., 0].astype(int) - colour[..., 2].astype(int)).mean() > 5
+    assert snap["cloud_colour"].shape == (snap["cloud"].shape[0], 3)
+    assert snap["cloud_colour"].dtype == np.uint8
 
 
 def test_snapshot_asks_only_for_offered_items(client):

@@ -12,6 +12,7 @@
 
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -286,6 +287,78 @@ TEST(McapBagIndex, RefusalsSayWhatIsWrong)
     // The same topic for both sides.
     why = indexError(mixed, "/a/image", "/a/image");
     EXPECT_NE(why.find("both set to the topic '/a/image'"), std::string::npos) << why;
+}
+
+// Colour images of a bag: their grey is what it always was, their colour the picture
+// (rgb8, bgr8 exactly; YUV 4:2:2 through BT.601), and a 4:2:2 image of odd width or too
+// short a step is refused before it is touched.
+TEST(ImageMessage, ColourEncodingsGiveTheirGreyAndTheirColour)
+{
+    const cv::Mat bgr = [] {
+        cv::Mat image(4, 6, CV_8UC3);
+        cv::randu(image, 0, 255);
+        return image;
+    }();
+    const auto message = [](const cv::Mat& pixels, const char* encoding) {
+        ImageMessage m;
+        m.width = static_cast<uint32_t>(pixels.cols);
+        m.height = static_cast<uint32_t>(pixels.rows);
+        m.encoding = encoding;
+        m.step = static_cast<uint32_t>(pixels.cols * pixels.elemSize());
+        m.data.assign(reinterpret_cast<const char*>(pixels.data),
+                      pixels.total() * pixels.elemSize());
+        return serialized(m);
+    };
+    cv::Mat rgb;
+    cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
+    cv::Mat grey_of_bgr;
+    cv::cvtColor(bgr, grey_of_bgr, cv::COLOR_BGR2GRAY);
+    for (const auto& [pixels, encoding] : {std::pair{bgr, "bgr8"}, std::pair{rgb, "rgb8"}}) {
+        SCOPED_TRACE(encoding);
+        cv::Mat grey, colour, grey_only;
+        std::string why;
+        ASSERT_TRUE(decodeImageMessage(message(pixels, encoding), {}, grey, colour, why)) << why;
+        EXPECT_EQ(cv::norm(colour, bgr, cv::NORM_INF), 0.0);
+        EXPECT_EQ(cv::norm(grey, grey_of_bgr, cv::NORM_INF), 0.0);
+        ASSERT_TRUE(decodeImageMessage(message(pixels, encoding), {}, grey_only, why)) << why;
+        EXPECT_EQ(cv::norm(grey_only, grey, cv::NORM_INF), 0.0);
+    }
+
+    // YUV 4:2:2, limited range: black (Y 16) and white (Y 235) pixel pairs, grey chroma.
+    cv::Mat yuyv(2, 4, CV_8UC2);
+    cv::Mat uyvy(2, 4, CV_8UC2);
+    for (int x = 0; x < 4; ++x) {
+        const uint8_t luma = x < 2 ? 16 : 235;
+        yuyv.at<cv::Vec2b>(0, x) = yuyv.at<cv::Vec2b>(1, x) = cv::Vec2b(luma, 128);
+        uyvy.at<cv::Vec2b>(0, x) = uyvy.at<cv::Vec2b>(1, x) = cv::Vec2b(128, luma);
+    }
+    for (const auto& [pixels, encoding] :
+         {std::pair{yuyv, "yuv422_yuy2"}, std::pair{uyvy, "yuv422"}}) {
+        SCOPED_TRACE(encoding);
+        cv::Mat grey, colour;
+        std::string why;
+        ASSERT_TRUE(decodeImageMessage(message(pixels, encoding), {}, grey, colour, why)) << why;
+        EXPECT_EQ(grey.at<uint8_t>(0, 0), 16) << "the grey is the luma plane";
+        EXPECT_EQ(grey.at<uint8_t>(1, 3), 235);
+        ASSERT_EQ(colour.type(), CV_8UC3);
+        EXPECT_EQ(colour.at<cv::Vec3b>(0, 0), cv::Vec3b(0, 0, 0));
+        EXPECT_GE(colour.at<cv::Vec3b>(1, 3)[1], 254);
+    }
+
+    // Mono: no colour, whatever the buffer held.
+    cv::Mat grey, colour(2, 2, CV_8UC3);
+    std::string why;
+    ASSERT_TRUE(decodeImageMessage(message(grey_of_bgr, "mono8"), {}, grey, colour, why));
+    EXPECT_TRUE(colour.empty());
+
+    // 4:2:2 of odd width, or a step short of 2 bytes a pixel: refused, undecoded.
+    EXPECT_FALSE(
+        decodeImageMessage(serialized(lying(3, 2, "yuv422", 6, 12)), {}, grey, colour, why));
+    EXPECT_NE(why.find("odd width"), std::string::npos) << why;
+    EXPECT_TRUE(colour.empty());
+    EXPECT_FALSE(
+        decodeImageMessage(serialized(lying(4, 2, "yuv422_yuy2", 7, 64)), {}, grey, colour, why));
+    EXPECT_NE(why.find("less than its row of 8 bytes"), std::string::npos) << why;
 }
 
 } // namespace

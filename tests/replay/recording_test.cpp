@@ -108,9 +108,13 @@ TEST(Recording, WriterRefusesBadImagesAndLeavesNoRowForThem)
     RecordingWriter writer(tmp.file("rec"));
     EXPECT_EQ(writer.write(pairs[0].left, pairs[0].right, 10, 11), 0u);
 
-    const cv::Mat color(pairs[1].left.size(), CV_8UC3, cv::Scalar::all(7));
+    // Colour (a colour camera's BGR) is written; 16-bit or four channels are not images
+    // of a camera.
+    const cv::Mat deep(pairs[1].left.size(), CV_16UC1, cv::Scalar::all(7));
+    const cv::Mat four(pairs[1].left.size(), CV_8UC4, cv::Scalar::all(7));
     const cv::Mat bigger(cv::Size(120, 80), CV_8UC1, cv::Scalar::all(7));
-    EXPECT_THROW(writer.write(color, pairs[1].right, 20, 21), RecordingError);
+    EXPECT_THROW(writer.write(deep, pairs[1].right, 20, 21), RecordingError);
+    EXPECT_THROW(writer.write(four, pairs[1].right, 20, 21), RecordingError);
     EXPECT_THROW(writer.write(pairs[1].left, bigger, 20, 21), RecordingError);
     EXPECT_THROW(writer.write(bigger, bigger, 20, 21), RecordingError); // not the first size
     EXPECT_THROW(writer.write(cv::Mat(), pairs[1].right, 20, 21), RecordingError);

@@ -15,14 +15,18 @@
 
 #include <dirent.h>
 #include <fcntl.h>
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <spdlog/sinks/ringbuffer_sink.h>
 #include <spdlog/spdlog.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "replay/mcap_recording.hpp"
+#include "replay/recording.hpp"
 #include "replay/replay_source.hpp"
 #include "tests/support/bags.hpp"
 #include "tests/support/data_paths.hpp"
@@ -749,6 +753,72 @@ TEST_F(ReplaySourceTest, McapBagReplaysLikeARecording)
     EXPECT_NE(bad.source.status().last_error.find("/stereo/left/image_raw"), std::string::npos)
         << bad.source.status().last_error;
     bad.source.stop();
+}
+
+// A colour recording, as a colour camera's are recorded (a colour left PNG, a bag's bgr8
+// image): the left frame carries its colour exactly, its grey is the grey a grey replay
+// of the same file gives, and the right camera's grey stays grey; keep_colour off or a
+// grey recording give no colour.
+TEST_F(ReplaySourceTest, ColourRecordingsKeepTheLeftCamerasColour)
+{
+    const cv::Mat tsukuba =
+        cv::imread(test::sharedDataDir() + "/middlebury/tsukuba/im3.png", cv::IMREAD_COLOR);
+    ASSERT_FALSE(tsukuba.empty());
+    pairs_ = test::tsukubaPairs(3);
+    test::stampPairs(pairs_, 7'000'000'000, 40 * kMs);
+    std::vector<cv::Mat> colours;
+    for (int k = 0; k < 3; ++k)
+        colours.push_back(
+            tsukuba(cv::Rect(12 * k, 6 * k, pairs_[0].left.cols, pairs_[0].left.rows)).clone());
+    const std::string dir = tmp_.file("colour");
+    const std::string bag = tmp_.file("colour.mcap");
+    {
+        RecordingWriter csv(dir);
+        McapRecordingWriter mcap(bag);
+        for (int k = 0; k < 3; ++k) {
+            csv.write(colours[k], pairs_[k].right, pairs_[k].left_stamp_ns,
+                      pairs_[k].right_stamp_ns);
+            mcap.write(colours[k], pairs_[k].right, pairs_[k].left_stamp_ns,
+                       pairs_[k].right_stamp_ns);
+        }
+    }
+    for (const std::string& path : {dir, bag}) {
+        for (const bool keep : {true, false}) {
+            SCOPED_TRACE(path + (keep ? " with colour" : " grey only"));
+            ReplayOptions options = lockstep(path);
+            options.keep_colour = keep;
+            Rig rig(options, 4);
+            ASSERT_EQ(rig.source.start(rig.ring), 0) << rig.source.status().last_error;
+            std::vector<StereoPair> got = popPairs(rig.ring, 3);
+            ASSERT_EQ(got.size(), 3u);
+            for (int k = 0; k < 3; ++k) {
+                const Frame& left = *got[k].left;
+                // The grey of a colour PNG is libpng's, of a bgr8 image COLOR_BGR2GRAY.
+                cv::Mat grey;
+                if (path == dir)
+                    grey = cv::imread(dir + "/left/" + fmt::format("{:06d}.png", k),
+                                      cv::IMREAD_GRAYSCALE);
+                else
+                    cv::cvtColor(colours[k], grey, cv::COLOR_BGR2GRAY);
+                EXPECT_TRUE(test::samePixels(left.image, grey)) << "pair " << k;
+                EXPECT_TRUE(test::samePixels(got[k].right->image, pairs_[k].right));
+                EXPECT_TRUE(got[k].right->colour.empty());
+                if (keep) {
+                    ASSERT_EQ(left.colour.type(), CV_8UC3);
+                    EXPECT_EQ(cv::norm(left.colour, colours[k], cv::NORM_INF), 0.0) << "pair " << k;
+                } else {
+                    EXPECT_TRUE(left.colour.empty());
+                }
+            }
+        }
+    }
+
+    // A grey recording: no colour plane at all.
+    Rig grey(lockstep(makeRecording(2)), 4);
+    ASSERT_EQ(grey.source.start(grey.ring), 0);
+    std::vector<StereoPair> got = popPairs(grey.ring, 2);
+    ASSERT_EQ(got.size(), 2u);
+    EXPECT_TRUE(got[0].left->colour.empty());
 }
 
 // Issue 23: Image messages that lie about their size, mid-replay, after good pairs: the

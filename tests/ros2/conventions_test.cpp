@@ -1,6 +1,7 @@
 // ROS 2's rules as stereod follows them, without DDS: names, the Range of every kind of
 // reading, the camera's frames (/tf_static) and ROS's image conventions.
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include <gtest/gtest.h>
@@ -154,6 +155,52 @@ TEST(Ros2Conventions, DepthNanDisparityBelowRangeRightCameraP3)
     EXPECT_DOUBLE_EQ(left.p[3], 0.0);
     EXPECT_DOUBLE_EQ(right.p[3], -615.0 * 0.1);
     EXPECT_DOUBLE_EQ(left.k[0], 615.0);
+}
+
+// Colour as ROS carries it: the left image rgb8 (red first) or mono8, and a cloud point's
+// colour as PCL packs it, 0x00RRGGBB's bits in a float32, interleaved after x y z
+// intensity; the subsampled cloud keeps each point's own colour.
+TEST(Ros2Conventions, ColourLeftImageAndPackedCloudColours)
+{
+    DepthResult result;
+    result.left_rectified = cv::Mat(2, 3, CV_8UC1, cv::Scalar(9));
+    cv::Mat out;
+    EXPECT_STREQ(ros2::leftImageForRos(result, out), "mono8");
+    EXPECT_EQ(out.type(), CV_8UC1);
+    result.left_rectified_colour = cv::Mat(2, 3, CV_8UC3, cv::Scalar(1, 2, 3)); // B G R
+    EXPECT_STREQ(ros2::leftImageForRos(result, out), "rgb8");
+    EXPECT_EQ(out.at<cv::Vec3b>(1, 2), cv::Vec3b(3, 2, 1));
+
+    const float packed = ros2::packedRgb({0x12, 0x34, 0x56});
+    uint32_t bits = 0;
+    std::memcpy(&bits, &packed, sizeof bits);
+    EXPECT_EQ(bits, 0x00123456u);
+
+    for (int i = 0; i < 5; ++i) {
+        const auto v = static_cast<float>(i);
+        result.cloud.push_back({v, v + 0.5f, v + 1.0f, 10.0f * v});
+        result.cloud_colour.push_back({static_cast<uint8_t>(i), 0, 0});
+    }
+    std::vector<CloudPoint> points;
+    std::vector<CloudColour> colours;
+    ros2::subsampleCloud(result, 2, points, colours);
+    ASSERT_EQ(points.size(), 3u);
+    ASSERT_EQ(colours.size(), 3u);
+    EXPECT_EQ(points[2].x, 4.0f);
+    EXPECT_EQ(colours[2].r, 4);
+    std::vector<float> interleaved;
+    ros2::xyziRgbCloud(points, colours, interleaved);
+    ASSERT_EQ(interleaved.size(), 15u);
+    EXPECT_EQ(interleaved[5], 2.0f);  // the second point's x
+    EXPECT_EQ(interleaved[8], 20.0f); // its intensity
+    std::memcpy(&bits, &interleaved[9], sizeof bits);
+    EXPECT_EQ(bits, 0x00020000u); // its colour, red 2
+
+    // A grey result: no colours, so the cloud goes out without the rgb field.
+    result.cloud_colour.clear();
+    ros2::subsampleCloud(result, 1, points, colours);
+    EXPECT_EQ(points.size(), 5u);
+    EXPECT_TRUE(colours.empty());
 }
 
 } // namespace

@@ -144,10 +144,19 @@ TEST_F(Ros2Interop, FastDdsSubscriberGetsEveryTopicAndTheServicesOwnValues)
     const Json& disparity = topics["rt/stereo/disparity"]["last"];
     EXPECT_FLOAT_EQ(disparity["f"].get<float>(), static_cast<float>(test::kTsukubaFocalPx));
     EXPECT_EQ(disparity["image"]["encoding"], "32FC1");
+    // The replayed Tsukuba left image is in colour: rgb8, and a cloud with PCL's packed rgb.
+    const Json& image = topics["rt/stereo/left/image_rect"]["last"];
+    EXPECT_EQ(image["encoding"], "rgb8");
+    EXPECT_EQ(image["step"], 384 * 3);
+    EXPECT_EQ(image["bytes"], 384 * 288 * 3);
     const Json& points = topics["rt/stereo/points"]["last"];
-    EXPECT_EQ(points["point_step"], 16);
-    EXPECT_EQ(points["fields"].size(), 4u);
+    EXPECT_EQ(points["point_step"], 20);
+    ASSERT_EQ(points["fields"].size(), 5u);
+    EXPECT_EQ(points["fields"][4]["name"], "rgb");
+    EXPECT_EQ(points["fields"][4]["offset"], 16);
+    EXPECT_EQ(points["fields"][4]["datatype"], 7); // FLOAT32, as PCL packs it
     EXPECT_GT(points["width"].get<int>(), 1000);
+    EXPECT_EQ(points["bytes"], points["width"].get<int>() * 20);
 
     // /tf_static: base_link -> stereo_link at the configured pose -> the optical frames.
     const Json& tf = topics["rt/tf_static"]["last"];

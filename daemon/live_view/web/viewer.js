@@ -20,13 +20,21 @@ const state = {
   range: null,                 // the depth colours' range in force, {near, far} metres
 };
 
+// The left image: mono8, or rgb8 where the left camera has colour (rows `step` bytes).
 function drawGrey(canvas, image) {
   canvas.width = image.width; canvas.height = image.height;
   const ctx = canvas.getContext("2d");
   const out = ctx.createImageData(image.width, image.height);
-  for (let i = 0; i < image.width * image.height; ++i) {
-    const v = image.data[i];
-    out.data[4 * i] = v; out.data[4 * i + 1] = v; out.data[4 * i + 2] = v; out.data[4 * i + 3] = 255;
+  const rgb = image.encoding === "rgb8";
+  for (let y = 0; y < image.height; ++y) {
+    for (let x = 0; x < image.width; ++x) {
+      const i = y * image.width + x;
+      const at = y * image.step + (rgb ? 3 * x : x);
+      out.data[4 * i] = image.data[at];
+      out.data[4 * i + 1] = image.data[rgb ? at + 1 : at];
+      out.data[4 * i + 2] = image.data[rgb ? at + 2 : at];
+      out.data[4 * i + 3] = 255;
+    }
   }
   ctx.putImageData(out, 0, 0);
   if (state.region) {
