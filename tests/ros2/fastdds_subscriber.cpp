@@ -26,12 +26,11 @@
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
 #include <fastdds/dds/topic/TypeSupport.hpp>
-#include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
-#include <fastrtps/utils/IPLocator.h>
 #include <nlohmann/json.hpp>
 
 #include "ros2_dds_types.h"
 #include "ros2_dds_typesPubSubTypes.h"
+#include "tests/ros2/fastdds_loopback.hpp"
 
 namespace {
 
@@ -139,20 +138,8 @@ int main(int argc, char** argv)
     const double seconds = std::atof(argv[3]);
     const int min_each = std::atoi(argv[4]);
 
-    // The loopback interface only; stereod is found at the well-known ports of the first
-    // participant indices on 127.0.0.1 (no multicast there).
-    DomainParticipantQos participant_qos;
-    participant_qos.name("fastdds_interop_subscriber");
-    participant_qos.transport().use_builtin_transports = false;
-    auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
-    udp->interfaceWhiteList.push_back("127.0.0.1");
-    udp->receiveBufferSize = 4 * 1024 * 1024;
-    udp->maxInitialPeersRange = 33;
-    participant_qos.transport().user_transports.push_back(udp);
-    eprosima::fastrtps::rtps::Locator_t peer;
-    peer.kind = LOCATOR_KIND_UDPv4;
-    eprosima::fastrtps::rtps::IPLocator::setIPv4(peer, "127.0.0.1");
-    participant_qos.wire_protocol().builtin.initialPeersList.push_back(peer);
+    const DomainParticipantQos participant_qos =
+        stereod::test::loopbackParticipantQos("fastdds_interop_subscriber");
     DomainParticipant* participant =
         DomainParticipantFactory::get_instance()->create_participant(domain, participant_qos);
     if (participant == nullptr) {
