@@ -42,7 +42,7 @@ enum class QosProfile {
     SensorData, // best effort, keep last 5, volatile: images, clouds
     Reliable,   // reliable, keep last 10, volatile: the reading, camera_info
     StaticTf,   // reliable, keep last 1, transient local: /tf_static, as tf2's static
-                // broadcaster, so that late joiners get it
+                // broadcaster, and ros_discovery_info, as rmw: late joiners get it
 };
 
 // A localhost-only domain entity shared by the process's participants in it.

@@ -2,8 +2,9 @@
 // that fastddsgen compiled from ros2/idl/ros2_dds_types.idl: nothing of stereod's DDS code.
 // It joins the domain on the loopback interface, subscribes to every topic stereod
 // publishes with ROS 2's names, types and QoS, and prints what it received as one JSON
-// object on stdout: per topic the matches and the count, and the decoded content of the
-// last message of each (depth values in full).
+// object on stdout: per topic the matches, the matched writers' GUIDs and the count, and
+// the decoded content of the last message of each (depth values in full); and the
+// ROS 2 graph's ros_discovery_info.
 //
 //   fastdds_subscriber DOMAIN NAMESPACE SECONDS MIN_EACH
 //
@@ -15,6 +16,7 @@
 #include <functional>
 #include <iostream>
 #include <memory>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -83,6 +85,26 @@ Json cameraInfoJson(const sensor_msgs::msg::dds_::CameraInfo_& info)
             {"p", info.p()}};
 }
 
+// A GID or GUID as 32 hex digits.
+std::string hex(const uint8_t* bytes, std::size_t size)
+{
+    std::string out;
+    char digits[3];
+    for (std::size_t i = 0; i < size; ++i) {
+        std::snprintf(digits, sizeof digits, "%02x", bytes[i]);
+        out += digits;
+    }
+    return out;
+}
+
+Json gidsJson(const std::vector<rmw_dds_common::msg::dds_::Gid_>& gids)
+{
+    Json out = Json::array();
+    for (const auto& gid : gids)
+        out.push_back(hex(gid.data().data(), gid.data().size()));
+    return out;
+}
+
 struct Subscription {
     std::string name; // DDS topic
     std::string type;
@@ -90,20 +112,25 @@ struct Subscription {
     DataReader* reader = nullptr;
     int count = 0;
     Json last;
-    std::function<bool(DataReader*, Json&)> take; // one sample into `last`; false: none
+    // The GUIDs of the writers samples came from (Fast DDS's handle of a remote writer is
+    // its GUID), to hold the node's announced GIDs to.
+    std::set<std::string> writers;
+    // One sample into `last`, its writer into `writers`; false: none.
+    std::function<bool(DataReader*, Json&, std::set<std::string>&)> take;
 };
 
 template <typename Message>
-std::function<bool(DataReader*, Json&)> taker(std::function<Json(const Message&)> decode,
-                                              bool keep_all = false)
+std::function<bool(DataReader*, Json&, std::set<std::string>&)>
+taker(std::function<Json(const Message&)> decode, bool keep_all = false)
 {
-    return [decode, keep_all](DataReader* reader, Json& last) {
+    return [decode, keep_all](DataReader* reader, Json& last, std::set<std::string>& writers) {
         Message message;
         SampleInfo info;
         if (reader->take_next_sample(&message, &info) != ReturnCode_t::RETCODE_OK)
             return false;
         if (!info.valid_data)
             return true;
+        writers.insert(hex(info.publication_handle.value, 16));
         if (keep_all) {
             if (!last.is_array())
                 last = Json::array();
@@ -152,15 +179,16 @@ int main(int argc, char** argv)
     using namespace sensor_msgs::msg::dds_;
     const std::string rt = "rt" + ns + "/";
     std::vector<Subscription> topics;
-    const auto add = [&topics](std::string name, std::string type, int min_count,
-                               std::function<bool(DataReader*, Json&)> take) {
-        Subscription s;
-        s.name = std::move(name);
-        s.type = std::move(type);
-        s.min_count = min_count;
-        s.take = std::move(take);
-        topics.push_back(std::move(s));
-    };
+    const auto add =
+        [&topics](std::string name, std::string type, int min_count,
+                  std::function<bool(DataReader*, Json&, std::set<std::string>&)> take) {
+            Subscription s;
+            s.name = std::move(name);
+            s.type = std::move(type);
+            s.min_count = min_count;
+            s.take = std::move(take);
+            topics.push_back(std::move(s));
+        };
     add(rt + "left/image_rect", "sensor_msgs::msg::dds_::Image_", min_each,
         taker<Image_>([](const Image_& m) { return imageJson(m, false); }));
     add(rt + "depth", "sensor_msgs::msg::dds_::Image_", min_each,
@@ -224,7 +252,21 @@ int main(int argc, char** argv)
             }
             return transforms;
         }));
+    // The ROS 2 graph: the nodes a participant holds (rmw's QoS: reliable, transient local).
+    add("ros_discovery_info", "rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_", 1,
+        taker<rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_>(
+            [](const rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_& m) {
+                Json nodes = Json::array();
+                for (const auto& node : m.node_entities_info_seq())
+                    nodes.push_back({{"namespace", node.node_namespace()},
+                                     {"name", node.node_name()},
+                                     {"readers", gidsJson(node.reader_gid_seq())},
+                                     {"writers", gidsJson(node.writer_gid_seq())}});
+                return Json{{"gid", hex(m.gid().data().data(), m.gid().data().size())},
+                            {"nodes", nodes}};
+            }));
     std::vector<TypeSupport> types = {
+        TypeSupport(new rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_PubSubType()),
         TypeSupport(new Image_PubSubType()),
         TypeSupport(new stereo_msgs::msg::dds_::DisparityImage_PubSubType()),
         TypeSupport(new PointCloud2_PubSubType()),
@@ -245,8 +287,8 @@ int main(int argc, char** argv)
         // rest, transient local for /tf_static (tf2's static listener).
         const bool sensor = i < 4;
         qos.reliability().kind = sensor ? BEST_EFFORT_RELIABILITY_QOS : RELIABLE_RELIABILITY_QOS;
-        qos.durability().kind =
-            t.name == "rt/tf_static" ? TRANSIENT_LOCAL_DURABILITY_QOS : VOLATILE_DURABILITY_QOS;
+        const bool latched = t.name == "rt/tf_static" || t.name == "ros_discovery_info";
+        qos.durability().kind = latched ? TRANSIENT_LOCAL_DURABILITY_QOS : VOLATILE_DURABILITY_QOS;
         qos.history().kind = KEEP_LAST_HISTORY_QOS;
         qos.history().depth = sensor ? 5 : 10;
         qos.endpoint().history_memory_policy =
@@ -269,7 +311,7 @@ int main(int argc, char** argv)
             SubscriptionMatchedStatus status;
             t.reader->get_subscription_matched_status(status);
             matched[i] = std::max(matched[i], status.current_count);
-            while (t.take(t.reader, t.last))
+            while (t.take(t.reader, t.last, t.writers))
                 ++t.count;
             all = all && t.count >= t.min_count;
         }
@@ -279,8 +321,11 @@ int main(int argc, char** argv)
     }
     for (std::size_t i = 0; i < topics.size(); ++i) {
         const Subscription& t = topics[i];
-        result["topics"][t.name] = {
-            {"type", t.type}, {"matched", matched[i]}, {"count", t.count}, {"last", t.last}};
+        result["topics"][t.name] = {{"type", t.type},
+                                    {"matched", matched[i]},
+                                    {"count", t.count},
+                                    {"last", t.last},
+                                    {"writers", t.writers}};
     }
     std::cout << result.dump() << "\n";
     participant->delete_contained_entities();
