@@ -25,6 +25,8 @@ constexpr int kRight = 1;
 constexpr uint32_t kWakeAttach = 2; // the guard condition's attachment in the waitset
 // How often the reading thread looks at stop_requested_ even when nothing arrives.
 constexpr dds_duration_t kWaitNs = DDS_MSECS(200);
+// How long one sample of the wall clock's offset converts stamps (it moves when NTP slews).
+constexpr int64_t kOffsetRefreshNs = 1'000'000'000;
 
 dds_entity_t checked(dds_entity_t entity, const char* what)
 {
@@ -198,7 +200,13 @@ void Ros2ImageSource::handleMessage(int side, std::string_view message)
     if (pixels.data != frame->image.data)
         pixels.copyTo(frame->image);
     frame->source_stamp_ns = header_ns;
-    frame->stamp_ns = saturatingSubNs(header_ns, realtimeOffsetNs());
+    // One offset for a while rather than one per image: two images of one stamp get one
+    // monotonic stamp (a fresh sample each time differs by the clock reads' time).
+    if (offset_ns_ == 0 || now_ns - offset_sampled_ns_ > kOffsetRefreshNs) {
+        offset_ns_ = realtimeOffsetNs();
+        offset_sampled_ns_ = now_ns;
+    }
+    frame->stamp_ns = saturatingSubNs(header_ns, offset_ns_);
     frame->sequence = s.sequence++;
     s.frames.fetch_add(1, std::memory_order_relaxed);
     noteArrival(s, now_ns);

@@ -19,10 +19,10 @@
 // and readings resume when images do.
 //
 // Stamps: a message's header stamp (the wall clock, as ROS 2 stamps) is kept in
-// Frame::source_stamp_ns and converted to CLOCK_MONOTONIC with the clocks' offset at
-// arrival for Frame::stamp_ns. The driver must stamp on this machine's clock (or one
-// synchronized with it) for the readings' age to mean anything; pairing needs only that
-// both topics use one clock.
+// Frame::source_stamp_ns and converted to CLOCK_MONOTONIC for Frame::stamp_ns with the
+// clocks' offset, sampled once a second (so that the two images of one stamp get one). The driver
+// must stamp on this machine's clock (or one synchronized with it) for the readings' age to mean
+// anything; pairing needs only that both topics use one clock.
 //
 // Thread contract: as FrameSource: start()/stop() from one controlling thread; status()
 // and frameSize() from any thread. Our reading thread is the only producer into both
@@ -124,7 +124,10 @@ class Ros2ImageSource final : public FrameSource {
     std::atomic<bool> stop_requested_{false};
     std::atomic<int64_t> started_ns_{0}; // CLOCK_MONOTONIC of start(); 0 while stopped
     std::string message_;                // reading thread only: the sample's CDR, capacity kept
-    bool running_ = false;               // controlling thread only
+    // Reading thread only: CLOCK_REALTIME - CLOCK_MONOTONIC, and when it was sampled.
+    int64_t offset_ns_ = 0;
+    int64_t offset_sampled_ns_ = 0;
+    bool running_ = false; // controlling thread only
 
     mutable std::mutex status_mutex_;
     std::string start_error_;                // guarded by status_mutex_
