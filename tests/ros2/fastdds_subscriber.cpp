@@ -2,13 +2,15 @@
 // that fastddsgen compiled from ros2/idl/ros2_dds_types.idl: nothing of stereod's DDS code.
 // It joins the domain on the loopback interface, subscribes to every topic stereod
 // publishes with ROS 2's names, types and QoS, and prints what it received as one JSON
-// object on stdout: per topic the matches, the matched writers' GUIDs and the count, and
+// object on stdout: per topic the matches, the writers' GUIDs, the count and the age of
+// the samples when taken (median, p99, max: wall time minus the header's stamp), and
 // the decoded content of the last message of each (depth values in full); and the
 // ROS 2 graph's ros_discovery_info.
 //
 //   fastdds_subscriber DOMAIN NAMESPACE SECONDS MIN_EACH
 //
 // Ends when every topic has MIN_EACH messages (tf_static: one) or after SECONDS.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -105,6 +107,10 @@ Json gidsJson(const std::vector<rmw_dds_common::msg::dds_::Gid_>& gids)
     return out;
 }
 
+struct Subscription;
+// One sample into the subscription (`last`, `writers`, `ages_ms`); false: none.
+using Take = std::function<bool(DataReader*, Subscription&)>;
+
 struct Subscription {
     std::string name; // DDS topic
     std::string type;
@@ -115,31 +121,55 @@ struct Subscription {
     // The GUIDs of the writers samples came from (Fast DDS's handle of a remote writer is
     // its GUID), to hold the node's announced GIDs to.
     std::set<std::string> writers;
-    // One sample into `last`, its writer into `writers`; false: none.
-    std::function<bool(DataReader*, Json&, std::set<std::string>&)> take;
+    // Wall time at take minus the header's stamp of each sample, ms: the age on delivery.
+    std::vector<double> ages_ms;
+    Take take;
 };
 
-template <typename Message>
-std::function<bool(DataReader*, Json&, std::set<std::string>&)>
-taker(std::function<Json(const Message&)> decode, bool keep_all = false)
+int64_t wallNowNs()
 {
-    return [decode, keep_all](DataReader* reader, Json& last, std::set<std::string>& writers) {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(
+               std::chrono::system_clock::now().time_since_epoch())
+        .count();
+}
+
+template <typename Message>
+Take taker(std::function<Json(const Message&)> decode, bool keep_all = false)
+{
+    return [decode, keep_all](DataReader* reader, Subscription& s) {
         Message message;
         SampleInfo info;
         if (reader->take_next_sample(&message, &info) != ReturnCode_t::RETCODE_OK)
             return false;
         if (!info.valid_data)
             return true;
-        writers.insert(hex(info.publication_handle.value, 16));
+        const int64_t now_ns = wallNowNs();
+        s.writers.insert(hex(info.publication_handle.value, 16));
+        Json decoded = decode(message);
+        if (decoded.is_object() && decoded.contains("header"))
+            s.ages_ms.push_back(
+                static_cast<double>(now_ns - decoded["header"]["stamp_ns"].get<int64_t>()) / 1e6);
         if (keep_all) {
-            if (!last.is_array())
-                last = Json::array();
-            last.push_back(decode(message));
+            if (!s.last.is_array())
+                s.last = Json::array();
+            s.last.push_back(std::move(decoded));
         } else {
-            last = decode(message);
+            s.last = std::move(decoded);
         }
         return true;
     };
+}
+
+// Median, 99th percentile and maximum of `values`.
+Json summary(std::vector<double> values)
+{
+    if (values.empty())
+        return nullptr;
+    std::sort(values.begin(), values.end());
+    const auto at = [&values](double q) {
+        return values[static_cast<std::size_t>(q * static_cast<double>(values.size() - 1))];
+    };
+    return {{"count", values.size()}, {"p50", at(0.5)}, {"p99", at(0.99)}, {"max", values.back()}};
 }
 
 } // namespace
@@ -179,16 +209,14 @@ int main(int argc, char** argv)
     using namespace sensor_msgs::msg::dds_;
     const std::string rt = "rt" + ns + "/";
     std::vector<Subscription> topics;
-    const auto add =
-        [&topics](std::string name, std::string type, int min_count,
-                  std::function<bool(DataReader*, Json&, std::set<std::string>&)> take) {
-            Subscription s;
-            s.name = std::move(name);
-            s.type = std::move(type);
-            s.min_count = min_count;
-            s.take = std::move(take);
-            topics.push_back(std::move(s));
-        };
+    const auto add = [&topics](std::string name, std::string type, int min_count, Take take) {
+        Subscription s;
+        s.name = std::move(name);
+        s.type = std::move(type);
+        s.min_count = min_count;
+        s.take = std::move(take);
+        topics.push_back(std::move(s));
+    };
     add(rt + "left/image_rect", "sensor_msgs::msg::dds_::Image_", min_each,
         taker<Image_>([](const Image_& m) { return imageJson(m, false); }));
     add(rt + "depth", "sensor_msgs::msg::dds_::Image_", min_each,
@@ -311,7 +339,7 @@ int main(int argc, char** argv)
             SubscriptionMatchedStatus status;
             t.reader->get_subscription_matched_status(status);
             matched[i] = std::max(matched[i], status.current_count);
-            while (t.take(t.reader, t.last, t.writers))
+            while (t.take(t.reader, t))
                 ++t.count;
             all = all && t.count >= t.min_count;
         }
@@ -321,11 +349,9 @@ int main(int argc, char** argv)
     }
     for (std::size_t i = 0; i < topics.size(); ++i) {
         const Subscription& t = topics[i];
-        result["topics"][t.name] = {{"type", t.type},
-                                    {"matched", matched[i]},
-                                    {"count", t.count},
-                                    {"last", t.last},
-                                    {"writers", t.writers}};
+        result["topics"][t.name] = {{"type", t.type},       {"matched", matched[i]},
+                                    {"count", t.count},     {"last", t.last},
+                                    {"writers", t.writers}, {"age_ms", summary(t.ages_ms)}};
     }
     std::cout << result.dump() << "\n";
     participant->delete_contained_entities();
