@@ -1,6 +1,7 @@
 #pragma once
 // The one interface every producer of stereo pairs implements: two V4L2 cameras with
-// stereo sync, one side-by-side device, and the replay of a recording.
+// stereo sync, one side-by-side device, the replay of a recording, and a ROS 2 camera
+// driver's image topics (ros2/ros2_image_source.hpp).
 
 #include <cstddef>
 #include <cstdint>
@@ -57,7 +58,7 @@ struct CameraStatus {
 inline constexpr std::size_t kSkewWindowPairs = 256;
 
 struct SourceStatus {
-    std::string kind; // "replay", "v4l2", "side-by-side"
+    std::string kind; // "replay", "v4l2", "side-by-side", "ros2"
     SourceState state = SourceState::Stopped;
     std::string last_error;
     std::vector<CameraStatus> cameras;

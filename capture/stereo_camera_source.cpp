@@ -169,13 +169,7 @@ SourceStatus StereoCameraSource::status() const
         out.last_error = !start_error_.empty() ? start_error_ : reasons;
     }
 
-    out.pairs = sync.pairs;
-    out.unpaired_dropped = sync.unpaired();
-    out.skew_mean_ms = sync.skew_mean_ms;
-    out.skew_p99_ms = sync.skew_p99_ms;
-    out.skew_max_ms = sync.skew_max_ms;
-    out.clock_offset_detected = sync.offset_detected;
-    out.clock_offset_ms = sync.offset_estimate_ms;
+    addSyncFigures(sync, out);
     if (sync.offset_detected) {
         char text[200];
         std::snprintf(text, sizeof text,

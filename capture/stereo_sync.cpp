@@ -28,6 +28,17 @@ double toMs(int64_t ns) noexcept
 
 } // namespace
 
+void addSyncFigures(const SyncStats& sync, SourceStatus& out) noexcept
+{
+    out.pairs = sync.pairs;
+    out.unpaired_dropped = sync.unpaired();
+    out.skew_mean_ms = sync.skew_mean_ms;
+    out.skew_p99_ms = sync.skew_p99_ms;
+    out.skew_max_ms = sync.skew_max_ms;
+    out.clock_offset_detected = sync.offset_detected;
+    out.clock_offset_ms = sync.offset_estimate_ms;
+}
+
 void StereoSync::Queue::push(FrameHandle frame)
 {
     frames[(head + size) % kMaxPending] = std::move(frame);

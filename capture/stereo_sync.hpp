@@ -85,6 +85,10 @@ struct SyncStats {
     uint64_t unpaired() const noexcept { return drops[0].total() + drops[1].total(); }
 };
 
+// Copies the sync's figures into a source's status: pairs, the frames left unpaired, the
+// skew over the recent pairs and the clock offset (the warning about it is the source's).
+void addSyncFigures(const SyncStats& sync, SourceStatus& out) noexcept;
+
 // The pure pairing logic (rules above). Thread-bound: one thread adds frames and takes
 // pairs. Dropped frames are released (their buffers given back) inside add()/takePair().
 class StereoSync {

@@ -221,6 +221,29 @@ void checkCameras(Checker& checker, const SourceConfig& source)
     }
 }
 
+void checkRos2Source(Checker& checker, const SourceConfig& source)
+{
+    const Ros2SourceConfig& ros2 = source.ros2;
+    // An absolute topic name follows a namespace's rules (tokens of letters, digits and _),
+    // with at least one token.
+    const auto checkTopic = [&checker](const std::string& key, const std::string& topic) {
+        std::string problem = ros2::namespaceProblem(topic);
+        if (problem.empty() && topic == "/")
+            problem = "names no topic";
+        if (!problem.empty())
+            checker.fail(key, problem,
+                         "an absolute ROS 2 topic name such as /stereo/left/image_raw");
+    };
+    checkTopic("source.ros2.topics.left", ros2.left_topic);
+    checkTopic("source.ros2.topics.right", ros2.right_topic);
+    if (ros2.left_topic == ros2.right_topic)
+        checker.fail("source.ros2.topics.right", "the same topic as source.ros2.topics.left",
+                     "the other camera's image topic");
+    // The largest frame any source may have (8192x8192, as a recording's).
+    checker.integer("source.ros2.width", ros2.width, 16, 8192, " px");
+    checker.integer("source.ros2.height", ros2.height, 16, 8192, " px");
+}
+
 void checkSource(Checker& checker, const SourceConfig& source, const std::string& calibration)
 {
     checker.integer("source.ring_capacity", source.ring_capacity, 2, 64, " pairs");
@@ -230,6 +253,7 @@ void checkSource(Checker& checker, const SourceConfig& source, const std::string
     checker.real("source.replay.fps", source.replay.fps, above(0, 1000, " fps"));
 
     checkCameras(checker, source);
+    checkRos2Source(checker, source);
 
     constexpr std::string_view kRecording =
         "a recording directory (frames.csv, left/, right/), a folder of left*/right* images, "

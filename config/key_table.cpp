@@ -158,7 +158,8 @@ std::vector<KeyDef> buildKeyTable()
         "source.type", kRestart, [](auto& c) -> auto& { return c.source.kind; },
         Names<SourceKind>{{"replay", SourceKind::Replay},
                           {"v4l2", SourceKind::V4l2},
-                          {"side_by_side", SourceKind::SideBySide}}));
+                          {"side_by_side", SourceKind::SideBySide},
+                          {"ros2", SourceKind::Ros2}}));
     add(textKey(
         "source.replay.path", kRestart, [](auto& c) -> auto& { return c.source.replay.path; },
         true));
@@ -225,6 +226,16 @@ std::vector<KeyDef> buildKeyTable()
         "source.cameras.controls.white_balance_k",
         [](auto& c) -> auto& { return c.source.cameras.controls.white_balance_k; }, "kelvin"));
     add(powerLineKey());
+    add(textKey(
+        "source.ros2.topics.left", kRestart,
+        [](auto& c) -> auto& { return c.source.ros2.left_topic; }, false));
+    add(textKey(
+        "source.ros2.topics.right", kRestart,
+        [](auto& c) -> auto& { return c.source.ros2.right_topic; }, false));
+    add(integerKey(
+        "source.ros2.width", kRestart, [](auto& c) -> auto& { return c.source.ros2.width; }));
+    add(integerKey(
+        "source.ros2.height", kRestart, [](auto& c) -> auto& { return c.source.ros2.height; }));
     add(integerKey(
         "source.ring_capacity", kRestart, [](auto& c) -> auto& { return c.source.ring_capacity; }));
     add(realKey(

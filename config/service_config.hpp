@@ -47,6 +47,7 @@ enum class SourceKind {
     Replay,     // a recording on disk (source.replay)
     V4l2,       // two V4L2 cameras, paired by stereo sync (source.cameras.left/right)
     SideBySide, // one V4L2 device whose frames hold left|right halves (source.cameras.device)
+    Ros2,       // a ROS 2 camera driver's two Image topics over DDS (source.ros2)
 };
 
 struct ReplayConfig {
@@ -81,10 +82,20 @@ struct CamerasConfig {
     bool lock_exposure = false; // manual exposure, frozen (controls.exposure_us if set)
 };
 
+// The two sensor_msgs/msg/Image topics of source.type ros2 (docs/ros2.md); the DDS domain
+// and discovery are the ROS 2 node's (ROS_DOMAIN_ID, ros2.localhost_only).
+struct Ros2SourceConfig {
+    std::string left_topic = "/stereo/left/image_raw"; // ROS 2 topic names
+    std::string right_topic = "/stereo/right/image_raw";
+    int width = 640; // px of each image; images of another size are refused
+    int height = 480;
+};
+
 struct SourceConfig {
     SourceKind kind = SourceKind::Replay;
     ReplayConfig replay;
     CamerasConfig cameras;
+    Ros2SourceConfig ros2;
     int ring_capacity = 4;            // pairs queued between source and worker
     double max_skew_ms = 5.0;         // pairs further apart give no reading (out of sync)
     double stall_timeout_ms = 2000.0; // no pair for this long: the source counts as down

@@ -5,6 +5,7 @@
 
 #include "capture/side_by_side_source.hpp"
 #include "capture/stereo_camera_source.hpp"
+#include "ros2/ros2_image_source.hpp"
 
 namespace stereod {
 
@@ -64,9 +65,26 @@ std::unique_ptr<FrameSource> makeCameraSource(const SourceConfig& source)
         return std::make_unique<SideBySideSource>(std::move(options));
     }
     case SourceKind::Replay:
+    case SourceKind::Ros2:
         break;
     }
-    throw std::invalid_argument("source.type replay is not a camera source");
+    throw std::invalid_argument("source.type replay or ros2 is not a camera source");
+}
+
+std::unique_ptr<FrameSource> makeRos2Source(const ServiceConfig& config)
+{
+    const SourceConfig& source = config.source;
+    if (source.kind != SourceKind::Ros2)
+        throw std::invalid_argument("source.type is not ros2");
+    ros2::Ros2SourceOptions options;
+    options.left_topic = source.ros2.left_topic;
+    options.right_topic = source.ros2.right_topic;
+    options.frame_size = cv::Size(source.ros2.width, source.ros2.height);
+    options.discovery = ros2::discoveryFromEnvironment(config.ros2.localhost_only);
+    options.sync = syncSettings(source);
+    options.stall_timeout_ns = std::llround(source.stall_timeout_ms * 1e6);
+    options.ring_capacity = static_cast<std::size_t>(source.ring_capacity);
+    return std::make_unique<ros2::Ros2ImageSource>(std::move(options));
 }
 
 } // namespace stereod

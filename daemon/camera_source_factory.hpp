@@ -1,6 +1,7 @@
 #pragma once
-// Builds the camera frame sources (source.type v4l2 and side_by_side) from the service
-// configuration: the glue between config/ and capture/.
+// Builds the camera frame sources (source.type v4l2 and side_by_side, and ros2: a ROS 2
+// camera driver's topics) from the service configuration: the glue between config/ and
+// capture/ (and ros2/).
 
 #include <memory>
 
@@ -19,5 +20,10 @@ CameraSettings cameraSettings(const SourceConfig& source, const std::string& dev
 // The two-camera source or the side-by-side source, not started. Throws
 // std::invalid_argument when the configuration is not of a camera source.
 std::unique_ptr<FrameSource> makeCameraSource(const SourceConfig& source);
+
+// The ROS 2 source of source.type ros2, not started, in the domain of ROS_DOMAIN_ID with
+// the ROS 2 node's discovery (ros2.localhost_only). Throws std::invalid_argument for a
+// ROS_DOMAIN_ID that is no domain or a configuration not of a ROS 2 source.
+std::unique_ptr<FrameSource> makeRos2Source(const ServiceConfig& config);
 
 } // namespace stereod

@@ -115,6 +115,15 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request)
         bag_camera_info = replay_source->bagCameraInfo();
         source_name = replay.path;
         source = std::move(replay_source);
+    } else if (config.source.kind == SourceKind::Ros2) {
+        // The topics are subscribed to in run(): a domain that cannot be joined is a
+        // Source error there.
+        try {
+            source = makeRos2Source(config);
+        } catch (const std::exception& e) {
+            throw StartupError(ExitCode::Source, e.what());
+        }
+        source_name = config.source.ros2.left_topic + " and " + config.source.ros2.right_topic;
     } else {
         // The cameras open in run(): a camera that cannot start is a Source error there.
         try {

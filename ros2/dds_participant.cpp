@@ -2,7 +2,9 @@
 
 #include <charconv>
 #include <cstdlib>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <stdexcept>
 #include <string_view>
 
@@ -53,6 +55,43 @@ QosPtr makeQos(QosProfile profile)
 
 } // namespace
 
+// A localhost-only domain entity, deleted when its last participant of this process is.
+// Cyclone refuses a second dds_create_domain() of one id, so the publisher and the ROS 2
+// source share it.
+struct LocalhostDomain {
+    dds_entity_t entity = 0;
+    ~LocalhostDomain()
+    {
+        if (entity > 0)
+            dds_delete(entity);
+    }
+};
+
+namespace {
+
+// The localhost-only domain of `domain_id`, made with cycloneLocalhostConfig() by its
+// first user. Throws std::runtime_error with Cyclone's reason.
+std::shared_ptr<LocalhostDomain> sharedLocalhostDomain(uint32_t domain_id)
+{
+    static std::mutex mutex;
+    static std::map<uint32_t, std::weak_ptr<LocalhostDomain>> domains; // guarded by mutex
+    const std::lock_guard lock(mutex);
+    if (std::shared_ptr<LocalhostDomain> existing = domains[domain_id].lock())
+        return existing;
+    auto domain = std::make_shared<LocalhostDomain>();
+    domain->entity = dds_create_domain(domain_id, cycloneLocalhostConfig(domain_id).c_str());
+    if (domain->entity < 0) {
+        const dds_return_t code = domain->entity;
+        domain->entity = 0;
+        throw std::runtime_error("DDS domain " + std::to_string(domain_id) +
+                                 " on 127.0.0.1: " + ddsError(code));
+    }
+    domains[domain_id] = domain;
+    return domain;
+}
+
+} // namespace
+
 DdsDiscovery discoveryFromEnvironment(bool config_localhost_only)
 {
     DdsDiscovery discovery;
@@ -86,19 +125,12 @@ std::string cycloneLocalhostConfig(uint32_t domain_id)
 
 DdsParticipant::DdsParticipant(const DdsDiscovery& discovery)
 {
-    if (discovery.localhost_only) {
-        domain_ = dds_create_domain(discovery.domain_id,
-                                    cycloneLocalhostConfig(discovery.domain_id).c_str());
-        if (domain_ < 0)
-            throw std::runtime_error("DDS domain " + std::to_string(discovery.domain_id) +
-                                     " on 127.0.0.1: " + ddsError(domain_));
-    }
+    if (discovery.localhost_only)
+        domain_ = sharedLocalhostDomain(discovery.domain_id);
     participant_ = dds_create_participant(discovery.domain_id, nullptr, nullptr);
     if (participant_ < 0) {
         const dds_return_t code = participant_;
         participant_ = 0;
-        if (domain_ > 0)
-            dds_delete(domain_);
         throw std::runtime_error("DDS participant in domain " +
                                  std::to_string(discovery.domain_id) + ": " + ddsError(code));
     }
@@ -108,8 +140,19 @@ DdsParticipant::~DdsParticipant()
 {
     if (participant_ > 0)
         dds_delete(participant_);
-    if (domain_ > 0)
-        dds_delete(domain_);
+}
+
+dds_entity_t DdsParticipant::makeTopic(const std::string& dds_topic,
+                                       const dds_topic_descriptor_t& descriptor,
+                                       const dds_qos_t* qos)
+{
+    // One topic entity per name and participant: a second dds_create_topic() of the same
+    // name and type gives the same topic.
+    const dds_entity_t topic =
+        dds_create_topic(participant_, &descriptor, dds_topic.c_str(), qos, nullptr);
+    if (topic < 0)
+        throw std::runtime_error("DDS topic " + dds_topic + ": " + ddsError(topic));
+    return topic;
 }
 
 dds_entity_t DdsParticipant::makeWriter(const std::string& dds_topic,
@@ -117,14 +160,31 @@ dds_entity_t DdsParticipant::makeWriter(const std::string& dds_topic,
                                         QosProfile profile)
 {
     const QosPtr qos = makeQos(profile);
-    const dds_entity_t topic =
-        dds_create_topic(participant_, &descriptor, dds_topic.c_str(), qos.get(), nullptr);
-    if (topic < 0)
-        throw std::runtime_error("DDS topic " + dds_topic + ": " + ddsError(topic));
+    const dds_entity_t topic = makeTopic(dds_topic, descriptor, qos.get());
     const dds_entity_t writer = dds_create_writer(participant_, topic, qos.get(), nullptr);
     if (writer < 0)
         throw std::runtime_error("DDS writer on " + dds_topic + ": " + ddsError(writer));
     return writer;
+}
+
+dds_entity_t DdsParticipant::makeReader(const std::string& dds_topic,
+                                        const dds_topic_descriptor_t& descriptor,
+                                        QosProfile profile)
+{
+    const QosPtr qos = makeQos(profile);
+    const dds_entity_t topic = makeTopic(dds_topic, descriptor, qos.get());
+    const dds_entity_t reader = dds_create_reader(participant_, topic, qos.get(), nullptr);
+    if (reader < 0)
+        throw std::runtime_error("DDS reader on " + dds_topic + ": " + ddsError(reader));
+    return reader;
+}
+
+uint32_t DdsParticipant::matchedWriters(dds_entity_t reader) noexcept
+{
+    dds_subscription_matched_status_t status{};
+    if (dds_get_subscription_matched_status(reader, &status) != DDS_RETCODE_OK)
+        return 0;
+    return status.current_count;
 }
 
 uint32_t DdsParticipant::matchedReaders(dds_entity_t writer) noexcept

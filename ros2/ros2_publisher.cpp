@@ -9,6 +9,7 @@
 #include "ros2/camera_frames.hpp"
 #include "ros2/conventions.hpp"
 #include "ros2/messages.hpp"
+#include "ros2/node_announcement.hpp"
 #include "ros2/range_reading.hpp"
 #include "ros2/topic_names.hpp"
 #include "ros2_dds_types.h"
@@ -115,6 +116,12 @@ std::string Ros2Publisher::start()
             writers->writer[c] =
                 writers->participant.makeWriter(ddsTopicName(name), *types[c], profile);
         }
+        // `ros2 node list` shows /NAMESPACE/stereod, `ros2 node info` its publishers.
+        announceNode(writers->participant,
+                     {settings_.ns,
+                      kNodeName,
+                      {},
+                      std::vector<dds_entity_t>(writers->writer.begin(), writers->writer.end())});
         writers_ = std::move(writers);
     } catch (const std::exception& e) {
         std::lock_guard lock(mutex_);

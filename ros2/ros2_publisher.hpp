@@ -43,6 +43,9 @@
 
 namespace stereod::ros2 {
 
+// The ROS 2 node's name, in the topics' namespace (ros_discovery_info).
+inline constexpr const char* kNodeName = "stereod";
+
 struct Ros2Settings {
     std::string ns = "/stereo"; // the topics' namespace; namespaceProblem() must accept it
     DdsDiscovery discovery;

@@ -220,7 +220,7 @@ INSTANTIATE_TEST_SUITE_P(
     ::testing::Values(
         // source
         RejectedCase{"source:\n  type: usb\n", "source.type", 2,
-                     "unknown value (got usb, expected replay, v4l2 or side_by_side"},
+                     "unknown value (got usb, expected replay, v4l2, side_by_side or ros2"},
         RejectedCase{"source:\n  ring_capacity: 1\n", "source.ring_capacity", 2,
                      "out of range (got 1, expected 2 to 64 pairs)"},
         RejectedCase{"source:\n  ring_capacity: 65\n", "source.ring_capacity", 2, "got 65"},
@@ -233,6 +233,14 @@ INSTANTIATE_TEST_SUITE_P(
                      "expected paced or lockstep"},
         RejectedCase{"source:\n  replay:\n    loop: maybe\n", "source.replay.loop", 3,
                      "not true or false"},
+        RejectedCase{"source:\n  ros2:\n    topics:\n      left: stereo/left\n",
+                     "source.ros2.topics.left", 4, "an absolute ROS 2 topic name"},
+        RejectedCase{"source:\n  ros2:\n    topics:\n      right: /\n", "source.ros2.topics.right",
+                     4, "names no topic"},
+        RejectedCase{"source:\n  ros2:\n    topics:\n      right: /stereo/left/image_raw\n",
+                     "source.ros2.topics.right", 4, "the same topic as source.ros2.topics.left"},
+        RejectedCase{"source:\n  ros2:\n    width: 9000\n", "source.ros2.width", 3,
+                     "expected 16 to 8192 px"},
         RejectedCase{"source: 5\n", "source", 1,
                      "not a section (got 5, expected a mapping of keys)"},
         // matcher

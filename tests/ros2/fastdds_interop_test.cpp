@@ -3,6 +3,7 @@
 // from eProsima Fast DDS with fastddsgen's types (tests/ros2/fastdds_subscriber.cpp)
 // discovers every topic with its ROS 2 type and decodes each message. What it decodes is
 // held to the service's own snapshot, `stereoctl distance --json` and the configured pose.
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <string>
@@ -77,13 +78,15 @@ TEST_F(Ros2Interop, FastDdsSubscriberGetsEveryTopicAndTheServicesOwnValues)
         {"rt/stereo/right/camera_info", "sensor_msgs::msg::dds_::CameraInfo_"},
         {"rt/stereo/nearest", "sensor_msgs::msg::dds_::Range_"},
         {"rt/stereo/reading", "std_msgs::msg::dds_::String_"},
-        {"rt/tf_static", "tf2_msgs::msg::dds_::TFMessage_"}};
+        {"rt/tf_static", "tf2_msgs::msg::dds_::TFMessage_"},
+        {"ros_discovery_info", "rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_"}};
     ASSERT_EQ(topics.size(), expected.size()) << topics.dump();
     for (const auto& [name, type] : expected) {
         ASSERT_TRUE(topics.contains(name)) << name;
         EXPECT_EQ(topics[name]["type"], type);
         EXPECT_GE(topics[name]["matched"].get<int>(), 1) << name;
-        EXPECT_GE(topics[name]["count"].get<int>(), name == "rt/tf_static" ? 1 : 5) << name;
+        const bool once = name == "rt/tf_static" || name == "ros_discovery_info";
+        EXPECT_GE(topics[name]["count"].get<int>(), once ? 1 : 5) << name;
     }
 
     // Depth: 32FC1 metres, NaN where none (REP 118), within 1 mm of the service's snapshot.
@@ -170,6 +173,31 @@ TEST_F(Ros2Interop, FastDdsSubscriberGetsEveryTopicAndTheServicesOwnValues)
     EXPECT_EQ(tf[1]["child"], "stereo_left_optical_frame");
     EXPECT_EQ(tf[2]["child"], "stereo_right_optical_frame");
     EXPECT_NEAR(tf[2]["translation"][1].get<double>(), -test::kTsukubaBaselineM, 1e-12);
+
+    // ros_discovery_info: the participant holds the node /stereo/stereod (`ros2 node list`),
+    // whose writers are those the subscriber got each topic from, by GUID.
+    const Json& graph = topics["ros_discovery_info"]["last"];
+    ASSERT_EQ(graph["nodes"].size(), 1u) << graph.dump();
+    const Json& node = graph["nodes"][0];
+    EXPECT_EQ(node["namespace"], "/stereo");
+    EXPECT_EQ(node["name"], "stereod");
+    EXPECT_TRUE(node["readers"].empty());
+    EXPECT_EQ(node["writers"].size(), expected.size() - 1);
+    const std::string gid = graph["gid"];
+    ASSERT_EQ(gid.size(), 32u);
+    // The participant's GUID: its prefix, and the participant's entity id 0x000001c1.
+    EXPECT_EQ(gid.substr(24), "000001c1");
+    for (const auto& [name, type] : expected) {
+        if (name == "ros_discovery_info")
+            continue;
+        const Json& writers = topics[name]["writers"];
+        ASSERT_EQ(writers.size(), 1u) << name << ": " << writers.dump();
+        const std::string writer = writers[0];
+        EXPECT_EQ(writer.substr(0, 24), gid.substr(0, 24)) << name;
+        EXPECT_NE(std::find(node["writers"].begin(), node["writers"].end(), Json(writer)),
+                  node["writers"].end())
+            << name << ": " << writer << " not in " << node["writers"].dump();
+    }
 
     // The service's own count of what went out.
     const Json ros2 = status()["ros2"];

@@ -2,12 +2,15 @@
 // that fastddsgen compiled from ros2/idl/ros2_dds_types.idl: nothing of stereod's DDS code.
 // It joins the domain on the loopback interface, subscribes to every topic stereod
 // publishes with ROS 2's names, types and QoS, and prints what it received as one JSON
-// object on stdout: per topic the matches and the count, and the decoded content of the
-// last message of each (depth values in full).
+// object on stdout: per topic the matches, the writers' GUIDs, the count and the age of
+// the samples when taken (median, p99, max: wall time minus the header's stamp), and
+// the decoded content of the last message of each (depth values in full); and the
+// ROS 2 graph's ros_discovery_info.
 //
 //   fastdds_subscriber DOMAIN NAMESPACE SECONDS MIN_EACH
 //
 // Ends when every topic has MIN_EACH messages (tf_static: one) or after SECONDS.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -15,6 +18,7 @@
 #include <functional>
 #include <iostream>
 #include <memory>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -26,12 +30,11 @@
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
 #include <fastdds/dds/topic/TypeSupport.hpp>
-#include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
-#include <fastrtps/utils/IPLocator.h>
 #include <nlohmann/json.hpp>
 
 #include "ros2_dds_types.h"
 #include "ros2_dds_typesPubSubTypes.h"
+#include "tests/ros2/fastdds_loopback.hpp"
 
 namespace {
 
@@ -84,6 +87,30 @@ Json cameraInfoJson(const sensor_msgs::msg::dds_::CameraInfo_& info)
             {"p", info.p()}};
 }
 
+// A GID or GUID as 32 hex digits.
+std::string hex(const uint8_t* bytes, std::size_t size)
+{
+    std::string out;
+    char digits[3];
+    for (std::size_t i = 0; i < size; ++i) {
+        std::snprintf(digits, sizeof digits, "%02x", bytes[i]);
+        out += digits;
+    }
+    return out;
+}
+
+Json gidsJson(const std::vector<rmw_dds_common::msg::dds_::Gid_>& gids)
+{
+    Json out = Json::array();
+    for (const auto& gid : gids)
+        out.push_back(hex(gid.data().data(), gid.data().size()));
+    return out;
+}
+
+struct Subscription;
+// One sample into the subscription (`last`, `writers`, `ages_ms`); false: none.
+using Take = std::function<bool(DataReader*, Subscription&)>;
+
 struct Subscription {
     std::string name; // DDS topic
     std::string type;
@@ -91,29 +118,58 @@ struct Subscription {
     DataReader* reader = nullptr;
     int count = 0;
     Json last;
-    std::function<bool(DataReader*, Json&)> take; // one sample into `last`; false: none
+    // The GUIDs of the writers samples came from (Fast DDS's handle of a remote writer is
+    // its GUID), to hold the node's announced GIDs to.
+    std::set<std::string> writers;
+    // Wall time at take minus the header's stamp of each sample, ms: the age on delivery.
+    std::vector<double> ages_ms;
+    Take take;
 };
 
-template <typename Message>
-std::function<bool(DataReader*, Json&)> taker(std::function<Json(const Message&)> decode,
-                                              bool keep_all = false)
+int64_t wallNowNs()
 {
-    return [decode, keep_all](DataReader* reader, Json& last) {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(
+               std::chrono::system_clock::now().time_since_epoch())
+        .count();
+}
+
+template <typename Message>
+Take taker(std::function<Json(const Message&)> decode, bool keep_all = false)
+{
+    return [decode, keep_all](DataReader* reader, Subscription& s) {
         Message message;
         SampleInfo info;
         if (reader->take_next_sample(&message, &info) != ReturnCode_t::RETCODE_OK)
             return false;
         if (!info.valid_data)
             return true;
+        const int64_t now_ns = wallNowNs();
+        s.writers.insert(hex(info.publication_handle.value, 16));
+        Json decoded = decode(message);
+        if (decoded.is_object() && decoded.contains("header"))
+            s.ages_ms.push_back(
+                static_cast<double>(now_ns - decoded["header"]["stamp_ns"].get<int64_t>()) / 1e6);
         if (keep_all) {
-            if (!last.is_array())
-                last = Json::array();
-            last.push_back(decode(message));
+            if (!s.last.is_array())
+                s.last = Json::array();
+            s.last.push_back(std::move(decoded));
         } else {
-            last = decode(message);
+            s.last = std::move(decoded);
         }
         return true;
     };
+}
+
+// Median, 99th percentile and maximum of `values`.
+Json summary(std::vector<double> values)
+{
+    if (values.empty())
+        return nullptr;
+    std::sort(values.begin(), values.end());
+    const auto at = [&values](double q) {
+        return values[static_cast<std::size_t>(q * static_cast<double>(values.size() - 1))];
+    };
+    return {{"count", values.size()}, {"p50", at(0.5)}, {"p99", at(0.99)}, {"max", values.back()}};
 }
 
 } // namespace
@@ -139,20 +195,8 @@ int main(int argc, char** argv)
     const double seconds = std::atof(argv[3]);
     const int min_each = std::atoi(argv[4]);
 
-    // The loopback interface only; stereod is found at the well-known ports of the first
-    // participant indices on 127.0.0.1 (no multicast there).
-    DomainParticipantQos participant_qos;
-    participant_qos.name("fastdds_interop_subscriber");
-    participant_qos.transport().use_builtin_transports = false;
-    auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
-    udp->interfaceWhiteList.push_back("127.0.0.1");
-    udp->receiveBufferSize = 4 * 1024 * 1024;
-    udp->maxInitialPeersRange = 33;
-    participant_qos.transport().user_transports.push_back(udp);
-    eprosima::fastrtps::rtps::Locator_t peer;
-    peer.kind = LOCATOR_KIND_UDPv4;
-    eprosima::fastrtps::rtps::IPLocator::setIPv4(peer, "127.0.0.1");
-    participant_qos.wire_protocol().builtin.initialPeersList.push_back(peer);
+    const DomainParticipantQos participant_qos =
+        stereod::test::loopbackParticipantQos("fastdds_interop_subscriber");
     DomainParticipant* participant =
         DomainParticipantFactory::get_instance()->create_participant(domain, participant_qos);
     if (participant == nullptr) {
@@ -165,8 +209,7 @@ int main(int argc, char** argv)
     using namespace sensor_msgs::msg::dds_;
     const std::string rt = "rt" + ns + "/";
     std::vector<Subscription> topics;
-    const auto add = [&topics](std::string name, std::string type, int min_count,
-                               std::function<bool(DataReader*, Json&)> take) {
+    const auto add = [&topics](std::string name, std::string type, int min_count, Take take) {
         Subscription s;
         s.name = std::move(name);
         s.type = std::move(type);
@@ -237,7 +280,21 @@ int main(int argc, char** argv)
             }
             return transforms;
         }));
+    // The ROS 2 graph: the nodes a participant holds (rmw's QoS: reliable, transient local).
+    add("ros_discovery_info", "rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_", 1,
+        taker<rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_>(
+            [](const rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_& m) {
+                Json nodes = Json::array();
+                for (const auto& node : m.node_entities_info_seq())
+                    nodes.push_back({{"namespace", node.node_namespace()},
+                                     {"name", node.node_name()},
+                                     {"readers", gidsJson(node.reader_gid_seq())},
+                                     {"writers", gidsJson(node.writer_gid_seq())}});
+                return Json{{"gid", hex(m.gid().data().data(), m.gid().data().size())},
+                            {"nodes", nodes}};
+            }));
     std::vector<TypeSupport> types = {
+        TypeSupport(new rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_PubSubType()),
         TypeSupport(new Image_PubSubType()),
         TypeSupport(new stereo_msgs::msg::dds_::DisparityImage_PubSubType()),
         TypeSupport(new PointCloud2_PubSubType()),
@@ -258,8 +315,8 @@ int main(int argc, char** argv)
         // rest, transient local for /tf_static (tf2's static listener).
         const bool sensor = i < 4;
         qos.reliability().kind = sensor ? BEST_EFFORT_RELIABILITY_QOS : RELIABLE_RELIABILITY_QOS;
-        qos.durability().kind =
-            t.name == "rt/tf_static" ? TRANSIENT_LOCAL_DURABILITY_QOS : VOLATILE_DURABILITY_QOS;
+        const bool latched = t.name == "rt/tf_static" || t.name == "ros_discovery_info";
+        qos.durability().kind = latched ? TRANSIENT_LOCAL_DURABILITY_QOS : VOLATILE_DURABILITY_QOS;
         qos.history().kind = KEEP_LAST_HISTORY_QOS;
         qos.history().depth = sensor ? 5 : 10;
         qos.endpoint().history_memory_policy =
@@ -282,7 +339,7 @@ int main(int argc, char** argv)
             SubscriptionMatchedStatus status;
             t.reader->get_subscription_matched_status(status);
             matched[i] = std::max(matched[i], status.current_count);
-            while (t.take(t.reader, t.last))
+            while (t.take(t.reader, t))
                 ++t.count;
             all = all && t.count >= t.min_count;
         }
@@ -292,8 +349,9 @@ int main(int argc, char** argv)
     }
     for (std::size_t i = 0; i < topics.size(); ++i) {
         const Subscription& t = topics[i];
-        result["topics"][t.name] = {
-            {"type", t.type}, {"matched", matched[i]}, {"count", t.count}, {"last", t.last}};
+        result["topics"][t.name] = {{"type", t.type},       {"matched", matched[i]},
+                                    {"count", t.count},     {"last", t.last},
+                                    {"writers", t.writers}, {"age_ms", summary(t.ages_ms)}};
     }
     std::cout << result.dump() << "\n";
     participant->delete_contained_entities();

@@ -1,0 +1,254 @@
+// source.type ros2, fed by a ROS 2 camera driver nobody here wrote: a publisher built from
+// eProsima Fast DDS (tests/ros2/fastdds_image_publisher.cpp) sends the Tsukuba pair on the
+// two image topics over the loopback interface, in a DDS domain of this process's own, and
+// `stereod` reads its pairs from them. The distance is held to the same pair replayed from
+// files; stamps too far apart, a malformed image and a publisher that goes away and comes
+// back are each seen in what the service says.
+#include <chrono>
+#include <fstream>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+#include <unistd.h>
+
+#include "ctl/client.hpp"
+#include "tests/daemon/live_view_service.hpp"
+#include "tests/support/data_paths.hpp"
+#include "tests/support/process.hpp"
+
+namespace stereod {
+namespace {
+
+using namespace std::chrono_literals;
+using Json = nlohmann::ordered_json;
+using test::ChildProcess;
+
+class Ros2Source : public test::LiveViewE2e {
+  protected:
+    void SetUp() override
+    {
+        LiveViewE2e::SetUp();
+        // Apart from the interop test's domain (1 + pid % 200) when both run at once.
+        domain_ = std::to_string(201 + ::getpid() % 30);
+        ::setenv("ROS_DOMAIN_ID", domain_.c_str(), 1);
+    }
+
+    void TearDown() override
+    {
+        publisher_.reset();
+        ros2_service_.reset();
+        ::unsetenv("ROS_DOMAIN_ID");
+    }
+
+    // The distance of the Tsukuba pair replayed from files by the same service and
+    // calibration: what the ROS 2 source must give too.
+    double replayedDistance()
+    {
+        startService("off");
+        const Json reading = waitForReading(valid, 30s);
+        service_.reset();
+        EXPECT_TRUE(valid(reading)) << reading.dump();
+        return valid(reading) ? reading["distance_m"].get<double>() : 0.0;
+    }
+
+    // stereod reading the two image topics of the Tsukuba pair's size.
+    void startRos2Service(const std::string& extra_source_yaml = {},
+                          const std::string& extra_yaml = {})
+    {
+        const std::string config = dir_.file("ros2-source.yaml");
+        std::ofstream(config) << "source:\n  type: ros2\n  ros2:\n    width: 384\n"
+                              << "    height: 288\n  stall_timeout_ms: 1000\n"
+                              << extra_source_yaml << extra_yaml;
+        ros2_service_ = std::make_unique<ChildProcess>(
+            std::vector<std::string>{test::stereodPath(), "--config", config, "--calib",
+                                     calibration_, "--socket", socket_, "--live-view", "off"},
+            dir_.file("stereod-ros2.log"));
+        const auto deadline = std::chrono::steady_clock::now() + 30s;
+        while (std::chrono::steady_clock::now() < deadline) {
+            try {
+                ProtocolClient client(socket_, 2000ms);
+                client.request({{"cmd", "status"}});
+                return;
+            } catch (const std::exception&) {
+            }
+            std::this_thread::sleep_for(100ms);
+        }
+        FAIL() << "stereod did not answer within 30 s";
+    }
+
+    void publish(double seconds, const std::vector<std::string>& options = {})
+    {
+        std::vector<std::string> argv = {STEREOD_FASTDDS_IMAGE_PUBLISHER, domain_,
+                                         std::to_string(seconds), test::tsukubaDir() + "/im3.png",
+                                         test::tsukubaDir() + "/im4.png"};
+        argv.insert(argv.end(), options.begin(), options.end());
+        publisher_ = std::make_unique<ChildProcess>(argv, dir_.file("publisher.log"));
+    }
+
+    Json distance()
+    {
+        ProtocolClient client(socket_, 10000ms);
+        return client.request({{"cmd", "distance"}})["reading"];
+    }
+
+    // Polls the service's reading until `wanted` holds of it, or `limit` passes; the last
+    // reading either way.
+    template <typename Predicate> Json waitForReading(Predicate wanted, std::chrono::seconds limit)
+    {
+        Json reading;
+        const auto deadline = std::chrono::steady_clock::now() + limit;
+        while (std::chrono::steady_clock::now() < deadline) {
+            try {
+                reading = distance();
+                if (wanted(reading))
+                    return reading;
+            } catch (const std::exception&) {
+            }
+            std::this_thread::sleep_for(100ms);
+        }
+        return reading;
+    }
+
+    static bool valid(const Json& reading) { return reading.value("valid", false); }
+
+    std::string domain_;
+    std::unique_ptr<ChildProcess> ros2_service_;
+    std::unique_ptr<ChildProcess> publisher_;
+};
+
+std::string reasonCode(const Json& reading)
+{
+    return reading.contains("reason") && reading["reason"].is_object()
+               ? reading["reason"].value("code", std::string())
+               : std::string();
+}
+
+TEST_F(Ros2Source, DistanceEqualsTheSamePairReplayedFromFiles)
+{
+    const double replayed = replayedDistance();
+    ASSERT_GT(replayed, 0.0);
+    // Publishing as a ROS 2 node too: the source and the node share the process's domain.
+    startRos2Service({}, "ros2:\n  enabled: true\n");
+    ASSERT_FALSE(HasFailure());
+    publish(60);
+    const Json reading = waitForReading(valid, 30s);
+    ASSERT_TRUE(valid(reading)) << reading.dump();
+    // The same grey pixels (mono8 from the files as the replay reads them), the same
+    // matcher: the same distance.
+    EXPECT_DOUBLE_EQ(reading["distance_m"].get<double>(), replayed);
+
+    const Json st = status();
+    EXPECT_EQ(st["ros2"]["publishing"], true) << st["ros2"].dump();
+    const Json source = st["source"];
+    SCOPED_TRACE(source.dump());
+    EXPECT_EQ(source["kind"], "ros2");
+    EXPECT_EQ(source["state"], "running");
+    ASSERT_EQ(source["cameras"].size(), 2u);
+    EXPECT_EQ(source["cameras"][0]["name"], "/stereo/left/image_raw");
+    EXPECT_EQ(source["cameras"][1]["name"], "/stereo/right/image_raw");
+    EXPECT_GT(source["pairs"].get<int>(), 0);
+    EXPECT_EQ(source["cameras"][0]["bad_frames"], 0);
+    // Both images of a pair carry one stamp.
+    EXPECT_EQ(source["skew_ms"]["max"].get<double>(), 0.0);
+}
+
+// Colour drivers (rgb8, bgr8) are matched as grey; a reliable writer is taken too.
+TEST_F(Ros2Source, ColourImagesFromAReliableWriterAreMatchedAsGrey)
+{
+    const double replayed = replayedDistance();
+    ASSERT_GT(replayed, 0.0);
+    startRos2Service();
+    ASSERT_FALSE(HasFailure());
+    for (const std::string encoding : {"rgb8", "bgr8"}) {
+        publish(60, {"--encoding", encoding, "--reliable"});
+        // A reading of this publisher's pairs: the previous one's are a second old.
+        std::this_thread::sleep_for(1500ms);
+        const Json reading = waitForReading(valid, 30s);
+        ASSERT_TRUE(valid(reading)) << encoding << ": " << reading.dump();
+        // The grey of cvtColor and libpng's differ by a level here and there.
+        EXPECT_NEAR(reading["distance_m"].get<double>(), replayed, 0.01 * replayed) << encoding;
+        EXPECT_EQ(status()["source"]["cameras"][0]["bad_frames"], 0) << encoding;
+        publisher_.reset();
+    }
+}
+
+TEST_F(Ros2Source, StampsFurtherApartThanMaxSkewAreNotPaired)
+{
+    startRos2Service("  max_skew_ms: 5\n");
+    ASSERT_FALSE(HasFailure());
+    publish(60, {"--right-offset-ms", "20"});
+    // Both topics arrive, no pair is made.
+    Json source;
+    const auto deadline = std::chrono::steady_clock::now() + 30s;
+    while (std::chrono::steady_clock::now() < deadline) {
+        source = status()["source"];
+        if (source["cameras"][0]["frames"].get<int>() >= 10 &&
+            source["cameras"][1]["frames"].get<int>() >= 10)
+            break;
+        std::this_thread::sleep_for(200ms);
+    }
+    ASSERT_GE(source["cameras"][1]["frames"].get<int>(), 10) << source.dump();
+    EXPECT_EQ(source["pairs"], 0) << source.dump();
+    EXPECT_GE(source["unpaired_dropped"].get<int>(), 10) << source.dump();
+    const Json reading = distance();
+    EXPECT_FALSE(valid(reading)) << reading.dump();
+}
+
+TEST_F(Ros2Source, AMalformedImageIsRefusedWithItsMessageAndTheServiceRunsOn)
+{
+    startRos2Service();
+    ASSERT_FALSE(HasFailure());
+    // Every third left image declares a step of 192 bytes for its rows of 384.
+    publish(60, {"--bad-every", "3"});
+    const Json reading = waitForReading(valid, 30s);
+    ASSERT_TRUE(valid(reading)) << reading.dump();
+    Json left;
+    const auto deadline = std::chrono::steady_clock::now() + 30s;
+    while (std::chrono::steady_clock::now() < deadline) {
+        left = status()["source"]["cameras"][0];
+        if (left["bad_frames"].get<int>() >= 2)
+            break;
+        std::this_thread::sleep_for(200ms);
+    }
+    EXPECT_GE(left["bad_frames"].get<int>(), 2) << left.dump();
+    EXPECT_EQ(left["last_bad_frame"],
+              "image of 384x288 mono8 has step 192, less than its row of 384 bytes");
+    // The good two of every three images keep coming (the first may be lost to discovery).
+    EXPECT_GE(left["frames"].get<int>(), left["bad_frames"].get<int>());
+    // Still serving readings of the good pairs after the bad ones.
+    std::this_thread::sleep_for(500ms);
+    EXPECT_TRUE(valid(waitForReading(valid, 10s)));
+}
+
+TEST_F(Ros2Source, APublisherGoneIsSourceDownAndReadingsResumeWhenItIsBack)
+{
+    startRos2Service();
+    ASSERT_FALSE(HasFailure());
+    publish(4);
+    ASSERT_TRUE(valid(waitForReading(valid, 30s)));
+    ASSERT_TRUE(publisher_->waitFor(30s).has_value());
+
+    // No image for stall_timeout_ms (1 s): source down, naming the topic.
+    const Json down =
+        waitForReading([](const Json& r) { return reasonCode(r) == "source_down"; }, 20s);
+    EXPECT_EQ(reasonCode(down), "source_down") << down.dump();
+    const Json st = status();
+    EXPECT_EQ(st["state"], "source_down");
+    EXPECT_EQ(st["source"]["state"], "stalled");
+    EXPECT_NE(
+        st["source"]["last_error"].get<std::string>().find("no image on /stereo/left/image_raw"),
+        std::string::npos)
+        << st["source"].dump();
+
+    publish(60);
+    const Json back = waitForReading(valid, 30s);
+    EXPECT_TRUE(valid(back)) << back.dump();
+    EXPECT_EQ(status()["source"]["state"], "running");
+}
+
+} // namespace
+} // namespace stereod

@@ -1,0 +1,216 @@
+// The ROS 2 node's threads under load, for ThreadSanitizer (label threaded): the image
+// source's reading thread and sync thread against a writer, a consumer of the ring and a
+// reader of status(); the publisher's thread against the thread that offers results and
+// one that reads its counters. Everything in one process, on the loopback interface, in a
+// DDS domain of the test's own; the peers are Cyclone DDS entities on a participant of
+// their own (sharing the process's domain with the code under test).
+#include <atomic>
+#include <chrono>
+#include <cstring>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <dds/dds.h>
+#include <dds/ddsi/ddsi_serdata.h>
+#include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+#include <unistd.h>
+
+#include "base/clock.hpp"
+#include "ros2/dds_participant.hpp"
+#include "ros2/ros2_image_source.hpp"
+#include "ros2/ros2_publisher.hpp"
+#include "ros2_dds_types.h"
+
+namespace stereod::ros2 {
+namespace {
+
+using namespace std::chrono_literals;
+
+DdsDiscovery testDomain(int offset)
+{
+    DdsDiscovery discovery;
+    discovery.domain_id = static_cast<uint32_t>(100 + (::getpid() + offset) % 100);
+    discovery.localhost_only = true;
+    return discovery;
+}
+
+// A 64x48 mono8 image whose pixels all hold `value`, stamped `stamp_ns` (wall clock).
+sensor_msgs_msg_dds__Image_ monoImage(std::vector<uint8_t>& pixels, uint8_t value, int64_t stamp_ns,
+                                      char* encoding, char* frame_id)
+{
+    pixels.assign(64 * 48, value);
+    sensor_msgs_msg_dds__Image_ image{};
+    image.header.stamp.sec = static_cast<int32_t>(stamp_ns / 1'000'000'000);
+    image.header.stamp.nanosec = static_cast<uint32_t>(stamp_ns % 1'000'000'000);
+    image.header.frame_id = frame_id;
+    image.height = 48;
+    image.width = 64;
+    image.encoding = encoding;
+    image.step = 64;
+    image.data._buffer = pixels.data();
+    image.data._length = image.data._maximum = static_cast<uint32_t>(pixels.size());
+    return image;
+}
+
+TEST(Ros2Threads, SourceReadsPairsWhileStatusIsReadAndStopsUnderLoad)
+{
+    Ros2SourceOptions options;
+    options.discovery = testDomain(0);
+    options.frame_size = cv::Size(64, 48);
+    options.sync.max_skew_ns = 1'000'000;
+    options.stall_timeout_ns = 1'000'000'000;
+    Ros2ImageSource source(options);
+    PairRing ring(4);
+    ASSERT_EQ(source.start(ring), 0) << source.status().last_error;
+
+    DdsParticipant peer(options.discovery);
+    const dds_entity_t writers[2] = {
+        peer.makeWriter("rt/stereo/left/image_raw", sensor_msgs_msg_dds__Image__desc,
+                        QosProfile::SensorData),
+        peer.makeWriter("rt/stereo/right/image_raw", sensor_msgs_msg_dds__Image__desc,
+                        QosProfile::SensorData)};
+    // Until both readers match, written samples are lost.
+    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    while ((DdsParticipant::matchedReaders(writers[0]) == 0 ||
+            DdsParticipant::matchedReaders(writers[1]) == 0) &&
+           std::chrono::steady_clock::now() < deadline)
+        std::this_thread::sleep_for(10ms);
+    ASSERT_EQ(DdsParticipant::matchedReaders(writers[0]), 1u);
+
+    std::atomic<bool> done{false};
+    std::atomic<int> written{0};
+    std::thread writer([&] {
+        char encoding[] = "mono8";
+        char frame_id[] = "cam";
+        std::vector<uint8_t> pixels[2];
+        for (int i = 0; !done.load(); ++i) {
+            const int64_t stamp_ns = realtimeOffsetNs() + monotonicNowNs();
+            // The pair's number in its pixels, left and right alike.
+            for (int side = 0; side < 2; ++side) {
+                const sensor_msgs_msg_dds__Image_ image = monoImage(
+                    pixels[side], static_cast<uint8_t>(i % 251), stamp_ns, encoding, frame_id);
+                dds_write(writers[side], &image);
+            }
+            written.fetch_add(1);
+            std::this_thread::sleep_for(2ms);
+        }
+    });
+    std::thread watcher([&] {
+        while (!done.load()) {
+            const SourceStatus status = source.status();
+            EXPECT_EQ(status.cameras.size(), 2u);
+            std::this_thread::sleep_for(1ms);
+        }
+    });
+
+    int pairs = 0;
+    int mismatched = 0;
+    const auto until = std::chrono::steady_clock::now() + 2s;
+    while (std::chrono::steady_clock::now() < until) {
+        if (std::optional<StereoPair> pair = ring.tryPop()) {
+            ++pairs;
+            const uint8_t left = pair->left->image.at<uint8_t>(47, 63);
+            const uint8_t right = pair->right->image.at<uint8_t>(0, 0);
+            mismatched += (left != right || pair->left->stamp_ns != pair->right->stamp_ns) ? 1 : 0;
+        } else {
+            std::this_thread::sleep_for(1ms);
+        }
+    }
+    // Stopped while the writer still writes and the watcher still reads.
+    source.stop();
+    done.store(true);
+    writer.join();
+    watcher.join();
+
+    EXPECT_GT(pairs, 50) << written.load() << " pairs written";
+    EXPECT_EQ(mismatched, 0);
+    const SourceStatus status = source.status();
+    EXPECT_EQ(status.state, SourceState::Stopped);
+    EXPECT_GE(status.pairs, static_cast<uint64_t>(pairs));
+    EXPECT_EQ(status.cameras[0].bad_frames, 0u);
+    while (ring.tryPop()) {
+    }
+}
+
+TEST(Ros2Threads, PublisherPublishesWhileResultsAreOfferedAndCountersRead)
+{
+    Ros2Settings settings;
+    settings.ns = "/threads";
+    settings.discovery = testDomain(50);
+    settings.max_rate_hz = 1000;
+    RectifiedGeometry geometry;
+    geometry.image_size = cv::Size(64, 48);
+    geometry.focal_px = 60;
+    geometry.cx_px = 32;
+    geometry.cy_px = 24;
+    geometry.baseline_m = 0.1;
+    Ros2Publisher publisher(settings, geometry, NearestSettings{}, CameraPose{});
+    ASSERT_EQ(publisher.start(), "");
+
+    // A reader of the depth and of the Range, so that those channels are matched and filled.
+    DdsParticipant peer(settings.discovery);
+    const dds_entity_t readers[2] = {
+        peer.makeReader("rt/threads/depth", sensor_msgs_msg_dds__Image__desc,
+                        QosProfile::SensorData),
+        peer.makeReader("rt/threads/nearest", sensor_msgs_msg_dds__Range__desc,
+                        QosProfile::Reliable)};
+    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    while (publisher.counters().readers < 2 && std::chrono::steady_clock::now() < deadline)
+        std::this_thread::sleep_for(10ms);
+    ASSERT_GE(publisher.counters().readers, 2u);
+
+    std::atomic<bool> done{false};
+    std::thread offering([&] {
+        DepthResult result;
+        result.left_rectified = cv::Mat(48, 64, CV_8UC1, cv::Scalar(100));
+        result.disparity = cv::Mat(48, 64, CV_32FC1, cv::Scalar(6.0f));
+        result.depth_m = cv::Mat(48, 64, CV_32FC1, cv::Scalar(1.0f));
+        DisparityRange range;
+        range.num_disparities = 16;
+        range.closest_depth_m = 0.4;
+        while (!done.load()) {
+            ++result.frame;
+            publisher.offerFrame(result, realtimeOffsetNs() + monotonicNowNs(), true, range,
+                                 CameraPose{}, "{\"valid\":false}");
+            std::this_thread::sleep_for(1ms);
+        }
+    });
+    std::thread counting([&] {
+        while (!done.load()) {
+            EXPECT_EQ(publisher.counters().write_errors, 0u);
+            std::this_thread::sleep_for(1ms);
+        }
+    });
+
+    uint64_t received[2] = {0, 0};
+    const auto until = std::chrono::steady_clock::now() + 2s;
+    while (std::chrono::steady_clock::now() < until) {
+        for (int r = 0; r < 2; ++r) {
+            std::array<ddsi_serdata*, 8> samples{};
+            std::array<dds_sample_info_t, 8> infos{};
+            const dds_return_t n =
+                dds_takecdr(readers[r], samples.data(), 8, infos.data(), DDS_ANY_STATE);
+            for (int i = 0; i < n; ++i) {
+                received[r] += infos[static_cast<std::size_t>(i)].valid_data ? 1 : 0;
+                ddsi_serdata_unref(samples[static_cast<std::size_t>(i)]);
+            }
+        }
+        std::this_thread::sleep_for(1ms);
+    }
+    // Stopped while results are still offered and counters read.
+    publisher.stop();
+    done.store(true);
+    offering.join();
+    counting.join();
+
+    const Ros2Counters counters = publisher.counters();
+    EXPECT_GT(counters.frames, 50u);
+    EXPECT_GT(received[0], 20u);
+    EXPECT_GT(received[1], 20u);
+    EXPECT_FALSE(counters.publishing);
+}
+
+} // namespace
+} // namespace stereod::ros2
