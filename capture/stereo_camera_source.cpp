@@ -170,15 +170,8 @@ SourceStatus StereoCameraSource::status() const
     }
 
     addSyncFigures(sync, out);
-    if (sync.offset_detected) {
-        char text[200];
-        std::snprintf(text, sizeof text,
-                      "the cameras' frames are %.2f ms apart (right minus left, over %zu "
-                      "frames; max_skew %.2f ms): not triggered together, or one stamps late",
-                      sync.offset_estimate_ms, sync.offset_samples,
-                      static_cast<double>(options_.sync.max_skew_ns) / 1e6);
-        out.warnings.push_back(text);
-    }
+    addClockOffsetWarning(sync, options_.sync.max_skew_ns, "the cameras' frames", "frames",
+                          "not triggered together, or one stamps late", out);
     for (std::string& mismatch : controlMismatches(cameras[0], cameras[1]))
         out.warnings.push_back("controls differ: " + mismatch);
     return out;

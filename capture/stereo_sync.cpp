@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cstdio>
 #include <cstdlib>
 #include <limits>
 #include <stdexcept>
@@ -37,6 +38,19 @@ void addSyncFigures(const SyncStats& sync, SourceStatus& out) noexcept
     out.skew_max_ms = sync.skew_max_ms;
     out.clock_offset_detected = sync.offset_detected;
     out.clock_offset_ms = sync.offset_estimate_ms;
+}
+
+void addClockOffsetWarning(const SyncStats& sync, int64_t max_skew_ns, const char* apart,
+                           const char* samples, const char* cause, SourceStatus& out)
+{
+    if (!sync.offset_detected)
+        return;
+    char text[256];
+    std::snprintf(text, sizeof text,
+                  "%s are %.2f ms apart (right minus left, over %zu %s; max_skew %.2f ms): %s",
+                  apart, sync.offset_estimate_ms, sync.offset_samples, samples,
+                  static_cast<double>(max_skew_ns) / 1e6, cause);
+    out.warnings.push_back(text);
 }
 
 void StereoSync::Queue::push(FrameHandle frame)

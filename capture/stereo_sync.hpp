@@ -89,6 +89,11 @@ struct SyncStats {
 // skew over the recent pairs and the clock offset (the warning about it is the source's).
 void addSyncFigures(const SyncStats& sync, SourceStatus& out) noexcept;
 
+// The source's warning about a clock offset the sync detected, when it did: "<apart> are
+// X ms apart (right minus left, over N <samples>; max_skew Y ms): <cause>".
+void addClockOffsetWarning(const SyncStats& sync, int64_t max_skew_ns, const char* apart,
+                           const char* samples, const char* cause, SourceStatus& out);
+
 // The pure pairing logic (rules above). Thread-bound: one thread adds frames and takes
 // pairs. Dropped frames are released (their buffers given back) inside add()/takePair().
 class StereoSync {

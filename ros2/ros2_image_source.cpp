@@ -305,15 +305,8 @@ SourceStatus Ros2ImageSource::status() const
     }
 
     addSyncFigures(sync, out);
-    if (sync.offset_detected) {
-        char text[200];
-        std::snprintf(text, sizeof text,
-                      "the two topics' stamps are %.2f ms apart (right minus left, over %zu "
-                      "images; max_skew %.2f ms): the driver does not stamp a pair alike",
-                      sync.offset_estimate_ms, sync.offset_samples,
-                      static_cast<double>(options_.sync.max_skew_ns) / 1e6);
-        out.warnings.push_back(text);
-    }
+    addClockOffsetWarning(sync, options_.sync.max_skew_ns, "the two topics' stamps", "images",
+                          "the driver does not stamp a pair alike", out);
     return out;
 }
 
