@@ -98,7 +98,7 @@ size_t pyramidSgmMemoryBytes(const PyramidSgmSettings& s)
     if (hasCoarseLevel(s)) {
         const CensusSgmSettings coarse = coarseLevelSettings(s.full);
         const size_t area = static_cast<size_t>(coarse.width) * static_cast<size_t>(coarse.height);
-        bytes += censusSgmMemoryBytes(coarse) + area * (2 + sizeof(float) + 2);
+        bytes += censusSgmMemoryBytes(coarse) + area * (2 + sizeof(float) + 3);
         if (isGuided(s))
             bytes += GuidedSpans::memoryBytes(s.full, coarse);
     }
@@ -125,6 +125,7 @@ struct PyramidSgm::Impl {
             coarse_confidence.assign(area, 0);
             coarse_limit.assign(area, 0);
             coarse_near.assign(area, 0);
+            coarse_given.assign(area, 0);
             extended_last = 2 * (c.min_disparity + c.num_disparities - 1);
             probe_width = c.width;
             probe_height = c.height;
@@ -189,12 +190,21 @@ struct PyramidSgm::Impl {
             writeCoarseOnly(out);
     }
 
-    // PyramidSgmOutput::coarse_only_px, after the merge.
-    void writeCoarseOnly(const PyramidSgmOutput& out) const
+    // PyramidSgmOutput::coarse_only_px, after the merge. Which coarse matches may be given
+    // is decided once per coarse pixel, not once for each of the four it covers.
+    void writeCoarseOnly(const PyramidSgmOutput& out)
     {
         const int w = settings.full.width, h = settings.full.height;
         const CensusSgmSettings& c = coarse->settings();
         constexpr float kNone = std::numeric_limits<float>::infinity();
+        for (int cy = 0; cy < c.height; ++cy)
+            for (int cx = 0; cx < c.width; ++cx) {
+                const size_t ci = static_cast<size_t>(cy) * static_cast<size_t>(c.width) +
+                                  static_cast<size_t>(cx);
+                coarse_given[ci] = std::isfinite(coarse_disparity[ci]) && coarse_limit[ci] == 0 &&
+                                   isTextured(half_left.data(), static_cast<size_t>(c.width),
+                                              c.width, c.height, cx, cy, c.textured_min_range);
+            }
         for (int y = 0; y < h; ++y) {
             const int cy = std::min(y / 2, c.height - 1);
             for (int x = 0; x < w; ++x) {
@@ -206,9 +216,7 @@ struct PyramidSgm::Impl {
                 const int cx = std::min(x / 2, c.width - 1);
                 const size_t ci = static_cast<size_t>(cy) * static_cast<size_t>(c.width) +
                                   static_cast<size_t>(cx);
-                if (std::isfinite(coarse_disparity[ci]) && coarse_limit[ci] == 0 &&
-                    isTextured(half_left.data(), static_cast<size_t>(c.width), c.width, c.height,
-                               cx, cy, c.textured_min_range))
+                if (coarse_given[ci] != 0)
                     out.coarse_only_px[i] = 2.0f * coarse_disparity[ci];
             }
         }
@@ -290,7 +298,8 @@ struct PyramidSgm::Impl {
     std::vector<uint8_t> half_left, half_right;
     std::vector<float> coarse_disparity;
     std::vector<uint8_t> coarse_confidence, coarse_limit;
-    std::vector<uint8_t> coarse_near; // markCoarseNearSurface()
+    std::vector<uint8_t> coarse_near;  // markCoarseNearSurface()
+    std::vector<uint8_t> coarse_given; // writeCoarseOnly()
     std::unique_ptr<NearFieldProbe> probe;
     PyramidSgmTimings timings;
 };
