@@ -169,10 +169,12 @@ TEST(CalibrationHealthE2e, SwappedCamerasFailAndReadingsAreWithheldWhenAsked)
     std::printf("[health] service with the cameras swapped: %s\n", health.dump().c_str());
     ASSERT_EQ(health["state"], "failed");
     Json reading;
-    const auto deadline = std::chrono::steady_clock::now() + 5s;
+    const auto deadline = std::chrono::steady_clock::now() + 15s;
     while (std::chrono::steady_clock::now() < deadline) {
         reading = service.distance();
-        if (reading.contains("reason"))
+        // On loaded cores a reading may have aged past its limit; "stale" takes precedence
+        // over the check's verdict, so ask again for a fresh one.
+        if (reading.contains("reason") && reading["reason"]["code"] != "stale")
             break;
         std::this_thread::sleep_for(100ms);
     }
