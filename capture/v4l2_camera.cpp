@@ -14,6 +14,7 @@
 #include <sys/eventfd.h>
 #include <unistd.h>
 
+#include "base/latest_text.hpp"
 #include "base/system_error.hpp"
 #include "base/unique_fd.hpp"
 #include "capture/format_choice.hpp"
@@ -175,8 +176,8 @@ class V4l2Camera::Impl {
             out.camera.last_error = last_error_;
             out.format = format_;
             out.controls = controls_;
-            out.camera.last_bad_frame = last_bad_frame_;
         }
+        out.camera.last_bad_frame = last_bad_frame_.read();
         out.camera.name = name_;
         out.device = settings_.device;
         out.camera.state = state_.load(std::memory_order_acquire);
@@ -534,19 +535,15 @@ class V4l2Camera::Impl {
     {
         if (bad_since_good_ == 0)
             return fmt::format("no frame for {} ms", silent_ms);
-        std::lock_guard lock(status_mutex_);
         return fmt::format("no good frame for {} ms: {} bad (latest: {})", silent_ms,
-                           bad_since_good_, last_bad_frame_);
+                           bad_since_good_, last_bad_frame_.read());
     }
 
     bool skipBad(BufferSet& set, uint32_t index, const char* why)
     {
         ++bad_since_good_;
         bad_frames_.fetch_add(1, std::memory_order_relaxed);
-        {
-            std::lock_guard lock(status_mutex_);
-            last_bad_frame_.assign(why);
-        }
+        last_bad_frame_.write(why);
         return requeue(set, index);
     }
 
@@ -611,9 +608,13 @@ class V4l2Camera::Impl {
     std::atomic<double> fps_{0.0};
     std::atomic<bool> kernel_monotonic_{false};
 
+    // Written per bad frame, so without a lock (a frame's problem fits in 160 characters).
+    LatestText<160> last_bad_frame_;
+
+    // Taken by the capture thread only when the device changes state (opened, failed,
+    // stalled), never per frame.
     mutable std::mutex status_mutex_;
     std::string last_error_;               // guarded by status_mutex_
-    std::string last_bad_frame_;           // guarded by status_mutex_
     NegotiatedFormat format_;              // guarded by status_mutex_
     std::vector<ControlReading> controls_; // guarded by status_mutex_
 };
