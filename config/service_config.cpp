@@ -280,15 +280,40 @@ void validateConfig(const ServiceConfig& config, const ConfigOverrides& override
     }
 }
 
+std::optional<LivePart> livePartOf(std::string_view key)
+{
+    const KeyDef* def = schema().find(key);
+    if (def == nullptr || !def->live)
+        return std::nullopt;
+    const std::string_view section = key.substr(0, key.find('.'));
+    if (section == "matcher" || section == "nearest" || section == "output" ||
+        section == "point_cloud")
+        return LivePart::Processing;
+    if (section == "publish")
+        return LivePart::Publish;
+    if (section == "log_level")
+        return LivePart::LogLevel;
+    if (section == "calibration_health")
+        return LivePart::CalibrationHealth;
+    if (section == "robot" || section == "zones")
+        return LivePart::Zones;
+    return std::nullopt;
+}
+
 ConfigChange diffConfig(const ServiceConfig& running, const ServiceConfig& proposed)
 {
     ConfigChange change;
     for (const auto& def : schema().keys) {
-        if (def.show(running) != def.show(proposed)) {
-            change.changed.push_back(def.path);
-            if (!def.live) {
-                change.restart_needed.push_back(def.path);
-            }
+        if (def.show(running) == def.show(proposed)) {
+            continue;
+        }
+        change.changed.push_back(def.path);
+        const std::optional<LivePart> part = livePartOf(def.path);
+        if (!part) {
+            change.restart_needed.push_back(def.path);
+        } else if (std::find(change.live_parts.begin(), change.live_parts.end(), *part) ==
+                   change.live_parts.end()) {
+            change.live_parts.push_back(*part);
         }
     }
     return change;

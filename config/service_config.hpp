@@ -234,9 +234,24 @@ void validateConfig(const ServiceConfig& config, const ConfigOverrides& override
 // Which settings differ between two configurations and whether all of them can change
 // while running, as the dotted keys of the file ("nearest.roi.x", ...). Those that need
 // a restart (source.*, calibration, socket.*) are also listed in `restart_needed`.
+// The parts of a running service that live keys reach; a reload hands each part whose
+// keys changed over as a whole (unchanged values in it stay what they were).
+enum class LivePart {
+    Processing,        // matcher.*, nearest.*, output.*, point_cloud
+    Publish,           // publish.*
+    LogLevel,          // log_level
+    CalibrationHealth, // calibration_health.interval_s, withhold_when_failed
+    Zones,             // robot.*, zones
+};
+
+// The part a live key reaches; none for a key that is not live (or one a part has not
+// been given yet: diffConfig() then says it needs a restart, which is the truth).
+std::optional<LivePart> livePartOf(std::string_view key);
+
 struct ConfigChange {
     std::vector<std::string> changed;
-    std::vector<std::string> restart_needed;
+    std::vector<std::string> restart_needed; // of changed, the keys that are not live
+    std::vector<LivePart> live_parts;        // each part of changed's live keys, once
 };
 ConfigChange diffConfig(const ServiceConfig& running, const ServiceConfig& proposed);
 

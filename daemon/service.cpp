@@ -591,28 +591,45 @@ ReloadOutcome Service::loadAndApply()
         }
     }
     ConfigChange change = diffConfig(config_, proposed);
-    // restart_needed is a subset of changed: anything more is a live change. Live
-    // settings are handed over as a whole (unchanged values stay what they were).
-    if (change.changed.size() > change.restart_needed.size()) {
+    for (const LivePart part : change.live_parts)
+        applyLivePart(part, proposed);
+    outcome.changed = std::move(change.changed);
+    outcome.restart_needed = std::move(change.restart_needed);
+    return outcome;
+}
+
+// Each part is handed over as a whole: the keys of it that did not change keep their
+// values, since `proposed` has them too. The parts not changed stay as they were, though
+// `proposed` may differ there in keys that need a restart.
+void Service::applyLivePart(LivePart part, const ServiceConfig& proposed)
+{
+    switch (part) {
+    case LivePart::Processing:
         worker_->updateSettings(proposed.processing);
         if (ros2_)
             ros2_->setNearest(proposed.processing.nearest);
+        config_.processing = proposed.processing;
+        return;
+    case LivePart::Publish:
         server_->setPublishConfig(proposed.publish);
+        config_.publish = proposed.publish;
+        return;
+    case LivePart::LogLevel:
         applyLogLevel(proposed.log_level);
+        config_.log_level = proposed.log_level;
+        return;
+    case LivePart::CalibrationHealth:
         if (health_) {
             health_->setInterval(proposed.calibration_health.interval_s);
             worker_->setWithholdWhenFailed(proposed.calibration_health.withhold_when_failed);
         }
         config_.calibration_health = proposed.calibration_health;
+        return;
+    case LivePart::Zones:
         worker_->updateZones(proposed.zones);
         config_.zones = proposed.zones;
-        config_.processing = proposed.processing;
-        config_.publish = proposed.publish;
-        config_.log_level = proposed.log_level;
+        return;
     }
-    outcome.changed = std::move(change.changed);
-    outcome.restart_needed = std::move(change.restart_needed);
-    return outcome;
 }
 
 ReloadOutcome Service::reload()

@@ -154,6 +154,8 @@ class Service final : private ServerBackend {
     // Reads the configuration file and applies what can change live (reloadConfig()
     // adds the log lines and the notifications).
     ReloadOutcome loadAndApply();
+    // Hands one live part of `proposed` to the running service and keeps it in config_.
+    void applyLivePart(LivePart part, const ServiceConfig& proposed);
     // The STATUS= line for systemd now.
     std::string statusText(int64_t now_ns, const SourceHealth& health);
     // Shares the descriptors left under RLIMIT_NOFILE between the socket's clients and

@@ -93,6 +93,36 @@ TEST(ConfigDefaults, KeysNotGivenKeepTheirDefaults)
     EXPECT_EQ(change.changed, std::vector<std::string>{"nearest.max_depth_m"});
 }
 
+// A key the table marks live must reach the running service: a live key with no part
+// would be reported changed on reload and applied nowhere.
+TEST(ConfigLiveParts, EveryLiveKeyReachesAPartAndNoOtherKeyDoes)
+{
+    std::size_t live = 0;
+    for (const auto& key : configKeys()) {
+        EXPECT_EQ(livePartOf(key.path).has_value(), key.live) << key.path;
+        live += key.live ? 1 : 0;
+    }
+    EXPECT_GT(live, 40u);
+    EXPECT_EQ(livePartOf("matcher.num_disparities"), LivePart::Processing);
+    EXPECT_EQ(livePartOf("point_cloud"), LivePart::Processing);
+    EXPECT_EQ(livePartOf("robot.camera_pose.rpy_deg"), LivePart::Zones);
+    EXPECT_EQ(livePartOf("zones"), LivePart::Zones);
+    EXPECT_EQ(livePartOf("log_level"), LivePart::LogLevel);
+    EXPECT_FALSE(livePartOf("source.type").has_value());
+    EXPECT_FALSE(livePartOf("no.such.key").has_value());
+}
+
+TEST(ConfigLiveParts, AReloadNamesEachChangedPartOnceAndNoneForRestartKeys)
+{
+    const ServiceConfig config = parseConfig("nearest:\n  max_depth_m: 3\n  min_depth_m: 0.3\n"
+                                             "publish:\n  depth_max_hz: 5\n"
+                                             "socket:\n  path: /tmp/other.sock\n",
+                                             "t.yaml");
+    const ConfigChange change = diffConfig(defaultConfig(), config);
+    EXPECT_EQ(change.live_parts, (std::vector<LivePart>{LivePart::Processing, LivePart::Publish}));
+    EXPECT_EQ(change.restart_needed, std::vector<std::string>{"socket.path"});
+}
+
 TEST(ConfigExamples, ReferenceHoldsEveryKeyAtItsDefault)
 {
     const fs::path file = fs::path(STEREOD_SOURCE_DIR) / "config/examples/stereod.yaml";
