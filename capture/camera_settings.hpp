@@ -7,6 +7,8 @@
 #include <optional>
 #include <string>
 
+#include "base/name_table.hpp"
+
 namespace stereod {
 
 // Pixel format asked of the device. `Auto` takes the first the device offers at the
@@ -15,13 +17,33 @@ namespace stereod {
 // matching), packed RGB/BGR a grey conversion of three times the bytes.
 enum class PixelFormatChoice { Auto, Grey, Yuyv, Mjpeg, Rgb24, Bgr24 };
 
+// The names of source.cameras.format, one table for naming and parsing them.
+inline constexpr NameTable<PixelFormatChoice, 6> kPixelFormatChoices{{{
+    {PixelFormatChoice::Auto, "auto"},
+    {PixelFormatChoice::Grey, "grey"},
+    {PixelFormatChoice::Yuyv, "yuyv"},
+    {PixelFormatChoice::Mjpeg, "mjpeg"},
+    {PixelFormatChoice::Rgb24, "rgb24"},
+    {PixelFormatChoice::Bgr24, "bgr24"},
+}}};
+static_assert(kPixelFormatChoices.wellFormed());
+
 const char* toString(PixelFormatChoice format) noexcept;
-// "auto", "grey", "yuyv", "mjpeg", "rgb24", "bgr24" (case-insensitive); nothing for
+// One of kPixelFormatChoices' names, in any case ("GREY" as V4L2 writes it); nothing for
 // anything else.
 std::optional<PixelFormatChoice> parsePixelFormatChoice(const std::string& text) noexcept;
 
 // V4L2_CID_POWER_LINE_FREQUENCY menu (anti-flicker under mains lighting).
 enum class PowerLineFrequency { Disabled = 0, Hz50 = 1, Hz60 = 2, Auto = 3 };
+
+// The names of source.cameras.controls.power_line_frequency.
+inline constexpr NameTable<PowerLineFrequency, 4> kPowerLineFrequencies{{{
+    {PowerLineFrequency::Disabled, "disabled"},
+    {PowerLineFrequency::Hz50, "50hz"},
+    {PowerLineFrequency::Hz60, "60hz"},
+    {PowerLineFrequency::Auto, "auto"},
+}}};
+static_assert(kPowerLineFrequencies.wellFormed());
 
 // Controls applied alike to every camera of a rig. An unset field leaves the device's
 // value alone. Two cameras with different exposure or gain ruin matching, so what each

@@ -18,6 +18,7 @@
 #include <opencv2/core/matx.hpp>
 #include <yaml-cpp/yaml.h>
 
+#include "base/name_table.hpp"
 #include "config/name_suggestions.hpp"
 #include "config/service_config.hpp"
 #include "config/yaml_scalars.hpp"
@@ -254,6 +255,17 @@ KeyDef choiceKey(std::string path, bool live, Access access, Names<Enum> names)
         return std::string("?");
     };
     return def;
+}
+
+// One of the names of the enum's table (base/name_table.hpp), the one list of them.
+template <class Access, class Enum, std::size_t N>
+KeyDef choiceKey(std::string path, bool live, Access access, const NameTable<Enum, N>& table)
+{
+    Names<Enum> names;
+    for (const auto& entry : table.entries) {
+        names.emplace_back(entry.name, entry.value);
+    }
+    return choiceKey(std::move(path), live, access, std::move(names));
 }
 
 // An optional device setting: `keep` (unset: the device keeps its own value) or a value

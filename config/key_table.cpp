@@ -63,42 +63,19 @@ KeyDef zonesKey()
     return def;
 }
 
-const Names<PowerLineFrequency>& powerLineNames()
-{
-    static const Names<PowerLineFrequency> names = {{"disabled", PowerLineFrequency::Disabled},
-                                                    {"50hz", PowerLineFrequency::Hz50},
-                                                    {"60hz", PowerLineFrequency::Hz60},
-                                                    {"auto", PowerLineFrequency::Auto}};
-    return names;
-}
-
 KeyDef powerLineKey()
 {
     std::vector<std::string> known{std::string(kKeep)};
-    for (const auto& entry : powerLineNames()) {
-        known.push_back(entry.first);
+    for (const std::string& name : kPowerLineFrequencies.names()) {
+        known.push_back(name);
     }
     return keepKey(
         "source.cameras.controls.power_line_frequency", kRestart,
         [](auto& c) -> auto& { return c.source.cameras.controls.power_line; }, "unknown value",
-        listNames(known),
-        [](std::string_view text) -> std::optional<PowerLineFrequency> {
-            for (const auto& [name, value] : powerLineNames()) {
-                if (text == name) {
-                    return value;
-                }
-            }
-            return std::nullopt;
-        },
-        [](PowerLineFrequency value) {
-            for (const auto& [name, entry] : powerLineNames()) {
-                if (entry == value) {
-                    return name;
-                }
-            }
-            return std::string("?");
-        });
+        listNames(known), [](std::string_view text) { return kPowerLineFrequencies.parse(text); },
+        [](PowerLineFrequency value) { return std::string(kPowerLineFrequencies.name(value)); });
 }
+
 std::string algorithmName(const MatcherSettings& matcher)
 {
     return std::string(matcherAlgorithmName(matcher.kind, matcher.sgbm_mode));
@@ -155,17 +132,13 @@ std::vector<KeyDef> buildKeyTable()
     const auto add = [&keys](KeyDef def) { keys.push_back(std::move(def)); };
 
     add(choiceKey(
-        "source.type", kRestart, [](auto& c) -> auto& { return c.source.kind; },
-        Names<SourceKind>{{"replay", SourceKind::Replay},
-                          {"v4l2", SourceKind::V4l2},
-                          {"side_by_side", SourceKind::SideBySide},
-                          {"ros2", SourceKind::Ros2}}));
+        "source.type", kRestart, [](auto& c) -> auto& { return c.source.kind; }, kSourceKinds));
     add(textKey(
         "source.replay.path", kRestart, [](auto& c) -> auto& { return c.source.replay.path; },
         true));
     add(choiceKey(
         "source.replay.pacing", kRestart, [](auto& c) -> auto& { return c.source.replay.pacing; },
-        Names<ReplayPacing>{{"paced", ReplayPacing::Paced}, {"lockstep", ReplayPacing::Lockstep}}));
+        kReplayPacings));
     add(realKey(
         "source.replay.fps", kRestart, [](auto& c) -> auto& { return c.source.replay.fps; },
         "frames per second"));
@@ -188,17 +161,10 @@ std::vector<KeyDef> buildKeyTable()
         false));
     add(choiceKey(
         "source.cameras.format", kRestart, [](auto& c) -> auto& { return c.source.cameras.format; },
-        Names<PixelFormatChoice>{{"auto", PixelFormatChoice::Auto},
-                                 {"grey", PixelFormatChoice::Grey},
-                                 {"yuyv", PixelFormatChoice::Yuyv},
-                                 {"mjpeg", PixelFormatChoice::Mjpeg},
-                                 {"rgb24", PixelFormatChoice::Rgb24},
-                                 {"bgr24", PixelFormatChoice::Bgr24}}));
+        kPixelFormatChoices));
     add(choiceKey(
         "source.cameras.colour", kRestart, [](auto& c) -> auto& { return c.source.cameras.colour; },
-        Names<CameraColour>{{"left", CameraColour::Left},
-                            {"both", CameraColour::Both},
-                            {"none", CameraColour::None}}));
+        kCameraColours));
     add(integerKey(
         "source.cameras.width", kRestart, [](auto& c) -> auto& { return c.source.cameras.width; }));
     add(integerKey(
@@ -305,9 +271,7 @@ std::vector<KeyDef> buildKeyTable()
         "auto or grey levels"));
     add(choiceKey(
         "matcher.tuning", kLive, [](auto& c) -> auto& { return c.processing.matcher.tuning; },
-        Names<MatcherTuning>{{"natural", MatcherTuning::Natural},
-                             {"planar", MatcherTuning::Planar},
-                             {"patterns", MatcherTuning::Patterns}}));
+        kMatcherTunings));
     add(autoIntegerKey(
         "matcher.threads", kLive, [](auto& c) -> auto& { return c.processing.matcher.threads; },
         "auto (the cores available) or a number of threads"));

@@ -12,6 +12,7 @@
 #include <string_view>
 #include <vector>
 
+#include "base/name_table.hpp"
 #include "capture/camera_settings.hpp"
 #include "pipeline/stereo_processor.hpp"
 #include "pipeline/zones.hpp"
@@ -50,6 +51,15 @@ enum class SourceKind {
     Ros2,       // a ROS 2 camera driver's two Image topics over DDS (source.ros2)
 };
 
+// The names of source.type.
+inline constexpr NameTable<SourceKind, 4> kSourceKinds{{{
+    {SourceKind::Replay, "replay"},
+    {SourceKind::V4l2, "v4l2"},
+    {SourceKind::SideBySide, "side_by_side"},
+    {SourceKind::Ros2, "ros2"},
+}}};
+static_assert(kSourceKinds.wellFormed());
+
 struct ReplayConfig {
     std::string path; // a recording directory, a folder of left*/right*, or
                       // a ROS 2 bag (MCAP file)
@@ -66,6 +76,14 @@ struct ReplayConfig {
 // (source.cameras.colour). The left camera's colour is what the outputs carry (rectified
 // left image, cloud colours); the right's only reaches recordings.
 enum class CameraColour { None, Left, Both };
+
+// The names of source.cameras.colour, in the order the docs list them.
+inline constexpr NameTable<CameraColour, 3> kCameraColours{{{
+    {CameraColour::Left, "left"},
+    {CameraColour::Both, "both"},
+    {CameraColour::None, "none"},
+}}};
+static_assert(kCameraColours.wellFormed());
 
 // The V4L2 cameras of source.type v4l2 (two devices) or side_by_side (one device). The
 // controls are applied alike to both cameras; an unset control keeps the device's value.

@@ -212,7 +212,7 @@ CLI::App* declareDepth(CLI::App& app, DepthOptions& o)
                     "census-sgm's tuning: natural (textured scenes, the default), planar "
                     "(man-made: uniform flat surfaces, repeating patterns) or patterns "
                     "(natural, and planar's steps where a pattern repeats along the rows)")
-        ->check(CLI::IsMember({"natural", "planar", "patterns"}));
+        ->check(CLI::IsMember(kMatcherTunings.names()));
     cmd->add_option("--max-disparity", o.max_disparity,
                     "disparities searched, rounded up to a multiple of 16 (instead of deriving "
                     "them from the closest depth)")

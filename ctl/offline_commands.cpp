@@ -129,10 +129,9 @@ ProcessorSettings depthSettings(const DepthOptions& options)
         matcher.sgbm_mode = algorithm->mode;
     }
     const MatcherTuning configured_tuning = matcher.tuning;
-    if (!options.tuning.empty())
-        matcher.tuning = options.tuning == "planar"     ? MatcherTuning::Planar
-                         : options.tuning == "patterns" ? MatcherTuning::Patterns
-                                                        : MatcherTuning::Natural;
+    // --tuning is one of kMatcherTunings' names (the option checks), or empty.
+    if (const auto tuning = kMatcherTunings.parse(options.tuning))
+        matcher.tuning = *tuning;
     // Switched from census-sgm to OpenCV's or back here, or to another tuning: the new
     // matcher's (tuning's) own values for the settings they share.
     if ((configured == MatcherKind::CensusSgm) != (matcher.kind == MatcherKind::CensusSgm) ||

@@ -259,10 +259,8 @@ MatcherSettings matcherDefaults(MatcherKind kind, SgbmMode mode, MatcherTuning t
 
 std::string matcherName(const MatcherSettings& settings)
 {
-    if (settings.kind == MatcherKind::CensusSgm && settings.tuning == MatcherTuning::Planar)
-        return "census-sgm (planar)";
-    if (settings.kind == MatcherKind::CensusSgm && settings.tuning == MatcherTuning::Patterns)
-        return "census-sgm (patterns)";
+    if (settings.kind == MatcherKind::CensusSgm && settings.tuning != MatcherTuning::Natural)
+        return std::string("census-sgm (") + kMatcherTunings.name(settings.tuning) + ")";
     return std::string(matcherAlgorithmName(settings.kind, settings.sgbm_mode));
 }
 

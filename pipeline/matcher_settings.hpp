@@ -5,6 +5,7 @@
 #include <optional>
 #include <string_view>
 
+#include "base/name_table.hpp"
 #include "pipeline/sgm/census_sgm.hpp"
 
 namespace stereod {
@@ -64,6 +65,15 @@ enum class MatcherTuning {
     // along it (pipeline/sgm/periodic_pattern.hpp): for scenes that hold both.
     Patterns,
 };
+
+// The tunings' names (matcher.tuning, stereoctl's --tuning), one table for naming and
+// parsing them.
+inline constexpr NameTable<MatcherTuning, 3> kMatcherTunings{{{
+    {MatcherTuning::Natural, "natural"},
+    {MatcherTuning::Planar, "planar"},
+    {MatcherTuning::Patterns, "patterns"},
+}}};
+static_assert(kMatcherTunings.wellFormed());
 
 // census-sgm's settings as tuned on the real scenes of shared/data.
 inline constexpr sgm::CensusSgmSettings kCensusSgmTuned{};

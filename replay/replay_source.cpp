@@ -236,8 +236,7 @@ ReplaySource::ReplaySource(ReplayOptions options) : options_(std::move(options))
     spdlog::info("replay: {}: {} pairs of {}{}{}, {}{}", recording_.dir, recording_.entries.size(),
                  sizeText(frame_size_), colour_pool_ ? " (left in colour)" : "",
                  recording_.has_index ? "" : " (plain folder)",
-                 options_.pacing == ReplayPacing::Paced ? "paced" : "lockstep",
-                 options_.loop ? ", looping" : "");
+                 kReplayPacings.name(options_.pacing), options_.loop ? ", looping" : "");
 }
 
 ReplaySource::~ReplaySource()
