@@ -7,8 +7,9 @@
 // best effort: it matches a driver's sensor-data writers and reliable ones too) -> our
 // reading thread, which takes the samples as CDR, checks every size the message declares
 // against its bytes and the configured frame size before anything is decoded
-// (decodeImageMessage(), the check a bag's images get), converts rgb8/bgr8 to grey into a
-// frame of a pool allocated at start, and offers it to a StereoSyncThread that pairs the
+// (decodeImageMessage(), the check and decoder a bag's images get), converts rgb8, bgr8,
+// rgba8, bgra8 to grey and takes the luma of yuv422 / yuv422_yuy2 into a frame of a pool
+// allocated at start, and offers it to a StereoSyncThread that pairs the
 // two topics by header stamp within max_skew (capture/stereo_sync.hpp) and pushes the
 // pairs into the PairRing (drop-oldest). Every queue on the way is bounded.
 //
@@ -73,7 +74,7 @@ struct Ros2SourceOptions {
     // calibration comes from elsewhere).
     std::string left_info_topic;
     std::string right_info_topic;
-    cv::Size frame_size{640, 480}; // images of another size are refused, not decoded
+    cv::Size frame_size{640, 480};          // images of another size are refused, not decoded
     DdsDiscovery discovery;
     SyncSettings sync;
     int64_t stall_timeout_ns = 2'000'000'000; // no image on a topic this long: Stalled

@@ -13,6 +13,7 @@
 //     --bad-every N               every N-th left image declares a step shorter than its
 //                                 row (a malformed message); 0: none
 //     --reliable                  a reliable writer instead of sensor data's best effort
+//     --width PX                  the images cut to their PX left columns (an odd width)
 //     --topics LEFT RIGHT         ROS 2 topics (/stereo/left/image_raw /stereo/right/image_raw)
 //     --camera-info LEFT RIGHT    also sensor_msgs/msg/CameraInfo beside each image topic
 //                                 (.../camera_info), with each image's stamp, from ROS
@@ -56,6 +57,7 @@ struct Options {
     double rate_hz = 10;
     double right_offset_ms = 0;
     int bad_every = 0;
+    int width = 0; // 0: the files' own
     bool reliable = false;
     std::string left_topic = "/stereo/left/image_raw";
     std::string right_topic = "/stereo/right/image_raw";
@@ -81,6 +83,8 @@ bool parse(int argc, char** argv, Options& o)
             o.right_offset_ms = std::atof(argv[++i]);
         else if (arg == "--bad-every" && has_value)
             o.bad_every = std::atoi(argv[++i]);
+        else if (arg == "--width" && has_value)
+            o.width = std::atoi(argv[++i]);
         else if (arg == "--reliable")
             o.reliable = true;
         else if (arg == "--topics" && i + 2 < argc) {
@@ -195,12 +199,16 @@ int main(int argc, char** argv)
     if (!parse(argc, argv, o)) {
         std::fprintf(stderr, "usage: fastdds_image_publisher DOMAIN SECONDS LEFT_IMAGE RIGHT_IMAGE "
                              "[--encoding mono8|bgr8|rgb8|yuv422|yuv422_yuy2] [--rate HZ] "
-                             "[--right-offset-ms MS] [--bad-every N] [--reliable] "
+                             "[--right-offset-ms MS] [--bad-every N] [--width PX] [--reliable] "
                              "[--topics LEFT RIGHT] [--camera-info LEFT.yaml RIGHT.yaml]\n");
         return 2;
     }
-    const cv::Mat left = loadImage(o.left_path, o.encoding);
-    const cv::Mat right = loadImage(o.right_path, o.encoding);
+    cv::Mat left = loadImage(o.left_path, o.encoding);
+    cv::Mat right = loadImage(o.right_path, o.encoding);
+    if (o.width > 0 && o.width < left.cols && o.width < right.cols) {
+        left = left.colRange(0, o.width);
+        right = right.colRange(0, o.width);
+    }
     if (left.empty() || right.empty()) {
         std::fprintf(stderr, "fastdds_image_publisher: cannot read %s or %s\n", o.left_path.c_str(),
                      o.right_path.c_str());

@@ -210,6 +210,40 @@ TEST_F(Ros2Source, ColourImagesFromAReliableWriterAreMatchedAsGrey)
     }
 }
 
+// A driver's YUV 4:2:2 (UYVY as ROS's yuv422, YUYV as yuv422_yuy2) is matched on its
+// luma: the files' grey as luma gives the replayed distance exactly. An odd width cannot
+// be 4:2:2 and is refused by name.
+TEST_F(Ros2Source, Yuv422IsMatchedOnItsLumaAndAnOddWidthIsRefused)
+{
+    const double replayed = replayedDistance();
+    ASSERT_GT(replayed, 0.0);
+    startRos2Service();
+    ASSERT_FALSE(HasFailure());
+    for (const std::string encoding : {"yuv422", "yuv422_yuy2"}) {
+        publish(60, {"--encoding", encoding});
+        // A reading of this publisher's pairs: the previous one's are a second old.
+        std::this_thread::sleep_for(1500ms);
+        const Json reading = waitForReading(valid, 30s);
+        ASSERT_TRUE(valid(reading)) << encoding << ": " << reading.dump();
+        EXPECT_DOUBLE_EQ(reading["distance_m"].get<double>(), replayed) << encoding;
+        EXPECT_EQ(status()["source"]["cameras"][0]["bad_frames"], 0) << encoding;
+        publisher_.reset();
+    }
+
+    publish(60, {"--encoding", "yuv422", "--width", "383"});
+    Json left;
+    const auto deadline = std::chrono::steady_clock::now() + 30s;
+    while (std::chrono::steady_clock::now() < deadline) {
+        left = status()["source"]["cameras"][0];
+        if (left["bad_frames"].get<int>() >= 2)
+            break;
+        std::this_thread::sleep_for(200ms);
+    }
+    EXPECT_GE(left["bad_frames"].get<int>(), 2) << left.dump();
+    EXPECT_EQ(left["last_bad_frame"],
+              "image of 383x288 yuv422 has an odd width: 4:2:2 pixels come in pairs");
+}
+
 TEST_F(Ros2Source, StampsFurtherApartThanMaxSkewAreNotPaired)
 {
     startRos2Service("  max_skew_ms: 5\n");
