@@ -79,6 +79,7 @@ std::unique_ptr<ros2::Ros2ImageSource> makeRos2Source(const ServiceConfig& confi
     ros2::Ros2SourceOptions options;
     options.left_topic = source.ros2.left_topic;
     options.right_topic = source.ros2.right_topic;
+    options.node_namespace = config.ros2.ns;
     if (config.calibration_path.empty()) {
         options.left_info_topic = leftCameraInfoTopic(source.ros2);
         options.right_info_topic = rightCameraInfoTopic(source.ros2);

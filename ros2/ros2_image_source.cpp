@@ -14,6 +14,7 @@
 #include "pipeline/calibration_formats.hpp"
 #include "replay/image_message.hpp"
 #include "ros2/messages.hpp"
+#include "ros2/node_announcement.hpp"
 #include "ros2/topic_names.hpp"
 #include "ros2_dds_types.h"
 
@@ -124,6 +125,13 @@ int Ros2ImageSource::start(PairRing& ring)
                                        kInfoAttach + static_cast<uint32_t>(side)),
                     "DDS waitset attach");
         }
+        NodeEntities node{options_.node_namespace, kNodeName, {}, {}};
+        for (const Side& side : sides_)
+            node.readers.push_back(side.reader.load(std::memory_order_relaxed));
+        for (const InfoSide& side : infos_)
+            if (const dds_entity_t reader = side.reader.load(std::memory_order_relaxed))
+                node.readers.push_back(reader);
+        announceNode(*participant_, node);
         wake_ = checked(dds_create_guardcondition(participant_->handle()), "DDS guard condition");
         checked(dds_waitset_attach(waitset_, wake_, kWakeAttach), "DDS waitset attach");
     } catch (const std::exception& e) {

@@ -29,6 +29,11 @@
 // the next messages are tried; a camera_info that differs from the one taken, later, is
 // ignored with a warning (a new calibration needs a restart, docs/ros2.md).
 //
+// In the ROS 2 graph: the participant is announced on ros_discovery_info as the node
+// `stereod_source` in the node's namespace, with the GIDs of its readers (the image topics'
+// and camera_info's), so that `ros2 node info` lists its subscriptions
+// (ros2/node_announcement.hpp).
+//
 // Stamps: a message's header stamp (the wall clock, as ROS 2 stamps) is kept in
 // Frame::source_stamp_ns and converted to CLOCK_MONOTONIC for Frame::stamp_ns with the
 // clocks' offset, sampled once a second (so that the two images of one stamp get one). The driver
@@ -75,6 +80,7 @@ struct Ros2SourceOptions {
     std::string left_info_topic;
     std::string right_info_topic;
     cv::Size frame_size{640, 480};          // images of another size are refused, not decoded
+    std::string node_namespace = "/stereo"; // the announced node's (ros2.namespace)
     DdsDiscovery discovery;
     SyncSettings sync;
     int64_t stall_timeout_ns = 2'000'000'000; // no image on a topic this long: Stalled
@@ -89,6 +95,8 @@ struct CameraInfoCalibration {
 
 class Ros2ImageSource final : public FrameSource {
   public:
+    // The node the source's participant is announced as, in options.node_namespace.
+    static constexpr const char* kNodeName = "stereod_source";
     // Samples each reader keeps until our thread takes them ("keep last few").
     static constexpr int kReaderDepth = 4;
     // Frames queued per side between our reading thread and the sync thread.

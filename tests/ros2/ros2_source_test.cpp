@@ -6,6 +6,7 @@
 // back are each seen in what the service says. Without a calibration file the calibration
 // comes from the driver's camera_info topics: the same distance as with the file, and a
 // camera_info that cannot be used is refused by topic and field.
+#include <algorithm>
 #include <chrono>
 #include <fstream>
 #include <memory>
@@ -380,6 +381,51 @@ TEST_F(Ros2Source, AMalformedCameraInfoIsRefusedByTopicAndFieldAndTheServiceRuns
     EXPECT_EQ(st["state"], "uncalibrated");
     EXPECT_EQ(st["source"]["state"], "running");
     EXPECT_GT(st["source"]["pairs"].get<int>(), 0);
+}
+
+// In the ROS 2 graph the source is a node with its four subscriptions: its participant's
+// ros_discovery_info, as a Fast DDS peer decodes it, names /stereo/stereod_source with the
+// GIDs of the readers discovery finds on the image and camera_info topics.
+TEST_F(Ros2Source, ItsSubscriptionsAreAnnouncedAsANodeOnRosDiscoveryInfo)
+{
+    const auto [left_info, right_info] = exportCameraInfo();
+    startRos2Service({}, {}, false);
+    ASSERT_FALSE(HasFailure());
+    publish(60, {"--camera-info", left_info, right_info});
+    // Four seconds of the domain (no stereod topic comes: the node does not publish).
+    const test::ProcessResult peer =
+        test::runProcess({STEREOD_FASTDDS_SUBSCRIBER, domain_, "/stereo", "4", "1"});
+    ASSERT_EQ(peer.exit_code, 0) << peer.err;
+    const Json result = Json::parse(peer.out);
+    SCOPED_TRACE(result.dump());
+
+    const Json& samples = result["topics"]["ros_discovery_info"]["last"];
+    ASSERT_TRUE(samples.is_array());
+    const Json* node = nullptr;
+    std::string participant;
+    for (const Json& sample : samples)
+        for (const Json& candidate : sample["nodes"])
+            if (candidate["name"] == "stereod_source") {
+                node = &candidate;
+                participant = sample["gid"];
+            }
+    ASSERT_NE(node, nullptr);
+    EXPECT_EQ((*node)["namespace"], "/stereo");
+    EXPECT_TRUE((*node)["writers"].empty());
+    const Json& readers = (*node)["readers"];
+    ASSERT_EQ(readers.size(), 4u);
+    ASSERT_EQ(participant.size(), 32u);
+    for (const Json& reader : readers)
+        EXPECT_EQ(reader.get<std::string>().substr(0, 24), participant.substr(0, 24));
+    // Each topic's reader, as the peer's discovery saw it, is one the node announces.
+    for (const std::string topic : {"rt/stereo/left/image_raw", "rt/stereo/right/image_raw",
+                                    "rt/stereo/left/camera_info", "rt/stereo/right/camera_info"}) {
+        const Json& found = result["discovered_readers"][topic];
+        int announced = 0;
+        for (const Json& guid : found)
+            announced += std::count(readers.begin(), readers.end(), guid) > 0 ? 1 : 0;
+        EXPECT_EQ(announced, 1) << topic << ": " << found.dump();
+    }
 }
 
 } // namespace
