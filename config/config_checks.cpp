@@ -239,6 +239,16 @@ void checkRos2Source(Checker& checker, const SourceConfig& source)
     if (ros2.left_topic == ros2.right_topic)
         checker.fail("source.ros2.topics.right", "the same topic as source.ros2.topics.left",
                      "the other camera's image topic");
+    if (ros2.left_info_topic)
+        checkTopic("source.ros2.topics.left_camera_info", *ros2.left_info_topic);
+    if (ros2.right_info_topic)
+        checkTopic("source.ros2.topics.right_camera_info", *ros2.right_info_topic);
+    if (ros2.left_topic != ros2.right_topic &&
+        leftCameraInfoTopic(ros2) == rightCameraInfoTopic(ros2))
+        checker.fail("source.ros2.topics.right_camera_info",
+                     "the same topic as the left camera's camera_info (" +
+                         leftCameraInfoTopic(ros2) + ")",
+                     "the right camera's camera_info topic");
     // The largest frame any source may have (8192x8192, as a recording's).
     checker.integer("source.ros2.width", ros2.width, 16, 8192, " px");
     checker.integer("source.ros2.height", ros2.height, 16, 8192, " px");
@@ -518,10 +528,29 @@ void checkLiveView(Checker& checker, const LiveViewConfig& live_view)
         checker.real(key, value, closed(0, 1000, " Hz (0: live_view.max_rate_hz)"));
 }
 
-void checkRos2(Checker& checker, const Ros2Config& ros2)
+void checkRos2(Checker& checker, const ServiceConfig& config)
 {
-    if (const std::string problem = ros2::namespaceProblem(ros2.ns); !problem.empty())
+    const Ros2Config& ros2 = config.ros2;
+    if (const std::string problem = ros2::namespaceProblem(ros2.ns); !problem.empty()) {
         checker.fail("ros2.namespace", problem, "a ROS 2 namespace such as /stereo");
+    } else if (ros2.enabled && config.source.kind == SourceKind::Ros2 &&
+               config.calibration_path.empty()) {
+        // The node's own rectified camera_info must not be read back as the drivers'.
+        for (const bool right : {false, true}) {
+            const std::string published =
+                ros2::rosTopicName(ros2.ns, right ? "right/camera_info" : "left/camera_info");
+            const std::string subscribed = right ? rightCameraInfoTopic(config.source.ros2)
+                                                 : leftCameraInfoTopic(config.source.ros2);
+            if (published == subscribed) {
+                checker.fail("ros2.namespace",
+                             "stereod would publish its rectified camera_info on " + published +
+                                 ", the driver's camera_info topic it takes the calibration from",
+                             "a namespace of stereod's own (such as /stereo_depth), other "
+                             "source.ros2.topics, or a calibration file");
+                break;
+            }
+        }
+    }
     checker.integer("ros2.points_step", ros2.points_step, 1, 1000, "");
     checker.real("ros2.max_rate_hz", ros2.max_rate_hz, above(0, 1000, " Hz"));
 }
@@ -548,7 +577,7 @@ std::vector<Problem> checkValues(const ServiceConfig& config, const KeyLocations
     checkSocket(checker, config.socket);
     checkPublish(checker, config.publish);
     checkLiveView(checker, config.live_view);
-    checkRos2(checker, config.ros2);
+    checkRos2(checker, config);
     const auto& levels = logLevelNames();
     if (std::find(levels.begin(), levels.end(), config.log_level) == levels.end()) {
         checker.fail("log_level", "unknown level", expectedOneOf(levels, config.log_level));

@@ -223,6 +223,27 @@ template <class Access> KeyDef textKey(std::string path, bool live, Access acces
     return def;
 }
 
+// "auto" (std::nullopt) or a text.
+template <class Access> KeyDef autoTextKey(std::string path, bool live, Access access)
+{
+    KeyDef def{std::move(path), live, {}, {}};
+    def.read = [access](const YAML::Node& node, ServiceConfig& config,
+                        const ReadContext&) -> ReadResult {
+        if (!node.IsScalar()) {
+            return ReadFailure{"not text", "auto or text"};
+        }
+        if (node.Scalar() == "auto")
+            access(config) = std::nullopt;
+        else
+            access(config) = node.Scalar();
+        return std::nullopt;
+    };
+    def.show = [access](const ServiceConfig& config) {
+        return access(config) ? renderText(*access(config)) : std::string("auto");
+    };
+    return def;
+}
+
 // One of a fixed set of names.
 template <class Enum> using Names = std::vector<std::pair<std::string, Enum>>;
 

@@ -198,6 +198,12 @@ std::vector<KeyDef> buildKeyTable()
     add(textKey(
         "source.ros2.topics.right", kRestart,
         [](auto& c) -> auto& { return c.source.ros2.right_topic; }, false));
+    add(autoTextKey(
+        "source.ros2.topics.left_camera_info", kRestart,
+        [](auto& c) -> auto& { return c.source.ros2.left_info_topic; }));
+    add(autoTextKey(
+        "source.ros2.topics.right_camera_info", kRestart,
+        [](auto& c) -> auto& { return c.source.ros2.right_info_topic; }));
     add(integerKey(
         "source.ros2.width", kRestart, [](auto& c) -> auto& { return c.source.ros2.width; }));
     add(integerKey(

@@ -16,11 +16,22 @@
 #include "config/config_checks.hpp"
 #include "config/key_table.hpp"
 #include "pipeline/census_sgm_matcher.hpp"
+#include "ros2/topic_names.hpp"
 
 namespace stereod {
 
 namespace fs = std::filesystem;
 using namespace config_detail;
+
+std::string leftCameraInfoTopic(const Ros2SourceConfig& ros2)
+{
+    return ros2.left_info_topic.value_or(ros2::cameraInfoTopicBeside(ros2.left_topic));
+}
+
+std::string rightCameraInfoTopic(const Ros2SourceConfig& ros2)
+{
+    return ros2.right_info_topic.value_or(ros2::cameraInfoTopicBeside(ros2.right_topic));
+}
 
 namespace {
 

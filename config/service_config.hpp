@@ -105,9 +105,19 @@ struct CamerasConfig {
 struct Ros2SourceConfig {
     std::string left_topic = "/stereo/left/image_raw"; // ROS 2 topic names
     std::string right_topic = "/stereo/right/image_raw";
+    // The drivers' sensor_msgs/msg/CameraInfo topics, subscribed to for the calibration when
+    // none is given (`calibration`, --calib); unset ("auto"): the camera_info topic beside
+    // each image topic (/stereo/left/image_raw -> /stereo/left/camera_info).
+    std::optional<std::string> left_info_topic;
+    std::optional<std::string> right_info_topic;
     int width = 640; // px of each image; images of another size are refused
     int height = 480;
 };
+
+// The camera_info topics source.type ros2 subscribes to when no calibration is given: the
+// configured ones, else the ones beside the image topics.
+std::string leftCameraInfoTopic(const Ros2SourceConfig& ros2);
+std::string rightCameraInfoTopic(const Ros2SourceConfig& ros2);
 
 struct SourceConfig {
     SourceKind kind = SourceKind::Replay;

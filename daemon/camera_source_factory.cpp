@@ -71,7 +71,7 @@ std::unique_ptr<FrameSource> makeCameraSource(const SourceConfig& source)
     throw std::invalid_argument("source.type replay or ros2 is not a camera source");
 }
 
-std::unique_ptr<FrameSource> makeRos2Source(const ServiceConfig& config)
+std::unique_ptr<ros2::Ros2ImageSource> makeRos2Source(const ServiceConfig& config)
 {
     const SourceConfig& source = config.source;
     if (source.kind != SourceKind::Ros2)
@@ -79,6 +79,11 @@ std::unique_ptr<FrameSource> makeRos2Source(const ServiceConfig& config)
     ros2::Ros2SourceOptions options;
     options.left_topic = source.ros2.left_topic;
     options.right_topic = source.ros2.right_topic;
+    options.node_namespace = config.ros2.ns;
+    if (config.calibration_path.empty()) {
+        options.left_info_topic = leftCameraInfoTopic(source.ros2);
+        options.right_info_topic = rightCameraInfoTopic(source.ros2);
+    }
     options.frame_size = cv::Size(source.ros2.width, source.ros2.height);
     options.discovery = ros2::discoveryFromEnvironment(config.ros2.localhost_only);
     options.sync = syncSettings(source);

@@ -8,6 +8,7 @@
 #include "capture/frame_source.hpp"
 #include "capture/v4l2_camera.hpp"
 #include "config/service_config.hpp"
+#include "ros2/ros2_image_source.hpp"
 
 namespace stereod {
 
@@ -22,8 +23,9 @@ CameraSettings cameraSettings(const SourceConfig& source, const std::string& dev
 std::unique_ptr<FrameSource> makeCameraSource(const SourceConfig& source);
 
 // The ROS 2 source of source.type ros2, not started, in the domain of ROS_DOMAIN_ID with
-// the ROS 2 node's discovery (ros2.localhost_only). Throws std::invalid_argument for a
-// ROS_DOMAIN_ID that is no domain or a configuration not of a ROS 2 source.
-std::unique_ptr<FrameSource> makeRos2Source(const ServiceConfig& config);
+// the ROS 2 node's discovery (ros2.localhost_only); subscribed to the camera_info topics
+// too when no calibration is configured. Throws std::invalid_argument for a ROS_DOMAIN_ID
+// that is no domain or a configuration not of a ROS 2 source.
+std::unique_ptr<ros2::Ros2ImageSource> makeRos2Source(const ServiceConfig& config);
 
 } // namespace stereod

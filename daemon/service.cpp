@@ -686,9 +686,57 @@ bool Service::alive(int64_t now_ns) const noexcept
            workerMakesProgress(worker_->busySinceNs(), now_ns, interval_ns);
 }
 
+void Service::installCalibration(ArrivingCalibration arriving)
+{
+    const std::string& origin = arriving.origin;
+    std::unique_ptr<StereoProcessor> processor;
+    try {
+        checkFrameSize(arriving.calibration, source_->frameSize(), origin);
+        const std::string problem =
+            processingProblem(config_.processing, arriving.calibration, options_.config_path);
+        if (!problem.empty())
+            throw std::invalid_argument(problem);
+        processor = std::make_unique<StereoProcessor>(arriving.calibration, config_.processing);
+    } catch (const std::exception& e) {
+        spdlog::error("calibration from {} refused: {}; running uncalibrated", origin, e.what());
+        last_error_ = "calibration from " + origin + " refused: " + e.what();
+        return;
+    }
+    calibration_ = std::move(arriving.calibration);
+    processor_ = std::move(processor);
+    options_.calibration_path = origin;
+    options_.calibration_text = formatCalibration(*calibration_, origin);
+    initial_range_ = processor_->disparityRange();
+    initial_matcher_ = processor_->matcherName();
+    initial_max_output_depth_m_ = processor_->maxOutputDepth();
+    spdlog::info("calibration from {}: {}x{}, focal {:.1f} px, baseline {:.4f} m; processing "
+                 "starts",
+                 origin, calibration_->rectified.image_size.width,
+                 calibration_->rectified.image_size.height, calibration_->rectified.focal_px,
+                 calibration_->rectified.baseline_m);
+    logDisparityRange(initial_range_, config_.processing.matcher, initial_matcher_);
+    health_ = std::make_unique<CalibrationHealthMonitor>(calibration_->rectified,
+                                                         config_.calibration_health.interval_s);
+    worker_->setWithholdWhenFailed(config_.calibration_health.withhold_when_failed);
+    server_->setCalibration(calibration_->rectified, options_.calibration_path,
+                            options_.calibration_text);
+    if (live_view_)
+        live_view_->setGeometry(calibration_->rectified);
+    if (ros2_)
+        ros2_->setGeometry(calibration_->rectified);
+    // Last: from here the worker uses the chain and the monitor.
+    worker_->installProcessor(*processor_, health_.get());
+}
+
 void Service::onTick(int64_t now_ns)
 {
     last_tick_ns_.store(now_ns, std::memory_order_release);
+    if (!calibration_ && options_.calibration_feed) {
+        if (std::optional<ArrivingCalibration> arriving = options_.calibration_feed()) {
+            options_.calibration_feed = nullptr;
+            installCalibration(std::move(*arriving));
+        }
+    }
     if (running_ && source_counters_.due(now_ns)) {
         for (const SourceCounterWatch::Report& report :
              source_counters_.look(source_->status(), now_ns))

@@ -23,6 +23,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -80,6 +81,13 @@ ExitCode exitCodeFor(const ConfigError& error);
 std::string processingProblem(const ProcessorSettings& settings,
                               const StereoCalibration& calibration, const std::string& origin);
 
+// A calibration that came after start-up, and where it came from (for `status`, the log and
+// the `calibration` request).
+struct ArrivingCalibration {
+    StereoCalibration calibration;
+    std::string origin;
+};
+
 struct ServiceOptions {
     // The file `reload` and SIGHUP re-read; empty when running on built-in defaults.
     std::string config_path;
@@ -90,6 +98,11 @@ struct ServiceOptions {
     // The text of that file as loaded, for the `calibration` request (empty: the
     // calibration did not come from a file).
     std::string calibration_text;
+    // Where a calibration may come from after start-up when none was given (source.type
+    // ros2: the drivers' camera_info): asked on the I/O thread at every tick while the
+    // service is uncalibrated. The first one it gives is installed, or refused with the
+    // reason in the log and STATUS=, and it is asked no more. Unset: none comes.
+    std::function<std::optional<ArrivingCalibration>()> calibration_feed;
     // Talk to systemd (READY=1, STATUS=, WATCHDOG=1); harmless without systemd.
     bool notify_systemd = false;
     // How long after the stop request the worker may take to finish the pair in hand.
@@ -102,9 +115,10 @@ class Service final : private ServerBackend {
   public:
     // Takes the source (not started) and a loaded calibration, or none: uncalibrated mode
     // (no stereo chain; readings say `uncalibrated`, raw frames are served, `status` says
-    // "uncalibrated"). Throws StartupError: Calibration when the source's frames do not
-    // fit the calibration or the processor refuses it, InvalidConfig when the processing
-    // settings are refused, Socket when the socket cannot be set up.
+    // "uncalibrated") until options.calibration_feed gives one. Throws StartupError: Calibration
+    // when the source's frames do not fit the calibration or the processor refuses it,
+    // InvalidConfig when the processing settings are refused, Socket when the socket cannot be set
+    // up.
     Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
             std::optional<StereoCalibration> calibration, ServiceOptions options);
     ~Service() override;
@@ -170,6 +184,11 @@ class Service final : private ServerBackend {
     void startRos2();
     void onStopRequest();
     void onReloadRequest();
+    // Takes a calibration that came after start-up (ServiceOptions::calibration_feed) while
+    // uncalibrated: checked as the constructor checks one, its stereo chain made here and
+    // handed to the worker, the socket server, the live view and the ROS 2 node told. A
+    // calibration refused leaves the service uncalibrated, with the reason. I/O thread.
+    void installCalibration(ArrivingCalibration arriving);
     // Records that the service is stopping and wakes waitStopTaken().
     void markStopTaken() noexcept;
     void shutdown() noexcept;

@@ -92,8 +92,9 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request)
     spdlog::set_level(spdlog::level::from_str(config.log_level));
 
     std::unique_ptr<FrameSource> source;
-    std::string source_name;           // for messages: the recording or the cameras
-    std::string recording_calibration; // a replay's own calibration.yaml, if any
+    ros2::Ros2ImageSource* ros2_source = nullptr; // `source`, when it is a ROS 2 one
+    std::string source_name;                      // for messages: the recording or the cameras
+    std::string recording_calibration;            // a replay's own calibration.yaml, if any
     // A replayed bag's camera_info pair, if any: the calibration when none is given.
     std::optional<std::pair<ros2::CameraInfo, ros2::CameraInfo>> bag_camera_info;
     if (config.source.kind == SourceKind::Replay) {
@@ -119,7 +120,9 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request)
         // The topics are subscribed to in run(): a domain that cannot be joined is a
         // Source error there.
         try {
-            source = makeRos2Source(config);
+            auto made = makeRos2Source(config);
+            ros2_source = made.get();
+            source = std::move(made);
         } catch (const std::exception& e) {
             throw StartupError(ExitCode::Source, e.what());
         }
@@ -154,15 +157,19 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request)
         const std::string origin = source_name + " (camera_info)";
         try {
             calibration =
-                calibrationFromRosCameraInfo(rosCameraInfoFromMessage(bag_camera_info->first),
-                                             rosCameraInfoFromMessage(bag_camera_info->second),
-                                             origin + " left", origin + " right");
+                calibrationFromCameraInfoMessages(bag_camera_info->first, bag_camera_info->second,
+                                                  origin + " left", origin + " right");
             calibration_text = formatCalibration(*calibration, origin);
         } catch (const std::exception& e) {
             throw StartupError(ExitCode::Calibration, e.what());
         }
         spdlog::info("calibration from {}: focal {:.1f} px, baseline {:.4f} m", origin,
                      calibration->rectified.focal_px, calibration->rectified.baseline_m);
+    } else if (ros2_source != nullptr) {
+        spdlog::info("no calibration given (--calib, `calibration` in the configuration): "
+                     "taking it from {} and {}; uncalibrated until both arrive",
+                     leftCameraInfoTopic(config.source.ros2),
+                     rightCameraInfoTopic(config.source.ros2));
     } else {
         spdlog::warn("no calibration given (--calib, `calibration` in the configuration) and "
                      "none in {}",
@@ -174,6 +181,15 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request)
     options.overrides = request.overrides;
     options.calibration_path = calibration_path;
     options.calibration_text = std::move(calibration_text);
+    if (!calibration && ros2_source != nullptr) {
+        // The source lives as long as the service that owns it and asks this.
+        options.calibration_feed = [ros2_source]() -> std::optional<ArrivingCalibration> {
+            std::optional<ros2::CameraInfoCalibration> taken = ros2_source->cameraInfoCalibration();
+            if (!taken)
+                return std::nullopt;
+            return ArrivingCalibration{std::move(taken->calibration), std::move(taken->origin)};
+        };
+    }
     options.notify_systemd = true;
     // An installed stereod finds the page next to it (PREFIX/share/stereod/live_view);
     // one run from the build tree uses the source tree's.

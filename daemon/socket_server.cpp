@@ -115,6 +115,15 @@ void SocketServer::setPublishConfig(const PublishConfig& publish)
     options_.publish = publish;
 }
 
+void SocketServer::setCalibration(const RectifiedGeometry& geometry, const std::string& path,
+                                  const std::string& text)
+{
+    options_.geometry = geometry;
+    options_.calibration_path = path;
+    options_.calibration_text = text;
+    options_.calibrated = true;
+}
+
 ClientCounters SocketServer::counters() const
 {
     ClientCounters counters = counters_;

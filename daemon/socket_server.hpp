@@ -14,9 +14,9 @@
 // of file descriptors") and closed, and accepting resumes on the next tick: the loop
 // never spins on EMFILE.
 //
-// Thread contract: construction, run(), watch(), setPublishConfig(), counters() and the
-// destructor on one thread (the I/O thread); requestStop() from any thread and from a
-// signal handler. The backend is called on the I/O thread only.
+// Thread contract: construction, run(), watch(), setPublishConfig(), setCalibration(),
+// counters() and the destructor on one thread (the I/O thread); requestStop() from any
+// thread and from a signal handler. The backend is called on the I/O thread only.
 //
 // The class spans several files, one job each: socket_server.cpp (set-up, the event loop,
 // accepting connections, the timer), socket_server_connections.cpp (a connection's input,
@@ -94,6 +94,11 @@ class SocketServer {
 
     // New publishing settings (from a reload); take effect with the next event.
     void setPublishConfig(const PublishConfig& publish);
+
+    // The calibration that came after start (the service ran uncalibrated): snapshot
+    // replies, `status` and the `calibration` request give it from the next request.
+    void setCalibration(const RectifiedGeometry& geometry, const std::string& path,
+                        const std::string& text);
 
     ClientCounters counters() const;
     const std::string& socketPath() const noexcept { return options_.socket.path; }

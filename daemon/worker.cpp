@@ -115,6 +115,12 @@ void Worker::refreshRange()
 
 void Worker::applyPendingSettings()
 {
+    if (StereoProcessor* processor =
+            pending_processor_.exchange(nullptr, std::memory_order_acquire)) {
+        processor_ = processor;
+        health_ = pending_health_;
+        refreshRange();
+    }
     if (std::unique_ptr<ZonesSettings> zones{
             pending_zones_.exchange(nullptr, std::memory_order_acq_rel)}) {
         try {

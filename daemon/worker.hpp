@@ -17,11 +17,13 @@
 //
 // Uncalibrated mode (no processor): the worker runs no stereo chain; every pair gives an
 // `uncalibrated` reading (with its stamp and frame number) and, when wanted, its raw
-// frames, so that a calibration can be made from the running service.
+// frames, so that a calibration can be made from the running service. A calibration that
+// comes later (a ROS 2 driver's camera_info) hands its chain over with installProcessor(),
+// and the worker processes from its next pair on.
 //
 // Thread contract: start(), join() and the destructor from the controlling thread;
-// updateSettings(), busySinceNs() and waitFinished() from any thread; the processor
-// and the publisher's write side are used by the worker thread only while it runs.
+// updateSettings(), installProcessor(), busySinceNs() and waitFinished() from any thread; the
+// processor and the publisher's write side are used by the worker thread only while it runs.
 
 #include <array>
 #include <atomic>
@@ -122,6 +124,15 @@ class Worker {
     // replaced.
     void updateZones(const ZonesSettings& zones);
 
+    // The stereo chain of a calibration that came after start, for a worker made without
+    // one, and its health monitor (null: none): the worker takes both before its next pair
+    // (a frame boundary). Borrowed until the worker is destroyed. Once; never blocks.
+    void installProcessor(StereoProcessor& processor, CalibrationHealthMonitor* health) noexcept
+    {
+        pending_health_ = health;
+        pending_processor_.store(&processor, std::memory_order_release);
+    }
+
     // Hands new settings over; the worker applies them before its next pair (a frame
     // boundary). Never blocks the worker: an atomic pointer swap; settings not picked up
     // yet are replaced. If the processor refuses them, the worker logs why and keeps the
@@ -158,6 +169,10 @@ class Worker {
     const double max_skew_ms_; // source.max_skew_ms, which needs a restart to change
     std::atomic<ProcessorSettings*> pending_settings_{nullptr}; // owned; see updateSettings()
     std::atomic<ZonesSettings*> pending_zones_{nullptr};        // owned; see updateZones()
+    // Borrowed; see installProcessor(): pending_health_ is written before the release store
+    // of pending_processor_ and read after the worker's acquire.
+    std::atomic<StereoProcessor*> pending_processor_{nullptr};
+    CalibrationHealthMonitor* pending_health_ = nullptr;
     std::atomic<int64_t> busy_since_ns_{0};
     UniqueFd finished_fd_; // eventfd the thread writes once when it leaves its loop
 

@@ -398,6 +398,68 @@ RosCameraInfo rosCameraInfoFromMessage(const ros2::CameraInfo& message)
     return info;
 }
 
+namespace {
+
+// The checks of calibrationFromCameraInfoMessages() on one message, in its fields' names.
+void checkCameraInfoMessage(const ros2::CameraInfo& m, const std::string& origin)
+{
+    constexpr uint32_t kLargest = 8192; // the largest frame any source may have
+    if (m.width == 0 || m.height == 0 || m.width > kLargest || m.height > kLargest)
+        fail(origin, 0, m.width == 0 || m.width > kLargest ? "width" : "height",
+             "the image is " + std::to_string(m.width) + "x" + std::to_string(m.height) +
+                 ", not 1 to 8192 pixels each way");
+    std::size_t coefficients = 0;
+    if (m.distortion_model == "plumb_bob")
+        coefficients = 5;
+    else if (m.distortion_model == "rational_polynomial")
+        coefficients = 8;
+    else
+        fail(origin, 0, "distortion_model",
+             "'" + m.distortion_model +
+                 "' is not supported: stereod undistorts with OpenCV's pinhole models, "
+                 "plumb_bob (5 coefficients) and rational_polynomial (8)");
+    if (m.d.size() != coefficients)
+        fail(origin, 0, "d",
+             std::to_string(m.d.size()) + " coefficients for " + m.distortion_model +
+                 ", which has " + std::to_string(coefficients));
+    const auto finite = [&origin](const char* field, const double* values, std::size_t count) {
+        for (std::size_t i = 0; i < count; ++i)
+            if (!std::isfinite(values[i]))
+                fail(origin, 0, fmt::format("{}[{}]", field, i),
+                     fmt::format("{} is not a finite number", values[i]));
+    };
+    finite("d", m.d.data(), m.d.size());
+    finite("k", m.k.data(), m.k.size());
+    finite("r", m.r.data(), m.r.size());
+    finite("p", m.p.data(), m.p.size());
+    if (m.binning_x > 1 || m.binning_y > 1)
+        fail(origin, 0, m.binning_x > 1 ? "binning_x" : "binning_y",
+             "binned images (" + std::to_string(m.binning_x) + "x" + std::to_string(m.binning_y) +
+                 ") are not supported: the calibration must be for the images as they come");
+    const bool whole = m.roi.width == 0 || m.roi.height == 0 ||
+                       (m.roi.x_offset == 0 && m.roi.y_offset == 0 && m.roi.width == m.width &&
+                        m.roi.height == m.height);
+    if (!whole)
+        fail(origin, 0, "roi",
+             "a region of interest (" + std::to_string(m.roi.width) + "x" +
+                 std::to_string(m.roi.height) + " at " + std::to_string(m.roi.x_offset) + "," +
+                 std::to_string(m.roi.y_offset) +
+                 ") is not supported: the images must be the full sensor's");
+}
+
+} // namespace
+
+StereoCalibration calibrationFromCameraInfoMessages(const ros2::CameraInfo& left,
+                                                    const ros2::CameraInfo& right,
+                                                    const std::string& left_origin,
+                                                    const std::string& right_origin)
+{
+    checkCameraInfoMessage(left, left_origin);
+    checkCameraInfoMessage(right, right_origin);
+    return calibrationFromRosCameraInfo(rosCameraInfoFromMessage(left),
+                                        rosCameraInfoFromMessage(right), left_origin, right_origin);
+}
+
 StereoCalibration importRosCameraInfo(const std::string& left_path, const std::string& right_path)
 {
     const RosCamera left = RosReader(left_path).read();

@@ -53,6 +53,18 @@ StereoCalibration calibrationFromRosCameraInfo(const RosCameraInfo& left,
                                                const std::string& left_origin,
                                                const std::string& right_origin);
 
+// A full calibration from the two sensor_msgs/msg/CameraInfo messages of a stereo pair, as
+// a bag or a ROS 2 driver's camera_info topics carry them; the origins (the topics) name
+// them in errors. Every field of the message is checked before it is used, and a problem
+// names the message's own field (width, distortion_model, d, k[4], r, p[3], binning_x,
+// roi): sizes up to 8192x8192, plumb_bob with 5 coefficients or rational_polynomial with 8,
+// finite numbers, no binning and no region of interest (the images are the full sensor's);
+// then calibrationFromRosCameraInfo() does the rest. Throws CalibrationError.
+StereoCalibration calibrationFromCameraInfoMessages(const ros2::CameraInfo& left,
+                                                    const ros2::CameraInfo& right,
+                                                    const std::string& left_origin,
+                                                    const std::string& right_origin);
+
 // Reads a ROS stereo pair of camera_info files into a full calibration. R and T are not in
 // camera_info: they follow from the rectification, R = R2^T R1 and
 // T = R2^T (Tx, Ty, 0) with Tx = P2(0,3) / P2(0,0) (ROS: -baseline, metres). Q and the

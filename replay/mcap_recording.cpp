@@ -11,6 +11,7 @@
 
 #include "base/unique_fd.hpp"
 #include "replay/image_message.hpp"
+#include "ros2/topic_names.hpp"
 
 namespace stereod {
 
@@ -42,14 +43,6 @@ std::string lower(std::string s)
     std::transform(s.begin(), s.end(), s.begin(),
                    [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
     return s;
-}
-
-// `/a/b/image_raw` -> `/a/b/camera_info`.
-std::string siblingInfoTopic(const std::string& image_topic)
-{
-    const auto slash = image_topic.rfind('/');
-    return (slash == std::string::npos ? std::string() : image_topic.substr(0, slash + 1)) +
-           "camera_info";
 }
 
 } // namespace
@@ -292,8 +285,8 @@ McapStereoIndex indexMcapStereo(mcap::Reader& reader, const std::string& left_to
     }
     const uint16_t left_id = image_topics.at(index.left_topic);
     const uint16_t right_id = image_topics.at(index.right_topic);
-    const std::string left_info = siblingInfoTopic(index.left_topic);
-    const std::string right_info = siblingInfoTopic(index.right_topic);
+    const std::string left_info = ros2::cameraInfoTopicBeside(index.left_topic);
+    const std::string right_info = ros2::cameraInfoTopicBeside(index.right_topic);
     const int left_info_id = info_topics.count(left_info) ? info_topics.at(left_info) : -1;
     const int right_info_id = info_topics.count(right_info) ? info_topics.at(right_info) : -1;
 

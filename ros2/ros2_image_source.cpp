@@ -11,8 +11,10 @@
 #include <spdlog/spdlog.h>
 
 #include "base/clock.hpp"
+#include "pipeline/calibration_formats.hpp"
 #include "replay/image_message.hpp"
 #include "ros2/messages.hpp"
+#include "ros2/node_announcement.hpp"
 #include "ros2/topic_names.hpp"
 #include "ros2_dds_types.h"
 
@@ -23,6 +25,12 @@ namespace {
 constexpr int kLeft = 0;
 constexpr int kRight = 1;
 constexpr uint32_t kWakeAttach = 2; // the guard condition's attachment in the waitset
+constexpr uint32_t kInfoAttach = 3; // + side: the camera_info readers'
+// camera_info samples taken at once; a driver sends one with every image.
+constexpr int kInfoDepth = 2;
+// The largest camera_info message taken: its fixed part is under 400 bytes; room for a
+// long frame id and distortion model.
+constexpr std::size_t kMaxInfoBytes = 16384;
 // How often the reading thread looks at stop_requested_ even when nothing arrives.
 constexpr dds_duration_t kWaitNs = DDS_MSECS(200);
 // How long one sample of the wall clock's offset converts stamps (it moves when NTP slews).
@@ -38,6 +46,21 @@ dds_entity_t checked(dds_entity_t entity, const char* what)
 std::string sizeText(cv::Size size)
 {
     return std::to_string(size.width) + "x" + std::to_string(size.height);
+}
+
+// The same camera model (everything but the header).
+bool sameCamera(const CameraInfo& a, const CameraInfo& b)
+{
+    return a.width == b.width && a.height == b.height && a.distortion_model == b.distortion_model &&
+           a.d == b.d && a.k == b.k && a.r == b.r && a.p == b.p && a.binning_x == b.binning_x &&
+           a.binning_y == b.binning_y && a.roi.x_offset == b.roi.x_offset &&
+           a.roi.y_offset == b.roi.y_offset && a.roi.width == b.roi.width &&
+           a.roi.height == b.roi.height && a.roi.do_rectify == b.roi.do_rectify;
+}
+
+std::string publishers(uint32_t writers)
+{
+    return std::to_string(writers) + (writers == 1 ? " publisher" : " publishers");
 }
 
 } // namespace
@@ -60,6 +83,10 @@ Ros2ImageSource::Ros2ImageSource(Ros2SourceOptions options)
                                     " is empty");
     sides_[kLeft].topic = options_.left_topic;
     sides_[kRight].topic = options_.right_topic;
+    infos_[kLeft].topic = options_.left_info_topic;
+    infos_[kRight].topic = options_.right_info_topic;
+    if (infos_[kLeft].topic.empty() != infos_[kRight].topic.empty())
+        throw std::invalid_argument("ros2 source: a camera_info topic for one camera only");
 }
 
 Ros2ImageSource::~Ros2ImageSource()
@@ -86,11 +113,31 @@ int Ros2ImageSource::start(PairRing& ring)
             const dds_entity_t condition =
                 checked(dds_create_readcondition(reader, DDS_ANY_STATE), "DDS read condition");
             checked(dds_waitset_attach(waitset_, condition, side), "DDS waitset attach");
+            if (infos_[side].topic.empty())
+                continue;
+            const dds_entity_t info_reader = participant_->makeReader(
+                ddsTopicName(infos_[side].topic), sensor_msgs_msg_dds__CameraInfo__desc,
+                QosProfile::SensorData);
+            infos_[side].reader.store(info_reader, std::memory_order_release);
+            const dds_entity_t info_condition =
+                checked(dds_create_readcondition(info_reader, DDS_ANY_STATE), "DDS read condition");
+            checked(dds_waitset_attach(waitset_, info_condition,
+                                       kInfoAttach + static_cast<uint32_t>(side)),
+                    "DDS waitset attach");
         }
+        NodeEntities node{options_.node_namespace, kNodeName, {}, {}};
+        for (const Side& side : sides_)
+            node.readers.push_back(side.reader.load(std::memory_order_relaxed));
+        for (const InfoSide& side : infos_)
+            if (const dds_entity_t reader = side.reader.load(std::memory_order_relaxed))
+                node.readers.push_back(reader);
+        announceNode(*participant_, node);
         wake_ = checked(dds_create_guardcondition(participant_->handle()), "DDS guard condition");
         checked(dds_waitset_attach(waitset_, wake_, kWakeAttach), "DDS waitset attach");
     } catch (const std::exception& e) {
         for (Side& side : sides_)
+            side.reader.store(0, std::memory_order_release);
+        for (InfoSide& side : infos_)
             side.reader.store(0, std::memory_order_release);
         participant_.reset(); // deletes whatever was made on it
         const std::lock_guard lock(status_mutex_);
@@ -118,6 +165,8 @@ void Ros2ImageSource::stop() noexcept
     sync_.stop();
     for (Side& side : sides_)
         side.reader.store(0, std::memory_order_release);
+    for (InfoSide& side : infos_)
+        side.reader.store(0, std::memory_order_release);
     participant_.reset(); // the readers, conditions and waitset with it
     waitset_ = 0;
     wake_ = 0;
@@ -127,9 +176,14 @@ void Ros2ImageSource::stop() noexcept
 
 void Ros2ImageSource::run() noexcept
 {
-    dds_attach_t triggered[3];
+    dds_attach_t triggered[5];
     while (!stop_requested_.load(std::memory_order_acquire)) {
-        dds_waitset_wait(waitset_, triggered, 3, kWaitNs);
+        dds_waitset_wait(waitset_, triggered, 5, kWaitNs);
+        // camera_info first: a calibration is taken as soon as a pair of it is in.
+        const bool left_info = takeCameraInfo(kLeft);
+        const bool right_info = takeCameraInfo(kRight);
+        if (left_info || right_info)
+            considerCameraInfo();
         // One take of each side in turn, so that a burst on one topic does not hold the
         // other's frames back.
         bool took = true;
@@ -170,6 +224,104 @@ bool Ros2ImageSource::takeSamples(int side)
         ddsi_serdata_unref(samples[static_cast<std::size_t>(i)]);
     }
     return true;
+}
+
+bool Ros2ImageSource::takeCameraInfo(int side)
+{
+    InfoSide& s = infos_[side];
+    const dds_entity_t reader = s.reader.load(std::memory_order_acquire);
+    if (reader == 0)
+        return false;
+    std::array<ddsi_serdata*, kInfoDepth> samples{};
+    std::array<dds_sample_info_t, kInfoDepth> infos{};
+    const dds_return_t count =
+        dds_takecdr(reader, samples.data(), kInfoDepth, infos.data(), DDS_ANY_STATE);
+    if (count <= 0)
+        return false;
+    for (int i = 0; i < count; ++i) {
+        const auto index = static_cast<std::size_t>(i);
+        if (infos[index].valid_data) {
+            const std::size_t bytes = ddsi_serdata_size(samples[index]);
+            if (bytes > kMaxInfoBytes) {
+                noteCameraInfoProblem(s.topic + ": a message of " + std::to_string(bytes) +
+                                      " bytes, more than a camera_info can be (not decoded)");
+            } else {
+                message_.resize(bytes);
+                ddsi_serdata_to_ser(samples[index], 0, bytes, message_.data());
+                try {
+                    s.latest = parseCameraInfo(message_);
+                } catch (const CdrError& e) {
+                    noteCameraInfoProblem(s.topic + ": " + e.what());
+                }
+            }
+        }
+        ddsi_serdata_unref(samples[index]);
+    }
+    return true;
+}
+
+void Ros2ImageSource::considerCameraInfo()
+{
+    InfoSide& left = infos_[kLeft];
+    InfoSide& right = infos_[kRight];
+    if (left.taken) {
+        // Calibrated: the rectification maps stay those of the first pair.
+        for (InfoSide* side : {&left, &right}) {
+            if (side->latest && !sameCamera(*side->latest, *side->taken) &&
+                !side->changed.exchange(true, std::memory_order_relaxed))
+                spdlog::warn("ros2 source: {} changed after the calibration was taken from it: "
+                             "ignored, the calibration stays the first one (restart stereod to "
+                             "take the new one)",
+                             side->topic);
+        }
+        return;
+    }
+    if (!left.latest || !right.latest)
+        return;
+    // The same pair as the one refused last: refused again, without a word.
+    if (refused_[kLeft] && refused_[kRight] && sameCamera(*left.latest, *refused_[kLeft]) &&
+        sameCamera(*right.latest, *refused_[kRight]))
+        return;
+    try {
+        StereoCalibration calibration =
+            calibrationFromCameraInfoMessages(*left.latest, *right.latest, left.topic, right.topic);
+        const cv::Size size = calibration.rectified.image_size;
+        if (size != options_.frame_size)
+            throwCalibrationError(left.topic, 0, "width",
+                                  "the camera_info is for " + sizeText(size) +
+                                      " images, the source's are " + sizeText(options_.frame_size) +
+                                      " (source.ros2.width, source.ros2.height)");
+        const std::string origin = left.topic + " + " + right.topic;
+        spdlog::info("ros2 source: calibration from {}: {}x{}, focal {:.1f} px, baseline {:.4f} m",
+                     origin, size.width, size.height, calibration.rectified.focal_px,
+                     calibration.rectified.baseline_m);
+        left.taken = left.latest;
+        right.taken = right.latest;
+        const std::lock_guard lock(status_mutex_);
+        calibration_ = CameraInfoCalibration{std::move(calibration), origin};
+        camera_info_problem_.clear();
+    } catch (const std::exception& e) {
+        refused_[kLeft] = left.latest;
+        refused_[kRight] = right.latest;
+        noteCameraInfoProblem(e.what());
+    }
+}
+
+void Ros2ImageSource::noteCameraInfoProblem(std::string problem)
+{
+    const std::lock_guard lock(status_mutex_);
+    if (problem == camera_info_problem_)
+        return;
+    spdlog::error("ros2 source: camera_info refused: {}; uncalibrated until a camera_info pair "
+                  "passes",
+                  problem);
+    camera_info_problem_ = std::move(problem);
+}
+
+std::optional<CameraInfoCalibration> Ros2ImageSource::cameraInfoCalibration() const
+{
+    const std::lock_guard lock(status_mutex_);
+    return calibration_;
 }
 
 void Ros2ImageSource::handleMessage(int side, std::string_view message)
@@ -304,6 +456,26 @@ SourceStatus Ros2ImageSource::status() const
         }
     }
 
+    if (started_ns != 0 && !infos_[kLeft].topic.empty()) {
+        const std::lock_guard lock(status_mutex_);
+        if (!calibration_ && !camera_info_problem_.empty()) {
+            out.warnings.push_back("camera_info refused: " + camera_info_problem_ +
+                                   "; uncalibrated until a camera_info pair passes");
+        } else if (!calibration_) {
+            const auto writers = [](const InfoSide& side) {
+                return publishers(
+                    DdsParticipant::matchedWriters(side.reader.load(std::memory_order_acquire)));
+            };
+            out.warnings.push_back("waiting for camera_info on " + infos_[kLeft].topic + " (" +
+                                   writers(infos_[kLeft]) + ") and " + infos_[kRight].topic + " (" +
+                                   writers(infos_[kRight]) + "): uncalibrated until both arrive");
+        }
+        for (const InfoSide& side : infos_)
+            if (side.changed.load(std::memory_order_relaxed))
+                out.warnings.push_back(side.topic +
+                                       " changed after the calibration was taken from it: "
+                                       "ignored (a restart takes the new one)");
+    }
     addSyncFigures(sync, out);
     addClockOffsetWarning(sync, options_.sync.max_skew_ns, "the two topics' stamps", "images",
                           "the driver does not stamp a pair alike", out);

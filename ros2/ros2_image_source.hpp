@@ -7,8 +7,9 @@
 // best effort: it matches a driver's sensor-data writers and reliable ones too) -> our
 // reading thread, which takes the samples as CDR, checks every size the message declares
 // against its bytes and the configured frame size before anything is decoded
-// (decodeImageMessage(), the check a bag's images get), converts rgb8/bgr8 to grey into a
-// frame of a pool allocated at start, and offers it to a StereoSyncThread that pairs the
+// (decodeImageMessage(), the check and decoder a bag's images get), converts rgb8, bgr8,
+// rgba8, bgra8 to grey and takes the luma of yuv422 / yuv422_yuy2 into a frame of a pool
+// allocated at start, and offers it to a StereoSyncThread that pairs the
 // two topics by header stamp within max_skew (capture/stereo_sync.hpp) and pushes the
 // pairs into the PairRing (drop-oldest). Every queue on the way is bounded.
 //
@@ -17,6 +18,21 @@
 // source runs on. A side with no image for stall_timeout is Stalled, and so is the source,
 // with the topic and the writers it matches in last_error: the service reports source down
 // and readings resume when images do.
+//
+// The calibration from the drivers' camera_info: with camera_info topics in the options (no
+// calibration given), a reader of each (best effort: reliable writers match too) beside the
+// image topics. Once both have given a message, the pair is checked and turned into a
+// calibration by calibrationFromCameraInfoMessages() (pipeline/calibration_formats.hpp,
+// the conversion a bag's camera_info gets) and held to the frame size; the first pair that
+// passes is the calibration (cameraInfoCalibration()) for as long as the source lives. A
+// pair refused is logged and shown in status().warnings with the topic and the field, and
+// the next messages are tried; a camera_info that differs from the one taken, later, is
+// ignored with a warning (a new calibration needs a restart, docs/ros2.md).
+//
+// In the ROS 2 graph: the participant is announced on ros_discovery_info as the node
+// `stereod_source` in the node's namespace, with the GIDs of its readers (the image topics'
+// and camera_info's), so that `ros2 node info` lists its subscriptions
+// (ros2/node_announcement.hpp).
 //
 // Stamps: a message's header stamp (the wall clock, as ROS 2 stamps) is kept in
 // Frame::source_stamp_ns and converted to CLOCK_MONOTONIC for Frame::stamp_ns with the
@@ -41,6 +57,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 
@@ -49,22 +66,37 @@
 #include "capture/frame_pool.hpp"
 #include "capture/frame_source.hpp"
 #include "capture/stereo_sync.hpp"
+#include "pipeline/calibration.hpp"
 #include "ros2/dds_participant.hpp"
+#include "ros2/messages.hpp"
 
 namespace stereod::ros2 {
 
 struct Ros2SourceOptions {
     std::string left_topic = "/stereo/left/image_raw"; // ROS 2 topic names
     std::string right_topic = "/stereo/right/image_raw";
-    cv::Size frame_size{640, 480}; // images of another size are refused, not decoded
+    // The drivers' sensor_msgs/msg/CameraInfo topics; empty: none subscribed to (the
+    // calibration comes from elsewhere).
+    std::string left_info_topic;
+    std::string right_info_topic;
+    cv::Size frame_size{640, 480};          // images of another size are refused, not decoded
+    std::string node_namespace = "/stereo"; // the announced node's (ros2.namespace)
     DdsDiscovery discovery;
     SyncSettings sync;
     int64_t stall_timeout_ns = 2'000'000'000; // no image on a topic this long: Stalled
     std::size_t ring_capacity = 4;            // the PairRing's, to size the frame pool
 };
 
+// A calibration made from the drivers' camera_info, and the topics it came from.
+struct CameraInfoCalibration {
+    StereoCalibration calibration;
+    std::string origin; // "/stereo/left/camera_info + /stereo/right/camera_info"
+};
+
 class Ros2ImageSource final : public FrameSource {
   public:
+    // The node the source's participant is announced as, in options.node_namespace.
+    static constexpr const char* kNodeName = "stereod_source";
     // Samples each reader keeps until our thread takes them ("keep last few").
     static constexpr int kReaderDepth = 4;
     // Frames queued per side between our reading thread and the sync thread.
@@ -85,6 +117,10 @@ class Ros2ImageSource final : public FrameSource {
     SourceStatus status() const override;
     cv::Size frameSize() const override { return options_.frame_size; }
 
+    // The calibration from the camera_info topics once a pair of their messages has passed
+    // every check; none before, and none without camera_info topics. Any thread.
+    std::optional<CameraInfoCalibration> cameraInfoCalibration() const;
+
     // The frames one side may hold at once: our hand, the inbox, the sync's queue, the
     // ring and the worker's pair.
     static std::size_t framesPerSide(std::size_t ring_capacity, const SyncSettings& sync) noexcept;
@@ -104,7 +140,22 @@ class Ros2ImageSource final : public FrameSource {
         std::size_t arrival_count = 0;
     };
 
+    // One camera's camera_info topic.
+    struct InfoSide {
+        std::string topic;
+        std::atomic<dds_entity_t> reader{0}; // 0 while stopped or not subscribed
+        std::optional<CameraInfo> latest;    // reading thread only: the newest that parsed
+        std::optional<CameraInfo> taken;     // reading thread only: the one calibrated from
+        std::atomic<bool> changed{false};    // a message differed from `taken`
+    };
+
     void run() noexcept;
+    // Takes what the camera_info reader of `side` holds; true when it took anything.
+    bool takeCameraInfo(int side);
+    // With a message of each side and no calibration yet: the pair checked, and taken or
+    // refused; with a calibration: a message that differs is warned about, once.
+    void considerCameraInfo();
+    void noteCameraInfoProblem(std::string problem);
     // Takes what the reader of `side` holds; true when it took anything.
     bool takeSamples(int side);
     void handleMessage(int side, std::string_view message);
@@ -115,6 +166,9 @@ class Ros2ImageSource final : public FrameSource {
     FramePool pool_;
     StereoSyncThread sync_;
     std::array<Side, 2> sides_;
+    std::array<InfoSide, 2> infos_;
+    // Reading thread only: the pair last refused, not checked again until one changes.
+    std::optional<CameraInfo> refused_[2];
 
     // Made by start(), deleted by stop(); the reading thread uses them between.
     std::unique_ptr<DdsParticipant> participant_;
@@ -130,8 +184,10 @@ class Ros2ImageSource final : public FrameSource {
     bool running_ = false; // controlling thread only
 
     mutable std::mutex status_mutex_;
-    std::string start_error_;                // guarded by status_mutex_
-    std::array<std::string, 2> bad_reasons_; // guarded by status_mutex_
+    std::string start_error_;                          // guarded by status_mutex_
+    std::array<std::string, 2> bad_reasons_;           // guarded by status_mutex_
+    std::optional<CameraInfoCalibration> calibration_; // guarded by status_mutex_
+    std::string camera_info_problem_; // guarded by status_mutex_: the last pair refused
 };
 
 } // namespace stereod::ros2

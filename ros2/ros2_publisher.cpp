@@ -128,7 +128,14 @@ std::string Ros2Publisher::start()
         error_ = e.what();
         return error_;
     }
-    publishStaticFrames(pose_);
+    CameraPose pose;
+    double baseline_m = 0.0;
+    {
+        std::lock_guard lock(mutex_);
+        pose = pose_;
+        baseline_m = geometry_.baseline_m;
+    }
+    publishStaticFrames(pose, baseline_m);
     publishing_.store(true, std::memory_order_release);
     thread_ = std::thread([this] { run(); });
     return {};
@@ -201,6 +208,12 @@ void Ros2Publisher::setNearest(const NearestSettings& nearest)
     nearest_ = nearest;
 }
 
+void Ros2Publisher::setGeometry(const RectifiedGeometry& geometry)
+{
+    std::lock_guard lock(mutex_);
+    geometry_ = geometry;
+}
+
 Ros2Counters Ros2Publisher::counters() const
 {
     Ros2Counters c;
@@ -255,6 +268,7 @@ void Ros2Publisher::run()
             mailbox_.frame = false;
             mailbox_.status = false;
             work.nearest = nearest_;
+            work.geometry = geometry_;
         }
         refreshMatches();
         const int64_t now_ns = monotonicNowNs();
@@ -270,7 +284,7 @@ void Ros2Publisher::run()
                                          : saturatingAddNs(now_ns, realtimeOffsetNs());
             Reading none;
             none.reason = NoReadingReason::SourceDown;
-            const RangeValues values = rangeFromReading(none, work.nearest, geometry_);
+            const RangeValues values = rangeFromReading(none, work.nearest, work.geometry);
             writeRange(values, Time::fromNs(stamp_ns));
             publishReadingJson(work.status_reading_json);
         }
@@ -332,8 +346,8 @@ void Ros2Publisher::publishFrame(const Mailbox& work, Scratch& scratch, int64_t 
         fillHeader(disparity.header, stamp, kLeftOpticalFrame);
         fillImage(disparity.image, stamp, kLeftOpticalFrame, work.disparity, "32FC1",
                   static_cast<uint32_t>(work.disparity.cols * 4), values.data());
-        disparity.f = static_cast<float>(geometry_.focal_px);
-        disparity.t = static_cast<float>(geometry_.baseline_m);
+        disparity.f = static_cast<float>(work.geometry.focal_px);
+        disparity.t = static_cast<float>(work.geometry.baseline_m);
         disparity.valid_window = {0, 0, disparity.image.height, disparity.image.width, false};
         disparity.min_disparity = work.min_disparity;
         disparity.max_disparity = work.max_disparity;
@@ -375,7 +389,7 @@ void Ros2Publisher::publishFrame(const Mailbox& work, Scratch& scratch, int64_t 
         const Ros2Channel channel = right ? kRightInfoChannel : kLeftInfoChannel;
         if (!due(channel))
             continue;
-        const CameraInfo info = rectifiedCameraInfo(geometry_, right, 0);
+        const CameraInfo info = rectifiedCameraInfo(work.geometry, right, 0);
         sensor_msgs_msg_dds__CameraInfo_ out{};
         fillHeader(out.header, stamp, right ? kRightOpticalFrame : kLeftOpticalFrame);
         out.height = info.height;
@@ -393,28 +407,30 @@ void Ros2Publisher::publishFrame(const Mailbox& work, Scratch& scratch, int64_t 
         countWrite(dds_write(w[channel], &out));
     }
     // The reading goes out with every frame: it is small, and it is what a robot acts on.
-    const RangeValues values = rangeFromReading(work.reading, work.nearest, geometry_);
+    const RangeValues values = rangeFromReading(work.reading, work.nearest, work.geometry);
     writeRange(values, stamp);
     publishReadingJson(work.reading_json);
 
-    bool pose_changed = false;
+    bool frames_changed = false;
     {
         std::lock_guard lock(mutex_);
-        pose_changed =
-            work.pose.translation_m != pose_.translation_m || work.pose.rpy_deg != pose_.rpy_deg;
+        frames_changed = work.pose.translation_m != pose_.translation_m ||
+                         work.pose.rpy_deg != pose_.rpy_deg ||
+                         work.geometry.baseline_m != tf_baseline_m_;
     }
-    if (pose_changed)
-        publishStaticFrames(work.pose);
+    if (frames_changed)
+        publishStaticFrames(work.pose, work.geometry.baseline_m);
     frames_.fetch_add(1, std::memory_order_relaxed);
 }
 
-void Ros2Publisher::publishStaticFrames(const CameraPose& pose)
+void Ros2Publisher::publishStaticFrames(const CameraPose& pose, double baseline_m)
 {
     {
         std::lock_guard lock(mutex_);
         pose_ = pose;
+        tf_baseline_m_ = baseline_m;
     }
-    const std::array<FrameTransform, 3> frames = cameraFrames(pose, geometry_.baseline_m);
+    const std::array<FrameTransform, 3> frames = cameraFrames(pose, baseline_m);
     const Time stamp = Time::fromNs(saturatingAddNs(monotonicNowNs(), realtimeOffsetNs()));
     std::array<geometry_msgs_msg_dds__TransformStamped_, 3> transforms{};
     for (std::size_t i = 0; i < frames.size(); ++i) {

@@ -113,6 +113,10 @@ class Ros2Publisher {
 
     // New nearest-object settings (a reload): the Range's limits and field of view.
     void setNearest(const NearestSettings& nearest);
+    // The rectified geometry of a calibration that came after start (the service ran
+    // uncalibrated): camera_info, the disparity's f and t, the Range's field of view and
+    // /tf_static's right optical frame follow it from the next frame. Any thread.
+    void setGeometry(const RectifiedGeometry& geometry);
 
     Ros2Counters counters() const;
 
@@ -130,6 +134,7 @@ class Ros2Publisher {
         std::string reading_json;
         CameraPose pose;
         NearestSettings nearest;
+        RectifiedGeometry geometry;
         bool status = false;
         std::string status_reading_json;
         int64_t status_realtime_ns = 0;
@@ -149,23 +154,24 @@ class Ros2Publisher {
     void run();
     void refreshMatches();
     void publishFrame(const Mailbox& work, Scratch& scratch, int64_t now_ns);
-    void publishStaticFrames(const CameraPose& pose);
+    void publishStaticFrames(const CameraPose& pose, double baseline_m);
     void writeRange(const RangeValues& values, const Time& stamp);
     void publishReadingJson(const std::string& json);
     void countWrite(int code) noexcept;
 
     Ros2Settings settings_;
-    RectifiedGeometry geometry_;
+    RectifiedGeometry geometry_;       // guarded by mutex_
     std::unique_ptr<Writers> writers_; // the publishing thread's after start()
     std::array<std::atomic<bool>, kRos2ChannelCount> wanted_{};
 
     mutable std::mutex mutex_;
     std::condition_variable wake_;
     bool stopping_ = false;
-    Mailbox mailbox_;         // guarded by mutex_
-    NearestSettings nearest_; // guarded by mutex_
-    CameraPose pose_;         // guarded by mutex_: the pose of the last /tf_static
-    std::string error_;       // guarded by mutex_
+    Mailbox mailbox_;            // guarded by mutex_
+    NearestSettings nearest_;    // guarded by mutex_
+    CameraPose pose_;            // guarded by mutex_: the pose of the last /tf_static
+    double tf_baseline_m_ = 0.0; // guarded by mutex_: the baseline of the last /tf_static
+    std::string error_;          // guarded by mutex_
     std::thread thread_;
 
     std::atomic<bool> publishing_{false};

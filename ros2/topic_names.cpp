@@ -56,4 +56,12 @@ std::string ddsTopicName(std::string_view ros_name)
     return "rt" + std::string(ros_name);
 }
 
+std::string cameraInfoTopicBeside(std::string_view image_topic)
+{
+    const auto slash = image_topic.rfind('/');
+    return (slash == std::string_view::npos ? std::string()
+                                            : std::string(image_topic.substr(0, slash + 1))) +
+           "camera_info";
+}
+
 } // namespace stereod::ros2

@@ -19,6 +19,10 @@ std::string namespaceProblem(std::string_view ns);
 // "/stereo/left/image_rect". `ns` must pass namespaceProblem().
 std::string rosTopicName(std::string_view ns, std::string_view relative);
 
+// The camera_info topic beside an image topic, as ROS 2's camera drivers and
+// image_transport pair them: "/stereo/left/image_raw" -> "/stereo/left/camera_info".
+std::string cameraInfoTopicBeside(std::string_view image_topic);
+
 // The DDS topic that carries the ROS 2 topic `ros_name` ("/stereo/depth"): "rt/stereo/depth".
 std::string ddsTopicName(std::string_view ros_name);
 

@@ -152,7 +152,7 @@ struct LiveView::Sessions {
 };
 
 LiveView::LiveView(LiveViewSettings settings, RectifiedGeometry geometry)
-    : settings_(std::move(settings)), geometry_(geometry), sessions_(std::make_unique<Sessions>())
+    : settings_(std::move(settings)), sessions_(std::make_unique<Sessions>()), geometry_(geometry)
 {
     address_ = formatListenAddress(settings_.host, settings_.port);
     WebSocketTransport::Handlers handlers;
@@ -373,6 +373,7 @@ void LiveView::feed()
         return true;
     };
     int64_t last_pump_ns = 0;
+    RectifiedGeometry geometry; // the mailbox's, with each frame
     while (true) {
         {
             std::unique_lock lock(mutex_);
@@ -397,6 +398,7 @@ void LiveView::feed()
                 std::swap(work.cloud_colour, mailbox_.cloud_colour);
                 work.left_encoding = mailbox_.left_encoding;
                 work.stamp_ns = mailbox_.stamp_ns;
+                geometry = geometry_;
                 work.min_disparity = mailbox_.min_disparity;
                 work.max_disparity = mailbox_.max_disparity;
                 mailbox_.frame = false;
@@ -432,8 +434,8 @@ void LiveView::feed()
                 image.header = left_header;
                 image.height = work.disparity.rows;
                 image.width = work.disparity.cols;
-                image.f = static_cast<float>(geometry_.focal_px);
-                image.t = static_cast<float>(geometry_.baseline_m);
+                image.f = static_cast<float>(geometry.focal_px);
+                image.t = static_cast<float>(geometry.baseline_m);
                 image.valid_window = {0, 0, image.height, image.width, false};
                 image.min_disparity = work.min_disparity;
                 image.max_disparity = work.max_disparity;
@@ -459,7 +461,7 @@ void LiveView::feed()
                 const Channel channel = right ? kRightInfo : kLeftInfo;
                 if (!due(channel))
                     continue;
-                ros2::serializeCameraInfo(ros2::rectifiedCameraInfo(geometry_, right, t), message);
+                ros2::serializeCameraInfo(ros2::rectifiedCameraInfo(geometry, right, t), message);
                 send(channel, t, message);
             }
             work.frame = false;
@@ -599,6 +601,12 @@ HttpResponse LiveView::serveFile(const std::string& request) const
     std::ostringstream body;
     body << in.rdbuf();
     return HttpResponse{200, contentType(file), body.str()};
+}
+
+void LiveView::setGeometry(const RectifiedGeometry& geometry)
+{
+    std::lock_guard lock(mutex_);
+    geometry_ = geometry;
 }
 
 StatusLiveView LiveView::status() const

@@ -136,6 +136,10 @@ class LiveView final : public PublishObserver {
     // The live view's part of `status`; `listen` is the address bound (or asked for).
     StatusLiveView status() const;
 
+    // The rectified geometry of a calibration that came after start (the service ran
+    // uncalibrated): camera_info and the disparity's f and t follow it. Any thread.
+    void setGeometry(const RectifiedGeometry& geometry);
+
   private:
     struct Mailbox {
         bool frame = false; // the frame channels below hold a result not sent yet
@@ -180,7 +184,6 @@ class LiveView final : public PublishObserver {
     HttpResponse serveFile(const std::string& path) const;
 
     LiveViewSettings settings_;
-    RectifiedGeometry geometry_;
     std::unique_ptr<WebSocketTransport> transport_;
     std::unique_ptr<Sessions> sessions_; // transport thread only
     uint64_t waiting_sequence_ = 0;      // transport thread only: orders waiting frames
@@ -189,7 +192,8 @@ class LiveView final : public PublishObserver {
     std::mutex mutex_;
     std::condition_variable wake_;
     bool stopping_ = false;
-    Mailbox mailbox_; // guarded by mutex_
+    Mailbox mailbox_;            // guarded by mutex_
+    RectifiedGeometry geometry_; // guarded by mutex_
     std::thread feed_thread_;
 
     std::string address_;

@@ -271,6 +271,17 @@ INSTANTIATE_TEST_SUITE_P(
                      "source.ros2.topics.right", 4, "the same topic as source.ros2.topics.left"},
         RejectedCase{"source:\n  ros2:\n    width: 9000\n", "source.ros2.width", 3,
                      "expected 16 to 8192 px"},
+        RejectedCase{"source:\n  ros2:\n    topics:\n      left_camera_info: camera_info\n",
+                     "source.ros2.topics.left_camera_info", 4, "an absolute ROS 2 topic name"},
+        RejectedCase{"source:\n  ros2:\n    topics:\n      right_camera_info: "
+                     "/stereo/left/camera_info\n",
+                     "source.ros2.topics.right_camera_info", 4,
+                     "the same topic as the left camera's camera_info (/stereo/left/camera_info)"},
+        RejectedCase{"source:\n  ros2:\n    topics:\n      right_camera_info: [a]\n",
+                     "source.ros2.topics.right_camera_info", 4, "expected auto or text"},
+        RejectedCase{"source:\n  type: ros2\nros2:\n  enabled: true\n  namespace: /stereo\n",
+                     "ros2.namespace", 5,
+                     "stereod would publish its rectified camera_info on /stereo/left/camera_info"},
         RejectedCase{"source: 5\n", "source", 1,
                      "not a section (got 5, expected a mapping of keys)"},
         // matcher
@@ -746,6 +757,46 @@ TEST(ConfigMatcher, PlanarTuningTakesItsOwnSharedDefaultsUnlessSet)
             .processing.matcher;
     EXPECT_EQ(set.uniqueness_ratio, 9);
     EXPECT_EQ(set.speckle_window_px, censusSgmTuning(MatcherTuning::Planar).speckle_window_px);
+}
+
+// source.type ros2 takes its calibration from the camera_info topics beside the image
+// topics unless others are given; stereod's own node must not publish on them.
+TEST(ConfigRos2Source, CameraInfoTopicsAreBesideTheImagesUnlessGiven)
+{
+    // The two camera_info topics of the ros2 source given by `topics_yaml`.
+    const auto infoTopics = [](const std::string& topics_yaml) {
+        const Ros2SourceConfig ros2 =
+            parseConfig("source:\n  ros2:\n    topics:\n" + topics_yaml, "t.yaml").source.ros2;
+        return std::vector<std::string>{leftCameraInfoTopic(ros2), rightCameraInfoTopic(ros2)};
+    };
+    const ServiceConfig defaults = defaultConfig();
+    EXPECT_FALSE(defaults.source.ros2.left_info_topic.has_value());
+    EXPECT_EQ(infoTopics("      left: /stereo/left/image_raw\n"),
+              (std::vector<std::string>{"/stereo/left/camera_info", "/stereo/right/camera_info"}));
+    EXPECT_EQ(
+        infoTopics("      left: /cam/left/image_color\n      right: /cam/right/image_color\n"),
+        (std::vector<std::string>{"/cam/left/camera_info", "/cam/right/camera_info"}));
+    const std::string given_yaml =
+        "      left_camera_info: /rig/info_l\n      right_camera_info: auto\n";
+    EXPECT_EQ(infoTopics(given_yaml),
+              (std::vector<std::string>{"/rig/info_l", "/stereo/right/camera_info"}));
+    const ServiceConfig given =
+        parseConfig("source:\n  ros2:\n    topics:\n" + given_yaml, "t.yaml");
+    const ConfigChange change = diffConfig(defaults, given);
+    EXPECT_EQ(change.changed, (std::vector<std::string>{"source.ros2.topics.left_camera_info"}));
+    EXPECT_EQ(change.restart_needed, change.changed);
+
+    // stereod's node beside a driver under one namespace: refused only while the
+    // calibration comes from camera_info.
+    EXPECT_TRUE(problemsOf("source:\n  type: ros2\nros2:\n  enabled: true\n  namespace: "
+                           "/stereo_depth\n")
+                    .empty());
+    ServiceConfig with_file = defaultConfig();
+    with_file.source.kind = SourceKind::Ros2;
+    with_file.ros2.enabled = true;
+    // Any file that exists: the calibration's content is start-up's to check.
+    with_file.calibration_path = (fs::path(STEREOD_SOURCE_DIR) / "README.md").string();
+    EXPECT_NO_THROW(validateConfig(with_file)) << "a calibration file: no camera_info read";
 }
 
 TEST(ConfigDiff, EveryKeyIsClassified)

@@ -103,20 +103,24 @@ class ServiceTest : public ::testing::Test {
         return makeRectifiedCalibration(kSize, test::kTsukubaFocalPx, test::kTsukubaBaselineM);
     }
 
-    std::unique_ptr<Service> makeService(const ServiceConfig& config, ServiceOptions options = {})
+    // `calibrated` false: none given (uncalibrated, unless options.calibration_feed gives one).
+    std::unique_ptr<Service> makeService(const ServiceConfig& config, ServiceOptions options = {},
+                                         bool calibrated = true)
     {
         auto source = std::make_unique<FakeSource>(tsukuba().left, tsukuba().right);
         source_ = source.get();
-        return std::make_unique<Service>(config, std::move(source), calibration(),
-                                         std::move(options));
+        return std::make_unique<Service>(
+            config, std::move(source),
+            calibrated ? std::optional<StereoCalibration>(calibration()) : std::nullopt,
+            std::move(options));
     }
 
     // Runs the service on its own thread; clients may connect as soon as this returns (the
     // socket listens from construction on).
-    void launch(const ServiceConfig& config, ServiceOptions options = {})
+    void launch(const ServiceConfig& config, ServiceOptions options = {}, bool calibrated = true)
     {
         socket_path_ = config.socket.path;
-        service_ = makeService(config, std::move(options));
+        service_ = makeService(config, std::move(options), calibrated);
         thread_ = std::thread([this] {
             try {
                 exit_code_ = service_->run();
@@ -391,6 +395,54 @@ TEST_F(ServiceTest, DistanceMatchesTheGroundTruth)
     EXPECT_EQ(reading["region_pixels"], 192 * 144);
     EXPECT_GT(reading["valid_fraction"].get<double>(), 0.7);
     EXPECT_FALSE(reading.contains("reason"));
+}
+
+// A calibration that comes after start (a ROS 2 driver's camera_info): uncalibrated
+// readings until it does, then the processing starts with it; it is taken on the I/O thread
+// while the worker runs, and every part says so.
+TEST_F(ServiceTest, ACalibrationArrivingLaterStartsTheProcessing)
+{
+    std::atomic<bool> arrived{false};
+    std::atomic<int> asked{0};
+    ServiceOptions options;
+    options.calibration_feed = [&]() -> std::optional<ArrivingCalibration> {
+        ++asked;
+        if (!arrived.load())
+            return std::nullopt;
+        return ArrivingCalibration{calibration(), "/l/camera_info + /r/camera_info"};
+    };
+    launch(baseConfig(), std::move(options), false);
+    TestClient client(socket_path_);
+    ASSERT_EQ(client.request({{"cmd", "hello"}})["ok"], true);
+    source_->deliver(1);
+    waitForFrames(client, 1);
+    Json reading = distance(client);
+    EXPECT_EQ(reading["reason"]["code"], "uncalibrated") << reading.dump();
+    EXPECT_EQ(status(client)["state"], "uncalibrated");
+    EXPECT_EQ(client.request({{"cmd", "calibration"}})["calibrated"], false);
+
+    arrived = true;
+    ASSERT_TRUE(waitUntil([&] {
+        return status(client)["calibration"]["path"] == "/l/camera_info + /r/camera_info";
+    }));
+    const int asked_when_taken = asked.load();
+    source_->deliver(1);
+    waitForFrames(client, 2);
+    reading = distance(client);
+    ASSERT_EQ(reading["valid"], true) << reading.dump();
+    const double expected_m = groundTruthNearestM(baseConfig().processing.nearest);
+    EXPECT_NEAR(reading["distance_m"].get<double>(), expected_m, 0.03 * expected_m);
+    const Json st = status(client);
+    EXPECT_EQ(st["state"], "running");
+    EXPECT_EQ(st["calibration"]["focal_px"], test::kTsukubaFocalPx);
+    EXPECT_NE(st["pipeline"]["matcher"], "none") << st["pipeline"].dump();
+    const Json calibration_reply = client.request({{"cmd", "calibration"}});
+    EXPECT_EQ(calibration_reply["calibrated"], true);
+    EXPECT_EQ(calibration_reply["path"], "/l/camera_info + /r/camera_info");
+    EXPECT_NE(calibration_reply["text"].get<std::string>().find("focal_px"), std::string::npos)
+        << calibration_reply.dump();
+    // Taken once: not asked again.
+    EXPECT_EQ(asked.load(), asked_when_taken);
 }
 
 TEST_F(ServiceTest, ReadingOlderThanAllowedIsStale)

@@ -2,6 +2,7 @@
 // of OpenCV's stereo_calib sample (read), with a real calibration made from OpenCV's
 // chessboard pairs. A file read back must rectify exactly as the calibration it came from.
 
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <functional>
@@ -356,6 +357,58 @@ TEST(CalibrationFormats, RefusesRosFilesItCannotUseNamingFileAndKey)
 
     message = refusal([&] { importRosCameraInfo(dir.file("none.yaml"), right); });
     EXPECT_TRUE(contains(message, "none.yaml: cannot open: No such file or directory")) << message;
+}
+
+// The camera_info messages of a bag or of a ROS 2 driver's topics: the real calibration
+// comes back from them, and each field that cannot be used is refused by its own name.
+TEST_F(CalibrationFormatsTest, CameraInfoMessagesGiveTheCalibrationAndAreCheckedByField)
+{
+    const StereoCalibration& c = calibration();
+    const auto [left_info, right_info] = rosCameraInfoPair(c);
+    const ros2::CameraInfo left = cameraInfoMessage(left_info);
+    const ros2::CameraInfo right = cameraInfoMessage(right_info);
+    const StereoCalibration back = calibrationFromCameraInfoMessages(left, right, "/l", "/r");
+    EXPECT_EQ(back.P1, c.P1);
+    EXPECT_EQ(back.P2, c.P2);
+    EXPECT_EQ(back.rectified.baseline_m, c.rectified.baseline_m);
+    expectSameRectification(c, back);
+
+    struct Case {
+        std::function<void(ros2::CameraInfo&)> spoil;
+        std::string message;
+    };
+    const std::vector<Case> cases = {
+        {[](ros2::CameraInfo& m) { m.width = 0; },
+         "/r: width: the image is 0x480, not 1 to 8192 pixels each way"},
+        {[](ros2::CameraInfo& m) { m.height = 100000; },
+         "/r: height: the image is 640x100000, not 1 to 8192 pixels each way"},
+        {[](ros2::CameraInfo& m) { m.distortion_model = "equidistant"; },
+         "/r: distortion_model: 'equidistant' is not supported"},
+        {[](ros2::CameraInfo& m) { m.d.resize(4); },
+         "/r: d: 4 coefficients for plumb_bob, which has 5"},
+        {[](ros2::CameraInfo& m) { m.d[2] = std::nan(""); },
+         "/r: d[2]: nan is not a finite number"},
+        {[](ros2::CameraInfo& m) { m.k[4] = INFINITY; }, "/r: k[4]: inf is not a finite number"},
+        {[](ros2::CameraInfo& m) { m.r[8] = std::nan(""); },
+         "/r: r[8]: nan is not a finite number"},
+        {[](ros2::CameraInfo& m) { m.p[3] = -INFINITY; }, "/r: p[3]: -inf is not a finite number"},
+        {[](ros2::CameraInfo& m) { m.binning_x = 2; },
+         "/r: binning_x: binned images (2x0) are not supported"},
+        {[](ros2::CameraInfo& m) {
+             m.roi = {10, 0, 480, 320, false};
+         },
+         "/r: roi: a region of interest (320x480 at 10,0) is not supported"},
+        // Well-formed but not a stereo rig's: what the shared conversion refuses.
+        {[](ros2::CameraInfo& m) { m.p[3] = 0.0; },
+         "/l + /r: T: the translation between the cameras must not be zero"},
+    };
+    for (const Case& bad : cases) {
+        ros2::CameraInfo spoilt = right;
+        bad.spoil(spoilt);
+        const std::string message =
+            refusal([&] { calibrationFromCameraInfoMessages(left, spoilt, "/l", "/r"); });
+        EXPECT_TRUE(contains(message, bad.message)) << message;
+    }
 }
 
 // Writes the two files exactly as OpenCV's stereo_calib sample does (FileStorage, the same

@@ -5,13 +5,19 @@
 // tests (tests/ros2/ros2_source_test.cpp) feed stereod from it.
 //
 //   fastdds_image_publisher DOMAIN SECONDS LEFT_IMAGE RIGHT_IMAGE [options]
-//     --encoding mono8|bgr8|rgb8  how the pixels go out (mono8: the files read as grey)
+//     --encoding E                how the pixels go out: mono8 (the files read as grey),
+//                                 bgr8, rgb8, or yuv422 / yuv422_yuy2 (UYVY / YUYV of the
+//                                 grey: the files' grey as luma, no chroma)
 //     --rate HZ                   pairs a second (10)
 //     --right-offset-ms MS        the right image's stamp this much after the left's (0)
 //     --bad-every N               every N-th left image declares a step shorter than its
 //                                 row (a malformed message); 0: none
 //     --reliable                  a reliable writer instead of sensor data's best effort
+//     --width PX                  the images cut to their PX left columns (an odd width)
 //     --topics LEFT RIGHT         ROS 2 topics (/stereo/left/image_raw /stereo/right/image_raw)
+//     --camera-info LEFT RIGHT    also sensor_msgs/msg/CameraInfo beside each image topic
+//                                 (.../camera_info), with each image's stamp, from ROS
+//                                 camera_info YAML files (as camera_info_manager loads them)
 //
 // Prints one JSON line when it ends: the pairs published and the readers matched.
 #include <chrono>
@@ -31,6 +37,7 @@
 #include <fastdds/dds/topic/TypeSupport.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <yaml-cpp/yaml.h>
 
 #include "ros2_dds_types.h"
 #include "ros2_dds_typesPubSubTypes.h"
@@ -39,6 +46,7 @@
 namespace {
 
 using namespace eprosima::fastdds::dds;
+using sensor_msgs::msg::dds_::CameraInfo_;
 using sensor_msgs::msg::dds_::Image_;
 
 struct Options {
@@ -49,9 +57,11 @@ struct Options {
     double rate_hz = 10;
     double right_offset_ms = 0;
     int bad_every = 0;
+    int width = 0; // 0: the files' own
     bool reliable = false;
     std::string left_topic = "/stereo/left/image_raw";
     std::string right_topic = "/stereo/right/image_raw";
+    std::string left_info_path, right_info_path; // empty: no camera_info
 };
 
 bool parse(int argc, char** argv, Options& o)
@@ -73,15 +83,26 @@ bool parse(int argc, char** argv, Options& o)
             o.right_offset_ms = std::atof(argv[++i]);
         else if (arg == "--bad-every" && has_value)
             o.bad_every = std::atoi(argv[++i]);
+        else if (arg == "--width" && has_value)
+            o.width = std::atoi(argv[++i]);
         else if (arg == "--reliable")
             o.reliable = true;
         else if (arg == "--topics" && i + 2 < argc) {
             o.left_topic = argv[++i];
             o.right_topic = argv[++i];
+        } else if (arg == "--camera-info" && i + 2 < argc) {
+            o.left_info_path = argv[++i];
+            o.right_info_path = argv[++i];
         } else
             return false;
     }
-    return o.encoding == "mono8" || o.encoding == "bgr8" || o.encoding == "rgb8";
+    return o.encoding == "mono8" || o.encoding == "bgr8" || o.encoding == "rgb8" ||
+           o.encoding == "yuv422" || o.encoding == "yuv422_yuy2";
+}
+
+bool isYuv(const std::string& encoding)
+{
+    return encoding == "yuv422" || encoding == "yuv422_yuy2";
 }
 
 // The image as the message carries it, with its encoding's channels.
@@ -89,6 +110,20 @@ cv::Mat loadImage(const std::string& path, const std::string& encoding)
 {
     if (encoding == "mono8")
         return cv::imread(path, cv::IMREAD_GRAYSCALE);
+    if (isYuv(encoding)) {
+        // Two bytes a pixel: the grey as luma beside a neutral chroma (128), UYVY for
+        // yuv422, YUYV for yuv422_yuy2.
+        const cv::Mat grey = cv::imread(path, cv::IMREAD_GRAYSCALE);
+        if (grey.empty())
+            return grey;
+        cv::Mat chroma(grey.size(), CV_8UC1, cv::Scalar(128));
+        cv::Mat yuv;
+        if (encoding == "yuv422")
+            cv::merge(std::vector<cv::Mat>{chroma, grey}, yuv);
+        else
+            cv::merge(std::vector<cv::Mat>{grey, chroma}, yuv);
+        return yuv;
+    }
     cv::Mat bgr = cv::imread(path, cv::IMREAD_COLOR);
     if (encoding == "rgb8" && !bgr.empty())
         cv::cvtColor(bgr, bgr, cv::COLOR_BGR2RGB);
@@ -114,10 +149,38 @@ Image_ imageMessage(const cv::Mat& pixels, const std::string& encoding)
     return message;
 }
 
-void stamp(Image_& message, int64_t ns)
+template <class Message> void stamp(Message& message, int64_t ns)
 {
     message.header().stamp().sec(static_cast<int32_t>(ns / 1'000'000'000));
     message.header().stamp().nanosec(static_cast<uint32_t>(ns % 1'000'000'000));
+}
+
+// A ROS camera_info YAML file (image_width, camera_matrix.data, ...) as the message;
+// throws YAML::Exception when a key is missing.
+CameraInfo_ cameraInfoMessage(const std::string& path)
+{
+    const YAML::Node root = YAML::LoadFile(path);
+    CameraInfo_ message;
+    message.header().frame_id("stereo_camera_optical_frame");
+    message.width(root["image_width"].as<uint32_t>());
+    message.height(root["image_height"].as<uint32_t>());
+    message.distortion_model(root["distortion_model"].as<std::string>());
+    message.d(root["distortion_coefficients"]["data"].as<std::vector<double>>());
+    const auto fill = [&root](const char* key, double* out, std::size_t count) {
+        const auto values = root[key]["data"].as<std::vector<double>>();
+        for (std::size_t i = 0; i < count && i < values.size(); ++i)
+            out[i] = values[i];
+    };
+    fill("camera_matrix", message.k().data(), 9);
+    fill("rectification_matrix", message.r().data(), 9);
+    fill("projection_matrix", message.p().data(), 12);
+    return message;
+}
+
+// `/a/b/image_raw` -> `/a/b/camera_info`, as drivers place them.
+std::string infoTopicBeside(const std::string& image_topic)
+{
+    return image_topic.substr(0, image_topic.rfind('/') + 1) + "camera_info";
 }
 
 } // namespace
@@ -135,12 +198,17 @@ int main(int argc, char** argv)
     Options o;
     if (!parse(argc, argv, o)) {
         std::fprintf(stderr, "usage: fastdds_image_publisher DOMAIN SECONDS LEFT_IMAGE RIGHT_IMAGE "
-                             "[--encoding mono8|bgr8|rgb8] [--rate HZ] [--right-offset-ms MS] "
-                             "[--bad-every N] [--reliable] [--topics LEFT RIGHT]\n");
+                             "[--encoding mono8|bgr8|rgb8|yuv422|yuv422_yuy2] [--rate HZ] "
+                             "[--right-offset-ms MS] [--bad-every N] [--width PX] [--reliable] "
+                             "[--topics LEFT RIGHT] [--camera-info LEFT.yaml RIGHT.yaml]\n");
         return 2;
     }
-    const cv::Mat left = loadImage(o.left_path, o.encoding);
-    const cv::Mat right = loadImage(o.right_path, o.encoding);
+    cv::Mat left = loadImage(o.left_path, o.encoding);
+    cv::Mat right = loadImage(o.right_path, o.encoding);
+    if (o.width > 0 && o.width < left.cols && o.width < right.cols) {
+        left = left.colRange(0, o.width);
+        right = right.colRange(0, o.width);
+    }
     if (left.empty() || right.empty()) {
         std::fprintf(stderr, "fastdds_image_publisher: cannot read %s or %s\n", o.left_path.c_str(),
                      o.right_path.c_str());
@@ -181,6 +249,31 @@ int main(int argc, char** argv)
         }
     }
 
+    // The drivers' camera_info, on the same QoS as their images.
+    DataWriter* info_writers[2] = {};
+    CameraInfo_ infos[2];
+    if (!o.left_info_path.empty()) {
+        try {
+            infos[0] = cameraInfoMessage(o.left_info_path);
+            infos[1] = cameraInfoMessage(o.right_info_path);
+        } catch (const YAML::Exception& e) {
+            std::fprintf(stderr, "fastdds_image_publisher: camera_info: %s\n", e.what());
+            return 1;
+        }
+        TypeSupport info_type(new sensor_msgs::msg::dds_::CameraInfo_PubSubType());
+        info_type.register_type(participant);
+        for (int side = 0; side < 2; ++side) {
+            Topic* topic = participant->create_topic("rt" + infoTopicBeside(topics[side]),
+                                                     info_type.get_type_name(), TOPIC_QOS_DEFAULT);
+            info_writers[side] =
+                topic == nullptr ? nullptr : publisher->create_datawriter(topic, qos);
+            if (info_writers[side] == nullptr) {
+                std::fprintf(stderr, "fastdds_image_publisher: no camera_info writer\n");
+                return 1;
+            }
+        }
+    }
+
     Image_ messages[2] = {imageMessage(left, o.encoding), imageMessage(right, o.encoding)};
     Image_ bad = messages[0];
     bad.step(bad.width() / 2); // shorter than a row of the image
@@ -200,6 +293,11 @@ int main(int argc, char** argv)
         stamp(messages[1], now_ns + static_cast<int64_t>(o.right_offset_ms * 1e6));
         writers[0]->write(&left_message);
         writers[1]->write(&messages[1]);
+        for (int side = 0; side < 2 && info_writers[0] != nullptr; ++side) {
+            stamp(infos[side],
+                  side == 0 ? now_ns : now_ns + static_cast<int64_t>(o.right_offset_ms * 1e6));
+            info_writers[side]->write(&infos[side]);
+        }
         ++pairs;
         PublicationMatchedStatus status;
         writers[0]->get_publication_matched_status(status);

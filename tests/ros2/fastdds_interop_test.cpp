@@ -175,8 +175,11 @@ TEST_F(Ros2Interop, FastDdsSubscriberGetsEveryTopicAndTheServicesOwnValues)
     EXPECT_NEAR(tf[2]["translation"][1].get<double>(), -test::kTsukubaBaselineM, 1e-12);
 
     // ros_discovery_info: the participant holds the node /stereo/stereod (`ros2 node list`),
-    // whose writers are those the subscriber got each topic from, by GUID.
-    const Json& graph = topics["ros_discovery_info"]["last"];
+    // whose writers are those the subscriber got each topic from, by GUID. A replay has
+    // no subscriptions: one participant announces.
+    const Json& samples = topics["ros_discovery_info"]["last"];
+    ASSERT_EQ(samples.size(), 1u) << samples.dump();
+    const Json& graph = samples[0];
     ASSERT_EQ(graph["nodes"].size(), 1u) << graph.dump();
     const Json& node = graph["nodes"][0];
     EXPECT_EQ(node["namespace"], "/stereo");

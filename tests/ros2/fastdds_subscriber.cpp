@@ -4,8 +4,10 @@
 // publishes with ROS 2's names, types and QoS, and prints what it received as one JSON
 // object on stdout: per topic the matches, the writers' GUIDs, the count and the age of
 // the samples when taken (median, p99, max: wall time minus the header's stamp), and
-// the decoded content of the last message of each (depth values in full); and the
-// ROS 2 graph's ros_discovery_info.
+// the decoded content of the last message of each (depth values in full); the ROS 2
+// graph's ros_discovery_info (every sample: one per announcing participant); and the GUIDs
+// of the readers discovery found in the domain, by topic, to hold the announced reader
+// GIDs to.
 //
 //   fastdds_subscriber DOMAIN NAMESPACE SECONDS MIN_EACH
 //
@@ -17,7 +19,9 @@
 #include <cstdlib>
 #include <functional>
 #include <iostream>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <set>
 #include <string>
 #include <thread>
@@ -25,6 +29,7 @@
 
 #include <fastdds/dds/domain/DomainParticipant.hpp>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/dds/domain/DomainParticipantListener.hpp>
 #include <fastdds/dds/subscriber/DataReader.hpp>
 #include <fastdds/dds/subscriber/SampleInfo.hpp>
 #include <fastdds/dds/subscriber/Subscriber.hpp>
@@ -172,6 +177,34 @@ Json summary(std::vector<double> values)
     return {{"count", values.size()}, {"p50", at(0.5)}, {"p99", at(0.99)}, {"max", values.back()}};
 }
 
+// The readers discovery finds, by DDS topic: their GUIDs (Fast DDS's discovery thread).
+class DiscoveredReaders final : public DomainParticipantListener {
+  public:
+    void on_subscriber_discovery(DomainParticipant* /*participant*/,
+                                 eprosima::fastrtps::rtps::ReaderDiscoveryInfo&& info) override
+    {
+        if (info.status != eprosima::fastrtps::rtps::ReaderDiscoveryInfo::DISCOVERED_READER)
+            return;
+        const auto& guid = info.info.guid();
+        std::string text = hex(guid.guidPrefix.value, 12) + hex(guid.entityId.value, 4);
+        const std::lock_guard lock(mutex_);
+        readers_[info.info.topicName().to_string()].insert(std::move(text));
+    }
+
+    Json json() const
+    {
+        const std::lock_guard lock(mutex_);
+        Json out = Json::object();
+        for (const auto& [topic, guids] : readers_)
+            out[topic] = guids;
+        return out;
+    }
+
+  private:
+    mutable std::mutex mutex_;
+    std::map<std::string, std::set<std::string>> readers_;
+};
+
 } // namespace
 
 // Debian's Fast DDS 2.9 deletes a reader through a base of another size when the
@@ -197,8 +230,9 @@ int main(int argc, char** argv)
 
     const DomainParticipantQos participant_qos =
         stereod::test::loopbackParticipantQos("fastdds_interop_subscriber");
-    DomainParticipant* participant =
-        DomainParticipantFactory::get_instance()->create_participant(domain, participant_qos);
+    DiscoveredReaders discovered;
+    DomainParticipant* participant = DomainParticipantFactory::get_instance()->create_participant(
+        domain, participant_qos, &discovered, StatusMask::none());
     if (participant == nullptr) {
         std::fprintf(stderr, "fastdds_subscriber: cannot create a participant in domain %d\n",
                      domain);
@@ -292,7 +326,8 @@ int main(int argc, char** argv)
                                      {"writers", gidsJson(node.writer_gid_seq())}});
                 return Json{{"gid", hex(m.gid().data().data(), m.gid().data().size())},
                             {"nodes", nodes}};
-            }));
+            },
+            true));
     std::vector<TypeSupport> types = {
         TypeSupport(new rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_PubSubType()),
         TypeSupport(new Image_PubSubType()),
@@ -353,6 +388,7 @@ int main(int argc, char** argv)
                                     {"count", t.count},     {"last", t.last},
                                     {"writers", t.writers}, {"age_ms", summary(t.ages_ms)}};
     }
+    result["discovered_readers"] = discovered.json();
     std::cout << result.dump() << "\n";
     participant->delete_contained_entities();
     DomainParticipantFactory::get_instance()->delete_participant(participant);

@@ -3,7 +3,10 @@
 // two image topics over the loopback interface, in a DDS domain of this process's own, and
 // `stereod` reads its pairs from them. The distance is held to the same pair replayed from
 // files; stamps too far apart, a malformed image and a publisher that goes away and comes
-// back are each seen in what the service says.
+// back are each seen in what the service says. Without a calibration file the calibration
+// comes from the driver's camera_info topics: the same distance as with the file, and a
+// camera_info that cannot be used is refused by topic and field.
+#include <algorithm>
 #include <chrono>
 #include <fstream>
 #include <memory>
@@ -16,6 +19,8 @@
 #include <unistd.h>
 
 #include "ctl/client.hpp"
+#include "pipeline/calibration.hpp"
+#include "pipeline/calibration_formats.hpp"
 #include "tests/daemon/live_view_service.hpp"
 #include "tests/support/data_paths.hpp"
 #include "tests/support/process.hpp"
@@ -56,17 +61,22 @@ class Ros2Source : public test::LiveViewE2e {
     }
 
     // stereod reading the two image topics of the Tsukuba pair's size.
+    // `with_calibration_file`: --calib the Tsukuba pair's calibration; without it, the
+    // calibration comes from the camera_info topics.
     void startRos2Service(const std::string& extra_source_yaml = {},
-                          const std::string& extra_yaml = {})
+                          const std::string& extra_yaml = {}, bool with_calibration_file = true)
     {
         const std::string config = dir_.file("ros2-source.yaml");
         std::ofstream(config) << "source:\n  type: ros2\n  ros2:\n    width: 384\n"
                               << "    height: 288\n  stall_timeout_ms: 1000\n"
                               << extra_source_yaml << extra_yaml;
-        ros2_service_ = std::make_unique<ChildProcess>(
-            std::vector<std::string>{test::stereodPath(), "--config", config, "--calib",
-                                     calibration_, "--socket", socket_, "--live-view", "off"},
-            dir_.file("stereod-ros2.log"));
+        std::vector<std::string> argv = {
+            test::stereodPath(), "--config", config, "--socket", socket_, "--live-view", "off"};
+        if (with_calibration_file) {
+            argv.push_back("--calib");
+            argv.push_back(calibration_);
+        }
+        ros2_service_ = std::make_unique<ChildProcess>(argv, dir_.file("stereod-ros2.log"));
         const auto deadline = std::chrono::steady_clock::now() + 30s;
         while (std::chrono::steady_clock::now() < deadline) {
             try {
@@ -114,6 +124,31 @@ class Ros2Source : public test::LiveViewE2e {
     }
 
     static bool valid(const Json& reading) { return reading.value("valid", false); }
+
+    // The Tsukuba calibration as a ROS camera_info pair of files, as `stereoctl export-ros`
+    // writes them (and a driver's camera_info_manager loads them).
+    std::pair<std::string, std::string> exportCameraInfo()
+    {
+        const std::string left = dir_.file("left.yaml");
+        const std::string right = dir_.file("right.yaml");
+        exportRosCameraInfo(loadCalibration(calibration_), left, right);
+        return {left, right};
+    }
+
+    // The service's source warnings once one contains `text` (or after `limit`).
+    Json waitForWarning(const std::string& text, std::chrono::seconds limit)
+    {
+        Json warnings;
+        const auto deadline = std::chrono::steady_clock::now() + limit;
+        while (std::chrono::steady_clock::now() < deadline) {
+            warnings = status()["source"]["warnings"];
+            for (const Json& warning : warnings)
+                if (warning.get<std::string>().find(text) != std::string::npos)
+                    return warnings;
+            std::this_thread::sleep_for(200ms);
+        }
+        return warnings;
+    }
 
     std::string domain_;
     std::unique_ptr<ChildProcess> ros2_service_;
@@ -174,6 +209,40 @@ TEST_F(Ros2Source, ColourImagesFromAReliableWriterAreMatchedAsGrey)
         EXPECT_EQ(status()["source"]["cameras"][0]["bad_frames"], 0) << encoding;
         publisher_.reset();
     }
+}
+
+// A driver's YUV 4:2:2 (UYVY as ROS's yuv422, YUYV as yuv422_yuy2) is matched on its
+// luma: the files' grey as luma gives the replayed distance exactly. An odd width cannot
+// be 4:2:2 and is refused by name.
+TEST_F(Ros2Source, Yuv422IsMatchedOnItsLumaAndAnOddWidthIsRefused)
+{
+    const double replayed = replayedDistance();
+    ASSERT_GT(replayed, 0.0);
+    startRos2Service();
+    ASSERT_FALSE(HasFailure());
+    for (const std::string encoding : {"yuv422", "yuv422_yuy2"}) {
+        publish(60, {"--encoding", encoding});
+        // A reading of this publisher's pairs: the previous one's are a second old.
+        std::this_thread::sleep_for(1500ms);
+        const Json reading = waitForReading(valid, 30s);
+        ASSERT_TRUE(valid(reading)) << encoding << ": " << reading.dump();
+        EXPECT_DOUBLE_EQ(reading["distance_m"].get<double>(), replayed) << encoding;
+        EXPECT_EQ(status()["source"]["cameras"][0]["bad_frames"], 0) << encoding;
+        publisher_.reset();
+    }
+
+    publish(60, {"--encoding", "yuv422", "--width", "383"});
+    Json left;
+    const auto deadline = std::chrono::steady_clock::now() + 30s;
+    while (std::chrono::steady_clock::now() < deadline) {
+        left = status()["source"]["cameras"][0];
+        if (left["bad_frames"].get<int>() >= 2)
+            break;
+        std::this_thread::sleep_for(200ms);
+    }
+    EXPECT_GE(left["bad_frames"].get<int>(), 2) << left.dump();
+    EXPECT_EQ(left["last_bad_frame"],
+              "image of 383x288 yuv422 has an odd width: 4:2:2 pixels come in pairs");
 }
 
 TEST_F(Ros2Source, StampsFurtherApartThanMaxSkewAreNotPaired)
@@ -248,6 +317,115 @@ TEST_F(Ros2Source, APublisherGoneIsSourceDownAndReadingsResumeWhenItIsBack)
     const Json back = waitForReading(valid, 30s);
     EXPECT_TRUE(valid(back)) << back.dump();
     EXPECT_EQ(status()["source"]["state"], "running");
+}
+
+TEST_F(Ros2Source, CalibrationFromTheDriversCameraInfoGivesTheFileCalibratedDistance)
+{
+    const double replayed = replayedDistance();
+    ASSERT_GT(replayed, 0.0);
+    const auto [left_info, right_info] = exportCameraInfo();
+    startRos2Service({}, {}, false);
+    ASSERT_FALSE(HasFailure());
+    // Images without camera_info: uncalibrated, and the status says what it waits for.
+    publish(60);
+    const Json waiting =
+        waitForReading([](const Json& r) { return reasonCode(r) == "uncalibrated"; }, 30s);
+    EXPECT_EQ(reasonCode(waiting), "uncalibrated") << waiting.dump();
+    const Json warnings =
+        waitForWarning("waiting for camera_info on /stereo/left/camera_info", 10s);
+    EXPECT_NE(warnings.dump().find("waiting for camera_info on /stereo/left/camera_info (0 "
+                                   "publishers) and /stereo/right/camera_info (0 publishers)"),
+              std::string::npos)
+        << warnings.dump();
+    EXPECT_EQ(status()["state"], "uncalibrated");
+
+    // The driver with its camera_info (reliable, as the images then): processing starts,
+    // and the distance is the file-calibrated one.
+    publisher_.reset();
+    publish(60, {"--camera-info", left_info, right_info, "--reliable"});
+    const Json reading = waitForReading(valid, 30s);
+    ASSERT_TRUE(valid(reading)) << reading.dump();
+    EXPECT_DOUBLE_EQ(reading["distance_m"].get<double>(), replayed);
+    const Json st = status();
+    EXPECT_EQ(st["state"], "running");
+    EXPECT_EQ(st["calibration"]["path"], "/stereo/left/camera_info + /stereo/right/camera_info")
+        << st["calibration"].dump();
+    EXPECT_NEAR(st["calibration"]["focal_px"].get<double>(), test::kTsukubaFocalPx, 1e-9)
+        << st["calibration"].dump();
+    EXPECT_EQ(st["source"]["warnings"].size(), 0u) << st["source"].dump();
+}
+
+TEST_F(Ros2Source, AMalformedCameraInfoIsRefusedByTopicAndFieldAndTheServiceRunsOn)
+{
+    const auto [left_info, right_info] = exportCameraInfo();
+    // The right camera's model one stereod cannot undistort with.
+    std::ifstream in(right_info);
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string model = "distortion_model: plumb_bob";
+    ASSERT_NE(text.find(model), std::string::npos) << text;
+    text.replace(text.find(model), model.size(), "distortion_model: equidistant");
+    std::ofstream(right_info) << text;
+
+    startRos2Service({}, {}, false);
+    ASSERT_FALSE(HasFailure());
+    publish(60, {"--camera-info", left_info, right_info});
+    const std::string refusal =
+        "camera_info refused: /stereo/right/camera_info: distortion_model: 'equidistant' is not "
+        "supported";
+    const Json warnings = waitForWarning(refusal, 30s);
+    EXPECT_NE(warnings.dump().find(refusal), std::string::npos) << warnings.dump();
+    // Still running, on images, uncalibrated.
+    const Json reading = distance();
+    EXPECT_EQ(reasonCode(reading), "uncalibrated") << reading.dump();
+    const Json st = status();
+    EXPECT_EQ(st["state"], "uncalibrated");
+    EXPECT_EQ(st["source"]["state"], "running");
+    EXPECT_GT(st["source"]["pairs"].get<int>(), 0);
+}
+
+// In the ROS 2 graph the source is a node with its four subscriptions: its participant's
+// ros_discovery_info, as a Fast DDS peer decodes it, names /stereo/stereod_source with the
+// GIDs of the readers discovery finds on the image and camera_info topics.
+TEST_F(Ros2Source, ItsSubscriptionsAreAnnouncedAsANodeOnRosDiscoveryInfo)
+{
+    const auto [left_info, right_info] = exportCameraInfo();
+    startRos2Service({}, {}, false);
+    ASSERT_FALSE(HasFailure());
+    publish(60, {"--camera-info", left_info, right_info});
+    // Four seconds of the domain (no stereod topic comes: the node does not publish).
+    const test::ProcessResult peer =
+        test::runProcess({STEREOD_FASTDDS_SUBSCRIBER, domain_, "/stereo", "4", "1"});
+    ASSERT_EQ(peer.exit_code, 0) << peer.err;
+    const Json result = Json::parse(peer.out);
+    SCOPED_TRACE(result.dump());
+
+    const Json& samples = result["topics"]["ros_discovery_info"]["last"];
+    ASSERT_TRUE(samples.is_array());
+    const Json* node = nullptr;
+    std::string participant;
+    for (const Json& sample : samples)
+        for (const Json& candidate : sample["nodes"])
+            if (candidate["name"] == "stereod_source") {
+                node = &candidate;
+                participant = sample["gid"];
+            }
+    ASSERT_NE(node, nullptr);
+    EXPECT_EQ((*node)["namespace"], "/stereo");
+    EXPECT_TRUE((*node)["writers"].empty());
+    const Json& readers = (*node)["readers"];
+    ASSERT_EQ(readers.size(), 4u);
+    ASSERT_EQ(participant.size(), 32u);
+    for (const Json& reader : readers)
+        EXPECT_EQ(reader.get<std::string>().substr(0, 24), participant.substr(0, 24));
+    // Each topic's reader, as the peer's discovery saw it, is one the node announces.
+    for (const std::string topic : {"rt/stereo/left/image_raw", "rt/stereo/right/image_raw",
+                                    "rt/stereo/left/camera_info", "rt/stereo/right/camera_info"}) {
+        const Json& found = result["discovered_readers"][topic];
+        int announced = 0;
+        for (const Json& guid : found)
+            announced += std::count(readers.begin(), readers.end(), guid) > 0 ? 1 : 0;
+        EXPECT_EQ(announced, 1) << topic << ": " << found.dump();
+    }
 }
 
 } // namespace

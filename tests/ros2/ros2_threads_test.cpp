@@ -1,12 +1,14 @@
 // The ROS 2 node's threads under load, for ThreadSanitizer (label threaded): the image
 // source's reading thread and sync thread against a writer, a consumer of the ring and a
-// reader of status(); the publisher's thread against the thread that offers results and
-// one that reads its counters. Everything in one process, on the loopback interface, in a
-// DDS domain of the test's own; the peers are Cyclone DDS entities on a participant of
-// their own (sharing the process's domain with the code under test).
+// reader of status(); its camera_info taken while the calibration and status() are read;
+// the publisher's thread against the thread that offers results and one that reads its
+// counters and sets a late calibration's geometry. Everything in one process, on the
+// loopback interface, in a DDS domain of the test's own; the peers are Cyclone DDS entities
+// on a participant of their own (sharing the process's domain with the code under test).
 #include <atomic>
 #include <chrono>
 #include <cstring>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -134,6 +136,108 @@ TEST(Ros2Threads, SourceReadsPairsWhileStatusIsReadAndStopsUnderLoad)
     }
 }
 
+// The camera_info of a 64x48 rectified rig (focal 50 px, baseline 0.1 m; `focal_px` other
+// than 50 makes another one), stamped with the wall clock.
+sensor_msgs_msg_dds__CameraInfo_ cameraInfo(bool right, double focal_px, double* d, char* model,
+                                            char* frame_id)
+{
+    sensor_msgs_msg_dds__CameraInfo_ info{};
+    const int64_t stamp_ns = realtimeOffsetNs() + monotonicNowNs();
+    info.header.stamp.sec = static_cast<int32_t>(stamp_ns / 1'000'000'000);
+    info.header.stamp.nanosec = static_cast<uint32_t>(stamp_ns % 1'000'000'000);
+    info.header.frame_id = frame_id;
+    info.height = 48;
+    info.width = 64;
+    info.distortion_model = model;
+    info.d._buffer = d;
+    info.d._length = info.d._maximum = 5;
+    const double k[9] = {focal_px, 0, 32, 0, focal_px, 24, 0, 0, 1};
+    std::memcpy(info.k, k, sizeof k);
+    const double r[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    std::memcpy(info.r, r, sizeof r);
+    const double p[12] = {focal_px, 0, 32, right ? -focal_px * 0.1 : 0.0, 0, focal_px, 24, 0, 0,
+                          0,        1, 0};
+    std::memcpy(info.p, p, sizeof p);
+    return info;
+}
+
+// camera_info taken on the reading thread while another thread asks for the calibration
+// and the status: the first pair is the calibration, a changed one later only a warning.
+TEST(Ros2Threads, SourceTakesCameraInfoWhileTheCalibrationAndStatusAreRead)
+{
+    Ros2SourceOptions options;
+    options.discovery = testDomain(25);
+    options.frame_size = cv::Size(64, 48);
+    options.left_info_topic = "/stereo/left/camera_info";
+    options.right_info_topic = "/stereo/right/camera_info";
+    Ros2ImageSource source(options);
+    PairRing ring(4);
+    ASSERT_EQ(source.start(ring), 0) << source.status().last_error;
+
+    DdsParticipant peer(options.discovery);
+    const dds_entity_t writers[2] = {
+        peer.makeWriter("rt/stereo/left/camera_info", sensor_msgs_msg_dds__CameraInfo__desc,
+                        QosProfile::Reliable),
+        peer.makeWriter("rt/stereo/right/camera_info", sensor_msgs_msg_dds__CameraInfo__desc,
+                        QosProfile::Reliable)};
+    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    while ((DdsParticipant::matchedReaders(writers[0]) == 0 ||
+            DdsParticipant::matchedReaders(writers[1]) == 0) &&
+           std::chrono::steady_clock::now() < deadline)
+        std::this_thread::sleep_for(10ms);
+    ASSERT_EQ(DdsParticipant::matchedReaders(writers[1]), 1u);
+
+    std::atomic<bool> done{false};
+    std::atomic<bool> taken{false};
+    std::thread writer([&] {
+        char model[] = "plumb_bob";
+        char frame_id[] = "cam";
+        double d[5] = {};
+        for (int i = 0; !done.load(); ++i) {
+            // Once taken, another focal length: ignored.
+            const double focal_px = taken.load() ? 60.0 : 50.0;
+            for (int side = 0; side < 2; ++side) {
+                const sensor_msgs_msg_dds__CameraInfo_ info =
+                    cameraInfo(side == 1, focal_px, d, model, frame_id);
+                dds_write(writers[side], &info);
+            }
+            std::this_thread::sleep_for(2ms);
+        }
+    });
+    std::thread watcher([&] {
+        while (!done.load()) {
+            EXPECT_EQ(source.status().cameras.size(), 2u);
+            std::this_thread::sleep_for(1ms);
+        }
+    });
+    std::optional<CameraInfoCalibration> calibration;
+    const auto until = std::chrono::steady_clock::now() + 10s;
+    while (!calibration && std::chrono::steady_clock::now() < until) {
+        calibration = source.cameraInfoCalibration();
+        std::this_thread::sleep_for(1ms);
+    }
+    taken.store(true);
+    std::vector<std::string> warnings;
+    const auto later = std::chrono::steady_clock::now() + 5s;
+    while (warnings.size() < 2 && std::chrono::steady_clock::now() < later) {
+        warnings = source.status().warnings;
+        std::this_thread::sleep_for(5ms);
+    }
+    source.stop();
+    done.store(true);
+    writer.join();
+    watcher.join();
+
+    ASSERT_TRUE(calibration.has_value());
+    EXPECT_EQ(calibration->origin, "/stereo/left/camera_info + /stereo/right/camera_info");
+    EXPECT_EQ(calibration->calibration.rectified.focal_px, 50.0);
+    EXPECT_NEAR(calibration->calibration.rectified.baseline_m, 0.1, 1e-12);
+    EXPECT_EQ(source.cameraInfoCalibration()->calibration.rectified.focal_px, 50.0);
+    ASSERT_EQ(warnings.size(), 2u);
+    EXPECT_EQ(warnings[0], "/stereo/left/camera_info changed after the calibration was taken "
+                           "from it: ignored (a restart takes the new one)");
+}
+
 TEST(Ros2Threads, PublisherPublishesWhileResultsAreOfferedAndCountersRead)
 {
     Ros2Settings settings;
@@ -178,8 +282,13 @@ TEST(Ros2Threads, PublisherPublishesWhileResultsAreOfferedAndCountersRead)
         }
     });
     std::thread counting([&] {
+        // And a calibration that arrives late, as a ROS 2 driver's camera_info does: the
+        // geometry set while the thread publishes with it.
+        RectifiedGeometry later = geometry;
         while (!done.load()) {
             EXPECT_EQ(publisher.counters().write_errors, 0u);
+            later.baseline_m = later.baseline_m == 0.1 ? 0.12 : 0.1;
+            publisher.setGeometry(later);
             std::this_thread::sleep_for(1ms);
         }
     });
