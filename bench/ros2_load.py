@@ -50,6 +50,14 @@ def cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS  # utime + stime
 
 
+def machine_busy_seconds():
+    """CPU seconds every core spent busy, and in all, since boot (/proc/stat)."""
+    with open("/proc/stat") as f:
+        fields = [int(x) for x in f.readline().split()[1:]]
+    idle = fields[3] + fields[4]  # idle + iowait
+    return (sum(fields) - idle) / CLOCK_TICKS, sum(fields) / CLOCK_TICKS
+
+
 def run_case(build, work, ros2, subscribers, seconds, domain, matcher):
     sock = os.path.join(work, "s.sock")
     config = os.path.join(work, "case.yaml")
@@ -85,9 +93,13 @@ def run_case(build, work, ros2, subscribers, seconds, domain, matcher):
         time.sleep(3)  # discovery, and the subscribers' start-up
         before = request(sock, {"cmd": "status"})["status"]
         cpu0, t0 = cpu_seconds(service.pid), time.monotonic()
+        subs_cpu0 = sum(cpu_seconds(p.pid) for p in subs)
+        busy0, all0 = machine_busy_seconds()
         time.sleep(seconds)
         after = request(sock, {"cmd": "status"})["status"]
         cpu1, t1 = cpu_seconds(service.pid), time.monotonic()
+        subs_cpu1 = sum(cpu_seconds(p.pid) for p in subs)
+        busy1, all1 = machine_busy_seconds()
         received = [json.loads(p.communicate(timeout=60)[0]) for p in subs]
     finally:
         service.terminate()
@@ -106,6 +118,11 @@ def run_case(build, work, ros2, subscribers, seconds, domain, matcher):
         "ros2": ros2,
         "subscribers": subscribers,
         "cpu_percent": round(100 * (cpu1 - cpu0) / elapsed, 1),
+        # The subscribers run on the same machine: what they take, and how busy all the
+        # cores were (anything else running shows here too), say whether the service was
+        # short of CPU rather than held up.
+        "subscribers_cpu_percent": round(100 * (subs_cpu1 - subs_cpu0) / elapsed, 1),
+        "machine_busy_percent": round(100 * (busy1 - busy0) / (all1 - all0), 1),
         "source_pairs_per_s": round(delta(["source", "pairs"]) / elapsed, 2),
         "processed_per_s": round(delta(["pipeline", "frames"]) / elapsed, 2),
         "ring_dropped": delta(["source", "ring_dropped"]),
