@@ -11,7 +11,7 @@
 #include <string_view>
 #include <vector>
 
-#include "pipeline/reading.hpp"
+#include "model/reading.hpp"
 #include "pipeline/zones.hpp"
 #include "protocol/reply.hpp"
 
