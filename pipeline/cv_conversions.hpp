@@ -5,9 +5,11 @@
 //
 // Pure functions; any thread. Units unchanged by every conversion.
 
+#include <opencv2/core/matx.hpp>
 #include <opencv2/core/types.hpp>
 
 #include "model/image_size.hpp"
+#include "model/vec3.hpp"
 
 namespace stereod {
 
@@ -19,6 +21,16 @@ inline cv::Size toCv(ImageSize size)
 inline ImageSize toImageSize(cv::Size size)
 {
     return {size.width, size.height};
+}
+
+inline cv::Vec3d toCv(const Vec3& v)
+{
+    return {v[0], v[1], v[2]};
+}
+
+inline Vec3 toVec3(const cv::Vec3d& v)
+{
+    return {v[0], v[1], v[2]};
 }
 
 } // namespace stereod

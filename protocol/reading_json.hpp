@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "model/reading.hpp"
-#include "pipeline/zones.hpp"
+#include "model/zone_reading.hpp"
 #include "protocol/reply.hpp"
 
 namespace stereod {
