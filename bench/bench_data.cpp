@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "pipeline/chessboard_calibration.hpp"
+#include "pipeline/cv_conversions.hpp"
 
 namespace stereod::bench {
 
@@ -133,7 +134,7 @@ StereoCalibration makePlausibleRigCalibration(cv::Size size)
                       &calibration.valid_roi_left, &calibration.valid_roi_right);
 
     RectifiedGeometry& geometry = calibration.rectified;
-    geometry.image_size = size;
+    geometry.image_size = toImageSize(size);
     geometry.focal_px = calibration.P1(0, 0);
     geometry.cx_px = calibration.P1(0, 2);
     geometry.cy_px = calibration.P1(1, 2);
@@ -151,7 +152,7 @@ ImagePair simulateRawPair(const StereoCalibration& calibration, const ImagePair&
 
 RectifyMaps makeRectifyMaps(const StereoCalibration& calibration)
 {
-    const cv::Size size = calibration.rectified.image_size;
+    const cv::Size size = toCv(calibration.rectified.image_size);
     RectifyMaps maps;
     cv::initUndistortRectifyMap(calibration.left.camera_matrix, calibration.left.distortion,
                                 calibration.R1, calibration.P1, size, CV_16SC2, maps.left_xy,

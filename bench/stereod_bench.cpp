@@ -43,6 +43,7 @@
 #include "bench/summary_table.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/census_sgm_matcher.hpp"
+#include "pipeline/cv_conversions.hpp"
 #include "pipeline/nearest_object.hpp"
 #include "pipeline/sgm/census_sgm.hpp"
 #include "pipeline/stereo_processor.hpp"
@@ -170,7 +171,7 @@ const SceneInputs& sceneInputs(const Scene& scene, cv::Size size)
         auto inputs = std::make_unique<SceneInputs>();
         if (scene.raw_rig_views) {
             inputs->calibration = chessboardRigCalibration();
-            if (inputs->calibration.rectified.image_size != size) {
+            if (toCv(inputs->calibration.rectified.image_size) != size) {
                 throw std::runtime_error(
                     scene.name + ": the rig is calibrated at " +
                     std::to_string(inputs->calibration.rectified.image_size.width) + "x" +

@@ -15,13 +15,13 @@
 #include <utility>
 #include <vector>
 
-#include <opencv2/core/matx.hpp>
 #include <yaml-cpp/yaml.h>
 
 #include "base/name_table.hpp"
 #include "config/name_suggestions.hpp"
 #include "config/service_config.hpp"
 #include "config/yaml_scalars.hpp"
+#include "model/vec3.hpp"
 
 namespace stereod::config_detail {
 
@@ -168,21 +168,21 @@ template <class Access> KeyDef boolKey(std::string path, bool live, Access acces
 }
 
 // Three numbers, [x, y, z].
-inline std::optional<cv::Vec3d> parseVec3(const YAML::Node& node)
+inline std::optional<Vec3> parseVec3(const YAML::Node& node)
 {
     if (!node.IsSequence() || node.size() != 3)
         return std::nullopt;
-    cv::Vec3d v;
+    Vec3 v;
     for (std::size_t i = 0; i < 3; ++i) {
         const auto value = node[i].IsScalar() ? parseReal(node[i].Scalar()) : std::nullopt;
         if (!value)
             return std::nullopt;
-        v[static_cast<int>(i)] = *value;
+        v[i] = *value;
     }
     return v;
 }
 
-inline std::string showVec3(const cv::Vec3d& v)
+inline std::string showVec3(const Vec3& v)
 {
     return "[" + formatNumber(v[0]) + ", " + formatNumber(v[1]) + ", " + formatNumber(v[2]) + "]";
 }

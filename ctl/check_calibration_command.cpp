@@ -20,6 +20,7 @@
 #include "ctl/file_patterns.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/calibration_health.hpp"
+#include "pipeline/cv_conversions.hpp"
 #include "pipeline/rectifier.hpp"
 
 namespace stereod {
@@ -53,7 +54,7 @@ std::vector<PairFigures> measurePairs(const StereoCalibration& calibration,
     std::vector<PairFigures> pairs;
     cv::Mat left_rect, right_rect;
     for (size_t i = 0; i < left.size(); ++i) {
-        const cv::Size size = calibration.rectified.image_size;
+        const cv::Size size = toCv(calibration.rectified.image_size);
         rectifier.rectifyLeft(readGray(left[i], size), left_rect);
         rectifier.rectifyRight(readGray(right[i], size), right_rect);
         pairs.push_back({left[i], right[i], checker.measure(left_rect, right_rect)});

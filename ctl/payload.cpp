@@ -38,7 +38,7 @@ Payload parsePayload(const nlohmann::ordered_json& header)
 
 void readImagePayload(ProtocolClient& client, const Payload& payload, int type, cv::Mat& image)
 {
-    if (!imagePayloadAddsUp(payload, type)) {
+    if (!imagePayloadAddsUp(payload, static_cast<std::size_t>(CV_ELEM_SIZE(type)))) {
         throw ClientError(fmt::format("the service announced a {} payload of {}x{} {} in {} "
                                       "bytes, which does not add up",
                                       payload.name, payload.width, payload.height, payload.format,

@@ -12,7 +12,7 @@
 #include <opencv2/core/mat.hpp>
 
 #include "ctl/client.hpp"
-#include "pipeline/stereo_processor.hpp"
+#include "model/cloud_point.hpp"
 #include "protocol/payload.hpp"
 
 namespace stereod {

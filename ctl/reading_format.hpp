@@ -12,7 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "pipeline/reading.hpp"
+#include "model/reading.hpp"
 
 namespace stereod {
 

@@ -17,6 +17,7 @@
 #include "ctl/output.hpp"
 #include "ctl/payload.hpp"
 #include "ctl/signal_catcher.hpp"
+#include "pipeline/cv_conversions.hpp"
 #include "pipeline/depth_io.hpp"
 #include "pipeline/zones.hpp"
 #include "protocol/request.hpp"
@@ -152,8 +153,8 @@ void drawPicture(ProtocolClient& client, const json& reply, const std::string& p
     const int font_thickness = picture.cols >= 1000 ? 2 : 1;
 
     const json pose = reply.value("camera_pose", json::object());
-    const CameraPose camera_pose{vec3(pose.value("translation_m", json())),
-                                 vec3(pose.value("rpy_deg", json()))};
+    const CameraPose camera_pose{toVec3(vec3(pose.value("translation_m", json()))),
+                                 toVec3(vec3(pose.value("rpy_deg", json())))};
     const cv::Matx33d base_to_optical = opticalToBaseRotation(camera_pose).t();
     const double f = camera["focal_px"].get<double>();
     const double cx = camera["cx_px"].get<double>();
@@ -166,7 +167,7 @@ void drawPicture(ProtocolClient& client, const json& reply, const std::string& p
     const double cy = camera["cy_px"].get<double>();
     constexpr double kNearPlane = 0.05; // m: edges are cut where they pass behind this
     const auto optical = [&](const cv::Vec3d& base) {
-        return base_to_optical * (base - camera_pose.translation_m);
+        return base_to_optical * (base - toCv(camera_pose.translation_m));
     };
     const auto pixel = [&](const cv::Vec3d& p) {
         return cv::Point2d(f * p[0] / p[2] + cx, f * p[1] / p[2] + cy);

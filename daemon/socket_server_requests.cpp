@@ -6,8 +6,8 @@
 #include <spdlog/spdlog.h>
 
 #include "capture/frame.hpp"
+#include "daemon/image_payload.hpp"
 #include "daemon/socket_server.hpp"
-#include "protocol/payload.hpp"
 
 namespace stereod {
 

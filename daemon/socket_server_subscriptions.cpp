@@ -4,9 +4,9 @@
 #include <spdlog/spdlog.h>
 
 #include "capture/frame.hpp"
+#include "daemon/image_payload.hpp"
 #include "daemon/socket_server.hpp"
 #include "protocol/events.hpp"
-#include "protocol/payload.hpp"
 
 namespace stereod {
 

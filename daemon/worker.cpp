@@ -13,6 +13,7 @@
 #include <sys/eventfd.h>
 #include <unistd.h>
 
+#include "pipeline/cv_conversions.hpp"
 #include "pipeline/depth_io.hpp"
 
 namespace stereod {
@@ -226,7 +227,7 @@ void Worker::processPair(StereoPair& pair)
             // the matcher saw is the frame itself.
             if (health_ != nullptr && processed && health_->due(monotonicNowNs()))
                 health_->offer(result.left_rectified, processor_->lastRightRectified(), stamp_ns);
-            const cv::Size calibrated = processor_->calibration().rectified.image_size;
+            const cv::Size calibrated = toCv(processor_->calibration().rectified.image_size);
             if (!processed &&
                 (pair.left->image.size() != calibrated || pair.right->image.size() != calibrated))
                 slot.reason_message.format("frames %dx%d and %dx%d, calibration %dx%d",

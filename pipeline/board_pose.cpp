@@ -8,6 +8,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "pipeline/cv_conversions.hpp"
 #include "pipeline/nearest_object.hpp"
 
 namespace stereod {
@@ -100,7 +101,7 @@ std::optional<BoardDepthInRegion> boardDepthInRegion(const BoardPose& pose,
                                                      const RectifiedGeometry& geometry,
                                                      const NearestSettings& nearest)
 {
-    const cv::Rect region = regionPixels(nearest.roi, geometry.image_size);
+    const cv::Rect region = regionPixels(nearest.roi, toCv(geometry.image_size));
     if (region.area() == 0)
         return std::nullopt;
     // The pattern's outline drawn into a mask of the region alone, in 1/16 px so that the

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "pipeline/calibration_checks.hpp"
+#include "pipeline/cv_conversions.hpp"
 
 namespace stereod {
 
@@ -25,7 +26,7 @@ RectifiedGeometry rectifiedFromProjections(const cv::Matx34d& P1, const cv::Matx
                                            cv::Size image_size)
 {
     RectifiedGeometry g;
-    g.image_size = image_size;
+    g.image_size = toImageSize(image_size);
     g.focal_px = P1(0, 0);
     g.cx_px = P1(0, 2);
     g.cy_px = P1(1, 2);
@@ -37,7 +38,7 @@ RectifiedGeometry rectifiedFromProjections(const cv::Matx34d& P1, const cv::Matx
 void checkFrameSize(const StereoCalibration& calibration, cv::Size frame_size,
                     const std::string& origin)
 {
-    const cv::Size expected = calibration.rectified.image_size;
+    const cv::Size expected = toCv(calibration.rectified.image_size);
     if (frame_size != expected)
         fail(origin, 0, "image_size",
              "frames are " + describeSize(frame_size) + " but the calibration is for " +
@@ -50,7 +51,7 @@ StereoCalibration makeRectifiedCalibration(cv::Size image_size, double focal_px,
 {
     StereoCalibration c;
     c.kind = StereoCalibration::Kind::RectifiedOnly;
-    c.rectified.image_size = image_size;
+    c.rectified.image_size = toImageSize(image_size);
     c.rectified.focal_px = focal_px;
     c.rectified.baseline_m = baseline_m;
     c.rectified.cx_px = cx_px.value_or((image_size.width - 1) / 2.0);

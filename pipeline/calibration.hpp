@@ -17,6 +17,8 @@
 #include <opencv2/core/matx.hpp>
 #include <opencv2/core/types.hpp>
 
+#include "model/rectified_geometry.hpp"
+
 namespace stereod {
 
 // A calibration file that cannot be used. what() names the file, the key and the problem.
@@ -40,23 +42,6 @@ struct ChessboardSpec {
     int cols = 0; // inner corners per row, as OpenCV counts them
     int rows = 0;
     double square_m = 0.0;
-};
-
-// The geometry of the rectified pair: all that triangulation needs.
-struct RectifiedGeometry {
-    cv::Size image_size;
-    double focal_px = 0.0; // rectified focal length, pixels
-    double cx_px = 0.0;    // principal point of the rectified left camera
-    double cy_px = 0.0;
-    double baseline_m = 0.0; // distance between the optical centres
-    // Principal point x of the right camera minus that of the left, in pixels
-    // (Middlebury's "doffs"): a pixel with disparity d lies at Z = f*B / (d + doffs).
-    double doffs_px = 0.0;
-
-    // Depth in metres of disparity d (pixels); d + doffs must be > 0.
-    double depthFromDisparity(double d) const { return focal_px * baseline_m / (d + doffs_px); }
-    // The disparity at depth z_m: f*B/z - doffs.
-    double disparityAtDepth(double z_m) const { return focal_px * baseline_m / z_m - doffs_px; }
 };
 
 struct StereoCalibration {

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <initializer_list>
 
+#include "pipeline/cv_conversions.hpp"
+
 namespace stereod::calibration_detail {
 
 namespace {
@@ -165,12 +167,12 @@ class Validator {
     void geometry(const RectifiedGeometry& g, bool full) const
     {
         // In the full form these numbers come from P1/P2: point there.
-        imageSize(g.image_size);
+        imageSize(toCv(g.image_size));
         positive(full ? "P1" : "focal_px", g.focal_px);
         positive(full ? "P2" : "baseline_m", g.baseline_m);
         finite(full ? "P2" : "doffs_px", g.doffs_px);
         if (full) {
-            principalPoint("P1", g.cx_px, g.cy_px, g.image_size);
+            principalPoint("P1", g.cx_px, g.cy_px, toCv(g.image_size));
         } else {
             // Separate keys in the rectified form: name the one that is wrong.
             finite("cx_px", g.cx_px);
@@ -186,7 +188,7 @@ class Validator {
 
     void full(const StereoCalibration& c) const
     {
-        const cv::Size size = c.rectified.image_size;
+        const cv::Size size = toCv(c.rectified.image_size);
         imageSize(size);
         cameraMatrix("left.camera_matrix", c.left.camera_matrix, size);
         distortion("left.distortion", c.left.distortion);

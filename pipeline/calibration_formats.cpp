@@ -16,6 +16,7 @@
 
 #include "base/system_error.hpp"
 #include "pipeline/chessboard_calibration.hpp"
+#include "pipeline/cv_conversions.hpp"
 
 namespace stereod {
 namespace {
@@ -480,7 +481,7 @@ std::pair<RosCameraInfo, RosCameraInfo> rosCameraInfoPair(const StereoCalibratio
                                                           const std::string& left_origin,
                                                           const std::string& right_origin)
 {
-    const cv::Size size = calibration.rectified.image_size;
+    const cv::Size size = toCv(calibration.rectified.image_size);
     if (calibration.kind == StereoCalibration::Kind::Full) {
         return {rosCamera(size, calibration.left, calibration.R1, calibration.P1, left_origin),
                 rosCamera(size, calibration.right, calibration.R2, calibration.P2, right_origin)};

@@ -15,6 +15,7 @@
 #include "base/system_error.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/calibration_checks.hpp"
+#include "pipeline/cv_conversions.hpp"
 
 namespace stereod {
 
@@ -272,7 +273,7 @@ class Parser {
         StereoCalibration c;
         c.kind = StereoCalibration::Kind::RectifiedOnly;
         RectifiedGeometry& g = c.rectified;
-        g.image_size = imageSize(root);
+        g.image_size = toImageSize(imageSize(root));
         g.focal_px = requireNumber(root, "", "focal_px");
         g.baseline_m = requireNumber(root, "", "baseline_m");
         g.cx_px = optionalNumber(root, "cx_px").value_or((g.image_size.width - 1) / 2.0);

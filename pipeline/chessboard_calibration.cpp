@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include "base/system_error.hpp"
+#include "pipeline/cv_conversions.hpp"
 #include "pipeline/rectifier.hpp"
 
 namespace stereod {
@@ -588,7 +589,7 @@ cv::Mat renderRectifiedPreview(const StereoCalibration& calibration, const cv::M
                                const std::vector<cv::Point2f>& left_corners,
                                const std::vector<cv::Point2f>& right_corners, int line_step_px)
 {
-    const cv::Size size = calibration.rectified.image_size;
+    const cv::Size size = toCv(calibration.rectified.image_size);
     checkFrameSize(calibration, left_raw.size(), "preview left image");
     checkFrameSize(calibration, right_raw.size(), "preview right image");
     if (line_step_px < 1)

@@ -6,6 +6,7 @@
 #include <string_view>
 
 #include "base/name_table.hpp"
+#include "model/disparity_range.hpp"
 #include "pipeline/sgm/census_sgm.hpp"
 
 namespace stereod {
@@ -142,21 +143,6 @@ struct MatcherSettings {
     // full resolution searches only around what it measured, the whole range where that
     // is unreliable (pipeline/sgm/guided_spans.hpp).
     bool guided_search = false;
-};
-
-// How the disparity range was chosen, for logs and `status`.
-struct DisparityRange {
-    int min_disparity = 0;
-    int num_disparities = 0; // multiple of 16: the full-resolution search
-    // The nearest depth the matcher measures: with the extended range, twice the
-    // disparities' (about half the full-resolution range's closest depth).
-    double closest_depth_m = 0.0;
-    bool capped = false; // true when max_num_disparities kept min_depth_m out of sight
-    // The nearest depth the full-resolution search sees (closest_depth_m without the
-    // extended range).
-    double range_closest_depth_m = 0.0;
-    bool extended = false;     // census-sgm's extended range is on
-    int last_disparity_px = 0; // the largest disparity measured (extended included)
 };
 
 } // namespace stereod

@@ -9,8 +9,8 @@
 #include <opencv2/core/mat.hpp>
 #include <opencv2/core/types.hpp>
 
+#include "model/reading.hpp"
 #include "pipeline/nearest_settings.hpp"
-#include "pipeline/reading.hpp"
 #include "pipeline/reading_verdict.hpp"
 
 namespace stereod {

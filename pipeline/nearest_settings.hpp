@@ -1,16 +1,9 @@
 #pragma once
 // How the nearest object is read off a depth map.
 
-namespace stereod {
+#include "model/region_of_interest.hpp"
 
-// A rectangle in fractions of the rectified left image (0..1), so that it survives a
-// change of resolution. x/y are the top-left corner.
-struct RegionOfInterest {
-    double x = 0.25;
-    double y = 0.25;
-    double width = 0.5;
-    double height = 0.5;
-};
+namespace stereod {
 
 struct NearestSettings {
     RegionOfInterest roi;

@@ -9,7 +9,7 @@
 
 #include <cstdint>
 
-#include "pipeline/reading.hpp"
+#include "model/reading.hpp"
 
 namespace stereod {
 

@@ -11,6 +11,8 @@
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "pipeline/cv_conversions.hpp"
+
 // Why the remap is ours and not cv::remap: the service promises no heap allocation per
 // frame in steady state, and OpenCV 4.6's cv::remap creates two temporary Mats for every
 // stripe of every call (its RemapInvoker buffers the map tiles), 20 to 56 allocations per
@@ -257,7 +259,7 @@ Rectifier::Rectifier(const StereoCalibration& calibration)
 {
     if (calibration.kind != StereoCalibration::Kind::Full)
         return;
-    const cv::Size size = calibration.rectified.image_size;
+    const cv::Size size = toCv(calibration.rectified.image_size);
     cv::initUndistortRectifyMap(calibration.left.camera_matrix, calibration.left.distortion,
                                 calibration.R1, calibration.P1, size, CV_16SC2, left_map_xy_,
                                 left_map_frac_);

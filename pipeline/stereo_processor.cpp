@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 #include <spdlog/spdlog.h>
 
+#include "pipeline/cv_conversions.hpp"
 #include "pipeline/hidden_surfaces.hpp"
 #include "pipeline/matcher.hpp"
 #include "pipeline/nearest_object.hpp"
@@ -110,7 +111,7 @@ DisparityRange validateProcessorSettings(const ProcessorSettings& settings,
             "output.max_depth_m: " + std::to_string(*settings.output.max_depth_m) +
             " m: must be auto or above 0 m");
     const DisparityRange range = chooseDisparityRange(settings.matcher, geometry);
-    const cv::Size size = geometry.image_size;
+    const cv::Size size = toCv(geometry.image_size);
     const int last_disparity = range.min_disparity + range.num_disparities - 1;
     if (last_disparity >= size.width) {
         // Name the key that set the range: the explicit count, or the cap it came from.
@@ -146,7 +147,7 @@ struct StereoProcessor::Impl {
               defaultMaxOutputDepth(calibration_in.rectified)))
     {
         if (rectifier.remaps())
-            right_rectified.create(calibration.rectified.image_size, CV_8UC1);
+            right_rectified.create(toCv(calibration.rectified.image_size), CV_8UC1);
         warnIfCapped(range, settings.matcher);
     }
 
@@ -164,9 +165,10 @@ struct StereoProcessor::Impl {
             problem = std::string(side) + " image is not 8-bit";
             return {};
         }
-        if (image.size() != calibration.rectified.image_size) {
+        if (image.size() != toCv(calibration.rectified.image_size)) {
             problem = std::string(side) + " image is " + describeSize(image.size()) +
-                      ", the calibration is for " + describeSize(calibration.rectified.image_size);
+                      ", the calibration is for " +
+                      describeSize(toCv(calibration.rectified.image_size));
             return {};
         }
         switch (image.channels()) {
@@ -191,7 +193,7 @@ struct StereoProcessor::Impl {
             spdlog::warn("frame {}: {}; the pair gives no reading", out.frame, problem);
         last_frame_bad = true;
         // Leave nothing of the previous frame behind that could pass for this one.
-        const cv::Size size = calibration.rectified.image_size;
+        const cv::Size size = toCv(calibration.rectified.image_size);
         out.left_rectified.create(size, CV_8UC1);
         out.left_rectified.setTo(0);
         out.left_rectified_colour.release();

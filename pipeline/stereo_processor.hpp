@@ -15,10 +15,12 @@
 
 #include <opencv2/core/mat.hpp>
 
+#include "model/cloud_point.hpp"
+#include "model/reading.hpp"
+#include "model/stage_timings.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/matcher_settings.hpp"
 #include "pipeline/nearest_settings.hpp"
-#include "pipeline/reading.hpp"
 #include "pipeline/reading_verdict.hpp"
 
 namespace stereod {
@@ -47,37 +49,6 @@ struct ProcessorSettings {
     NearestSettings nearest;
     OutputSettings output;
     bool compute_cloud = true; // the point cloud is skipped when nobody needs it
-};
-
-// Milliseconds spent in each stage of the last process() call.
-struct StageTimings {
-    double rectify_ms = 0.0;
-    double match_ms = 0.0;
-    double depth_ms = 0.0;
-    double nearest_ms = 0.0;
-    double cloud_ms = 0.0;
-    // Parts of match_ms: census-sgm's extended range and near-field probe.
-    double extended_range_ms = 0.0;
-    double near_field_probe_ms = 0.0;
-    double colour_ms = 0.0;       // the colour left rectified; exactly 0 for grey input
-    double cloud_colour_ms = 0.0; // the cloud's colours; exactly 0 without them
-    double totalMs() const
-    {
-        return rectify_ms + colour_ms + match_ms + depth_ms + nearest_ms + cloud_ms +
-               cloud_colour_ms;
-    }
-};
-
-// One point of the cloud: camera frame of the rectified left camera (x right, y down,
-// z forward), metres; intensity from the rectified left image.
-struct CloudPoint {
-    float x, y, z;
-    float intensity;
-};
-
-// The colour of a cloud point, from the rectified colour left image, 0..255 per channel.
-struct CloudColour {
-    uint8_t r, g, b;
 };
 
 // Everything the chain produced for one pair. Reused frame after frame: buffers keep

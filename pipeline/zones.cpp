@@ -5,6 +5,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include "pipeline/cv_conversions.hpp"
+
 namespace stereod {
 namespace {
 
@@ -45,19 +47,6 @@ bool usableDepth(float z)
 }
 
 } // namespace
-
-const char* zoneStateName(ZoneState state) noexcept
-{
-    switch (state) {
-    case ZoneState::Clear:
-        return "clear";
-    case ZoneState::Occupied:
-        return "occupied";
-    case ZoneState::Unknown:
-        return "unknown";
-    }
-    return "unknown";
-}
 
 void validateZonesSettings(const ZonesSettings& s)
 {
@@ -146,7 +135,7 @@ double ZoneMonitor::visibleFraction(const ZoneSettings& zone, const cv::Mat& dep
 {
     const int n = settings_.visibility_samples;
     const cv::Matx33d base_to_optical = rotation_.t();
-    const cv::Vec3d& t = settings_.camera_pose.translation_m;
+    const cv::Vec3d t = toCv(settings_.camera_pose.translation_m);
     int visible = 0;
     for (int i = 0; i < n; ++i)
         for (int j = 0; j < n; ++j)
@@ -191,7 +180,7 @@ const std::vector<ZoneReading>& ZoneMonitor::markUnknown(const char* reason, int
         zone.reason = reason;
         zone.points = 0;
         zone.nearest_m = 0.0;
-        zone.nearest_point_m = cv::Vec3d(0, 0, 0);
+        zone.nearest_point_m = {0.0, 0.0, 0.0};
         zone.visible_fraction = 0.0;
         zone.occupied_now = false;
         zone.stamp_ns = stamp_ns;
@@ -210,14 +199,14 @@ const std::vector<ZoneReading>& ZoneMonitor::update(const cv::Mat& depth_m,
     for (ZoneReading& r : readings_) {
         r.points = 0;
         r.nearest_m = 0.0;
-        r.nearest_point_m = cv::Vec3d(0, 0, 0);
+        r.nearest_point_m = {0.0, 0.0, 0.0};
         r.stamp_ns = stamp_ns;
         r.frame = frame;
     }
     for (std::vector<Point>& points : inside_)
         points.clear();
     const int step = settings_.pixel_step;
-    const cv::Vec3d& t = settings_.camera_pose.translation_m;
+    const cv::Vec3d t = toCv(settings_.camera_pose.translation_m);
     for (int v = 0; v < depth_m.rows && zones > 0; v += step) {
         const float* row = depth_m.ptr<float>(v);
         for (int u = 0; u < depth_m.cols; u += step) {
@@ -263,7 +252,7 @@ const std::vector<ZoneReading>& ZoneMonitor::update(const cv::Mat& depth_m,
                 points.begin(), points.begin() + static_cast<std::ptrdiff_t>(rank), points.end(),
                 [](const Point& a, const Point& b) { return a.distance_m < b.distance_m; });
             r.nearest_m = points[rank].distance_m;
-            r.nearest_point_m = points[rank].base_m;
+            r.nearest_point_m = toVec3(points[rank].base_m);
         }
         if (track.occupied) {
             r.state = ZoneState::Occupied;

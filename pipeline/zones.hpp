@@ -27,20 +27,16 @@
 #include <opencv2/core/mat.hpp>
 #include <opencv2/core/matx.hpp>
 
+#include "model/vec3.hpp"
+#include "model/zone_reading.hpp"
 #include "pipeline/calibration.hpp"
 
 namespace stereod {
 
-// Where the camera sits on the robot.
-struct CameraPose {
-    cv::Vec3d translation_m{0.0, 0.0, 0.0}; // camera origin in the base frame
-    cv::Vec3d rpy_deg{0.0, 0.0, 0.0};       // roll, pitch, yaw of the camera body (x forward)
-};
-
 struct ZoneSettings {
     std::string name;
-    cv::Vec3d min_m{0.0, 0.0, 0.0}; // box corners in the base frame, min < max
-    cv::Vec3d max_m{0.0, 0.0, 0.0};
+    Vec3 min_m{0.0, 0.0, 0.0}; // box corners in the base frame, min < max
+    Vec3 max_m{0.0, 0.0, 0.0};
     int min_points = 50;  // depth points inside that make it occupied
     int enter_frames = 2; // consecutive occupied frames to turn occupied
     int leave_frames = 3; // consecutive free frames to turn clear again
@@ -72,26 +68,6 @@ inline constexpr double kMaxZoneCoordinateM = 1000.0;
 // more than kMaxZones zones, a coordinate beyond kMaxZoneCoordinateM, an angle beyond
 // +-360 degrees, or anything not finite.
 void validateZonesSettings(const ZonesSettings& settings);
-
-enum class ZoneState { Clear, Occupied, Unknown };
-
-// "clear", "occupied", "unknown".
-const char* zoneStateName(ZoneState state) noexcept;
-
-struct ZoneReading {
-    std::string name;
-    cv::Vec3d min_m{0.0, 0.0, 0.0}; // the zone's box, base frame (from its settings)
-    cv::Vec3d max_m{0.0, 0.0, 0.0};
-    ZoneState state = ZoneState::Unknown;
-    std::string reason;     // for unknown: "not_visible", "no_frame"
-    int points = 0;         // depth points inside this frame (pixel_step counted once)
-    double nearest_m = 0.0; // distance of the nearest point from the base origin
-    cv::Vec3d nearest_point_m{0.0, 0.0, 0.0}; // where it is, base frame (see nearest_percentile)
-    double visible_fraction = 0.0; // share of the zone's volume in sight (seen empty or filled)
-    bool occupied_now = false;     // this frame alone, before hysteresis
-    int64_t stamp_ns = 0;          // capture time of the pair
-    uint64_t frame = 0;
-};
 
 // The rotation and translation from the rectified left camera's optical frame to the base
 // frame: p_base = R * p_optical + t.

@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "pipeline/zones.hpp"
+#include "model/zone_reading.hpp"
 #include "protocol/reading_json.hpp"
 
 namespace stereod {

@@ -6,17 +6,6 @@
 
 namespace stereod {
 
-Payload imagePayload(std::string_view name, std::string_view format, const cv::Mat& mat)
-{
-    Payload payload;
-    payload.name = name;
-    payload.format = format;
-    payload.width = mat.empty() ? 0 : mat.cols;
-    payload.height = mat.empty() ? 0 : mat.rows;
-    payload.bytes = matBytes(mat);
-    return payload;
-}
-
 namespace {
 
 Payload perPointPayload(std::string_view name, std::string_view format, std::size_t points,
@@ -41,49 +30,6 @@ Payload cloudPayload(std::size_t points)
 Payload cloudColourPayload(std::size_t points)
 {
     return perPointPayload("cloud_colour", kFormatRgb, points, sizeof(CloudColour));
-}
-
-Payload colourPayload(std::string_view name, const cv::Mat& bgr)
-{
-    return imagePayload(name, kFormatRgb, bgr);
-}
-
-uint64_t matBytes(const cv::Mat& mat)
-{
-    return mat.empty() ? 0 : static_cast<uint64_t>(mat.total()) * mat.elemSize();
-}
-
-void appendMatBytes(std::string& out, const cv::Mat& mat)
-{
-    if (mat.empty())
-        return;
-    const std::size_t row_bytes = static_cast<std::size_t>(mat.cols) * mat.elemSize();
-    if (mat.isContinuous()) {
-        out.append(reinterpret_cast<const char*>(mat.data),
-                   row_bytes * static_cast<std::size_t>(mat.rows));
-        return;
-    }
-    for (int row = 0; row < mat.rows; ++row)
-        out.append(reinterpret_cast<const char*>(mat.ptr(row)), row_bytes);
-}
-
-void appendBgrAsRgb(std::string& out, const cv::Mat& bgr)
-{
-    if (bgr.empty())
-        return;
-    const std::size_t row_bytes = static_cast<std::size_t>(bgr.cols) * 3;
-    std::size_t at = out.size();
-    out.resize(at + row_bytes * static_cast<std::size_t>(bgr.rows));
-    for (int row = 0; row < bgr.rows; ++row) {
-        const uint8_t* in = bgr.ptr<uint8_t>(row);
-        char* dst = out.data() + at;
-        for (std::size_t i = 0; i < row_bytes; i += 3) {
-            dst[i] = static_cast<char>(in[i + 2]);
-            dst[i + 1] = static_cast<char>(in[i + 1]);
-            dst[i + 2] = static_cast<char>(in[i]);
-        }
-        at += row_bytes;
-    }
 }
 
 void appendPayloadJson(std::string& out, const Payload& payload)
@@ -139,11 +85,11 @@ std::optional<Payload> payloadFromJson(const Json& header)
     return payload;
 }
 
-bool imagePayloadAddsUp(const Payload& payload, int type)
+bool imagePayloadAddsUp(const Payload& payload, std::size_t pixel_bytes)
 {
     const std::size_t expected = static_cast<std::size_t>(std::max(payload.width, 0)) *
                                  static_cast<std::size_t>(std::max(payload.height, 0)) *
-                                 CV_ELEM_SIZE(type);
+                                 pixel_bytes;
     return payload.width > 0 && payload.height > 0 && payload.bytes == expected;
 }
 
@@ -158,7 +104,7 @@ bool colourPayloadAddsUp(const Payload& payload)
         return payload.bytes == payload.points * sizeof(CloudColour);
     if (payload.width == 0 && payload.height == 0)
         return payload.bytes == 0;
-    return imagePayloadAddsUp(payload, CV_8UC3);
+    return imagePayloadAddsUp(payload, std::size_t{3}); // u8_rgb: r, g, b
 }
 
 } // namespace stereod

@@ -1,8 +1,9 @@
 #pragma once
 // The binary payloads that follow some replies and events (docs/protocol.md, "Binary
 // payloads"): their formats, their descriptors (the entries of `payloads` and the depth
-// event's header), how the service writes an image's bytes, and how a client checks what
-// it is told before reading. One definition for the service and its clients.
+// event's header), and how a client checks what it is told before reading. One definition
+// for the service and its clients, without OpenCV: the service's images as payloads are
+// daemon/image_payload.hpp.
 //
 // Payload bytes are in host order, which the protocol fixes as little-endian; both sides
 // send and read them in place.
@@ -17,9 +18,7 @@
 #include <string_view>
 #include <type_traits>
 
-#include <opencv2/core/mat.hpp>
-
-#include "pipeline/stereo_processor.hpp"
+#include "model/cloud_point.hpp"
 #include "protocol/reply.hpp"
 
 namespace stereod {
@@ -53,27 +52,11 @@ struct Payload {
     std::optional<int64_t> stamp_ns; // capture time of a raw frame
 };
 
-// The descriptor of `mat`'s pixels as the service sends them (an empty image: 0 bytes).
-Payload imagePayload(std::string_view name, std::string_view format, const cv::Mat& mat);
-
 // The descriptor of `points` cloud points.
 Payload cloudPayload(std::size_t points);
 
 // The descriptor of the colours of `points` cloud points (cloud_colour, u8_rgb).
 Payload cloudColourPayload(std::size_t points);
-
-// The descriptor of a BGR colour image sent as u8_rgb (an empty image: 0 bytes).
-Payload colourPayload(std::string_view name, const cv::Mat& bgr);
-
-// Bytes of `mat`'s pixels; 0 for an empty image.
-uint64_t matBytes(const cv::Mat& mat);
-
-// Appends `mat`'s pixels row by row, without padding.
-void appendMatBytes(std::string& out, const cv::Mat& mat);
-
-// Appends a CV_8UC3 BGR image's pixels as u8_rgb (red first), row by row; nothing for an
-// empty image. Allocates nothing once `out` has the capacity.
-void appendBgrAsRgb(std::string& out, const cv::Mat& bgr);
 
 // Appends the descriptor as a JSON object: name, format, then points and bytes (the
 // cloud) or width, height and bytes (an image), then stamp_ns when there is one.
@@ -90,8 +73,11 @@ std::optional<std::size_t> payloadBytesFromJson(const Json& header);
 // count (the client cannot know how much to read past).
 std::optional<Payload> payloadFromJson(const Json& header);
 
-// Whether an image payload of OpenCV `type` has width x height x element size bytes.
-bool imagePayloadAddsUp(const Payload& payload, int type);
+// Whether an image payload has width x height x `pixel_bytes` bytes (and a size).
+bool imagePayloadAddsUp(const Payload& payload, std::size_t pixel_bytes);
+// An OpenCV type (CV_16UC1 is 2) is not a pixel's bytes: say sizeof(uint16_t), or
+// CV_ELEM_SIZE(type).
+bool imagePayloadAddsUp(const Payload& payload, int) = delete;
 
 // Whether a cloud payload has 16 bytes per point.
 bool cloudPayloadAddsUp(const Payload& payload);

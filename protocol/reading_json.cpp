@@ -76,7 +76,7 @@ std::size_t formatReasonMessage(const Reading& reading, std::string_view detail,
     return length;
 }
 
-void appendVec3(std::string& out, const cv::Vec3d& v)
+void appendVec3(std::string& out, const Vec3& v)
 {
     out.push_back('[');
     for (int k = 0; k < 3; ++k) {

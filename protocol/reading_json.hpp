@@ -11,8 +11,8 @@
 #include <string_view>
 #include <vector>
 
-#include "pipeline/reading.hpp"
-#include "pipeline/zones.hpp"
+#include "model/reading.hpp"
+#include "model/zone_reading.hpp"
 #include "protocol/reply.hpp"
 
 namespace stereod {

@@ -10,8 +10,10 @@
 #include <string>
 #include <vector>
 
-#include "pipeline/calibration.hpp"
-#include "pipeline/stereo_processor.hpp"
+#include "model/disparity_range.hpp"
+#include "model/rectified_geometry.hpp"
+#include "model/region_of_interest.hpp"
+#include "model/stage_timings.hpp"
 #include "protocol/reading_json.hpp"
 #include "protocol/reply.hpp"
 

@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "pipeline/cv_conversions.hpp"
 #include "ros2/messages.hpp"
 
 namespace stereod::ros2 {
@@ -25,7 +26,7 @@ std::array<FrameTransform, 3> cameraFrames(const CameraPose& pose, double baseli
     frames[0] = {kBaseFrame,
                  kCameraBodyFrame,
                  {pose.translation_m[0], pose.translation_m[1], pose.translation_m[2]},
-                 quaternionFromRpyDeg(pose.rpy_deg)};
+                 quaternionFromRpyDeg(toCv(pose.rpy_deg))};
     frames[1] = {kCameraBodyFrame, kLeftOpticalFrame, {0.0, 0.0, 0.0}, kOpticalInBody};
     frames[2] = {kCameraBodyFrame, kRightOpticalFrame, {0.0, -baseline_m, 0.0}, kOpticalInBody};
     return frames;

@@ -7,9 +7,9 @@
 //
 // Reentrant: pure functions. Units: metres and radians (as the message has them).
 
-#include "pipeline/calibration.hpp"
+#include "model/reading.hpp"
+#include "model/rectified_geometry.hpp"
 #include "pipeline/nearest_settings.hpp"
-#include "pipeline/reading.hpp"
 
 namespace stereod::ros2 {
 

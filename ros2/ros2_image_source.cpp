@@ -12,6 +12,7 @@
 
 #include "base/clock.hpp"
 #include "pipeline/calibration_formats.hpp"
+#include "pipeline/cv_conversions.hpp"
 #include "replay/image_message.hpp"
 #include "ros2/messages.hpp"
 #include "ros2/node_announcement.hpp"
@@ -285,7 +286,7 @@ void Ros2ImageSource::considerCameraInfo()
     try {
         StereoCalibration calibration =
             calibrationFromCameraInfoMessages(*left.latest, *right.latest, left.topic, right.topic);
-        const cv::Size size = calibration.rectified.image_size;
+        const cv::Size size = toCv(calibration.rectified.image_size);
         if (size != options_.frame_size)
             throwCalibrationError(left.topic, 0, "width",
                                   "the camera_info is for " + sizeText(size) +

@@ -167,7 +167,7 @@ TEST(ConfigExamples, AloeDemoLoadsAgainstItsRecording)
     // Aloe's geometry (Middlebury 2006, full size): the scene's 1.2 m must be in sight
     // without hitting the disparity cap.
     RectifiedGeometry aloe;
-    aloe.image_size = cv::Size(1282, 1110);
+    aloe.image_size = ImageSize{1282, 1110};
     aloe.focal_px = 3740.0;
     aloe.baseline_m = 0.160;
     aloe.doffs_px = 270.0;

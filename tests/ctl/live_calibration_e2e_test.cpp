@@ -174,7 +174,7 @@ TEST_F(LiveCalibrationE2e, CollectsEightDistinctViewsAndCalibratesWithinTheTarge
     EXPECT_EQ(loaded.kind, StereoCalibration::Kind::Full);
     ASSERT_TRUE(loaded.rms_px.has_value());
     EXPECT_DOUBLE_EQ(*loaded.rms_px, rms_px);
-    EXPECT_EQ(loaded.rectified.image_size, cv::Size(640, 480));
+    EXPECT_EQ(loaded.rectified.image_size, (ImageSize{640, 480}));
 
     // The saved pairs are 8 distinct sample pairs, lossless: each saved image is a sample
     // image bit for bit, left with its own right.

@@ -119,7 +119,7 @@ TEST(StereoctlCalibrateChessboard, SkipsAPairWithoutTheBoardThatTheGlobCaught)
         << run.err;
     EXPECT_NE(run.out.find("no: board not found in either image"), std::string::npos) << run.out;
     EXPECT_NE(run.out.find("13 of 14 pairs used"), std::string::npos) << run.out;
-    EXPECT_EQ(loadCalibration(out).rectified.image_size, cv::Size(640, 480));
+    EXPECT_EQ(loadCalibration(out).rectified.image_size, (ImageSize{640, 480}));
 }
 
 TEST(StereoctlCalibrateChessboard, RefusesABoardSizeFoundNowhere)
@@ -182,7 +182,7 @@ TEST(StereoctlCalibrationFiles, ExportsARosPairAndImportsItBack)
     EXPECT_EQ(c.kind, StereoCalibration::Kind::Full);
     EXPECT_DOUBLE_EQ(c.rectified.focal_px, 425.0);
     EXPECT_DOUBLE_EQ(c.rectified.baseline_m, 0.12);
-    EXPECT_EQ(c.rectified.image_size, cv::Size(752, 480));
+    EXPECT_EQ(c.rectified.image_size, (ImageSize{752, 480}));
 
     // The pair the wrong way round: refused, naming the file.
     const ProcessResult swapped = runProcess(

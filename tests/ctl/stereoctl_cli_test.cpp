@@ -32,7 +32,7 @@ TEST(StereoctlCalibrate, RectifiedFileReadsBackWithTheSameNumbers)
     const StereoCalibration loaded = loadCalibration(out);
     EXPECT_EQ(loaded.kind, StereoCalibration::Kind::RectifiedOnly);
     const RectifiedGeometry& g = loaded.rectified;
-    EXPECT_EQ(g.image_size, cv::Size(1282, 1110));
+    EXPECT_EQ(g.image_size, (ImageSize{1282, 1110}));
     EXPECT_DOUBLE_EQ(g.focal_px, 3740.0);
     EXPECT_DOUBLE_EQ(g.baseline_m, 0.16);
     EXPECT_DOUBLE_EQ(g.cx_px, 640.25);

@@ -18,6 +18,7 @@
 
 #include "daemon/live_view/foxglove_protocol.hpp"
 #include "daemon/live_view/live_view.hpp"
+#include "pipeline/cv_conversions.hpp"
 #include "tests/support/descriptor_exhaustion.hpp"
 #include "tests/support/http_client.hpp"
 #include "tests/support/websocket_client.hpp"
@@ -31,7 +32,7 @@ using Clock = std::chrono::steady_clock;
 RectifiedGeometry geometryOf(cv::Size size)
 {
     RectifiedGeometry g;
-    g.image_size = size;
+    g.image_size = toImageSize(size);
     g.focal_px = 500.0;
     g.cx_px = size.width / 2.0;
     g.cy_px = size.height / 2.0;

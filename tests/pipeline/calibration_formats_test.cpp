@@ -19,6 +19,7 @@
 #include "pipeline/calibration.hpp"
 #include "pipeline/calibration_formats.hpp"
 #include "pipeline/chessboard_calibration.hpp"
+#include "pipeline/cv_conversions.hpp"
 #include "pipeline/rectifier.hpp"
 #include "tests/support/data_paths.hpp"
 #include "tests/support/files.hpp"
@@ -294,7 +295,7 @@ projection_matrix: !!opencv-matrix
 )");
     const StereoCalibration c = importRosCameraInfo(left, right);
     EXPECT_EQ(c.kind, StereoCalibration::Kind::Full);
-    EXPECT_EQ(c.rectified.image_size, cv::Size(752, 480));
+    EXPECT_EQ(c.rectified.image_size, (ImageSize{752, 480}));
     EXPECT_DOUBLE_EQ(c.rectified.focal_px, 425.0);
     EXPECT_DOUBLE_EQ(c.rectified.baseline_m, 0.12);
     EXPECT_DOUBLE_EQ(c.rectified.cx_px, 376.5);
@@ -439,7 +440,7 @@ TEST_F(CalibrationFormatsTest, ReadsOpenCvStereoCalibFilesInMetres)
                       extrinsics = dir.file("extrinsics.yml");
     writeStereoCalibFiles(c, intrinsics, extrinsics);
     const StereoCalibration back =
-        importOpenCvStereoCalib(intrinsics, extrinsics, c.rectified.image_size, kSquareM);
+        importOpenCvStereoCalib(intrinsics, extrinsics, toCv(c.rectified.image_size), kSquareM);
     EXPECT_EQ(back.left.camera_matrix, c.left.camera_matrix);
     EXPECT_EQ(back.right.distortion, c.right.distortion);
     EXPECT_EQ(back.R, c.R);
@@ -451,7 +452,7 @@ TEST_F(CalibrationFormatsTest, ReadsOpenCvStereoCalibFilesInMetres)
 
     // Read as squares (the unit left at 1): the baseline is 1/0.025 times larger.
     const StereoCalibration squares =
-        importOpenCvStereoCalib(intrinsics, extrinsics, c.rectified.image_size);
+        importOpenCvStereoCalib(intrinsics, extrinsics, toCv(c.rectified.image_size));
     EXPECT_NEAR(squares.rectified.baseline_m, c.rectified.baseline_m / kSquareM, 1e-9);
 }
 
@@ -467,8 +468,8 @@ TEST_F(CalibrationFormatsTest, RefusesOpenCvFilesItCannotUse)
     fs << "R" << cv::Mat(c.R);
     fs.release();
 
-    std::string message =
-        refusal([&] { importOpenCvStereoCalib(intrinsics, partial, c.rectified.image_size); });
+    std::string message = refusal(
+        [&] { importOpenCvStereoCalib(intrinsics, partial, toCv(c.rectified.image_size)); });
     EXPECT_TRUE(contains(message, partial + ": T: missing key")) << message;
 
     message = refusal([&] { importOpenCvStereoCalib(intrinsics, dir.file("no.yml"), {640, 480}); });

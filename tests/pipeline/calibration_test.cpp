@@ -126,7 +126,7 @@ TEST(Calibration, ParsesRectifiedForm)
 {
     const StereoCalibration c = parseCalibration(kRectified, "calib.yaml");
     EXPECT_EQ(c.kind, StereoCalibration::Kind::RectifiedOnly);
-    EXPECT_EQ(c.rectified.image_size, cv::Size(1282, 1110));
+    EXPECT_EQ(c.rectified.image_size, (ImageSize{1282, 1110}));
     EXPECT_EQ(c.rectified.focal_px, 3740.0);
     EXPECT_EQ(c.rectified.baseline_m, 0.16);
     EXPECT_EQ(c.rectified.doffs_px, 270.0);

@@ -22,6 +22,7 @@
 
 #include "pipeline/calibration.hpp"
 #include "pipeline/chessboard_calibration.hpp"
+#include "pipeline/cv_conversions.hpp"
 #include "pipeline/matcher.hpp"
 #include "pipeline/rectifier.hpp"
 #include "pipeline/stereo_processor.hpp"
@@ -127,7 +128,7 @@ TEST_F(ChessboardCalibrationTest, UsesAllThirteenRealPairsWithinTheTargets)
     EXPECT_EQ(c.board->square_m, kSquareM);
     EXPECT_EQ(c.rms_px, r.rms_px);
     EXPECT_EQ(c.epipolar_error_px, r.epipolar_error_px);
-    EXPECT_EQ(c.rectified.image_size, cv::Size(640, 480));
+    EXPECT_EQ(c.rectified.image_size, (ImageSize{640, 480}));
     EXPECT_EQ(c.left.distortion.size(), 4u);
     // alpha 0: (nearly) every rectified pixel has image data in both cameras, and every
     // pixel of the valid regions does.
@@ -251,7 +252,7 @@ cv::Mat boardMask(const StereoCalibration& c, const PairReport& p, std::vector<c
     cv::undistortPoints(p.left_corners, rect, c.left.camera_matrix, c.left.distortion, c.R1, c.P1,
                         kUndistort);
     const std::vector<cv::Point> outline = {rect[0], rect[8], rect[53], rect[45]};
-    cv::Mat mask = cv::Mat::zeros(c.rectified.image_size, CV_8UC1);
+    cv::Mat mask = cv::Mat::zeros(toCv(c.rectified.image_size), CV_8UC1);
     cv::fillConvexPoly(mask, outline, cv::Scalar(255));
     return mask;
 }
@@ -607,7 +608,7 @@ TEST(ChessboardCalibration, SkipsAPairWithoutTheBoardWhateverItsSize)
     EXPECT_EQ(r.pairs_used, 6);
     EXPECT_FALSE(r.pairs[0].used);
     EXPECT_EQ(r.pairs[0].rejection, "board not found in either image");
-    EXPECT_EQ(r.calibration.rectified.image_size, cv::Size(640, 480));
+    EXPECT_EQ(r.calibration.rectified.image_size, (ImageSize{640, 480}));
 }
 
 // Two used pairs (the board found in both images) of different sizes: refused, naming the

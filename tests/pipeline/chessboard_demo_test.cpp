@@ -25,6 +25,7 @@
 #include "pipeline/board_pose.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/chessboard_calibration.hpp"
+#include "pipeline/cv_conversions.hpp"
 #include "pipeline/nearest_object.hpp"
 #include "pipeline/stereo_processor.hpp"
 #include "tests/support/data_paths.hpp"
@@ -99,7 +100,7 @@ TEST_F(ChessboardDemoTest, EveryReadingOnTheBoardIsWithinAFewPercentOfItsPose)
 
     // The region lies where the matcher searches the whole range: left of column
     // min_disparity + num_disparities the match would fall outside the right image.
-    const cv::Rect region = regionPixels(nearest.roi, g.image_size);
+    const cv::Rect region = regionPixels(nearest.roi, toCv(g.image_size));
     EXPECT_GE(region.x, range.min_disparity + range.num_disparities) << region;
 
     std::printf("[accuracy] pair        board   valid  in range  reading    board pose (span)"

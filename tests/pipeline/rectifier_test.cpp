@@ -19,6 +19,7 @@
 #include "bench/bench_data.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/chessboard_calibration.hpp"
+#include "pipeline/cv_conversions.hpp"
 #include "pipeline/rectifier.hpp"
 #include "tests/support/data_paths.hpp"
 #include "tests/support/files.hpp"
@@ -131,7 +132,7 @@ TEST(RealRig, RectifiesLikeOpenCvRemap)
     const StereoCalibration& c = realRig();
     const Rectifier rectifier(c);
     ASSERT_TRUE(rectifier.remaps());
-    const cv::Size size = c.rectified.image_size;
+    const cv::Size size = toCv(c.rectified.image_size);
     const Maps left_maps = fixedPointMaps(c.left, c.R1, c.P1, size);
     const Maps right_maps = fixedPointMaps(c.right, c.R2, c.P2, size);
     cv::Mat left_rect, right_rect;
@@ -163,7 +164,7 @@ TEST(RealRig, PixelsWithoutRawDataAreBlack)
     cv::Mat rectified;
     rectifier.rectifyLeft(left, rectified);
 
-    const Maps maps = fixedPointMaps(c.left, c.R1, c.P1, c.rectified.image_size);
+    const Maps maps = fixedPointMaps(c.left, c.R1, c.P1, toCv(c.rectified.image_size));
     const cv::Mat outside = whollyOutside(maps.xy, left.size());
     const int outside_count = cv::countNonZero(outside);
     const int straddling = countStraddling(maps.xy, left.size());

@@ -68,7 +68,7 @@ const SceneDepth& scene()
     return depth;
 }
 
-ZonesSettings oneZone(cv::Vec3d min_m, cv::Vec3d max_m)
+ZonesSettings oneZone(Vec3 min_m, Vec3 max_m)
 {
     ZonesSettings s;
     ZoneSettings zone;

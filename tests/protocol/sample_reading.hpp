@@ -1,7 +1,7 @@
 #pragma once
 // A valid reading with every field set, for the tests of what the protocol writes.
 
-#include "pipeline/reading.hpp"
+#include "model/reading.hpp"
 
 namespace stereod {
 

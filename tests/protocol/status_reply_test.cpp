@@ -50,7 +50,7 @@ ServiceStatus runningStatus()
     RectifiedGeometry geometry;
     geometry.focal_px = 700.5;
     geometry.baseline_m = 0.12;
-    geometry.image_size = cv::Size(640, 480);
+    geometry.image_size = ImageSize{640, 480};
     status.calibration.geometry = geometry;
     status.calibration.rms_px = 0.31;
     status.clients.connected = 2;

@@ -41,7 +41,7 @@ TEST(Ros2Names, TopicsUnderTheNamespaceAndOnDds)
 RectifiedGeometry geometry()
 {
     RectifiedGeometry g;
-    g.image_size = cv::Size(384, 288);
+    g.image_size = ImageSize{384, 288};
     g.focal_px = 615.0;
     g.cx_px = 192.0;
     g.cy_px = 144.0;

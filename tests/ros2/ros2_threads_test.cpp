@@ -245,7 +245,7 @@ TEST(Ros2Threads, PublisherPublishesWhileResultsAreOfferedAndCountersRead)
     settings.discovery = testDomain(50);
     settings.max_rate_hz = 1000;
     RectifiedGeometry geometry;
-    geometry.image_size = cv::Size(64, 48);
+    geometry.image_size = ImageSize{64, 48};
     geometry.focal_px = 60;
     geometry.cx_px = 32;
     geometry.cy_px = 24;

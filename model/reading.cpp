@@ -1,4 +1,4 @@
-#include "pipeline/reading.hpp"
+#include "model/reading.hpp"
 
 namespace stereod {
 

@@ -1,6 +1,9 @@
 #pragma once
 // The nearest-object reading the service hands to a robot: a distance, or "no reading"
-// with the reason. Never a number the data do not support.
+// with the reason. Never a number the data do not support. Made by the pipeline
+// (pipeline/reading_verdict.hpp), written by the protocol, printed by stereoctl.
+//
+// Plain values; the functions are pure (any thread). Units in the field names.
 
 #include <cstdint>
 
