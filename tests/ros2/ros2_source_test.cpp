@@ -107,6 +107,20 @@ class Ros2Source : public test::LiveViewE2e {
 
     // Polls the service's reading until `wanted` holds of it, or `limit` passes; the last
     // reading either way.
+    // The left topic's status once two of its images were refused (or after 30 s).
+    Json leftOnceBadTwice()
+    {
+        Json left;
+        const auto deadline = std::chrono::steady_clock::now() + 30s;
+        while (std::chrono::steady_clock::now() < deadline) {
+            left = status()["source"]["cameras"][0];
+            if (left["bad_frames"].get<int>() >= 2)
+                break;
+            std::this_thread::sleep_for(200ms);
+        }
+        return left;
+    }
+
     template <typename Predicate> Json waitForReading(Predicate wanted, std::chrono::seconds limit)
     {
         Json reading;
@@ -232,14 +246,7 @@ TEST_F(Ros2Source, Yuv422IsMatchedOnItsLumaAndAnOddWidthIsRefused)
     }
 
     publish(60, {"--encoding", "yuv422", "--width", "383"});
-    Json left;
-    const auto deadline = std::chrono::steady_clock::now() + 30s;
-    while (std::chrono::steady_clock::now() < deadline) {
-        left = status()["source"]["cameras"][0];
-        if (left["bad_frames"].get<int>() >= 2)
-            break;
-        std::this_thread::sleep_for(200ms);
-    }
+    const Json left = leftOnceBadTwice();
     EXPECT_GE(left["bad_frames"].get<int>(), 2) << left.dump();
     EXPECT_EQ(left["last_bad_frame"],
               "image of 383x288 yuv422 has an odd width: 4:2:2 pixels come in pairs");
@@ -275,14 +282,7 @@ TEST_F(Ros2Source, AMalformedImageIsRefusedWithItsMessageAndTheServiceRunsOn)
     publish(60, {"--bad-every", "3"});
     const Json reading = waitForReading(valid, 30s);
     ASSERT_TRUE(valid(reading)) << reading.dump();
-    Json left;
-    const auto deadline = std::chrono::steady_clock::now() + 30s;
-    while (std::chrono::steady_clock::now() < deadline) {
-        left = status()["source"]["cameras"][0];
-        if (left["bad_frames"].get<int>() >= 2)
-            break;
-        std::this_thread::sleep_for(200ms);
-    }
+    const Json left = leftOnceBadTwice();
     EXPECT_GE(left["bad_frames"].get<int>(), 2) << left.dump();
     EXPECT_EQ(left["last_bad_frame"],
               "image of 384x288 mono8 has step 192, less than its row of 384 bytes");
