@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 
@@ -99,10 +100,14 @@ class ServiceHealth {
         return health;
     }
 
-    Json distance()
+    // The latest reading, allowed to be `max_age_ms` old (the service's default if none).
+    Json distance(std::optional<double> max_age_ms = std::nullopt)
     {
         ProtocolClient client(socket_, 2000ms);
-        return client.request({{"cmd", "distance"}})["reading"];
+        Json request = {{"cmd", "distance"}};
+        if (max_age_ms)
+            request["max_age_ms"] = *max_age_ms;
+        return client.request(request)["reading"];
     }
 
     const std::string& socket() const { return socket_; }
@@ -168,16 +173,10 @@ TEST(CalibrationHealthE2e, SwappedCamerasFailAndReadingsAreWithheldWhenAsked)
     const Json health = service.healthAfter(3);
     std::printf("[health] service with the cameras swapped: %s\n", health.dump().c_str());
     ASSERT_EQ(health["state"], "failed");
-    Json reading;
-    const auto deadline = std::chrono::steady_clock::now() + 15s;
-    while (std::chrono::steady_clock::now() < deadline) {
-        reading = service.distance();
-        // On loaded cores a reading may have aged past its limit; "stale" takes precedence
-        // over the check's verdict, so ask again for a fresh one.
-        if (reading.contains("reason") && reading["reason"]["code"] != "stale")
-            break;
-        std::this_thread::sleep_for(100ms);
-    }
+    // On CI's loaded cores the pipeline can lag its 5 pairs a second by more than the
+    // default second, and "stale" rightly takes precedence over the check's verdict; the
+    // verdict is what this test is about, so it allows an old reading.
+    const Json reading = service.distance(30'000.0);
     EXPECT_FALSE(reading["valid"].get<bool>()) << reading.dump();
     EXPECT_EQ(reading["reason"]["code"], "calibration_suspect") << reading.dump();
     EXPECT_EQ(reading.value("calibration_suspect", false), true);
