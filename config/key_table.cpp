@@ -149,6 +149,10 @@ const std::vector<std::string>& logLevelNames()
     return names;
 }
 
+// The cameras' and the replay's colour keys: one choice, one set of names.
+const Names<CameraColour> kCameraColourNames{
+    {"left", CameraColour::Left}, {"both", CameraColour::Both}, {"none", CameraColour::None}};
+
 std::vector<KeyDef> buildKeyTable()
 {
     std::vector<KeyDef> keys;
@@ -171,6 +175,9 @@ std::vector<KeyDef> buildKeyTable()
         "frames per second"));
     add(boolKey(
         "source.replay.loop", kRestart, [](auto& c) -> auto& { return c.source.replay.loop; }));
+    add(choiceKey(
+        "source.replay.colour", kRestart, [](auto& c) -> auto& { return c.source.replay.colour; },
+        kCameraColourNames));
     add(textKey(
         "source.replay.topics.left", kRestart,
         [](auto& c) -> auto& { return c.source.replay.left_topic; }, false));
@@ -196,9 +203,7 @@ std::vector<KeyDef> buildKeyTable()
                                  {"bgr24", PixelFormatChoice::Bgr24}}));
     add(choiceKey(
         "source.cameras.colour", kRestart, [](auto& c) -> auto& { return c.source.cameras.colour; },
-        Names<CameraColour>{{"left", CameraColour::Left},
-                            {"both", CameraColour::Both},
-                            {"none", CameraColour::None}}));
+        kCameraColourNames));
     add(integerKey(
         "source.cameras.width", kRestart, [](auto& c) -> auto& { return c.source.cameras.width; }));
     add(integerKey(

@@ -176,6 +176,20 @@ bool decodeImage(const std::string& path, cv::Size expected, const std::string& 
     return true;
 }
 
+// A decoded image into a pooled frame of its size: the grey, and where the frame has a
+// colour plane the image's colour, or its grey when it has none (a grey image in a colour
+// recording). copyTo() and cvtColor() write into the pooled buffers: no allocation.
+void fillFrame(const cv::Mat& grey, const cv::Mat& colour, Frame& frame)
+{
+    grey.copyTo(frame.image);
+    if (frame.colour.empty())
+        return;
+    if (colour.empty())
+        cv::cvtColor(grey, frame.colour, cv::COLOR_GRAY2BGR);
+    else
+        colour.copyTo(frame.colour);
+}
+
 } // namespace
 
 ReplaySource::ReplaySource(ReplayOptions options) : options_(std::move(options))
@@ -224,18 +238,25 @@ ReplaySource::ReplaySource(ReplayOptions options) : options_(std::move(options))
              " pairs is readable (first: " + first_problem + ")");
         return;
     }
-    // A colour first pair gives the left frames a colour plane (a grey pair later in the
-    // same recording fills it with its grey); the right frames stay grey.
+    // A colour first pair gives that side's frames a colour plane (a grey pair later in
+    // the same recording fills it with its grey); the right frames stay grey unless asked.
     const std::size_t pairs = std::max<std::size_t>(options_.pool_pairs, 1);
-    if (left_colour_.empty()) {
-        pool_ = std::make_unique<FramePool>(2 * pairs, frame_size_);
-    } else {
-        pool_ = std::make_unique<FramePool>(pairs, frame_size_);
-        colour_pool_ = std::make_unique<FramePool>(pairs, frame_size_, CV_8UC1, true);
-    }
+    const bool left_colour = !left_colour_.empty();
+    const bool right_colour = !right_colour_.empty();
+    const std::size_t colour_sides = (left_colour ? 1 : 0) + (right_colour ? 1 : 0);
+    if (colour_sides < 2)
+        pool_ = std::make_unique<FramePool>((2 - colour_sides) * pairs, frame_size_);
+    if (colour_sides > 0)
+        colour_pool_ =
+            std::make_unique<FramePool>(colour_sides * pairs, frame_size_, CV_8UC1, true);
+    left_pool_ = left_colour ? colour_pool_.get() : pool_.get();
+    right_pool_ = right_colour ? colour_pool_.get() : pool_.get();
+    const char* in_colour = colour_sides == 2 ? " (both in colour)"
+                            : left_colour     ? " (left in colour)"
+                            : right_colour    ? " (right in colour)"
+                                              : "";
     spdlog::info("replay: {}: {} pairs of {}{}{}, {}{}", recording_.dir, recording_.entries.size(),
-                 sizeText(frame_size_), colour_pool_ ? " (left in colour)" : "",
-                 recording_.has_index ? "" : " (plain folder)",
+                 sizeText(frame_size_), in_colour, recording_.has_index ? "" : " (plain folder)",
                  options_.pacing == ReplayPacing::Paced ? "paced" : "lockstep",
                  options_.loop ? ", looping" : "");
 }
@@ -427,8 +448,13 @@ bool ReplaySource::decodePair(std::size_t i, BadPair& bad)
                 return false;
             }
             const cv::Size right_size = frame_size_.empty() ? left_image_.size() : frame_size_;
-            if (!decodeMcapImage(*bag_, bag_pairs_[i].right, right_image_, bad.reason,
-                                 right_size)) {
+            const bool right_decoded =
+                options_.keep_right_colour
+                    ? decodeMcapImage(*bag_, bag_pairs_[i].right, right_image_, right_colour_,
+                                      bad.reason, right_size)
+                    : decodeMcapImage(*bag_, bag_pairs_[i].right, right_image_, bad.reason,
+                                      right_size);
+            if (!right_decoded) {
                 bad.side = kRight;
                 bad.path = entry.right_path;
                 return false;
@@ -458,7 +484,8 @@ bool ReplaySource::decodePair(std::size_t i, BadPair& bad)
         const std::string left_size =
             frame_size_.empty() ? "its left image is " + sizeText(left_image_.size()) : replay_size;
         if (!decodeImage(entry.right_path, left_image_.size(), left_size, file_bytes_, right_image_,
-                         bad.reason, bad.code)) {
+                         bad.reason, bad.code,
+                         options_.keep_right_colour ? &right_colour_ : nullptr)) {
             bad.side = kRight;
             bad.path = entry.right_path;
             return false;
@@ -581,9 +608,9 @@ void ReplaySource::run() noexcept
             // Frames from the pool: lock-free; lockstep waits for a free one instead of
             // dropping the pair.
             StereoPair pair;
-            pair.left = acquireFrame(colour_pool_ ? *colour_pool_ : *pool_, !paced);
+            pair.left = acquireFrame(*left_pool_, !paced);
             if (pair.left)
-                pair.right = acquireFrame(*pool_, !paced);
+                pair.right = acquireFrame(*right_pool_, !paced);
             if (!pair.right) {
                 if (stop_requested_.load(std::memory_order_acquire))
                     return;
@@ -591,14 +618,8 @@ void ReplaySource::run() noexcept
                 continue;
             }
             // Same size and type: copyTo() writes into the pooled buffers, no allocation.
-            left_image_.copyTo(pair.left->image);
-            right_image_.copyTo(pair.right->image);
-            if (!pair.left->colour.empty()) {
-                if (left_colour_.empty())
-                    cv::cvtColor(left_image_, pair.left->colour, cv::COLOR_GRAY2BGR);
-                else
-                    left_colour_.copyTo(pair.left->colour);
-            }
+            fillFrame(left_image_, left_colour_, *pair.left);
+            fillFrame(right_image_, right_colour_, *pair.right);
             const uint64_t number = pass * count + i;
             pair.index = number;
             pair.left->sequence = number;
