@@ -26,10 +26,18 @@ inline constexpr std::size_t kMaxImageFileBytes = 64u << 20;
 // (`expected_what` says what that is), or, with no size expected yet, larger than
 // kMaxReplayPixels; or cut short. With `colour`, a colour file's colour goes there too
 // (CV_8UC3 BGR; released for a grey file), and `out` is still exactly the grey decode of
-// the file. On failure says why, with the errno: ENOENT when missing, EINVAL for a file
-// that is no usable image.
+// the file: a colour PNG whose header allows it (ImageHeader::grey_from_rgb, as
+// `stereoctl record` writes them) is decoded once, in colour, its grey pngGreyFromBgr();
+// other colour files (JPEG, PNG with a gamma or 16-bit samples) are decoded twice. On
+// failure says why, with the errno: ENOENT when missing, EINVAL for a file that is no
+// usable image.
 bool decodeImageFile(const std::string& path, cv::Size expected, const std::string& expected_what,
                      std::vector<uint8_t>& bytes, cv::Mat& out, std::string& reason, int& code,
                      cv::Mat* colour = nullptr);
+
+// The grey libpng gives for an 8-bit colour PNG without gamma (ImageHeader::grey_from_rgb)
+// when OpenCV decodes it as grey, made from its colour decode `bgr` (CV_8UC3) into `grey`
+// (CV_8UC1, reallocated only when its size differs): bit for bit the same.
+void pngGreyFromBgr(const cv::Mat& bgr, cv::Mat& grey);
 
 } // namespace stereod

@@ -81,9 +81,10 @@ struct ReplayOptions {
     // want of buffers (lockstep waits for them instead).
     std::size_t pool_pairs = 8;
     // Keep the left camera's colour where the recording has it (colour PNG/JPEG files,
-    // rgb8/bgr8/yuv422 bag images): Frame::colour, at the cost of a second decode of each
-    // colour left file. Grey recordings are unaffected either way. Off: no colour is
-    // decoded at all (source.replay.colour none).
+    // rgb8/bgr8/yuv422 bag images): Frame::colour. A colour PNG as `stereoctl record`
+    // writes it is then decoded once, in colour, its grey made from that; a colour JPEG
+    // is decoded a second time (replay/image_decode.hpp). Grey recordings are unaffected
+    // either way. Off: no colour is decoded at all (source.replay.colour none).
     bool keep_colour = true;
     // The same for the right camera's images (source.replay.colour both).
     bool keep_right_colour = false;
