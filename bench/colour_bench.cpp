@@ -8,11 +8,14 @@
 //
 // The stages around the processor too: the capture decoders (FrameDecoder) with and without
 // the colour beside the grey, for YUYV, MJPEG and RGB24 buffers made from the photograph;
-// a bag's rgb8 image decoded for replay with and without its colour; and what the outputs
-// add: the rectified colour as u8_rgb socket bytes, as a ROS rgb8 image, and the coloured
-// cloud packed for PointCloud2.
+// a bag's rgb8 image decoded for replay with and without its colour; a recording's image
+// file (a colour PNG as `stereoctl record` writes it, a colour JPEG) decoded for replay grey
+// only (source.replay.colour none) and with its colour, beside the grey file a grey
+// recording holds; and what the outputs add: the rectified colour as u8_rgb socket bytes,
+// as a ROS rgb8 image, and the coloured cloud packed for PointCloud2.
 
 #include <cstdint>
+#include <filesystem>
 #include <stdexcept>
 #include <string>
 
@@ -22,6 +25,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <unistd.h>
 
 #include "bench/alloc_counter.hpp"
 #include "bench/bench_data.hpp"
@@ -30,7 +34,9 @@
 #include "pipeline/rectifier.hpp"
 #include "pipeline/stereo_processor.hpp"
 #include "pipeline/triangulation.hpp"
+#include "replay/image_decode.hpp"
 #include "replay/image_message.hpp"
+#include "replay/recording.hpp"
 #include "ros2/conventions.hpp"
 #include "ros2/messages.hpp"
 
@@ -243,6 +249,78 @@ void BM_ReplayBagRgb8Colour(benchmark::State& state)
     replayBag(state, true);
 }
 
+// --- replay: a recording's image file to grey, and to grey and colour -------------------
+
+// The photograph as a recording's left image files, in a directory removed at exit: a
+// colour and a grey PNG as `stereoctl record` writes them (RecordingWriter), a colour and
+// a grey JPEG at quality 90 (a plain folder's).
+struct ReplayFiles {
+    std::filesystem::path dir;
+    std::string colour_png, grey_png, colour_jpeg, grey_jpeg;
+    ~ReplayFiles() { std::filesystem::remove_all(dir); }
+};
+
+const ReplayFiles& replayFiles()
+{
+    static const ReplayFiles files = [] {
+        ReplayFiles made;
+        made.dir =
+            std::filesystem::temp_directory_path() / ("colour_bench_" + std::to_string(::getpid()));
+        const cv::Mat& bgr = inputs().raw_left_colour;
+        const cv::Mat& grey = inputs().raw.left;
+        for (const bool colour : {true, false}) {
+            const std::string dir = (made.dir / (colour ? "colour" : "grey")).string();
+            RecordingWriter writer(dir);
+            writer.write(colour ? bgr : grey, grey, 0, 0);
+            (colour ? made.colour_png : made.grey_png) = dir + "/left/000000.png";
+        }
+        made.colour_jpeg = (made.dir / "colour.jpg").string();
+        made.grey_jpeg = (made.dir / "grey.jpg").string();
+        cv::imwrite(made.colour_jpeg, bgr, {cv::IMWRITE_JPEG_QUALITY, 90});
+        cv::imwrite(made.grey_jpeg, grey, {cv::IMWRITE_JPEG_QUALITY, 90});
+        return made;
+    }();
+    return files;
+}
+
+void replayFile(benchmark::State& state, const std::string& path, bool colour)
+{
+    std::vector<uint8_t> bytes;
+    cv::Mat grey, out_colour;
+    std::string reason;
+    int code = 0;
+    timed(state, [&] {
+        if (!decodeImageFile(path, kSize, "640x480", bytes, grey, reason, code,
+                             colour ? &out_colour : nullptr))
+            throw std::runtime_error(path + ": " + reason);
+    });
+}
+
+void BM_ReplayPngGreyFile(benchmark::State& state)
+{
+    replayFile(state, replayFiles().grey_png, false);
+}
+void BM_ReplayPngColourFileGreyOnly(benchmark::State& state)
+{
+    replayFile(state, replayFiles().colour_png, false);
+}
+void BM_ReplayPngColourFile(benchmark::State& state)
+{
+    replayFile(state, replayFiles().colour_png, true);
+}
+void BM_ReplayJpegGreyFile(benchmark::State& state)
+{
+    replayFile(state, replayFiles().grey_jpeg, false);
+}
+void BM_ReplayJpegColourFileGreyOnly(benchmark::State& state)
+{
+    replayFile(state, replayFiles().colour_jpeg, false);
+}
+void BM_ReplayJpegColourFile(benchmark::State& state)
+{
+    replayFile(state, replayFiles().colour_jpeg, true);
+}
+
 // --- outputs: the rectified colour and the coloured cloud as they leave the service -----
 
 const DepthResult& colourResult()
@@ -319,6 +397,12 @@ BENCHMARK(BM_CaptureRgb24Grey)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_CaptureRgb24Colour)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_ReplayBagRgb8Grey)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_ReplayBagRgb8Colour)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ReplayPngGreyFile)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ReplayPngColourFileGreyOnly)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ReplayPngColourFile)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ReplayJpegGreyFile)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ReplayJpegColourFileGreyOnly)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ReplayJpegColourFile)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_SocketLeftColourRgb)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_Ros2LeftImageRgb8)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_Ros2CloudGrey)->Unit(benchmark::kMillisecond)->UseRealTime();

@@ -144,6 +144,9 @@ std::vector<KeyDef> buildKeyTable()
         "frames per second"));
     add(boolKey(
         "source.replay.loop", kRestart, [](auto& c) -> auto& { return c.source.replay.loop; }));
+    add(choiceKey(
+        "source.replay.colour", kRestart, [](auto& c) -> auto& { return c.source.replay.colour; },
+        kCameraColours));
     add(textKey(
         "source.replay.topics.left", kRestart,
         [](auto& c) -> auto& { return c.source.replay.left_topic; }, false));

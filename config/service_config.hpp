@@ -60,6 +60,21 @@ inline constexpr NameTable<SourceKind, 4> kSourceKinds{{{
 }}};
 static_assert(kSourceKinds.wellFormed());
 
+// Which cameras keep their colour beside the grey image the matcher sees
+// (source.cameras.colour, and source.replay.colour for a recording's images). The left
+// camera's colour is what the outputs carry (rectified left image, cloud colours); the
+// right's only reaches recordings.
+enum class CameraColour { None, Left, Both };
+
+// The names of source.cameras.colour and source.replay.colour, in the order the docs list
+// them.
+inline constexpr NameTable<CameraColour, 3> kCameraColours{{{
+    {CameraColour::Left, "left"},
+    {CameraColour::Both, "both"},
+    {CameraColour::None, "none"},
+}}};
+static_assert(kCameraColours.wellFormed());
+
 struct ReplayConfig {
     std::string path; // a recording directory, a folder of left*/right*, or
                       // a ROS 2 bag (MCAP file)
@@ -70,20 +85,8 @@ struct ReplayConfig {
     ReplayPacing pacing = ReplayPacing::Paced;
     double fps = 10.0; // nominal rate for plain folders (no frames.csv)
     bool loop = true;
+    CameraColour colour = CameraColour::Left; // kept where the recording's images have it
 };
-
-// Which cameras keep their colour beside the grey image the matcher sees
-// (source.cameras.colour). The left camera's colour is what the outputs carry (rectified
-// left image, cloud colours); the right's only reaches recordings.
-enum class CameraColour { None, Left, Both };
-
-// The names of source.cameras.colour, in the order the docs list them.
-inline constexpr NameTable<CameraColour, 3> kCameraColours{{{
-    {CameraColour::Left, "left"},
-    {CameraColour::Both, "both"},
-    {CameraColour::None, "none"},
-}}};
-static_assert(kCameraColours.wellFormed());
 
 // The V4L2 cameras of source.type v4l2 (two devices) or side_by_side (one device). The
 // controls are applied alike to both cameras; an unset control keeps the device's value.

@@ -3,7 +3,9 @@
 // (replay/recording.hpp), or, when --out ends in `.mcap`, a ROS 2 bag
 // (replay/mcap_recording.hpp) with the calibration in force as camera_info and, with
 // --with depth,points, each pair's depth and point cloud (the raw stream `with` them: one
-// event holds a pair and its results, so they cannot be mismatched).
+// event holds a pair and its results, so they cannot be mismatched). A pair with colour
+// gets a coloured cloud, its `rgb` packed by ros2::xyziRgbCloud() as the ROS 2 publisher
+// packs it.
 //
 // Two threads: this one reads the stream off the socket into a bounded pool of pair
 // buffers; a writer thread encodes and writes them with RecordingWriter. When every buffer
@@ -39,6 +41,7 @@
 #include "protocol/request.hpp"
 #include "replay/mcap_recording.hpp"
 #include "replay/recording.hpp"
+#include "ros2/conventions.hpp"
 
 namespace stereod {
 
@@ -69,6 +72,8 @@ struct PairBuffer {
     bool depth_present = false;
     std::vector<CloudPoint> cloud;
     bool cloud_present = false; // (a cloud may have no point)
+    // One colour per cloud point when the left camera kept its colour, else none.
+    std::vector<CloudColour> cloud_colour;
 };
 
 // What --with asked for.
@@ -354,6 +359,7 @@ bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair,
     if (pair != nullptr) {
         pair->depth_present = false;
         pair->cloud_present = false;
+        pair->cloud_colour.clear();
         pair->left_colour.release();
         pair->right_colour.release();
         const auto stamp = [&event](const char* key) -> std::optional<int64_t> {
@@ -379,6 +385,11 @@ bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair,
         if (pair != nullptr && results.points && name == snapshotItemName(SnapshotItem::Cloud)) {
             readCloudPayload(client, payload, pair->cloud);
             pair->cloud_present = true;
+            continue;
+        }
+        if (pair != nullptr && results.points &&
+            name == snapshotItemName(SnapshotItem::CloudColour) && payload.format == kFormatRgb) {
+            readCloudColourPayload(client, payload, pair->cloud_colour);
             continue;
         }
         const bool left_colour = name == snapshotItemName(SnapshotItem::RawLeftColour);
@@ -512,16 +523,23 @@ int runRecord(const RecordOptions& options)
         // stamps that merge with the robot's other data. A pair's depth and points carry
         // its left image's stamp: the depth is the left camera's view, and a ROS user
         // pairs them with the image by stamp.
-        write = [&bag, results](const PairBuffer& p) {
+        // `xyzirgb`: the coloured cloud's points interleaved, capacity kept (writer thread).
+        write = [&bag, results, xyzirgb = std::vector<float>()](const PairBuffer& p) mutable {
             const int64_t left = p.left_realtime_ns.value_or(p.left_stamp_ns);
             const int64_t right = p.right_realtime_ns.value_or(p.right_stamp_ns);
             bag->write(p.left_colour.empty() ? p.left : p.left_colour,
                        p.right_colour.empty() ? p.right : p.right_colour, left, right);
             if (results.depth && p.depth_present)
                 bag->writeDepth(p.depth_m, left);
-            if (results.points && p.cloud_present)
+            if (!results.points || !p.cloud_present)
+                return;
+            if (!p.left_colour.empty() && p.cloud_colour.size() == p.cloud.size()) {
+                ros2::xyziRgbCloud(p.cloud, p.cloud_colour, xyzirgb);
+                bag->writeColouredPoints(xyzirgb.data(), p.cloud.size(), left);
+            } else {
                 bag->writePoints(reinterpret_cast<const float*>(p.cloud.data()), p.cloud.size(),
                                  left);
+            }
         };
     } else {
         csv.emplace(options.out_dir);

@@ -105,6 +105,8 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request)
         replay.pacing = config.source.replay.pacing;
         replay.loop = config.source.replay.loop;
         replay.fps = config.source.replay.fps;
+        replay.keep_colour = config.source.replay.colour != CameraColour::None;
+        replay.keep_right_colour = config.source.replay.colour == CameraColour::Both;
         // Pairs in flight: the ring, the one the worker holds, the one being filled.
         replay.pool_pairs = static_cast<std::size_t>(config.source.ring_capacity) + 2;
         auto replay_source = std::make_unique<ReplaySource>(replay);

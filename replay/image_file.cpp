@@ -39,6 +39,26 @@ cv::Size boundedSize(uint32_t width, uint32_t height)
                     static_cast<int>(std::min(height, kMax)));
 }
 
+// Whether a gAMA, sRGB, iCCP or cHRM chunk comes before the PNG's first IDAT. Chunks are
+// walked by their declared lengths within `bytes`; a walk that leaves the file says yes,
+// the careful answer.
+bool hasColourSpaceChunk(std::span<const uint8_t> bytes)
+{
+    const auto is = [&bytes](std::size_t at, const char* type) {
+        return std::equal(type, type + 4, bytes.begin() + static_cast<std::ptrdiff_t>(at));
+    };
+    std::size_t at = 8; // after the signature: length (4), type (4), data, CRC (4)
+    while (at + 8 <= bytes.size()) {
+        const std::size_t type = at + 4;
+        if (is(type, "IDAT"))
+            return false;
+        if (is(type, "gAMA") || is(type, "sRGB") || is(type, "iCCP") || is(type, "cHRM"))
+            return true;
+        at = type + 4 + std::size_t{bigEndian32(bytes, at)} + 4;
+    }
+    return true;
+}
+
 ImageHeader parsePng(std::span<const uint8_t> bytes)
 {
     ImageHeader header;
@@ -52,6 +72,11 @@ ImageHeader parsePng(std::span<const uint8_t> bytes)
     header.size = boundedSize(bigEndian32(bytes, 16), bigEndian32(bytes, 20));
     // Colour type (after the bit depth): 2 RGB, 3 palette, 6 RGB with alpha; 0 and 4 grey.
     header.colour = bytes.size() > 25 && (bytes[25] == 2 || bytes[25] == 3 || bytes[25] == 6);
+    // libpng turns RGB to grey with gamma tables when the file names a gamma (gAMA, or
+    // sRGB and an ICC profile that imply one), and 16-bit samples before they are cut to
+    // 8: only without those is its grey a function of the 8-bit RGB the colour decode
+    // gives. The chunks that matter come before the first IDAT.
+    header.grey_from_rgb = header.colour && bytes[24] == 8 && !hasColourSpaceChunk(bytes);
     // The last chunk is IEND: length 0, "IEND", CRC.
     const std::size_t n = bytes.size();
     header.complete = n >= 24 + 12 && bytes[n - 8] == 'I' && bytes[n - 7] == 'E' &&

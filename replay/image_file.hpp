@@ -28,7 +28,11 @@ struct ImageHeader {
     cv::Size size;        // from the header; empty when unknown (Other, or unreadable)
     bool complete = true; // PNG ends with IEND, JPEG with its EOI marker
     bool colour = false;  // PNG of colour type RGB, RGBA or palette; JPEG of 3 or more components
-    std::string problem;  // a PNG or JPEG whose header cannot be read: why
+    // An 8-bit colour PNG without a gAMA, sRGB, iCCP or cHRM chunk before its pixels: its
+    // grey decode (libpng's rgb_to_gray, as OpenCV asks for it) is then a fixed integer
+    // weighting of its decoded red, green and blue alone (pngGreyFromBgr()).
+    bool grey_from_rgb = false;
+    std::string problem; // a PNG or JPEG whose header cannot be read: why
 };
 
 // The format, size and completeness of the image in `bytes` (the whole file), from the

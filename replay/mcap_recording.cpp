@@ -188,11 +188,26 @@ void McapRecordingWriter::writeDepth(const cv::Mat& depth_m, int64_t stamp_ns)
 
 void McapRecordingWriter::writePoints(const float* xyzi, std::size_t points, int64_t stamp_ns)
 {
+    writeCloud(xyzi, points, false, stamp_ns);
+}
+
+void McapRecordingWriter::writeColouredPoints(const float* xyzirgb, std::size_t points,
+                                              int64_t stamp_ns)
+{
+    writeCloud(xyzirgb, points, true, stamp_ns);
+}
+
+void McapRecordingWriter::writeCloud(const float* values, std::size_t points, bool rgb,
+                                     int64_t stamp_ns)
+{
     if (!points_channel_) {
         throw mcap::McapError(writer_.path() + ": points written without enablePoints()", EINVAL);
     }
     const ros2::Header header{ros2::Time::fromNs(stamp_ns), kLeftOpticalFrame};
-    ros2::serializeXyziCloud(header, xyzi, points, message_);
+    if (rgb)
+        ros2::serializeXyziRgbCloud(header, values, points, message_);
+    else
+        ros2::serializeXyziCloud(header, values, points, message_);
     const auto t = static_cast<uint64_t>(stamp_ns);
     writer_.write(*points_channel_, t, t, message_, lastSequence());
 }

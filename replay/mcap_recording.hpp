@@ -10,7 +10,8 @@
 //   /stereo/right/camera_info  calibration is known (the right one's p[3] = -fx' * B)
 //   /stereo/depth              sensor_msgs/msg/Image, 32FC1 metres, NaN = no depth
 //                              (optional: enableDepth())
-//   /stereo/points             sensor_msgs/msg/PointCloud2, x y z intensity float32
+//   /stereo/points             sensor_msgs/msg/PointCloud2, x y z intensity float32,
+//                              and rgb (PCL's packed float) when the pair has colour
 //                              (optional: enablePoints())
 // log_time, publish_time and header.stamp are the stamps the writer is given: `stereoctl
 // record` gives each frame's capture time in the service's one time base, CLOCK_REALTIME
@@ -85,6 +86,10 @@ class McapRecordingWriter {
     // in metres, intensity 0..255), written as an unorganised (height 1), dense cloud.
     // Throws mcap::McapError (EINVAL without enablePoints()).
     void writePoints(const float* xyzi, std::size_t points, int64_t stamp_ns);
+    // The same for a coloured cloud: 5 float32 a point, the fifth its colour packed as
+    // ROS packs a PointCloud2's `rgb` (ros2::xyziRgbCloud() makes them), written with the
+    // fields x y z intensity rgb.
+    void writeColouredPoints(const float* xyzirgb, std::size_t points, int64_t stamp_ns);
 
     // Writes the summary and closes the file. Throws mcap::McapError.
     void close() { writer_.close(); }
@@ -98,6 +103,8 @@ class McapRecordingWriter {
 
   private:
     void writeImage(uint16_t channel, const cv::Mat& image, int64_t stamp_ns, const char* frame_id);
+    // `points` points of 4 float32 (x y z intensity), or 5 with `rgb`.
+    void writeCloud(const float* values, std::size_t points, bool rgb, int64_t stamp_ns);
     // The MCAP sequence of the pair last written, which its depth and points share.
     uint32_t lastSequence() const noexcept
     {

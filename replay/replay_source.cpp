@@ -11,16 +11,11 @@
 #include <system_error>
 #include <utility>
 
-#include <fcntl.h>
 #include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <spdlog/details/console_globals.h>
 #include <spdlog/spdlog.h>
-#include <unistd.h>
 
-#include "base/unique_fd.hpp"
-#include "replay/image_file.hpp"
+#include "replay/image_decode.hpp"
 #include "replay/image_message.hpp"
 
 namespace stereod {
@@ -37,143 +32,18 @@ std::string sizeText(cv::Size size)
     return std::to_string(size.width) + "x" + std::to_string(size.height);
 }
 
-// Decodes `bytes` as 8-bit grayscale into `out`, catching what the image libraries print
-// on their own (libpng's "libpng error: ...", libjpeg's "Corrupt JPEG data: ...") into
-// `printed` instead of letting it reach stderr beside the log, unlimited, once per frame.
-// fd 2 is pointed at a pipe for the call, under spdlog's console mutex, so that no log
-// line of another thread goes into the pipe meanwhile. Throws what imdecode throws.
-void decodeQuietly(const std::vector<uint8_t>& bytes, cv::Mat& out, std::string& printed,
-                   int flags = cv::IMREAD_GRAYSCALE)
+// A decoded image into a pooled frame of its size: the grey, and where the frame has a
+// colour plane the image's colour, or its grey when it has none (a grey image in a colour
+// recording). copyTo() and cvtColor() write into the pooled buffers: no allocation.
+void fillFrame(const cv::Mat& grey, const cv::Mat& colour, Frame& frame)
 {
-    // Non-blocking on both ends: a library printing more than the pipe holds loses the
-    // rest rather than blocking this thread, which reads only after the call.
-    static const std::array<int, 2> pipe_fds = [] {
-        std::array<int, 2> fds{-1, -1};
-        if (::pipe2(fds.data(), O_CLOEXEC | O_NONBLOCK) != 0)
-            fds = {-1, -1};
-        return fds;
-    }();
-    printed.clear();
-    const cv::Mat encoded(1, static_cast<int>(bytes.size()), CV_8UC1,
-                          const_cast<uint8_t*>(bytes.data()));
-    if (pipe_fds[0] < 0) {
-        out = cv::imdecode(encoded, flags);
+    grey.copyTo(frame.image);
+    if (frame.colour.empty())
         return;
-    }
-    std::lock_guard console(spdlog::details::console_mutex::mutex());
-    std::fflush(stderr);
-    const UniqueFd saved(::dup(STDERR_FILENO));
-    if (!saved || ::dup2(pipe_fds[1], STDERR_FILENO) < 0) {
-        out = cv::imdecode(encoded, flags);
-        return;
-    }
-    struct Restore {
-        const UniqueFd& saved;
-        ~Restore()
-        {
-            std::fflush(stderr);
-            ::dup2(saved.get(), STDERR_FILENO);
-        }
-    };
-    {
-        const Restore restore{saved};
-        out = cv::imdecode(encoded, flags);
-    }
-    char chunk[512];
-    for (;;) {
-        const ssize_t got = ::read(pipe_fds[0], chunk, sizeof chunk);
-        if (got <= 0)
-            break;
-        printed.append(chunk, static_cast<std::size_t>(got));
-    }
-    while (!printed.empty() && (printed.back() == '\n' || printed.back() == ' '))
-        printed.pop_back();
-    std::replace(printed.begin(), printed.end(), '\n', ';');
-}
-
-// An image file larger than this is refused unread (a 1920x1080 PNG is a few MB).
-constexpr std::size_t kMaxImageFileBytes = 64u << 20;
-
-// Decodes one image file as 8-bit grayscale into `out` (imdecode allocates the buffer),
-// reading it into `bytes` first (a bounded read of a regular file, capacity kept) and
-// refusing it before decoding when its header says it is not `expected` (`expected_what`
-// says what that is), or, with no size expected yet, larger than kMaxReplayPixels; or cut
-// short. On failure says why, with the errno: ENOENT when missing, EINVAL for a file
-// that is no usable image.
-bool decodeImage(const std::string& path, cv::Size expected, const std::string& expected_what,
-                 std::vector<uint8_t>& bytes, cv::Mat& out, std::string& reason, int& code,
-                 cv::Mat* colour = nullptr)
-{
-    out.release();
-    if (colour != nullptr)
-        colour->release();
-    code = readImageFile(path, kMaxImageFileBytes, bytes, reason);
-    if (code != 0)
-        return false;
-    code = EINVAL;
-    const ImageHeader header = parseImageHeader(bytes);
-    if (!header.problem.empty()) {
-        reason = "not a readable image: " + header.problem;
-        return false;
-    }
-    if (!header.complete) {
-        reason = header.format == ImageFormat::Png
-                     ? "is cut short: a truncated PNG (no IEND chunk at its end)"
-                     : "is cut short: a truncated JPEG (no end-of-image marker)";
-        return false;
-    }
-    if (!header.size.empty()) {
-        if (!expected.empty() && header.size != expected) {
-            reason = "is " + sizeText(header.size) + ", " + expected_what + " (not decoded)";
-            return false;
-        }
-        if (expected.empty() &&
-            int64_t{header.size.width} * header.size.height > kMaxReplayPixels) {
-            reason = "declares " + sizeText(header.size) +
-                     " pixels, more than a frame may have (not decoded)";
-            return false;
-        }
-    }
-    std::string printed;
-    try {
-        decodeQuietly(bytes, out, printed);
-    } catch (const std::exception& e) { // cv::Exception, or memory that ran out
-        out.release();
-        reason = std::string("cannot decode: ") + e.what();
-        return false;
-    }
-    if (out.empty()) {
-        reason = "not a readable image (corrupt, truncated or of an unknown format)";
-        if (!printed.empty())
-            reason += ": " + printed;
-        return false;
-    }
-    // libjpeg says so when it met corrupt data it filled in (grey, or the last row):
-    // such a frame is not the picture the camera took. (libpng's warnings, e.g. about a
-    // colour profile, leave the pixels alone.)
-    if (header.format == ImageFormat::Jpeg && !printed.empty()) {
-        reason = "corrupt: " + printed;
-        out.release();
-        return false;
-    }
-    if (!expected.empty() && out.size() != expected) {
-        reason = "is " + sizeText(out.size()) + ", " + expected_what;
-        out.release();
-        return false;
-    }
-    // The colour beside the grey, decoded once more: the grey stays exactly the decoder's
-    // own (a JPEG's luma, libpng's grey), as for a grey replay.
-    if (colour != nullptr && header.colour) {
-        try {
-            decodeQuietly(bytes, *colour, printed, cv::IMREAD_COLOR);
-        } catch (const std::exception&) {
-            colour->release();
-        }
-        if (colour->size() != out.size() || colour->type() != CV_8UC3)
-            colour->release();
-    }
-    code = 0;
-    return true;
+    if (colour.empty())
+        cv::cvtColor(grey, frame.colour, cv::COLOR_GRAY2BGR);
+    else
+        colour.copyTo(frame.colour);
 }
 
 } // namespace
@@ -224,18 +94,25 @@ ReplaySource::ReplaySource(ReplayOptions options) : options_(std::move(options))
              " pairs is readable (first: " + first_problem + ")");
         return;
     }
-    // A colour first pair gives the left frames a colour plane (a grey pair later in the
-    // same recording fills it with its grey); the right frames stay grey.
+    // A colour first pair gives that side's frames a colour plane (a grey pair later in
+    // the same recording fills it with its grey); the right frames stay grey unless asked.
     const std::size_t pairs = std::max<std::size_t>(options_.pool_pairs, 1);
-    if (left_colour_.empty()) {
-        pool_ = std::make_unique<FramePool>(2 * pairs, frame_size_);
-    } else {
-        pool_ = std::make_unique<FramePool>(pairs, frame_size_);
-        colour_pool_ = std::make_unique<FramePool>(pairs, frame_size_, CV_8UC1, true);
-    }
+    const bool left_colour = !left_colour_.empty();
+    const bool right_colour = !right_colour_.empty();
+    const std::size_t colour_sides = (left_colour ? 1 : 0) + (right_colour ? 1 : 0);
+    if (colour_sides < 2)
+        pool_ = std::make_unique<FramePool>((2 - colour_sides) * pairs, frame_size_);
+    if (colour_sides > 0)
+        colour_pool_ =
+            std::make_unique<FramePool>(colour_sides * pairs, frame_size_, CV_8UC1, true);
+    left_pool_ = left_colour ? colour_pool_.get() : pool_.get();
+    right_pool_ = right_colour ? colour_pool_.get() : pool_.get();
+    const char* in_colour = colour_sides == 2 ? " (both in colour)"
+                            : left_colour     ? " (left in colour)"
+                            : right_colour    ? " (right in colour)"
+                                              : "";
     spdlog::info("replay: {}: {} pairs of {}{}{}, {}{}", recording_.dir, recording_.entries.size(),
-                 sizeText(frame_size_), colour_pool_ ? " (left in colour)" : "",
-                 recording_.has_index ? "" : " (plain folder)",
+                 sizeText(frame_size_), in_colour, recording_.has_index ? "" : " (plain folder)",
                  kReplayPacings.name(options_.pacing), options_.loop ? ", looping" : "");
 }
 
@@ -426,8 +303,13 @@ bool ReplaySource::decodePair(std::size_t i, BadPair& bad)
                 return false;
             }
             const cv::Size right_size = frame_size_.empty() ? left_image_.size() : frame_size_;
-            if (!decodeMcapImage(*bag_, bag_pairs_[i].right, right_image_, bad.reason,
-                                 right_size)) {
+            const bool right_decoded =
+                options_.keep_right_colour
+                    ? decodeMcapImage(*bag_, bag_pairs_[i].right, right_image_, right_colour_,
+                                      bad.reason, right_size)
+                    : decodeMcapImage(*bag_, bag_pairs_[i].right, right_image_, bad.reason,
+                                      right_size);
+            if (!right_decoded) {
                 bad.side = kRight;
                 bad.path = entry.right_path;
                 return false;
@@ -448,16 +330,18 @@ bool ReplaySource::decodePair(std::size_t i, BadPair& bad)
             frame_size_.empty()
                 ? std::string()
                 : "the replay is " + sizeText(frame_size_) + " (its first readable pair)";
-        if (!decodeImage(entry.left_path, frame_size_, replay_size, file_bytes_, left_image_,
-                         bad.reason, bad.code, options_.keep_colour ? &left_colour_ : nullptr)) {
+        if (!decodeImageFile(entry.left_path, frame_size_, replay_size, file_bytes_, left_image_,
+                             bad.reason, bad.code,
+                             options_.keep_colour ? &left_colour_ : nullptr)) {
             bad.side = kLeft;
             bad.path = entry.left_path;
             return false;
         }
         const std::string left_size =
             frame_size_.empty() ? "its left image is " + sizeText(left_image_.size()) : replay_size;
-        if (!decodeImage(entry.right_path, left_image_.size(), left_size, file_bytes_, right_image_,
-                         bad.reason, bad.code)) {
+        if (!decodeImageFile(entry.right_path, left_image_.size(), left_size, file_bytes_,
+                             right_image_, bad.reason, bad.code,
+                             options_.keep_right_colour ? &right_colour_ : nullptr)) {
             bad.side = kRight;
             bad.path = entry.right_path;
             return false;
@@ -580,9 +464,9 @@ void ReplaySource::run() noexcept
             // Frames from the pool: lock-free; lockstep waits for a free one instead of
             // dropping the pair.
             StereoPair pair;
-            pair.left = acquireFrame(colour_pool_ ? *colour_pool_ : *pool_, !paced);
+            pair.left = acquireFrame(*left_pool_, !paced);
             if (pair.left)
-                pair.right = acquireFrame(*pool_, !paced);
+                pair.right = acquireFrame(*right_pool_, !paced);
             if (!pair.right) {
                 if (stop_requested_.load(std::memory_order_acquire))
                     return;
@@ -590,14 +474,8 @@ void ReplaySource::run() noexcept
                 continue;
             }
             // Same size and type: copyTo() writes into the pooled buffers, no allocation.
-            left_image_.copyTo(pair.left->image);
-            right_image_.copyTo(pair.right->image);
-            if (!pair.left->colour.empty()) {
-                if (left_colour_.empty())
-                    cv::cvtColor(left_image_, pair.left->colour, cv::COLOR_GRAY2BGR);
-                else
-                    left_colour_.copyTo(pair.left->colour);
-            }
+            fillFrame(left_image_, left_colour_, *pair.left);
+            fillFrame(right_image_, right_colour_, *pair.right);
             const uint64_t number = pass * count + i;
             pair.index = number;
             pair.left->sequence = number;

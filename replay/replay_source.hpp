@@ -30,7 +30,8 @@
 // again: the replay recovers, as a camera that comes back does.
 //
 // Frames come from a FramePool sized from the first readable pair and allocated in the
-// constructor; decoding (cv::imdecode) allocates a temporary image per frame, which
+// constructor (a side whose first pair has colour, with a colour plane, filled with the
+// grey of a later grey image); decoding (cv::imdecode) allocates a temporary image per frame, which
 // OpenCV 4.6 cannot decode into a given buffer; nothing else is allocated per frame.
 //
 // Thread-safety: as FrameSource: start()/stop() from one controlling thread, status()
@@ -80,9 +81,13 @@ struct ReplayOptions {
     // want of buffers (lockstep waits for them instead).
     std::size_t pool_pairs = 8;
     // Keep the left camera's colour where the recording has it (colour PNG/JPEG files,
-    // rgb8/bgr8/yuv422 bag images): Frame::colour, at the cost of a second decode of each
-    // colour left file. Grey recordings are unaffected either way.
+    // rgb8/bgr8/yuv422 bag images): Frame::colour. A colour PNG as `stereoctl record`
+    // writes it is then decoded once, in colour, its grey made from that; a colour JPEG
+    // is decoded a second time (replay/image_decode.hpp). Grey recordings are unaffected
+    // either way. Off: no colour is decoded at all (source.replay.colour none).
     bool keep_colour = true;
+    // The same for the right camera's images (source.replay.colour both).
+    bool keep_right_colour = false;
 };
 
 class ReplaySource final : public FrameSource {
@@ -173,14 +178,17 @@ class ReplaySource final : public FrameSource {
     std::vector<int64_t> schedule_ns_;
     int64_t period_ns_ = 0;           // the mean recorded step forward (or the nominal rate's)
     int open_error_ = 0;              // negative errno when nothing is readable
-    std::unique_ptr<FramePool> pool_; // grey frames: the right's, and the left's
-    std::unique_ptr<FramePool> colour_pool_; // left frames with a colour plane, or none
+    std::unique_ptr<FramePool> pool_; // grey frames, for the sides kept grey, or none
+    std::unique_ptr<FramePool> colour_pool_; // frames with a colour plane, or none
+    FramePool* left_pool_ = nullptr;         // one of the two (borrowed)
+    FramePool* right_pool_ = nullptr;
 
     // Replay thread only (the controlling thread touches them only while it is not running).
     std::vector<uint8_t> warned_; // per entry and side: already logged
     cv::Mat left_image_;          // last decoded images (imdecode's buffers)
     cv::Mat right_image_;
     cv::Mat left_colour_;             // the left image's colour (BGR); empty when it has none
+    cv::Mat right_colour_;            // the same for the right image (keep_right_colour)
     std::vector<uint8_t> file_bytes_; // the image file being decoded, capacity kept
     uint64_t next_pass_ = 0;          // loops continue the numbering after a restart
     std::array<int64_t, 32> recent_stamps_ns_{}; // delivery times, for the measured fps

@@ -69,6 +69,8 @@ TEST(ConfigDefaults, ValidateAndSuitARobot)
     EXPECT_EQ(config.source.kind, SourceKind::Replay);
     EXPECT_EQ(config.source.replay.pacing, ReplayPacing::Paced);
     EXPECT_TRUE(config.source.replay.loop);
+    // A replay keeps the colour a camera would keep by default.
+    EXPECT_EQ(config.source.replay.colour, config.source.cameras.colour);
     EXPECT_EQ(config.socket.path, "/run/stereod/stereod.sock");
     EXPECT_EQ(config.socket.mode, 0660u);
     EXPECT_EQ(config.log_level, "info");
@@ -263,6 +265,8 @@ INSTANTIATE_TEST_SUITE_P(
                      "expected paced or lockstep"},
         RejectedCase{"source:\n  replay:\n    loop: maybe\n", "source.replay.loop", 3,
                      "not true or false"},
+        RejectedCase{"source:\n  replay:\n    colour: grey\n", "source.replay.colour", 3,
+                     "unknown value (got grey, expected left, both or none"},
         RejectedCase{"source:\n  ros2:\n    topics:\n      left: stereo/left\n",
                      "source.ros2.topics.left", 4, "an absolute ROS 2 topic name"},
         RejectedCase{"source:\n  ros2:\n    topics:\n      right: /\n", "source.ros2.topics.right",
@@ -509,6 +513,14 @@ TEST(ConfigValues, NumbersAreDecimalAndModesOctal)
     EXPECT_FALSE(parseConfig("point_cloud: off\n", "t").processing.compute_cloud);
     EXPECT_EQ(parseConfig("source:\n  replay:\n    pacing: lockstep\n", "t").source.replay.pacing,
               ReplayPacing::Lockstep);
+    for (const auto& [name, colour] :
+         {std::pair{"none", CameraColour::None}, std::pair{"left", CameraColour::Left},
+          std::pair{"both", CameraColour::Both}}) {
+        EXPECT_EQ(parseConfig(std::string("source:\n  replay:\n    colour: ") + name + "\n", "t")
+                      .source.replay.colour,
+                  colour)
+            << name;
+    }
     const ServiceConfig bm = parseConfig("matcher:\n  algorithm: bm\n  block_size: 15\n", "t");
     EXPECT_EQ(bm.processing.matcher.kind, MatcherKind::Bm);
     const ServiceConfig hh = parseConfig("matcher:\n  algorithm: sgbm-3way\n", "t");

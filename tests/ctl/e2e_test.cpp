@@ -286,6 +286,46 @@ TEST_F(StereodE2e, SnapshotWritesReadableFiles)
     EXPECT_EQ(magic, "ply");
 }
 
+// source.replay.colour none: the same colour recording replays grey, with no colour item
+// (0 x 0, no point coloured), as a grey recording's replay; left (the default, the
+// fixture's service) gives them.
+TEST_F(StereodE2e, ReplayColourNoneGivesNoColourItems)
+{
+    const Json items = Json::array({"left_colour", "raw_left_colour", "cloud", "cloud_colour"});
+    const Json coloured = request({{"cmd", "snapshot"}, {"items", items}});
+    ASSERT_EQ(coloured["ok"], true) << coloured.dump();
+    EXPECT_EQ(coloured["payloads"][0]["bytes"], kTsukubaSize.area() * 3);
+    EXPECT_EQ(coloured["payloads"][3]["points"], coloured["payloads"][2]["points"]);
+
+    const std::string config = dir_.file("grey.yaml");
+    std::ofstream(config) << "source:\n  replay:\n    colour: none\n";
+    const std::string socket = dir_.file("grey.sock");
+    ChildProcess grey({stereodPath(), "--config", config, "--replay", recording_, "--calib",
+                       calibration_, "--socket", socket},
+                      dir_.file("grey.log"));
+    const auto deadline = std::chrono::steady_clock::now() + kStartLimit;
+    Json snapshot;
+    while (std::chrono::steady_clock::now() < deadline && grey.running()) {
+        try {
+            ProtocolClient client(socket, 5000ms);
+            snapshot = client.request({{"cmd", "snapshot"}, {"items", items}});
+            if (snapshot.value("ok", false))
+                break;
+        } catch (const std::exception&) {
+        }
+        std::this_thread::sleep_for(20ms);
+    }
+    grey.sendSignal(SIGTERM);
+    grey.waitFor(10s);
+    ASSERT_EQ(snapshot.value("ok", false), true) << snapshot.dump();
+    const Json& payloads = snapshot["payloads"];
+    for (const std::size_t colour_item : {0u, 1u, 3u}) {
+        EXPECT_EQ(payloads[colour_item]["bytes"], 0) << payloads[colour_item].dump();
+    }
+    EXPECT_GT(payloads[2]["points"].get<std::size_t>(), 1000u);
+    EXPECT_EQ(payloads[3]["points"], 0);
+}
+
 TEST_F(StereodE2e, WatchPrintsOneLinePerReadingUntilInterrupted)
 {
     ChildProcess watch({stereoctlPath(), "watch", "--socket", socket_}, dir_.file("watch.log"));

@@ -1,7 +1,9 @@
 // `stereoctl record --with depth,points`: each pair's depth and point cloud in the bag, at
 // the pair's stamp, as the service computed them (checked against its snapshot, through
 // @mcap/core and @foxglove/rosmsg2-serialization), NaN and no point where the service
-// trusts no depth, refused `--with` values, and the bag replays on its image topics.
+// trusts no depth, refused `--with` values, and the bag replays on its image topics. A
+// colour recording's clouds carry ROS's packed `rgb`, the colours of the service's own
+// cloud_colour.
 
 #include <cmath>
 #include <cstring>
@@ -11,6 +13,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
 
 #include "replay/mcap_recording.hpp"
 #include "ros2/messages.hpp"
@@ -46,6 +49,60 @@ std::map<std::string, TopicStamps> stampsByTopic(const std::string& path)
     });
     return topics;
 }
+
+// The stamp of the bag's first pair whose left image is `left` (grey: the image as the
+// bag's reader decodes it to grey; colour: its colour), or 0.
+int64_t stampOfPairWithLeft(const std::string& bag, const cv::Mat& left)
+{
+    mcap::Reader reader(bag);
+    for (const McapPair& pair : indexMcapStereo(reader, "", "").pairs) {
+        cv::Mat grey, colour;
+        std::string why;
+        EXPECT_TRUE(decodeMcapImage(reader, pair.left, grey, colour, why)) << why;
+        if (sameImage(left.channels() == 3 ? colour : grey, left))
+            return pair.left_stamp_ns;
+    }
+    return 0;
+}
+
+// A PointCloud2's fields as rosmsg2-serialization decodes them: `names`, one float32
+// (datatype 7) each, one after the other.
+Json float32Fields(const std::vector<std::string>& names)
+{
+    Json fields = Json::array();
+    for (std::size_t i = 0; i < names.size(); ++i)
+        fields.push_back({{"name", names[i]}, {"offset", 4 * i}, {"datatype", 7}, {"count", 1}});
+    return fields;
+}
+
+// The results of a recording read by an independent reader, for the pair of a snapshot.
+class RecordResultsE2e : public RecordE2e {
+  protected:
+    // Records 18 pairs (three loops of the six source pairs: the snapshot's pair is among
+    // them) `--with` these results into `bag`, and returns what
+    // tests/mcap_interop/read_results.mjs (@mcap/core, rosmsg2-serialization) reads there
+    // at the stamp of the pair whose left image is `left` (the bag stamps each delivery of
+    // a pair anew, with the wall clock), with that stamp as "stamp_ns".
+    Json recordResultsOfPair(const std::string& interop, const std::string& with,
+                             const std::string& bag, const cv::Mat& left)
+    {
+        const ProcessResult recorded =
+            ctl({"record", "--out", bag, "--frames", "18", "--with", with});
+        EXPECT_EQ(recorded.exit_code, 0) << recorded.out << recorded.err;
+        const int64_t stamp_ns = stampOfPairWithLeft(bag, left);
+        EXPECT_NE(stamp_ns, 0) << "the snapshot's pair is not in the bag";
+        if (recorded.exit_code != 0 || stamp_ns == 0)
+            return Json::object();
+        const ProcessResult node = runProcess(
+            {STEREOD_NODE, interop + "/read_results.mjs", bag, std::to_string(stamp_ns)});
+        EXPECT_EQ(node.exit_code, 0) << node.err;
+        if (node.exit_code != 0)
+            return Json::object();
+        Json got = Json::parse(node.out);
+        got["stamp_ns"] = stamp_ns;
+        return got;
+    }
+};
 
 TEST_F(RecordE2e, DepthAndPointsCarryTheStampsOfTheirPairs)
 {
@@ -178,7 +235,7 @@ TEST_F(RecordE2e, UncalibratedServiceHasNoDepthToRecord)
 
 // Through an independent reader: the depth and the cloud in the bag are those the service
 // gives in a snapshot of the same pair.
-TEST_F(RecordE2e, RecordedDepthAndPointsAreTheSnapshotsThroughRosmsg2Serialization)
+TEST_F(RecordResultsE2e, RecordedDepthAndPointsAreTheSnapshotsThroughRosmsg2Serialization)
 {
     const std::string interop = interopScripts();
     if (interop.empty())
@@ -201,29 +258,10 @@ TEST_F(RecordE2e, RecordedDepthAndPointsAreTheSnapshotsThroughRosmsg2Serializati
     std::vector<float> cloud(payloads[2]["points"].get<std::size_t>() * 4);
     client.readPayload(cloud.data(), cloud.size() * sizeof(float));
 
-    // Three loops of the six source pairs: the snapshot's pair is among them.
-    const std::string out = dir_.file("results.mcap");
-    const ProcessResult recorded =
-        ctl({"record", "--out", out, "--frames", "18", "--with", "depth,points"});
-    ASSERT_EQ(recorded.exit_code, 0) << recorded.out << recorded.err;
-    // The bag stamps each delivery of a pair anew (the wall clock): the snapshot's pair is
-    // the one with its left image, at that pair's stamp.
-    int64_t stamp_ns = 0;
-    {
-        mcap::Reader reader(out);
-        for (const McapPair& pair : indexMcapStereo(reader, "", "").pairs) {
-            cv::Mat left;
-            std::string why;
-            ASSERT_TRUE(decodeMcapImage(reader, pair.left, left, why)) << why;
-            if (stamp_ns == 0 && sameImage(left, snapshot_left))
-                stamp_ns = pair.left_stamp_ns;
-        }
-    }
-    ASSERT_NE(stamp_ns, 0) << "the snapshot's pair is not in the bag";
-    const ProcessResult node =
-        runProcess({STEREOD_NODE, interop + "/read_results.mjs", out, std::to_string(stamp_ns)});
-    ASSERT_EQ(node.exit_code, 0) << node.err;
-    const Json got = Json::parse(node.out);
+    const Json got =
+        recordResultsOfPair(interop, "depth,points", dir_.file("results.mcap"), snapshot_left);
+    ASSERT_FALSE(HasFailure());
+    const int64_t stamp_ns = got["stamp_ns"];
     EXPECT_EQ(got["counts"][kMcapDepthTopic], 18);
     EXPECT_EQ(got["counts"][kMcapPointsTopic], 18);
 
@@ -250,12 +288,7 @@ TEST_F(RecordE2e, RecordedDepthAndPointsAreTheSnapshotsThroughRosmsg2Serializati
     ASSERT_TRUE(points.is_object()) << "no points at the snapshot's stamp " << stamp_ns;
     EXPECT_EQ(text(points["logTime"]), std::to_string(stamp_ns));
     const Json& message = points["message"];
-    const Json fields = Json::parse(R"([
-        {"name": "x", "offset": 0, "datatype": 7, "count": 1},
-        {"name": "y", "offset": 4, "datatype": 7, "count": 1},
-        {"name": "z", "offset": 8, "datatype": 7, "count": 1},
-        {"name": "intensity", "offset": 12, "datatype": 7, "count": 1}])");
-    EXPECT_EQ(message["fields"], fields);
+    EXPECT_EQ(message["fields"], float32Fields({"x", "y", "z", "intensity"}));
     EXPECT_EQ(message["point_step"], 16);
     EXPECT_EQ(message["height"], 1);
     EXPECT_EQ(message["width"], cloud.size() / 4);
@@ -266,6 +299,75 @@ TEST_F(RecordE2e, RecordedDepthAndPointsAreTheSnapshotsThroughRosmsg2Serializati
     for (std::size_t i = 0; i < cloud.size(); ++i)
         differing += message["data"][i].get<float>() == cloud[i] ? 0 : 1;
     EXPECT_EQ(differing, 0u) << "of " << cloud.size() / 4 << " points";
+}
+
+// A colour recording replayed and recorded with --with points: each cloud in the bag has
+// the field `rgb` after x y z intensity, ROS's packing (0x00RRGGBB in a float32's bits),
+// read through @mcap/core and rosmsg2-serialization, and its colours are the snapshot's
+// cloud_colour for the same pair.
+TEST_F(RecordResultsE2e, ColourPairsGiveCloudsWithRosPackedRgb)
+{
+    const std::string interop = interopScripts();
+    if (interop.empty())
+        GTEST_SKIP() << "node is not installed";
+    ASSERT_FALSE(HasFailure());
+    // The source pairs in tsukuba's colours, each darker than the one before.
+    const cv::Mat left = cv::imread(kTsukuba + "/im3.png", cv::IMREAD_COLOR);
+    const cv::Mat right = cv::imread(kTsukuba + "/im4.png", cv::IMREAD_COLOR);
+    ASSERT_EQ(left.type(), CV_8UC3);
+    for (int i = 0; i < kSourcePairs; ++i) {
+        left.convertTo(source_[i].left, CV_8UC3, 1.0, -3.0 * i);
+        right.convertTo(source_[i].right, CV_8UC3, 1.0, -3.0 * i);
+    }
+    startService(true);
+
+    ProtocolClient client(socket_, 30000ms);
+    const Json snapshot =
+        client.request({{"cmd", "snapshot"},
+                        {"items", Json::array({"raw_left_colour", "cloud", "cloud_colour"})}});
+    ASSERT_EQ(snapshot["ok"], true) << snapshot.dump();
+    ASSERT_EQ(snapshot["depth_valid"], true) << snapshot.dump();
+    const Json& payloads = snapshot["payloads"];
+    ASSERT_EQ(payloads[0]["format"], "u8_rgb");
+    cv::Mat snapshot_left(kSize, CV_8UC3);
+    ASSERT_EQ(payloads[0]["bytes"], snapshot_left.total() * 3);
+    client.readPayload(snapshot_left.data, snapshot_left.total() * 3);
+    cv::cvtColor(snapshot_left, snapshot_left, cv::COLOR_RGB2BGR);
+    std::vector<float> cloud(payloads[1]["points"].get<std::size_t>() * 4);
+    client.readPayload(cloud.data(), cloud.size() * sizeof(float));
+    const std::size_t points = cloud.size() / 4;
+    ASSERT_EQ(payloads[2]["points"], points);
+    std::vector<uint8_t> colours(points * 3);
+    client.readPayload(colours.data(), colours.size());
+    ASSERT_GT(points, 1000u);
+
+    // Recorded as captured (bgr8): the pair is found by its colours.
+    const Json got =
+        recordResultsOfPair(interop, "points", dir_.file("colour.mcap"), snapshot_left);
+    ASSERT_FALSE(HasFailure());
+    const int64_t stamp_ns = got["stamp_ns"];
+    EXPECT_EQ(got["counts"][kMcapPointsTopic], 18);
+    const Json& message = got["points"]["message"];
+    ASSERT_TRUE(message.is_object()) << "no points at the snapshot's stamp " << stamp_ns;
+    EXPECT_EQ(message["fields"], float32Fields({"x", "y", "z", "intensity", "rgb"}));
+    EXPECT_EQ(message["point_step"], 20);
+    EXPECT_EQ(message["width"], points);
+    EXPECT_EQ(message["row_step"], points * 20);
+    ASSERT_EQ(message["data"].size(), points * 5);
+    ASSERT_EQ(message["rgb"].size(), points);
+    std::size_t other_points = 0, other_colours = 0, grey_colours = 0;
+    for (std::size_t i = 0; i < points; ++i) {
+        for (std::size_t k = 0; k < 4; ++k)
+            other_points += message["data"][5 * i + k].get<float>() == cloud[4 * i + k] ? 0 : 1;
+        const uint8_t* rgb = &colours[3 * i];
+        const uint32_t packed = (uint32_t{rgb[0]} << 16) | (uint32_t{rgb[1]} << 8) | rgb[2];
+        other_colours += message["rgb"][i].get<uint32_t>() == packed ? 0 : 1;
+        grey_colours += rgb[0] == rgb[1] && rgb[1] == rgb[2] ? 1 : 0;
+    }
+    EXPECT_EQ(other_points, 0u) << "of " << points << " points";
+    EXPECT_EQ(other_colours, 0u) << "of " << points << " points";
+    // Tsukuba in colour: a cloud of grey points would be a grey recording.
+    EXPECT_LT(grey_colours, points / 10);
 }
 
 } // namespace

@@ -1,6 +1,7 @@
-// The bag writer's depth and points (McapRecordingWriter::writeDepth/writePoints), read
-// back with our reader: 32FC1 with NaN where the pipeline has 0, the cloud's fields and
-// layout, the pair's sequence and stamps, and what is refused.
+// The bag writer's depth and points (McapRecordingWriter::writeDepth/writePoints/
+// writeColouredPoints), read back with our reader: 32FC1 with NaN where the pipeline has
+// 0, the cloud's fields and layout (with `rgb` for a coloured one), the pair's sequence
+// and stamps, and what is refused.
 
 #include <cmath>
 #include <cstring>
@@ -37,6 +38,18 @@ std::map<std::string, std::vector<Message>> messagesByTopic(const std::string& p
             {m.sequence, m.log_time_ns, std::string(m.data)});
     });
     return topics;
+}
+
+// The cloud's fields are `names`, one float32 each, one after the other.
+void expectFloat32Fields(const ros2::PointCloud2View& points, const std::vector<std::string>& names)
+{
+    ASSERT_EQ(points.fields.size(), names.size());
+    for (std::size_t i = 0; i < names.size(); ++i) {
+        EXPECT_EQ(points.fields[i].name, names[i]);
+        EXPECT_EQ(points.fields[i].offset, 4 * i);
+        EXPECT_EQ(points.fields[i].datatype, ros2::PointField::FLOAT32);
+        EXPECT_EQ(points.fields[i].count, 1u);
+    }
 }
 
 TEST(McapRecordingResults, DepthAndPointsBesideTheirPair)
@@ -98,17 +111,37 @@ TEST(McapRecordingResults, DepthAndPointsBesideTheirPair)
     EXPECT_EQ(points.point_step, 16u);
     EXPECT_EQ(points.row_step, 32u);
     EXPECT_TRUE(points.is_dense);
-    ASSERT_EQ(points.fields.size(), 4u);
-    const char* names[] = {"x", "y", "z", "intensity"};
-    for (uint32_t i = 0; i < 4; ++i) {
-        EXPECT_EQ(points.fields[i].name, names[i]);
-        EXPECT_EQ(points.fields[i].offset, 4 * i);
-        EXPECT_EQ(points.fields[i].datatype, ros2::PointField::FLOAT32);
-        EXPECT_EQ(points.fields[i].count, 1u);
-    }
+    expectFloat32Fields(points, {"x", "y", "z", "intensity"});
     ASSERT_EQ(points.data.size(), cloud.size() * sizeof(float));
     EXPECT_EQ(std::memcmp(points.data.data(), cloud.data(), points.data.size()), 0);
     EXPECT_EQ(ros2::parsePointCloud2(topics.at(kMcapPointsTopic)[1].data).width, 0u);
+}
+
+TEST(McapRecordingResults, ColouredPointsHaveTheRgbFieldAfterIntensity)
+{
+    test::TempDir dir;
+    const std::string path = dir.file("coloured.mcap");
+    const cv::Mat image(4, 6, CV_8UC1, cv::Scalar(10));
+    // Two points, their colours packed as ROS packs them: 0x00RRGGBB in a float's bits.
+    std::vector<float> cloud = {0.1f, -0.2f, 1.5f, 10.0f, 0.0f, 0.3f, 0.4f, 2.5f, 200.0f, 0.0f};
+    const uint32_t colours[2] = {0x00ff8001, 0x0000ff00};
+    std::memcpy(&cloud[4], &colours[0], 4);
+    std::memcpy(&cloud[9], &colours[1], 4);
+    {
+        McapRecordingWriter writer(path);
+        writer.enablePoints();
+        writer.write(image, image, 1, 2);
+        writer.writeColouredPoints(cloud.data(), 2, 1);
+        writer.close();
+    }
+    const ros2::PointCloud2View points =
+        ros2::parsePointCloud2(messagesByTopic(path).at(kMcapPointsTopic).at(0).data);
+    EXPECT_EQ(points.width, 2u);
+    EXPECT_EQ(points.point_step, 20u);
+    EXPECT_EQ(points.row_step, 40u);
+    expectFloat32Fields(points, {"x", "y", "z", "intensity", "rgb"});
+    ASSERT_EQ(points.data.size(), cloud.size() * sizeof(float));
+    EXPECT_EQ(std::memcmp(points.data.data(), cloud.data(), points.data.size()), 0);
 }
 
 TEST(McapRecordingResults, ChannelsOnlyWhenEnabledAndWrongInputRefused)
@@ -122,6 +155,8 @@ TEST(McapRecordingResults, ChannelsOnlyWhenEnabledAndWrongInputRefused)
                      mcap::McapError);
         const float point[4] = {0, 0, 1, 0};
         EXPECT_THROW(writer.writePoints(point, 1, 1), mcap::McapError);
+        const float coloured[5] = {0, 0, 1, 0, 0};
+        EXPECT_THROW(writer.writeColouredPoints(coloured, 1, 1), mcap::McapError);
         writer.close();
     }
     const auto plain = messagesByTopic(dir.file("plain.mcap"));

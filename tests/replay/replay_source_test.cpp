@@ -755,6 +755,22 @@ TEST_F(ReplaySourceTest, McapBagReplaysLikeARecording)
     bad.source.stop();
 }
 
+// The pairs (grey or BGR images) written as a CSV+PNG recording `path` and as a bag
+// `path`.mcap, with their stamps; returns the two paths.
+std::pair<std::string, std::string> writeRecordingAndBag(const std::string& path,
+                                                         const std::vector<test::TestPair>& pairs)
+{
+    const std::string bag = path + ".mcap";
+    RecordingWriter csv(path);
+    McapRecordingWriter mcap(bag);
+    for (const test::TestPair& pair : pairs) {
+        csv.write(pair.left, pair.right, pair.left_stamp_ns, pair.right_stamp_ns);
+        mcap.write(pair.left, pair.right, pair.left_stamp_ns, pair.right_stamp_ns);
+    }
+    mcap.close();
+    return {path, bag};
+}
+
 // A colour recording, as a colour camera's are recorded (a colour left PNG, a bag's bgr8
 // image): the left frame carries its colour exactly, its grey is the grey a grey replay
 // of the same file gives, and the right camera's grey stays grey; keep_colour off or a
@@ -770,18 +786,10 @@ TEST_F(ReplaySourceTest, ColourRecordingsKeepTheLeftCamerasColour)
     for (int k = 0; k < 3; ++k)
         colours.push_back(
             tsukuba(cv::Rect(12 * k, 6 * k, pairs_[0].left.cols, pairs_[0].left.rows)).clone());
-    const std::string dir = tmp_.file("colour");
-    const std::string bag = tmp_.file("colour.mcap");
-    {
-        RecordingWriter csv(dir);
-        McapRecordingWriter mcap(bag);
-        for (int k = 0; k < 3; ++k) {
-            csv.write(colours[k], pairs_[k].right, pairs_[k].left_stamp_ns,
-                      pairs_[k].right_stamp_ns);
-            mcap.write(colours[k], pairs_[k].right, pairs_[k].left_stamp_ns,
-                       pairs_[k].right_stamp_ns);
-        }
-    }
+    std::vector<test::TestPair> recorded = pairs_;
+    for (int k = 0; k < 3; ++k)
+        recorded[k].left = colours[k];
+    const auto [dir, bag] = writeRecordingAndBag(tmp_.file("colour"), recorded);
     for (const std::string& path : {dir, bag}) {
         for (const bool keep : {true, false}) {
             SCOPED_TRACE(path + (keep ? " with colour" : " grey only"));
@@ -819,6 +827,45 @@ TEST_F(ReplaySourceTest, ColourRecordingsKeepTheLeftCamerasColour)
     std::vector<StereoPair> got = popPairs(grey.ring, 2);
     ASSERT_EQ(got.size(), 2u);
     EXPECT_TRUE(got[0].left->colour.empty());
+}
+
+// keep_right_colour (source.replay.colour both): the right frames carry their colour as
+// the left ones do, their grey the grey of a grey replay; without it they stay grey.
+TEST_F(ReplaySourceTest, BothKeepsTheRightCamerasColourToo)
+{
+    const std::string tsukuba = test::sharedDataDir() + "/middlebury/tsukuba/";
+    const cv::Mat left = cv::imread(tsukuba + "im3.png", cv::IMREAD_COLOR);
+    const cv::Mat right = cv::imread(tsukuba + "im4.png", cv::IMREAD_COLOR);
+    ASSERT_FALSE(left.empty());
+    ASSERT_FALSE(right.empty());
+    std::vector<test::TestPair> recorded(2, test::TestPair{left, right, 0, 0});
+    test::stampPairs(recorded, 1'000'000'000, 40 * kMs);
+    const auto [dir, bag] = writeRecordingAndBag(tmp_.file("both"), recorded);
+    for (const std::string& path : {dir, bag}) {
+        for (const bool both : {true, false}) {
+            SCOPED_TRACE(path + (both ? " both in colour" : " left in colour"));
+            ReplayOptions options = lockstep(path);
+            options.keep_right_colour = both;
+            Rig rig(options, 4);
+            ASSERT_EQ(rig.source.start(rig.ring), 0) << rig.source.status().last_error;
+            std::vector<StereoPair> got = popPairs(rig.ring, 2);
+            ASSERT_EQ(got.size(), 2u);
+            cv::Mat grey;
+            if (path == dir)
+                grey = cv::imread(dir + "/right/000001.png", cv::IMREAD_GRAYSCALE);
+            else
+                cv::cvtColor(right, grey, cv::COLOR_BGR2GRAY);
+            const Frame& frame = *got[1].right;
+            EXPECT_TRUE(test::samePixels(frame.image, grey));
+            EXPECT_EQ(got[1].left->colour.type(), CV_8UC3);
+            if (both) {
+                ASSERT_EQ(frame.colour.type(), CV_8UC3);
+                EXPECT_EQ(cv::norm(frame.colour, right, cv::NORM_INF), 0.0);
+            } else {
+                EXPECT_TRUE(frame.colour.empty());
+            }
+        }
+    }
 }
 
 // Issue 23: Image messages that lie about their size, mid-replay, after good pairs: the

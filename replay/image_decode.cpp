@@ -1,0 +1,182 @@
+#include "replay/image_decode.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <cstdio>
+
+#include <fcntl.h>
+#include <opencv2/imgcodecs.hpp>
+#include <spdlog/details/console_globals.h>
+#include <unistd.h>
+
+#include "base/unique_fd.hpp"
+#include "replay/image_file.hpp"
+#include "replay/image_message.hpp"
+
+namespace stereod {
+
+namespace {
+
+std::string sizeText(cv::Size size)
+{
+    return std::to_string(size.width) + "x" + std::to_string(size.height);
+}
+
+// Decodes `bytes` as 8-bit grayscale into `out`, catching what the image libraries print
+// on their own (libpng's "libpng error: ...", libjpeg's "Corrupt JPEG data: ...") into
+// `printed` instead of letting it reach stderr beside the log, unlimited, once per frame.
+// fd 2 is pointed at a pipe for the call, under spdlog's console mutex, so that no log
+// line of another thread goes into the pipe meanwhile. Throws what imdecode throws.
+void decodeQuietly(const std::vector<uint8_t>& bytes, cv::Mat& out, std::string& printed,
+                   int flags = cv::IMREAD_GRAYSCALE)
+{
+    // Non-blocking on both ends: a library printing more than the pipe holds loses the
+    // rest rather than blocking this thread, which reads only after the call.
+    static const std::array<int, 2> pipe_fds = [] {
+        std::array<int, 2> fds{-1, -1};
+        if (::pipe2(fds.data(), O_CLOEXEC | O_NONBLOCK) != 0)
+            fds = {-1, -1};
+        return fds;
+    }();
+    printed.clear();
+    const cv::Mat encoded(1, static_cast<int>(bytes.size()), CV_8UC1,
+                          const_cast<uint8_t*>(bytes.data()));
+    if (pipe_fds[0] < 0) {
+        out = cv::imdecode(encoded, flags);
+        return;
+    }
+    std::lock_guard console(spdlog::details::console_mutex::mutex());
+    std::fflush(stderr);
+    const UniqueFd saved(::dup(STDERR_FILENO));
+    if (!saved || ::dup2(pipe_fds[1], STDERR_FILENO) < 0) {
+        out = cv::imdecode(encoded, flags);
+        return;
+    }
+    struct Restore {
+        const UniqueFd& saved;
+        ~Restore()
+        {
+            std::fflush(stderr);
+            ::dup2(saved.get(), STDERR_FILENO);
+        }
+    };
+    {
+        const Restore restore{saved};
+        out = cv::imdecode(encoded, flags);
+    }
+    char chunk[512];
+    for (;;) {
+        const ssize_t got = ::read(pipe_fds[0], chunk, sizeof chunk);
+        if (got <= 0)
+            break;
+        printed.append(chunk, static_cast<std::size_t>(got));
+    }
+    while (!printed.empty() && (printed.back() == '\n' || printed.back() == ' '))
+        printed.pop_back();
+    std::replace(printed.begin(), printed.end(), '\n', ';');
+}
+
+} // namespace
+
+void pngGreyFromBgr(const cv::Mat& bgr, cv::Mat& grey)
+{
+    // png_set_rgb_to_gray(png, 1, 0.299, 0.587), as OpenCV calls it: libpng keeps the
+    // weights as 15-bit integers, each truncated (0.299 * 32768 = 9797.6 -> 9797, 0.587 *
+    // 32768 = 19234.8 -> 19234, blue the rest of 32768: 13737), and truncates the sum
+    // (png_do_rgb_to_gray, 8-bit without gamma).
+    constexpr uint32_t kRed = 9797, kGreen = 19234, kBlue = 32768 - kRed - kGreen;
+    grey.create(bgr.size(), CV_8UC1);
+    for (int row = 0; row < bgr.rows; ++row) {
+        const uint8_t* in = bgr.ptr<uint8_t>(row);
+        uint8_t* to = grey.ptr<uint8_t>(row);
+        for (int col = 0; col < bgr.cols; ++col, in += 3)
+            to[col] = static_cast<uint8_t>((kBlue * in[0] + kGreen * in[1] + kRed * in[2]) >> 15);
+    }
+}
+
+bool decodeImageFile(const std::string& path, cv::Size expected, const std::string& expected_what,
+                     std::vector<uint8_t>& bytes, cv::Mat& out, std::string& reason, int& code,
+                     cv::Mat* colour)
+{
+    out.release();
+    if (colour != nullptr)
+        colour->release();
+    code = readImageFile(path, kMaxImageFileBytes, bytes, reason);
+    if (code != 0)
+        return false;
+    code = EINVAL;
+    const ImageHeader header = parseImageHeader(bytes);
+    if (!header.problem.empty()) {
+        reason = "not a readable image: " + header.problem;
+        return false;
+    }
+    if (!header.complete) {
+        reason = header.format == ImageFormat::Png
+                     ? "is cut short: a truncated PNG (no IEND chunk at its end)"
+                     : "is cut short: a truncated JPEG (no end-of-image marker)";
+        return false;
+    }
+    if (!header.size.empty()) {
+        if (!expected.empty() && header.size != expected) {
+            reason = "is " + sizeText(header.size) + ", " + expected_what + " (not decoded)";
+            return false;
+        }
+        if (expected.empty() &&
+            int64_t{header.size.width} * header.size.height > kMaxReplayPixels) {
+            reason = "declares " + sizeText(header.size) +
+                     " pixels, more than a frame may have (not decoded)";
+            return false;
+        }
+    }
+    // A colour PNG whose grey is a weighting of its RGB is decoded once, in colour, and its
+    // grey made from that exactly as libpng makes it: half the work of two decodes, the
+    // same grey (the tests compare every 8-bit colour).
+    const bool once = colour != nullptr && header.grey_from_rgb;
+    const auto fail = [&](std::string why) {
+        reason = std::move(why);
+        out.release();
+        if (colour != nullptr)
+            colour->release();
+        return false;
+    };
+    std::string printed;
+    try {
+        if (once) {
+            decodeQuietly(bytes, *colour, printed, cv::IMREAD_COLOR);
+            if (!colour->empty() && colour->type() == CV_8UC3)
+                pngGreyFromBgr(*colour, out);
+        } else {
+            decodeQuietly(bytes, out, printed);
+        }
+    } catch (const std::exception& e) { // cv::Exception, or memory that ran out
+        return fail(std::string("cannot decode: ") + e.what());
+    }
+    if (out.empty()) {
+        return fail("not a readable image (corrupt, truncated or of an unknown format)" +
+                    (printed.empty() ? std::string() : ": " + printed));
+    }
+    // libjpeg says so when it met corrupt data it filled in (grey, or the last row):
+    // such a frame is not the picture the camera took. (libpng's warnings, e.g. about a
+    // colour profile, leave the pixels alone.)
+    if (header.format == ImageFormat::Jpeg && !printed.empty())
+        return fail("corrupt: " + printed);
+    if (!expected.empty() && out.size() != expected)
+        return fail("is " + sizeText(out.size()) + ", " + expected_what);
+    // Other colour files: the colour beside the grey, decoded once more, so that the grey
+    // stays exactly the decoder's own (a JPEG's luma, which its colour cannot give back;
+    // libpng's grey with the file's gamma), as for a grey replay.
+    if (colour != nullptr && header.colour && !once) {
+        try {
+            decodeQuietly(bytes, *colour, printed, cv::IMREAD_COLOR);
+        } catch (const std::exception&) {
+            colour->release();
+        }
+        if (colour->size() != out.size() || colour->type() != CV_8UC3)
+            colour->release();
+    }
+    code = 0;
+    return true;
+}
+
+} // namespace stereod
