@@ -256,6 +256,10 @@ TEST_F(LiveViewPage, ShowsTheDistanceThenStaleWhenNothingComes)
     EXPECT_EQ(shown["connection"], "● connected to 127.0.0.1:" + std::to_string(port));
     EXPECT_EQ(shown["depth_width"], 384);
     EXPECT_GT(shown["depth_variance"].get<double>(), 100.0) << "the depth canvas is blank";
+    // The 3-D view draws the points in the left camera's colour (tsukuba's, from the
+    // points' packed rgb field), not in grey.
+    EXPECT_GT(shown["cloud"]["lit_pixels"].get<int>(), 1000) << shown["cloud"].dump();
+    EXPECT_GT(shown["cloud"]["mean_chroma"].get<double>(), 8.0) << shown["cloud"].dump();
     // The colour bar: metres from the frame's own 1st to 99th percentile (tsukuba, f*B
     // 8 px*m: 0.5 to 1.7 m or so).
     const std::string bar = shown["colourbar"];

@@ -6,7 +6,7 @@
 // between two states (stop it, say) and read the next line.
 //   node page.mjs http://127.0.0.1:8765/?token=TOKEN OUTDIR NAME [STATE...]    (default: valid)
 // With the first state a distance (valid or suspect), it also hovers the depth image and
-// reports the hover text.
+// reports the hover text. Each state's line also says what the 3-D view drew (`cloud`).
 import { mkdirSync } from "node:fs";
 import { chromium } from "playwright-core";
 
@@ -23,6 +23,26 @@ try {
   const failed = []; // requests the server answered with an error (a favicon 404, ...)
   page.on("pageerror", (e) => errors.push(String(e)));
   page.on("response", (r) => { if (r.status() >= 400) failed.push(`${r.status()} ${r.url()}`); });
+  // The 3-D view as drawn: its lit pixels (the background is black) and their mean chroma
+  // (largest minus smallest channel: 0 for grey points).
+  await page.addInitScript(() => {
+    window.cloudDrawn = () => {
+      const gl = document.getElementById("cloud").querySelector("canvas");
+      const copy = document.createElement("canvas");
+      copy.width = gl.width; copy.height = gl.height;
+      const ctx = copy.getContext("2d");
+      ctx.drawImage(gl, 0, 0);
+      const px = ctx.getImageData(0, 0, copy.width, copy.height).data;
+      let lit = 0, chroma = 0;
+      for (let i = 0; i < px.length; i += 4) {
+        const hi = Math.max(px[i], px[i + 1], px[i + 2]);
+        if (hi <= 8) continue;
+        ++lit;
+        chroma += hi - Math.min(px[i], px[i + 1], px[i + 2]);
+      }
+      return { lit_pixels: lit, mean_chroma: lit ? chroma / lit : 0 };
+    };
+  });
   await page.goto(url);
   // The status panel filled: the page is connected and reads its channels.
   await page.waitForFunction(() => document.getElementById("status").textContent.startsWith("state"),
@@ -33,6 +53,11 @@ try {
       // A depth image drawn, and its colour bar.
       await page.waitForFunction(() => document.getElementById("colourbar").dataset.labels,
                                  null, { timeout: 30000 });
+    }
+    if (state === "valid" || state === "suspect") {
+      // And a cloud drawn in the 3-D view.
+      await page.waitForFunction(() => window.cloudDrawn().lit_pixels > 0, null,
+                                 { timeout: 30000, polling: 100 });
     }
     // What the page shows is read in the same evaluation that finds it in the state: a
     // reading that ages into STALE a moment later must not be taken for the state asked.
@@ -57,7 +82,8 @@ try {
                colourbar: $("colourbar").dataset.labels ?? "",
                status: $("status").textContent, health: $("health").textContent,
                health_state: $("health").dataset.state,
-               zones: [...$("zones").children].map((li) => ({ state: li.dataset.state, text: li.textContent })) };
+               zones: [...$("zones").children].map((li) => ({ state: li.dataset.state, text: li.textContent })),
+               cloud: window.cloudDrawn() };
     }, state, { timeout: 45000, polling: 20 });
     const shown = await found.jsonValue();
     if (first && (state === "valid" || state === "suspect")) {

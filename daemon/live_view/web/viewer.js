@@ -201,13 +201,24 @@ function makeCloudView(el) {
     const view = new DataView(cloud.data.buffer, cloud.data.byteOffset, cloud.data.byteLength);
     const positions = new Float32Array(3 * n);
     const colours = new Float32Array(3 * n);
+    // Where the left camera has colour the points carry PCL's packed `rgb` (a float32
+    // whose bits are 0x00RRGGBB); otherwise their grey `intensity`.
+    const rgb = cloud.fields.find((f) => f.name === "rgb");
+    const intensity = cloud.fields.find((f) => f.name === "intensity");
     for (let i = 0; i < n; ++i) {
       const o = i * cloud.pointStep;
       positions[3 * i] = view.getFloat32(o, true);
       positions[3 * i + 1] = view.getFloat32(o + 4, true);
       positions[3 * i + 2] = view.getFloat32(o + 8, true);
-      const v = view.getFloat32(o + 12, true) / 255;
-      colours[3 * i] = v; colours[3 * i + 1] = v; colours[3 * i + 2] = v;
+      if (rgb) {
+        const packed = view.getUint32(o + rgb.offset, true);
+        colours[3 * i] = ((packed >> 16) & 0xff) / 255;
+        colours[3 * i + 1] = ((packed >> 8) & 0xff) / 255;
+        colours[3 * i + 2] = (packed & 0xff) / 255;
+      } else {
+        const v = intensity ? view.getFloat32(o + intensity.offset, true) / 255 : 1;
+        colours[3 * i] = v; colours[3 * i + 1] = v; colours[3 * i + 2] = v;
+      }
     }
     geometry.setAttribute("position", new THREE.BufferAttribute(positions, 3));
     geometry.setAttribute("color", new THREE.BufferAttribute(colours, 3));
