@@ -134,8 +134,10 @@ TEST(McapRecordingResults, ColouredPointsHaveTheRgbFieldAfterIntensity)
         writer.writeColouredPoints(cloud.data(), 2, 1);
         writer.close();
     }
+    // The view points into the message's bytes: they must outlive it.
+    const auto topics = messagesByTopic(path);
     const ros2::PointCloud2View points =
-        ros2::parsePointCloud2(messagesByTopic(path).at(kMcapPointsTopic).at(0).data);
+        ros2::parsePointCloud2(topics.at(kMcapPointsTopic).at(0).data);
     EXPECT_EQ(points.width, 2u);
     EXPECT_EQ(points.point_step, 20u);
     EXPECT_EQ(points.row_step, 40u);
