@@ -1,11 +1,15 @@
 #pragma once
-// The last N samples of a signed duration (ns) and their summary: the one meaning of
-// "recent" behind the skew figures of every source in `status` (the last N pairs, not
-// since start).
+// The last N samples, not since start: the one meaning of "recent" behind the rolling
+// figures of `status`. Two windows, one per thread contract:
 //
-// One writer thread; summary() from any thread. Each slot is an atomic, so a reader sees
-// every sample whole; a summary taken while the writer adds may mix samples of adjacent
-// moments, which a statistic of the recent past tolerates. No allocation, no lock.
+// - RollingWindow: the last N samples of a signed duration (ns) and their summary, behind
+//   the skew figures of every source. One writer thread; summary() from any thread. Each
+//   slot is an atomic, so a reader sees every sample whole; a summary taken while the
+//   writer adds may mix samples of adjacent moments, which a statistic of the recent past
+//   tolerates. No allocation, no lock.
+// - RecentValues: the last N values of any type, oldest first, for one thread only (plain
+//   slots, no atomics); with mean() and perSecond() over it. Behind the worker's stage
+//   means, rate and latency percentiles, which it copies out with its stats.
 
 #include <algorithm>
 #include <array>
@@ -14,6 +18,7 @@
 #include <cstdint>
 
 #include "base/clock.hpp"
+#include "base/percentile.hpp"
 
 namespace stereod {
 
@@ -57,11 +62,8 @@ template <std::size_t N> class RollingWindow {
         }
         out.mean_ns = sum / static_cast<double>(out.count);
         out.mean_abs_ns = abs_sum / static_cast<double>(out.count);
-        const std::size_t rank = (out.count * 99 + 99) / 100; // ceil(0.99 n), >= 1
-        const auto nth = magnitude.begin() + static_cast<std::ptrdiff_t>(rank - 1);
-        std::nth_element(magnitude.begin(), nth,
-                         magnitude.begin() + static_cast<std::ptrdiff_t>(out.count));
-        out.p99_abs_ns = *nth;
+        out.p99_abs_ns = nearestRankPercentile(
+            magnitude.begin(), magnitude.begin() + static_cast<std::ptrdiff_t>(out.count), 99);
         return out;
     }
 
@@ -69,5 +71,48 @@ template <std::size_t N> class RollingWindow {
     std::array<std::atomic<int64_t>, N> samples_{};
     std::atomic<uint64_t> added_{0};
 };
+
+// The last N values added, oldest first: the window of the worker's rolling means, rate
+// and latency percentiles.
+//
+// One thread only (add, size and [] from the same thread, no atomics): for a thread that
+// keeps its own figures and hands out copies of them, as the worker does with its stats.
+template <typename T, std::size_t N> class RecentValues {
+  public:
+    void add(T value) noexcept
+    {
+        values_[next_] = value;
+        next_ = (next_ + 1) % N;
+        count_ = count_ < N ? count_ + 1 : N;
+    }
+    std::size_t size() const noexcept { return count_; }
+    // The i-th oldest value held, i < size().
+    T operator[](std::size_t i) const noexcept { return values_[(next_ + N - count_ + i) % N]; }
+
+  private:
+    std::array<T, N> values_{};
+    std::size_t next_ = 0;
+    std::size_t count_ = 0;
+};
+
+// Mean of the values held; 0 when there are none.
+template <std::size_t N> double mean(const RecentValues<double, N>& values) noexcept
+{
+    double sum = 0.0;
+    for (std::size_t i = 0; i < values.size(); ++i)
+        sum += values[i];
+    return values.size() == 0 ? 0.0 : sum / static_cast<double>(values.size());
+}
+
+// Events per second, from the times (ns) of the events held; 0 with fewer than two.
+template <std::size_t N> double perSecond(const RecentValues<int64_t, N>& times_ns) noexcept
+{
+    if (times_ns.size() < 2)
+        return 0.0;
+    const int64_t span_ns = times_ns[times_ns.size() - 1] - times_ns[0];
+    return span_ns > 0
+               ? static_cast<double>(times_ns.size() - 1) * 1e9 / static_cast<double>(span_ns)
+               : 0.0;
+}
 
 } // namespace stereod

@@ -7,24 +7,20 @@
 // gets a coloured cloud, its `rgb` packed by ros2::xyziRgbCloud() as the ROS 2 publisher
 // packs it.
 //
-// Two threads: this one reads the stream off the socket into a bounded pool of pair
-// buffers; a writer thread encodes and writes them with RecordingWriter. When every buffer
+// Two threads: this one reads the stream off the socket (ctl/record_events.hpp) into a
+// bounded pool of pair buffers; a writer thread (ctl/record_queue.hpp) encodes and writes
+// them with RecordingWriter. When every buffer
 // is full (the disk is slower than the cameras), the pair is read past and counted as
 // dropped: the socket is always drained, so the service never holds a backlog for us
 // (and its own backlog bound protects its worker anyway).
 
-#include <atomic>
 #include <chrono>
-#include <condition_variable>
 #include <cstdio>
-#include <deque>
 #include <filesystem>
 #include <functional>
-#include <mutex>
 #include <optional>
 #include <string>
 #include <system_error>
-#include <thread>
 #include <vector>
 
 #include <fmt/format.h>
@@ -35,6 +31,8 @@
 #include "ctl/commands.hpp"
 #include "ctl/exit_codes.hpp"
 #include "ctl/payload.hpp"
+#include "ctl/record_events.hpp"
+#include "ctl/record_queue.hpp"
 #include "ctl/signal_catcher.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/calibration_formats.hpp"
@@ -49,201 +47,6 @@ namespace {
 
 using json = nlohmann::ordered_json;
 namespace fs = std::filesystem;
-
-struct PairBuffer {
-    cv::Mat left;
-    cv::Mat right;
-    // The cameras' colour as captured (CV_8UC3, BGR), empty where a camera kept none: what
-    // is recorded in its place (a colour PNG, a bgr8 image in a bag).
-    cv::Mat left_colour;
-    cv::Mat right_colour;
-    // Each camera's own capture stamps (the source's: CLOCK_MONOTONIC for cameras, the
-    // recorded ones on replay): what a CSV+PNG recording keeps, to be replayed as it was.
-    int64_t left_stamp_ns = 0;
-    int64_t right_stamp_ns = 0;
-    // The same frames in the service's one time base, CLOCK_REALTIME: what a bag carries
-    // (header.stamp and log time), as ROS does. A service older than these fields gives
-    // none: the bag then keeps the source's stamps.
-    std::optional<int64_t> left_realtime_ns;
-    std::optional<int64_t> right_realtime_ns;
-    // The pair's results (--with), when the event carried them. The buffers keep their
-    // size from pair to pair.
-    cv::Mat depth_m; // CV_32FC1 metres, 0 = none
-    bool depth_present = false;
-    std::vector<CloudPoint> cloud;
-    bool cloud_present = false; // (a cloud may have no point)
-    // One colour per cloud point when the left camera kept its colour, else none.
-    std::vector<CloudColour> cloud_colour;
-};
-
-// What --with asked for.
-struct Results {
-    bool depth = false;
-    bool points = false;
-    bool any() const noexcept { return depth || points; }
-};
-
-Results parseWith(const std::vector<std::string>& with)
-{
-    Results results;
-    for (const std::string& item : with) {
-        if (item == "depth") {
-            results.depth = true;
-        } else if (item == "points") {
-            results.points = true;
-        } else {
-            throw UsageError("--with: unknown \"" + item + "\"; accepted: depth, points");
-        }
-    }
-    return results;
-}
-
-// Pair buffers travelling between the socket reader and the writer thread: a fixed set,
-// each either free or queued for writing.
-//
-// Thread-safe: every member function may be called from either thread.
-class PairQueue {
-  public:
-    explicit PairQueue(std::size_t capacity) : buffers_(capacity)
-    {
-        for (std::size_t i = 0; i < capacity; ++i) {
-            free_.push_back(i);
-        }
-    }
-
-    // A free buffer for the reader to fill, or none when all are queued or being written.
-    std::optional<std::size_t> takeFree()
-    {
-        std::lock_guard lock(mutex_);
-        if (free_.empty()) {
-            return std::nullopt;
-        }
-        const std::size_t index = free_.back();
-        free_.pop_back();
-        return index;
-    }
-    // The reader could not fill it after all.
-    void giveBack(std::size_t index)
-    {
-        std::lock_guard lock(mutex_);
-        free_.push_back(index);
-    }
-    void push(std::size_t index)
-    {
-        {
-            std::lock_guard lock(mutex_);
-            ready_.push_back(index);
-        }
-        changed_.notify_all();
-    }
-    // The next buffer to write; none once close() was called and nothing is left.
-    std::optional<std::size_t> pop()
-    {
-        std::unique_lock lock(mutex_);
-        changed_.wait(lock, [&] { return !ready_.empty() || closed_; });
-        if (ready_.empty()) {
-            return std::nullopt;
-        }
-        const std::size_t index = ready_.front();
-        ready_.pop_front();
-        return index;
-    }
-    // The writer is done with it.
-    void release(std::size_t index) { giveBack(index); }
-    // No more pairs will come; pop() drains what is queued, then returns none.
-    void close()
-    {
-        {
-            std::lock_guard lock(mutex_);
-            closed_ = true;
-        }
-        changed_.notify_all();
-    }
-    std::size_t queued() const
-    {
-        std::lock_guard lock(mutex_);
-        return ready_.size();
-    }
-    std::size_t capacity() const noexcept { return buffers_.size(); }
-    // Owned by whoever took the index: the reader between takeFree() and push(), the
-    // writer between pop() and release().
-    PairBuffer& buffer(std::size_t index) { return buffers_[index]; }
-
-  private:
-    std::vector<PairBuffer> buffers_;
-    mutable std::mutex mutex_;
-    std::condition_variable changed_;
-    std::vector<std::size_t> free_; // guarded by mutex_
-    std::deque<std::size_t> ready_; // guarded by mutex_
-    bool closed_ = false;           // guarded by mutex_
-};
-
-// The writer thread: writes queued pairs until the queue is closed and drained, or a write
-// fails (then it stops and keeps the error; the reader sees failed()).
-//
-// Thread contract: constructed and joined by the reader thread; written() and failed()
-// from any thread.
-class PairWriter {
-  public:
-    using WriteFn = std::function<void(const PairBuffer&)>;
-
-    PairWriter(WriteFn write, PairQueue& queue) : write_(std::move(write)), queue_(queue)
-    {
-        thread_ = std::thread([this] { run(); });
-    }
-    // Closes the queue (pairs queued are still written) and waits for the thread.
-    ~PairWriter()
-    {
-        queue_.close();
-        join();
-    }
-    PairWriter(const PairWriter&) = delete;
-    PairWriter& operator=(const PairWriter&) = delete;
-
-    void join()
-    {
-        if (thread_.joinable()) {
-            thread_.join();
-        }
-    }
-    uint64_t written() const noexcept { return written_.load(std::memory_order_acquire); }
-    bool failed() const noexcept { return failed_.load(std::memory_order_acquire); }
-    // The failure, once failed() is true.
-    std::string error() const
-    {
-        std::lock_guard lock(error_mutex_);
-        return error_;
-    }
-
-  private:
-    void run()
-    {
-        while (const std::optional<std::size_t> index = queue_.pop()) {
-            if (!failed()) {
-                const PairBuffer& pair = queue_.buffer(*index);
-                try {
-                    write_(pair);
-                    written_.fetch_add(1, std::memory_order_acq_rel);
-                } catch (const std::exception& e) {
-                    {
-                        std::lock_guard lock(error_mutex_);
-                        error_ = e.what();
-                    }
-                    failed_.store(true, std::memory_order_release);
-                }
-            }
-            queue_.release(*index);
-        }
-    }
-
-    WriteFn write_;
-    PairQueue& queue_;
-    std::thread thread_;
-    std::atomic<uint64_t> written_{0};
-    std::atomic<bool> failed_{false};
-    mutable std::mutex error_mutex_;
-    std::string error_; // guarded by error_mutex_
-};
 
 // A new directory, or an existing empty one: a user's data is never overwritten.
 void checkOutputDirectory(const std::string& dir)
@@ -343,95 +146,6 @@ class Progress {
     bool terminal_;
     std::chrono::steady_clock::time_point last_{};
 };
-
-// Reads the payloads of a raw event into `pair` (its results only when `results` asks for
-// them); false (payloads read past) when the event does not carry exactly raw_left and
-// raw_right.
-bool readRawPair(ProtocolClient& client, const json& event, PairBuffer* pair,
-                 const Results& results)
-{
-    const auto payloads = event.find("payloads");
-    if (payloads == event.end() || !payloads->is_array()) {
-        throw ClientError("a raw event from " + client.socketPath() + " has no payloads list", 0);
-    }
-    bool complete = true;
-    int sides = 0;
-    if (pair != nullptr) {
-        pair->depth_present = false;
-        pair->cloud_present = false;
-        pair->cloud_colour.clear();
-        pair->left_colour.release();
-        pair->right_colour.release();
-        const auto stamp = [&event](const char* key) -> std::optional<int64_t> {
-            const auto it = event.find(key);
-            if (it == event.end() || !it->is_number_integer())
-                return std::nullopt;
-            return it->get<int64_t>();
-        };
-        pair->left_realtime_ns = stamp("left_stamp_realtime_ns");
-        pair->right_realtime_ns = stamp("right_stamp_realtime_ns");
-    }
-    for (const json& header : *payloads) {
-        const Payload payload = parsePayload(header);
-        const std::string_view name = payload.name;
-        if (pair != nullptr && results.depth && name == snapshotItemName(SnapshotItem::Depth) &&
-            payload.format == kFormatDepthM) {
-            // An uncalibrated service has no depth: 0 x 0, read as none.
-            pair->depth_present = payload.width > 0 && payload.height > 0;
-            if (pair->depth_present)
-                readImagePayload(client, payload, CV_32FC1, pair->depth_m);
-            continue;
-        }
-        if (pair != nullptr && results.points && name == snapshotItemName(SnapshotItem::Cloud)) {
-            readCloudPayload(client, payload, pair->cloud);
-            pair->cloud_present = true;
-            continue;
-        }
-        if (pair != nullptr && results.points &&
-            name == snapshotItemName(SnapshotItem::CloudColour) && payload.format == kFormatRgb) {
-            readCloudColourPayload(client, payload, pair->cloud_colour);
-            continue;
-        }
-        const bool left_colour = name == snapshotItemName(SnapshotItem::RawLeftColour);
-        const bool right_colour = name == snapshotItemName(SnapshotItem::RawRightColour);
-        if (pair != nullptr && (left_colour || right_colour) && payload.format == kFormatRgb) {
-            readColourPayload(client, payload,
-                              left_colour ? pair->left_colour : pair->right_colour);
-            continue;
-        }
-        const bool left = name == snapshotItemName(SnapshotItem::RawLeft);
-        const bool right = name == snapshotItemName(SnapshotItem::RawRight);
-        if (pair == nullptr || (!left && !right) || payload.format != kFormatGray) {
-            client.skipPayload(payload.bytes);
-            complete = complete && (left || right || left_colour || right_colour ||
-                                    name == snapshotItemName(SnapshotItem::Depth) ||
-                                    name == snapshotItemName(SnapshotItem::Cloud) ||
-                                    name == snapshotItemName(SnapshotItem::CloudColour));
-            continue;
-        }
-        readImagePayload(client, payload, CV_8UC1, left ? pair->left : pair->right);
-        (left ? pair->left_stamp_ns : pair->right_stamp_ns) = payload.stamp_ns.value_or(0);
-        ++sides;
-    }
-    return pair != nullptr && complete && sides == 2;
-}
-
-// The service's `with` results are missing from an event: a service older than them.
-void checkResultsPresent(const json& event, const Results& results, const std::string& socket)
-{
-    bool depth = false;
-    bool cloud = false;
-    for (const json& header : event.value("payloads", json::array())) {
-        const std::string name = header.value("name", std::string());
-        depth = depth || name == snapshotItemName(SnapshotItem::Depth);
-        cloud = cloud || name == snapshotItemName(SnapshotItem::Cloud);
-    }
-    if ((results.depth && !depth) || (results.points && !cloud)) {
-        throw UsageError("the service at " + socket +
-                         " sends no depth or points with its raw pairs (a stereod older than "
-                         "`subscribe` `with`); record without --with");
-    }
-}
 
 // Whether the service sends the cameras' colour with raw pairs (`with` colour): its hello
 // lists the raw colour items.

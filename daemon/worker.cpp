@@ -13,6 +13,7 @@
 #include <sys/eventfd.h>
 #include <unistd.h>
 
+#include "base/percentile.hpp"
 #include "pipeline/cv_conversions.hpp"
 #include "pipeline/depth_io.hpp"
 
@@ -341,16 +342,9 @@ void Worker::processPair(StereoPair& pair)
         const std::size_t n = latency_ms_.size();
         for (std::size_t i = 0; i < n; ++i)
             latency_sorted_[i] = latency_ms_[i];
-        const auto percentile = [&](double p) {
-            const auto nth =
-                latency_sorted_.begin() +
-                static_cast<std::ptrdiff_t>(std::floor(p * static_cast<double>(n - 1)));
-            std::nth_element(latency_sorted_.begin(), nth,
-                             latency_sorted_.begin() + static_cast<std::ptrdiff_t>(n));
-            return *nth;
-        };
-        stats_.latency_p50_ms = percentile(0.50);
-        stats_.latency_p99_ms = percentile(0.99);
+        const auto sorted_end = latency_sorted_.begin() + static_cast<std::ptrdiff_t>(n);
+        stats_.latency_p50_ms = lowerLinearPercentile(latency_sorted_.begin(), sorted_end, 50.0);
+        stats_.latency_p99_ms = lowerLinearPercentile(latency_sorted_.begin(), sorted_end, 99.0);
     }
     slot.stats = stats_;
     publisher_.publish();

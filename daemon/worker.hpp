@@ -32,6 +32,7 @@
 #include <string>
 #include <thread>
 
+#include "base/rolling_window.hpp"
 #include "base/unique_fd.hpp"
 #include "capture/frame_source.hpp"
 #include "daemon/calibration_health_monitor.hpp"
@@ -46,45 +47,6 @@ namespace stereod {
 // distance out of sight ("cannot see closer than X m with N disparities").
 void logDisparityRange(const DisparityRange& range, const MatcherSettings& settings,
                        const std::string& matcher_name);
-
-// The last N values added, oldest first: the window of the rolling statistics.
-template <typename T, std::size_t N> class RecentValues {
-  public:
-    void add(T value) noexcept
-    {
-        values_[next_] = value;
-        next_ = (next_ + 1) % N;
-        count_ = count_ < N ? count_ + 1 : N;
-    }
-    std::size_t size() const noexcept { return count_; }
-    // The i-th oldest value held, i < size().
-    T operator[](std::size_t i) const noexcept { return values_[(next_ + N - count_ + i) % N]; }
-
-  private:
-    std::array<T, N> values_{};
-    std::size_t next_ = 0;
-    std::size_t count_ = 0;
-};
-
-// Mean of the values held; 0 when there are none.
-template <std::size_t N> double mean(const RecentValues<double, N>& values) noexcept
-{
-    double sum = 0.0;
-    for (std::size_t i = 0; i < values.size(); ++i)
-        sum += values[i];
-    return values.size() == 0 ? 0.0 : sum / static_cast<double>(values.size());
-}
-
-// Events per second, from the times (ns) of the events held; 0 with fewer than two.
-template <std::size_t N> double perSecond(const RecentValues<int64_t, N>& times_ns) noexcept
-{
-    if (times_ns.size() < 2)
-        return 0.0;
-    const int64_t span_ns = times_ns[times_ns.size() - 1] - times_ns[0];
-    return span_ns > 0
-               ? static_cast<double>(times_ns.size() - 1) * 1e9 / static_cast<double>(span_ns)
-               : 0.0;
-}
 
 // Copies the pair's frames into `raw` (as captured, with each camera's own stamp) and
 // marks it present; a missing frame leaves it not present. Allocates only when the

@@ -13,6 +13,7 @@
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "base/percentile.hpp"
 #include "pipeline/calibration_formats.hpp"
 
 namespace stereod {
@@ -145,12 +146,7 @@ double percentile(std::vector<double> values, double p)
 {
     if (values.empty())
         return 0.0;
-    const size_t index = std::min(
-        values.size() - 1,
-        static_cast<size_t>(std::floor(p / 100.0 * static_cast<double>(values.size() - 1))));
-    const auto nth = values.begin() + static_cast<std::ptrdiff_t>(index);
-    std::nth_element(values.begin(), nth, values.end());
-    return *nth;
+    return lowerLinearPercentile(values.begin(), values.end(), p);
 }
 
 constexpr double kPi = 3.14159265358979323846;

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "base/percentile.hpp"
+
 namespace stereod {
 namespace {
 
@@ -63,9 +65,7 @@ cv::Rect regionPixels(const RegionOfInterest& roi, cv::Size image_size)
 
 size_t percentileIndex(double percentile, size_t count)
 {
-    const double position =
-        std::clamp(percentile, 0.0, 100.0) / 100.0 * static_cast<double>(count - 1);
-    return std::min(count - 1, static_cast<size_t>(std::floor(position)));
+    return lowerLinearIndex(percentile, count);
 }
 
 NearestObjectFinder::NearestObjectFinder(size_t max_region_pixels)
@@ -79,10 +79,7 @@ namespace {
 // The percentile of `values` (reordered in place); not empty.
 double percentileOf(std::vector<float>& values, double percentile)
 {
-    const auto nth =
-        values.begin() + static_cast<std::ptrdiff_t>(percentileIndex(percentile, values.size()));
-    std::nth_element(values.begin(), nth, values.end());
-    return static_cast<double>(*nth);
+    return static_cast<double>(lowerLinearPercentile(values.begin(), values.end(), percentile));
 }
 
 } // namespace

@@ -1,4 +1,5 @@
-// The one rolling-window statistic: the last N samples, not since start.
+// The rolling windows: the last N samples, not since start (RollingWindow read across
+// threads, RecentValues on one thread).
 #include <cstdint>
 #include <limits>
 #include <thread>
@@ -77,6 +78,47 @@ TEST(RollingWindow, ReaderOnAnotherThreadSeesWholeSamples)
         }
     }
     writer.join();
+}
+
+TEST(RecentValues, HoldsTheLastNOldestFirst)
+{
+    RecentValues<int, 3> values;
+    EXPECT_EQ(values.size(), 0u);
+    for (int v : {1, 2, 3, 4, 5})
+        values.add(v);
+    ASSERT_EQ(values.size(), 3u);
+    EXPECT_EQ(values[0], 3);
+    EXPECT_EQ(values[1], 4);
+    EXPECT_EQ(values[2], 5);
+}
+
+TEST(RecentValues, MeanIsOfTheValuesHeldOnly)
+{
+    RecentValues<double, 2> values;
+    EXPECT_DOUBLE_EQ(mean(values), 0.0);
+    values.add(100.0); // pushed out below
+    values.add(1.0);
+    values.add(3.0);
+    EXPECT_DOUBLE_EQ(mean(values), 2.0);
+}
+
+TEST(RecentValues, PerSecondCountsIntervalsOverTheSpan)
+{
+    RecentValues<int64_t, 4> times_ns;
+    times_ns.add(0);
+    EXPECT_DOUBLE_EQ(perSecond(times_ns), 0.0); // one event: no interval yet
+    for (int64_t t : {100'000'000, 200'000'000, 300'000'000, 400'000'000})
+        times_ns.add(t);
+    // The four held span 0.3 s with three intervals: 10 per second.
+    EXPECT_DOUBLE_EQ(perSecond(times_ns), 10.0);
+}
+
+TEST(RecentValues, PerSecondIsZeroWhenTimeDoesNotAdvance)
+{
+    RecentValues<int64_t, 4> times_ns;
+    times_ns.add(5);
+    times_ns.add(5);
+    EXPECT_DOUBLE_EQ(perSecond(times_ns), 0.0);
 }
 
 } // namespace
