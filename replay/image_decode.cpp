@@ -1,16 +1,10 @@
 #include "replay/image_decode.hpp"
 
-#include <algorithm>
-#include <array>
 #include <cerrno>
-#include <cstdio>
 
-#include <fcntl.h>
 #include <opencv2/imgcodecs.hpp>
-#include <spdlog/details/console_globals.h>
-#include <unistd.h>
 
-#include "base/unique_fd.hpp"
+#include "replay/image_codecs.hpp"
 #include "replay/image_file.hpp"
 #include "replay/image_message.hpp"
 
@@ -23,58 +17,27 @@ std::string sizeText(cv::Size size)
     return std::to_string(size.width) + "x" + std::to_string(size.height);
 }
 
-// Decodes `bytes` as 8-bit grayscale into `out`, catching what the image libraries print
-// on their own (libpng's "libpng error: ...", libjpeg's "Corrupt JPEG data: ...") into
-// `printed` instead of letting it reach stderr beside the log, unlimited, once per frame.
-// fd 2 is pointed at a pipe for the call, under spdlog's console mutex, so that no log
-// line of another thread goes into the pipe meanwhile. Throws what imdecode throws.
-void decodeQuietly(const std::vector<uint8_t>& bytes, cv::Mat& out, std::string& printed,
-                   int flags = cv::IMREAD_GRAYSCALE)
+// Decodes `bytes` as 8-bit grey (or BGR with IMREAD_COLOR) into `out`, with what the image
+// libraries have to say (libpng's "libpng error: ...", libjpeg's "Corrupt JPEG data: ...")
+// in `printed`: PNG and JPEG by libpng and libjpeg with handlers that collect it
+// (replay/image_codecs.hpp), other formats, and the few files those leave (CMYK, EXIF
+// orientation), by imdecode. Throws what imdecode throws.
+void decodeQuietly(const std::vector<uint8_t>& bytes, ImageFormat format, cv::Mat& out,
+                   std::string& printed, int flags = cv::IMREAD_GRAYSCALE)
 {
-    // Non-blocking on both ends: a library printing more than the pipe holds loses the
-    // rest rather than blocking this thread, which reads only after the call.
-    static const std::array<int, 2> pipe_fds = [] {
-        std::array<int, 2> fds{-1, -1};
-        if (::pipe2(fds.data(), O_CLOEXEC | O_NONBLOCK) != 0)
-            fds = {-1, -1};
-        return fds;
-    }();
+    printed.clear();
+    const bool colour = flags == cv::IMREAD_COLOR;
+    CodecResult result = CodecResult::NotCovered;
+    if (format == ImageFormat::Png)
+        result = decodePng(bytes, colour, out, printed);
+    else if (format == ImageFormat::Jpeg)
+        result = decodeJpeg(bytes, colour, out, printed);
+    if (result != CodecResult::NotCovered)
+        return;
     printed.clear();
     const cv::Mat encoded(1, static_cast<int>(bytes.size()), CV_8UC1,
                           const_cast<uint8_t*>(bytes.data()));
-    if (pipe_fds[0] < 0) {
-        out = cv::imdecode(encoded, flags);
-        return;
-    }
-    std::lock_guard console(spdlog::details::console_mutex::mutex());
-    std::fflush(stderr);
-    const UniqueFd saved(::dup(STDERR_FILENO));
-    if (!saved || ::dup2(pipe_fds[1], STDERR_FILENO) < 0) {
-        out = cv::imdecode(encoded, flags);
-        return;
-    }
-    struct Restore {
-        const UniqueFd& saved;
-        ~Restore()
-        {
-            std::fflush(stderr);
-            ::dup2(saved.get(), STDERR_FILENO);
-        }
-    };
-    {
-        const Restore restore{saved};
-        out = cv::imdecode(encoded, flags);
-    }
-    char chunk[512];
-    for (;;) {
-        const ssize_t got = ::read(pipe_fds[0], chunk, sizeof chunk);
-        if (got <= 0)
-            break;
-        printed.append(chunk, static_cast<std::size_t>(got));
-    }
-    while (!printed.empty() && (printed.back() == '\n' || printed.back() == ' '))
-        printed.pop_back();
-    std::replace(printed.begin(), printed.end(), '\n', ';');
+    out = cv::imdecode(encoded, flags);
 }
 
 } // namespace
@@ -143,11 +106,11 @@ bool decodeImageFile(const std::string& path, cv::Size expected, const std::stri
     std::string printed;
     try {
         if (once) {
-            decodeQuietly(bytes, *colour, printed, cv::IMREAD_COLOR);
+            decodeQuietly(bytes, header.format, *colour, printed, cv::IMREAD_COLOR);
             if (!colour->empty() && colour->type() == CV_8UC3)
                 pngGreyFromBgr(*colour, out);
         } else {
-            decodeQuietly(bytes, out, printed);
+            decodeQuietly(bytes, header.format, out, printed);
         }
     } catch (const std::exception& e) { // cv::Exception, or memory that ran out
         return fail(std::string("cannot decode: ") + e.what());
@@ -168,7 +131,7 @@ bool decodeImageFile(const std::string& path, cv::Size expected, const std::stri
     // libpng's grey with the file's gamma), as for a grey replay.
     if (colour != nullptr && header.colour && !once) {
         try {
-            decodeQuietly(bytes, *colour, printed, cv::IMREAD_COLOR);
+            decodeQuietly(bytes, header.format, *colour, printed, cv::IMREAD_COLOR);
         } catch (const std::exception&) {
             colour->release();
         }

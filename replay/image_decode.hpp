@@ -4,9 +4,10 @@
 // before any pixel is decoded), decoded to 8-bit grey as the matcher sees it, and on
 // request its colour beside it.
 //
-// Thread-safe: what the image libraries print (libpng's "libpng error: ...", libjpeg's
-// "Corrupt JPEG data: ...") is caught from fd 2 under spdlog's console mutex, so calls
-// from several threads take turns at that moment only.
+// Reentrant: PNG and JPEG are decoded by libpng and libjpeg with handlers that collect
+// what they have to say (libpng's "libpng error: ...", libjpeg's "Corrupt JPEG data: ...")
+// into the reason (replay/image_codecs.hpp); nothing goes to stderr and no process-wide
+// state (fd 2, a lock) is touched, so calls from several threads run side by side.
 
 #include <cstddef>
 #include <cstdint>
@@ -20,8 +21,8 @@ namespace stereod {
 // An image file larger than this is refused unread (a 1920x1080 PNG is a few MB).
 inline constexpr std::size_t kMaxImageFileBytes = 64u << 20;
 
-// Decodes the image file at `path` as 8-bit grayscale into `out` (imdecode allocates the
-// buffer), reading it into `bytes` first (a bounded read of a regular file, capacity kept)
+// Decodes the image file at `path` as 8-bit grayscale into `out` (allocated by the
+// decode), reading it into `bytes` first (a bounded read of a regular file, capacity kept)
 // and refusing it before decoding when its header says it is not `expected`
 // (`expected_what` says what that is), or, with no size expected yet, larger than
 // kMaxReplayPixels; or cut short. With `colour`, a colour file's colour goes there too

@@ -10,6 +10,7 @@ packages=(
   libopencv-dev libv4l-dev libturbojpeg0-dev libeigen3-dev libyaml-cpp-dev libspdlog-dev libsystemd-dev
   nlohmann-json3-dev libcli11-dev
   libzstd-dev zlib1g-dev   # MCAP recordings: zstd chunks, CRC-32
+  libpng-dev libjpeg62-turbo-dev   # replay: PNG and JPEG decoded by the libraries themselves (replay/image_codecs.hpp)
   libwebsocketpp-dev libasio-dev libjs-three   # the live view: Foxglove WebSocket server, the page's 3D view
   chromium   # the live view's page tested in a real browser (headless, tests/live_view/page.mjs)
   cyclonedds-dev cyclonedds-tools   # ROS 2 on DDS: Eclipse Cyclone DDS and its IDL compiler (idlc)
