@@ -49,15 +49,7 @@ void fullRangeYuyvToBgr(const cv::Mat& yuyv, cv::Mat& bgr) noexcept
 
 const char* toString(DecodeStatus status) noexcept
 {
-    switch (status) {
-    case DecodeStatus::Ok:
-        return "ok";
-    case DecodeStatus::ShortBuffer:
-        return "short buffer";
-    case DecodeStatus::Corrupt:
-        return "corrupt";
-    }
-    return "unknown";
+    return kDecodeStatuses.name(status, "unknown");
 }
 
 FrameDecoder::FrameDecoder(uint32_t fourcc, int width, int height, uint32_t bytes_per_line,

@@ -23,6 +23,8 @@
 
 #include <opencv2/core/mat.hpp>
 
+#include "base/name_table.hpp"
+
 namespace stereod {
 
 enum class DecodeStatus {
@@ -30,6 +32,13 @@ enum class DecodeStatus {
     ShortBuffer, // bytesused smaller than the format needs (wrong byte count)
     Corrupt,     // the data do not decode (truncated or damaged JPEG, wrong size)
 };
+
+inline constexpr NameTable<DecodeStatus, 3> kDecodeStatuses{{{
+    {DecodeStatus::Ok, "ok"},
+    {DecodeStatus::ShortBuffer, "short buffer"},
+    {DecodeStatus::Corrupt, "corrupt"},
+}}};
+static_assert(kDecodeStatuses.wellFormed());
 
 const char* toString(DecodeStatus status) noexcept;
 

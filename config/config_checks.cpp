@@ -12,6 +12,7 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include "base/settings_error.hpp"
 #include "base/system_error.hpp"
 #include "config/key_table.hpp"
 #include "pipeline/census_sgm_matcher.hpp"
@@ -309,13 +310,17 @@ void failAsRefused(Checker& checker, const std::string& message, const std::stri
         checker.fail(key, message.substr(colon + 2, message.rfind(", got ") - colon - 2), docs);
 }
 
-// census-sgm's own limits are the matcher's (one place): its first refusal, by key.
+// census-sgm's own limits are the matcher's (one place): its first refusal, under the
+// `matcher.` key of the field it names.
 void checkCensusSgm(Checker& checker, const MatcherSettings& matcher)
 {
     try {
         validateCensusSgm(matcher);
-    } catch (const std::invalid_argument& e) {
-        failAsRefused(checker, e.what(), "matcher.algorithm");
+    } catch (const SettingsError& e) {
+        // The checker shows the key's value itself: the matcher's ", got X" would repeat it.
+        const std::string& problem = e.problem();
+        checker.fail("matcher." + e.field(), problem.substr(0, problem.rfind(", got ")),
+                     "see docs/configuration.md");
     }
 }
 

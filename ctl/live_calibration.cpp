@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
+#include "base/name_table.hpp"
 #include "ctl/calibration_report.hpp"
 #include "ctl/client.hpp"
 #include "ctl/commands.hpp"
@@ -126,17 +127,16 @@ void preparePairsDirectory(const std::string& dir)
 
 enum class Stop { Count, Timeout, Interrupted };
 
+inline constexpr NameTable<Stop, 3> kStops{{{
+    {Stop::Count, "count"},
+    {Stop::Timeout, "timeout"},
+    {Stop::Interrupted, "interrupted"},
+}}};
+static_assert(kStops.wellFormed());
+
 const char* stopName(Stop stop)
 {
-    switch (stop) {
-    case Stop::Count:
-        return "count";
-    case Stop::Timeout:
-        return "timeout";
-    case Stop::Interrupted:
-        return "interrupted";
-    }
-    return "?";
+    return kStops.name(stop);
 }
 
 // The views of one run: the verdict on each raw pair, the accepted pairs (saved and

@@ -27,6 +27,7 @@
 #include <opencv2/core.hpp>
 #include <unistd.h>
 
+#include "base/name_table.hpp"
 #include "ctl/client.hpp"
 #include "ctl/commands.hpp"
 #include "ctl/exit_codes.hpp"
@@ -93,19 +94,17 @@ void checkOutputFile(const std::string& path)
 // Why the recording ended.
 enum class Ending { Frames, Signal, ServiceGone, WriteFailed };
 
+inline constexpr NameTable<Ending, 4> kEndings{{{
+    {Ending::Frames, "frames"},
+    {Ending::Signal, "signal"},
+    {Ending::ServiceGone, "service_gone"},
+    {Ending::WriteFailed, "write_failed"},
+}}};
+static_assert(kEndings.wellFormed());
+
 const char* endingName(Ending ending)
 {
-    switch (ending) {
-    case Ending::Frames:
-        return "frames";
-    case Ending::Signal:
-        return "signal";
-    case Ending::ServiceGone:
-        return "service_gone";
-    case Ending::WriteFailed:
-        return "write_failed";
-    }
-    return "frames";
+    return kEndings.name(ending, "frames");
 }
 
 struct Counts {

@@ -21,28 +21,33 @@ namespace stereod {
 namespace {
 
 // The calibration file's text, read once: what is parsed is what `calibration` hands out.
-// Throws std::runtime_error naming the file and the errno text.
+// Throws CalibrationError naming the file and the errno text: the file named as the
+// calibration is the user's to fix.
 std::string readCalibrationText(const std::string& path)
 {
     std::ifstream in(path, std::ios::binary);
     if (!in)
-        throw std::runtime_error(path + ": cannot open: " + errnoText(errno));
+        throw CalibrationError(path + ": cannot open: " + errnoText(errno));
     std::ostringstream text;
     text << in.rdbuf();
     if (in.bad())
-        throw std::runtime_error(path + ": cannot read: " + errnoText(errno));
+        throw CalibrationError(path + ": cannot read: " + errnoText(errno));
     return text.str();
 }
 
 // Loads the calibration at `path`: its text (for the `calibration` request) and the parsed
-// calibration. Throws StartupError(Calibration) naming the file and the problem.
+// calibration. Throws StartupError(Calibration) naming the file and the problem; any other
+// failure (memory, a library's) is not the file's and gets the general exit code.
 StereoCalibration loadCalibrationFile(const std::string& path, std::string& text)
 {
     try {
         text = readCalibrationText(path);
         return parseCalibration(text, path);
-    } catch (const std::exception& e) {
+    } catch (const CalibrationError& e) {
         throw StartupError(ExitCode::Calibration, e.what());
+    } catch (const std::exception& e) {
+        throw StartupError(ExitCode::Failure,
+                           "cannot load the calibration " + path + ": " + e.what());
     }
 }
 
@@ -162,8 +167,11 @@ std::unique_ptr<Service> launchService(const LaunchRequest& request)
                 calibrationFromCameraInfoMessages(bag_camera_info->first, bag_camera_info->second,
                                                   origin + " left", origin + " right");
             calibration_text = formatCalibration(*calibration, origin);
-        } catch (const std::exception& e) {
+        } catch (const CalibrationError& e) {
             throw StartupError(ExitCode::Calibration, e.what());
+        } catch (const std::exception& e) {
+            throw StartupError(ExitCode::Failure,
+                               "cannot take the calibration from " + origin + ": " + e.what());
         }
         spdlog::info("calibration from {}: focal {:.1f} px, baseline {:.4f} m", origin,
                      calibration->rectified.focal_px, calibration->rectified.baseline_m);

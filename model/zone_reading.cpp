@@ -4,15 +4,7 @@ namespace stereod {
 
 const char* zoneStateName(ZoneState state) noexcept
 {
-    switch (state) {
-    case ZoneState::Clear:
-        return "clear";
-    case ZoneState::Occupied:
-        return "occupied";
-    case ZoneState::Unknown:
-        return "unknown";
-    }
-    return "unknown";
+    return kZoneStates.name(state, "unknown");
 }
 
 } // namespace stereod

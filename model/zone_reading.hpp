@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <string>
 
+#include "base/name_table.hpp"
 #include "model/vec3.hpp"
 
 namespace stereod {
@@ -21,6 +22,13 @@ struct CameraPose {
 };
 
 enum class ZoneState { Clear, Occupied, Unknown };
+
+inline constexpr NameTable<ZoneState, 3> kZoneStates{{{
+    {ZoneState::Clear, "clear"},
+    {ZoneState::Occupied, "occupied"},
+    {ZoneState::Unknown, "unknown"},
+}}};
+static_assert(kZoneStates.wellFormed());
 
 // "clear", "occupied", "unknown".
 const char* zoneStateName(ZoneState state) noexcept;

@@ -6,6 +6,8 @@
 
 #include <sched.h>
 
+#include "base/settings_error.hpp"
+
 namespace stereod {
 namespace {
 
@@ -122,11 +124,10 @@ void validateCensusSgm(const MatcherSettings& settings)
     const std::string most = "census-sgm searches at most " + std::to_string(sgm::kMaxDisparities) +
                              " disparities, got ";
     if (settings.num_disparities > sgm::kMaxDisparities)
-        throw std::invalid_argument("matcher.num_disparities: " + most +
-                                    std::to_string(settings.num_disparities));
+        throw SettingsError("num_disparities", most + std::to_string(settings.num_disparities));
     if (settings.num_disparities == 0 && settings.max_num_disparities > sgm::kMaxDisparities)
-        throw std::invalid_argument("matcher.max_num_disparities: " + most +
-                                    std::to_string(settings.max_num_disparities));
+        throw SettingsError("max_num_disparities",
+                            most + std::to_string(settings.max_num_disparities));
     sgm::validatePyramidSgmSettings(pyramidSgmSettings(settings, range));
 }
 

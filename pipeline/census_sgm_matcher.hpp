@@ -23,7 +23,7 @@ sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& settings,
 sgm::PyramidSgmSettings pyramidSgmSettings(const MatcherSettings& settings,
                                            const DisparityRange& range);
 
-// Throws std::invalid_argument naming the matcher.* setting that cannot work.
+// Throws SettingsError naming the MatcherSettings field that cannot work.
 void validateCensusSgm(const MatcherSettings& settings);
 
 std::unique_ptr<Matcher> makeCensusSgmMatcher(const MatcherSettings& settings,

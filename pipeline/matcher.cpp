@@ -8,6 +8,7 @@
 
 #include <opencv2/calib3d.hpp>
 
+#include "base/settings_error.hpp"
 #include "pipeline/census_sgm_matcher.hpp"
 
 namespace stereod {
@@ -18,7 +19,7 @@ constexpr int kDisparityScale = cv::StereoMatcher::DISP_SCALE;
 
 [[noreturn]] void invalid(const std::string& key, const std::string& problem)
 {
-    throw std::invalid_argument("matcher." + key + ": " + problem);
+    throw SettingsError(key, problem);
 }
 
 void inRange(const std::string& key, int value, int lo, int hi)

@@ -66,7 +66,7 @@ class Matcher {
     virtual MatcherKind kind() const = 0;
 };
 
-// Throws std::invalid_argument naming the setting and the allowed range when the settings
+// Throws SettingsError naming the field ("block_size") and the allowed range when the settings
 // cannot work (block size even or out of range, num_disparities not a multiple of 16, ...).
 void validateMatcherSettings(const MatcherSettings& settings);
 

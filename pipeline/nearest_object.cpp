@@ -5,13 +5,14 @@
 #include <stdexcept>
 
 #include "base/percentile.hpp"
+#include "base/settings_error.hpp"
 
 namespace stereod {
 namespace {
 
 [[noreturn]] void invalid(const std::string& key, const std::string& problem)
 {
-    throw std::invalid_argument("nearest." + key + ": " + problem);
+    throw SettingsError(key, problem);
 }
 
 void fraction(const std::string& key, double value)

@@ -15,7 +15,7 @@
 
 namespace stereod {
 
-// Throws std::invalid_argument naming the setting when NearestSettings cannot work
+// Throws SettingsError naming the field ("roi") when NearestSettings cannot work
 // (region outside 0..1 or empty, min_depth_m >= max_depth_m, percentile outside 0..100,
 // ...).
 void validateNearestSettings(const NearestSettings& settings);

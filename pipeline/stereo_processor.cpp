@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 #include <spdlog/spdlog.h>
 
+#include "base/settings_error.hpp"
 #include "pipeline/cv_conversions.hpp"
 #include "pipeline/hidden_surfaces.hpp"
 #include "pipeline/matcher.hpp"
@@ -104,12 +105,19 @@ double defaultMaxOutputDepth(const RectifiedGeometry& geometry)
 DisparityRange validateProcessorSettings(const ProcessorSettings& settings,
                                          const RectifiedGeometry& geometry)
 {
-    validateMatcherSettings(settings.matcher);
-    validateNearestSettings(settings.nearest);
+    try {
+        validateMatcherSettings(settings.matcher);
+    } catch (const SettingsError& e) {
+        throw e.within("matcher");
+    }
+    try {
+        validateNearestSettings(settings.nearest);
+    } catch (const SettingsError& e) {
+        throw e.within("nearest");
+    }
     if (settings.output.max_depth_m && !(*settings.output.max_depth_m > 0.0))
-        throw std::invalid_argument(
-            "output.max_depth_m: " + std::to_string(*settings.output.max_depth_m) +
-            " m: must be auto or above 0 m");
+        throw SettingsError("output.max_depth_m", std::to_string(*settings.output.max_depth_m) +
+                                                      " m: must be auto or above 0 m");
     const DisparityRange range = chooseDisparityRange(settings.matcher, geometry);
     const cv::Size size = toCv(geometry.image_size);
     const int last_disparity = range.min_disparity + range.num_disparities - 1;
@@ -118,22 +126,23 @@ DisparityRange validateProcessorSettings(const ProcessorSettings& settings,
         const char* key = settings.matcher.num_disparities > 0 ? "matcher.num_disparities"
                           : range.capped                       ? "matcher.max_num_disparities"
                                                                : "matcher.min_depth_m";
-        throw std::invalid_argument(
-            std::string(key) + ": a disparity range up to " + std::to_string(last_disparity) +
-            " px (" + std::to_string(range.num_disparities) + " disparities from " +
-            std::to_string(range.min_disparity) + ") leaves no column to match in an image " +
-            std::to_string(size.width) + " px wide");
+        throw SettingsError(key, "a disparity range up to " + std::to_string(last_disparity) +
+                                     " px (" + std::to_string(range.num_disparities) +
+                                     " disparities from " + std::to_string(range.min_disparity) +
+                                     ") leaves no column to match in an image " +
+                                     std::to_string(size.width) + " px wide");
     }
     if (settings.matcher.block_size >= std::min(size.width, size.height))
-        throw std::invalid_argument(
-            "matcher.block_size: " + std::to_string(settings.matcher.block_size) +
-            " does not fit in a " + describeSize(size) + " image");
+        throw SettingsError("matcher.block_size", std::to_string(settings.matcher.block_size) +
+                                                      " does not fit in a " + describeSize(size) +
+                                                      " image");
     // A region that rounds to no pixel at all would read "0.0 % valid" on every frame.
     const cv::Rect region = regionPixels(settings.nearest.roi, size);
     if (region.area() == 0)
-        throw std::invalid_argument(
-            "nearest.roi: " + std::to_string(region.width) + "x" + std::to_string(region.height) +
-            " px in a " + describeSize(size) + " image: the region must hold at least one pixel");
+        throw SettingsError("nearest.roi", std::to_string(region.width) + "x" +
+                                               std::to_string(region.height) + " px in a " +
+                                               describeSize(size) +
+                                               " image: the region must hold at least one pixel");
     return range;
 }
 

@@ -82,8 +82,8 @@ DisparityRange chooseDisparityRange(const MatcherSettings& settings,
 // Checks the settings against each other and against the rectified geometry, exactly as
 // the constructor and updateSettings() do (disparity range within the image width, block
 // size within the image, a region of interest of at least one pixel); returns the
-// disparity range they give. Throws std::invalid_argument starting with the key at fault
-// ("matcher.num_disparities: ...").
+// disparity range they give. Throws SettingsError (base/settings_error.hpp) naming the field
+// of ProcessorSettings at fault ("matcher.num_disparities").
 DisparityRange validateProcessorSettings(const ProcessorSettings& settings,
                                          const RectifiedGeometry& geometry);
 

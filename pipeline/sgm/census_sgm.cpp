@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "base/settings_error.hpp"
 #include "pipeline/sgm/band_pool.hpp"
 #include "pipeline/sgm/gap_bridge.hpp"
 #include "pipeline/sgm/periodic_pattern.hpp"
@@ -27,7 +28,7 @@ constexpr int kBandWarmupRows = 32;
 
 [[noreturn]] void invalid(const std::string& key, const std::string& problem)
 {
-    throw std::invalid_argument("matcher." + key + ": " + problem);
+    throw SettingsError(key, problem);
 }
 
 int roundUp(int value, int step)

@@ -122,7 +122,7 @@ inline constexpr CensusSgmSettings kPatternSceneSettings = [] {
     return s;
 }();
 
-// Throws std::invalid_argument naming the setting when the settings cannot work. A size
+// Throws SettingsError naming the field when the settings cannot work. A size
 // of 0x0 skips the checks that need the image size.
 void validateCensusSgmSettings(const CensusSgmSettings& settings);
 

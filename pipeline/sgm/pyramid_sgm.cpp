@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "base/settings_error.hpp"
 #include "pipeline/sgm/guided_spans.hpp"
 #include "pipeline/sgm/texture.hpp"
 
@@ -83,10 +84,11 @@ void validatePyramidSgmSettings(const PyramidSgmSettings& s)
         const bool sized = s.full.width != 0 || s.full.height != 0;
         if (sized &&
             (coarse.width <= coarse.census_width / 2 || coarse.height <= coarse.census_height / 2))
-            throw std::invalid_argument(
-                "matcher.extended_range: a " + std::to_string(s.full.width) + "x" +
-                std::to_string(s.full.height) +
-                " image is too small for a half-resolution level; turn the extended range off");
+            throw SettingsError("extended_range",
+                                "a " + std::to_string(s.full.width) + "x" +
+                                    std::to_string(s.full.height) +
+                                    " image is too small for a half-resolution level; turn "
+                                    "the extended range off");
         if (sized)
             validateCensusSgmSettings(coarse);
     }

@@ -85,7 +85,7 @@ struct PyramidSgmSettings {
 // is taken as measured), speckles a quarter of the area.
 CensusSgmSettings coarseLevelSettings(const CensusSgmSettings& full);
 
-// Throws std::invalid_argument naming the setting when the settings cannot work.
+// Throws SettingsError naming the field when the settings cannot work.
 void validatePyramidSgmSettings(const PyramidSgmSettings& settings);
 
 // Bytes of working memory a matcher with these settings allocates.

@@ -311,6 +311,8 @@ INSTANTIATE_TEST_SUITE_P(
                      "census-sgm searches at most 256 disparities (got 512, expected"},
         RejectedCase{"matcher:\n  max_num_disparities: 512\n", "matcher.max_num_disparities", 2,
                      "census-sgm searches at most 256 disparities (got 512"},
+        // census-sgm's own refusal: the matcher names its field, the configuration the key.
+        RejectedCase{"matcher:\n  p2: 250\n", "matcher.p2", 2, "census cost"},
         RejectedCase{"matcher:\n  algorithm: sgbm\n  block_size: 4\n", "matcher.block_size", 3,
                      "not odd"},
         RejectedCase{"matcher:\n  algorithm: sgbm\n  block_size: 33\n", "matcher.block_size", 3,

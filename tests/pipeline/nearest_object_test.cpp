@@ -155,7 +155,7 @@ TEST(NearestObject, ValidatesSettings)
         validateNearestSettings(s);
         FAIL();
     } catch (const std::invalid_argument& e) {
-        EXPECT_EQ(std::string(e.what()), "nearest.min_pixels: must be >= 1, got 0");
+        EXPECT_EQ(std::string(e.what()), "min_pixels: must be >= 1, got 0");
     }
 }
 

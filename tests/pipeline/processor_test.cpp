@@ -10,6 +10,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "base/settings_error.hpp"
 #include "pipeline/matcher.hpp"
 #include "pipeline/stereo_processor.hpp"
 #include "tests/support/data_paths.hpp"
@@ -141,38 +142,38 @@ TEST(MatcherSettings, RejectsWhatOpenCvCannotRun)
     EXPECT_EQ(message(opencv), "");
     MatcherSettings s = opencv;
     s.block_size = 4;
-    EXPECT_EQ(message(s), "matcher.block_size: must be odd, got 4");
+    EXPECT_EQ(message(s), "block_size: must be odd, got 4");
     s = opencv;
     s.kind = MatcherKind::Bm;
     s.block_size = 3;
-    EXPECT_EQ(message(s), "matcher.block_size: must be within 5..255, got 3");
+    EXPECT_EQ(message(s), "block_size: must be within 5..255, got 3");
     s = opencv;
     s.block_size = 33;
-    EXPECT_EQ(message(s), "matcher.block_size: must be within 1..31, got 33");
+    EXPECT_EQ(message(s), "block_size: must be within 1..31, got 33");
     s = opencv;
     s.num_disparities = 20;
-    EXPECT_EQ(message(s), "matcher.num_disparities: must be 0 (derived from min_depth_m) or a "
+    EXPECT_EQ(message(s), "num_disparities: must be 0 (derived from min_depth_m) or a "
                           "positive multiple of 16, got 20");
     s = opencv;
     s.p1 = 900; // p2 defaults to 800
-    EXPECT_EQ(message(s), "matcher.p2: must be greater than p1 (800 <= 900)");
+    EXPECT_EQ(message(s), "p2: must be greater than p1 (800 <= 900)");
     s = opencv;
     s.min_depth_m = 0.0;
-    EXPECT_NE(message(s).find("matcher.min_depth_m"), std::string::npos);
+    EXPECT_EQ(message(s).rfind("min_depth_m: ", 0), 0u) << message(s);
     s = opencv;
     s.pre_filter_cap = 0;
-    EXPECT_EQ(message(s), "matcher.pre_filter_cap: must be within 1..63, got 0");
+    EXPECT_EQ(message(s), "pre_filter_cap: must be within 1..63, got 0");
 
-    // census-sgm: its own limits, named by key.
+    // census-sgm: its own limits, named by field.
     MatcherSettings census;
     census.kind = MatcherKind::CensusSgm;
     EXPECT_EQ(message(census), "");
     s = census;
     s.paths = 4;
-    EXPECT_EQ(message(s), "matcher.paths: must be 3 or 5, got 4");
+    EXPECT_EQ(message(s), "paths: must be 3 or 5, got 4");
     s = census;
     s.p2 = 250; // with a 7x5 census (34 bits) the 8-bit path costs would overflow
-    EXPECT_NE(message(s).find("matcher.p2: census cost"), std::string::npos);
+    EXPECT_EQ(message(s).rfind("p2: census cost", 0), 0u) << message(s);
     s = census;
     s.num_disparities = 512;
     s.max_num_disparities = 512;
@@ -493,6 +494,30 @@ TEST_F(Processor, CloudSkippedWhenNotWanted)
     EXPECT_TRUE(out.reading.valid);
     EXPECT_TRUE(out.cloud.empty());
     EXPECT_EQ(out.timings.cloud_ms < 1.0, true);
+}
+
+// The matcher names its own field; the processor, which holds its settings as `matcher`,
+// names it from there: "matcher.paths", the way config/ shows it to the user.
+TEST_F(Processor, NamesTheFieldOfItsOwnSettings)
+{
+    ProcessorSettings bad = settings_;
+    bad.matcher.kind = MatcherKind::CensusSgm;
+    bad.matcher.paths = 4;
+    try {
+        validateProcessorSettings(bad, calibration_.rectified);
+        FAIL() << "paths 4 accepted";
+    } catch (const SettingsError& e) {
+        EXPECT_EQ(e.field(), "matcher.paths");
+        EXPECT_EQ(std::string(e.what()), "matcher.paths: must be 3 or 5, got 4");
+    }
+    bad = settings_;
+    bad.nearest.min_pixels = 0;
+    try {
+        validateProcessorSettings(bad, calibration_.rectified);
+        FAIL() << "min_pixels 0 accepted";
+    } catch (const SettingsError& e) {
+        EXPECT_EQ(e.field(), "nearest.min_pixels");
+    }
 }
 
 TEST_F(Processor, UpdateSettingsAppliesLiveAndRejectsInvalid)
