@@ -39,6 +39,17 @@ DdsDiscovery testDomain(int offset)
 }
 
 // A 64x48 mono8 image whose pixels all hold `value`, stamped `stamp_ns` (wall clock).
+// Waits (up to 10 s) until each of the two writers has matched a reader: until then,
+// written samples are lost.
+void waitForReaders(const dds_entity_t (&writers)[2])
+{
+    const auto deadline = std::chrono::steady_clock::now() + 10s;
+    while ((DdsParticipant::matchedReaders(writers[0]) == 0 ||
+            DdsParticipant::matchedReaders(writers[1]) == 0) &&
+           std::chrono::steady_clock::now() < deadline)
+        std::this_thread::sleep_for(10ms);
+}
+
 sensor_msgs_msg_dds__Image_ monoImage(std::vector<uint8_t>& pixels, uint8_t value, int64_t stamp_ns,
                                       char* encoding, char* frame_id)
 {
@@ -73,12 +84,7 @@ TEST(Ros2Threads, SourceReadsPairsWhileStatusIsReadAndStopsUnderLoad)
                         QosProfile::SensorData),
         peer.makeWriter("rt/stereo/right/image_raw", sensor_msgs_msg_dds__Image__desc,
                         QosProfile::SensorData)};
-    // Until both readers match, written samples are lost.
-    const auto deadline = std::chrono::steady_clock::now() + 10s;
-    while ((DdsParticipant::matchedReaders(writers[0]) == 0 ||
-            DdsParticipant::matchedReaders(writers[1]) == 0) &&
-           std::chrono::steady_clock::now() < deadline)
-        std::this_thread::sleep_for(10ms);
+    waitForReaders(writers);
     ASSERT_EQ(DdsParticipant::matchedReaders(writers[0]), 1u);
 
     std::atomic<bool> done{false};
@@ -180,11 +186,7 @@ TEST(Ros2Threads, SourceTakesCameraInfoWhileTheCalibrationAndStatusAreRead)
                         QosProfile::Reliable),
         peer.makeWriter("rt/stereo/right/camera_info", sensor_msgs_msg_dds__CameraInfo__desc,
                         QosProfile::Reliable)};
-    const auto deadline = std::chrono::steady_clock::now() + 10s;
-    while ((DdsParticipant::matchedReaders(writers[0]) == 0 ||
-            DdsParticipant::matchedReaders(writers[1]) == 0) &&
-           std::chrono::steady_clock::now() < deadline)
-        std::this_thread::sleep_for(10ms);
+    waitForReaders(writers);
     ASSERT_EQ(DdsParticipant::matchedReaders(writers[1]), 1u);
 
     std::atomic<bool> done{false};
