@@ -62,40 +62,9 @@ bool decodeImageFile(const std::string& path, cv::Size expected, const std::stri
                      std::vector<uint8_t>& bytes, cv::Mat& out, std::string& reason, int& code,
                      cv::Mat* colour)
 {
-    out.release();
-    if (colour != nullptr)
-        colour->release();
-    code = readImageFile(path, kMaxImageFileBytes, bytes, reason);
-    if (code != 0)
-        return false;
-    code = EINVAL;
-    const ImageHeader header = parseImageHeader(bytes);
-    if (!header.problem.empty()) {
-        reason = "not a readable image: " + header.problem;
-        return false;
-    }
-    if (!header.complete) {
-        reason = header.format == ImageFormat::Png
-                     ? "is cut short: a truncated PNG (no IEND chunk at its end)"
-                     : "is cut short: a truncated JPEG (no end-of-image marker)";
-        return false;
-    }
-    if (!header.size.empty()) {
-        if (!expected.empty() && header.size != expected) {
-            reason = "is " + sizeText(header.size) + ", " + expected_what + " (not decoded)";
-            return false;
-        }
-        if (expected.empty() &&
-            int64_t{header.size.width} * header.size.height > kMaxReplayPixels) {
-            reason = "declares " + sizeText(header.size) +
-                     " pixels, more than a frame may have (not decoded)";
-            return false;
-        }
-    }
-    // A colour PNG whose grey is a weighting of its RGB is decoded once, in colour, and its
-    // grey made from that exactly as libpng makes it: half the work of two decodes, the
-    // same grey (the tests compare every 8-bit colour).
-    const bool once = colour != nullptr && header.grey_from_rgb;
+    // `out` and `colour` keep their buffers from one call to the next (the decoders write
+    // into them when the size and type match): a replay decodes into the same images every
+    // frame. Every failure empties both.
     const auto fail = [&](std::string why) {
         reason = std::move(why);
         out.release();
@@ -103,12 +72,40 @@ bool decodeImageFile(const std::string& path, cv::Size expected, const std::stri
             colour->release();
         return false;
     };
+    std::string why;
+    code = readImageFile(path, kMaxImageFileBytes, bytes, why);
+    if (code != 0)
+        return fail(std::move(why));
+    code = EINVAL;
+    const ImageHeader header = parseImageHeader(bytes);
+    if (!header.problem.empty())
+        return fail("not a readable image: " + header.problem);
+    if (!header.complete) {
+        return fail(header.format == ImageFormat::Png
+                        ? "is cut short: a truncated PNG (no IEND chunk at its end)"
+                        : "is cut short: a truncated JPEG (no end-of-image marker)");
+    }
+    if (!header.size.empty()) {
+        if (!expected.empty() && header.size != expected)
+            return fail("is " + sizeText(header.size) + ", " + expected_what + " (not decoded)");
+        if (expected.empty() &&
+            int64_t{header.size.width} * header.size.height > kMaxReplayPixels) {
+            return fail("declares " + sizeText(header.size) +
+                        " pixels, more than a frame may have (not decoded)");
+        }
+    }
+    // A colour PNG whose grey is a weighting of its RGB is decoded once, in colour, and its
+    // grey made from that exactly as libpng makes it: half the work of two decodes, the
+    // same grey (the tests compare every 8-bit colour).
+    const bool once = colour != nullptr && header.grey_from_rgb;
     std::string printed;
     try {
         if (once) {
             decodeQuietly(bytes, header.format, *colour, printed, cv::IMREAD_COLOR);
             if (!colour->empty() && colour->type() == CV_8UC3)
                 pngGreyFromBgr(*colour, out);
+            else
+                out.release();
         } else {
             decodeQuietly(bytes, header.format, out, printed);
         }
@@ -137,6 +134,8 @@ bool decodeImageFile(const std::string& path, cv::Size expected, const std::stri
         }
         if (colour->size() != out.size() || colour->type() != CV_8UC3)
             colour->release();
+    } else if (colour != nullptr && !once) {
+        colour->release(); // a grey file: no colour beside its grey
     }
     code = 0;
     return true;

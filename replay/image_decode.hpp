@@ -21,9 +21,10 @@ namespace stereod {
 // An image file larger than this is refused unread (a 1920x1080 PNG is a few MB).
 inline constexpr std::size_t kMaxImageFileBytes = 64u << 20;
 
-// Decodes the image file at `path` as 8-bit grayscale into `out` (allocated by the
-// decode), reading it into `bytes` first (a bounded read of a regular file, capacity kept)
-// and refusing it before decoding when its header says it is not `expected`
+// Decodes the image file at `path` as 8-bit grayscale into `out` (its buffer reused when
+// it has the image's size and type; PNG and JPEG decode into it), reading it into `bytes` first (a
+// bounded read of a regular file, capacity kept) and refusing it before decoding when its header
+// says it is not `expected`
 // (`expected_what` says what that is), or, with no size expected yet, larger than
 // kMaxReplayPixels; or cut short. With `colour`, a colour file's colour goes there too
 // (CV_8UC3 BGR; released for a grey file), and `out` is still exactly the grey decode of

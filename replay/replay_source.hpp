@@ -31,8 +31,9 @@
 //
 // Frames come from a FramePool sized from the first readable pair and allocated in the
 // constructor (a side whose first pair has colour, with a colour plane, filled with the
-// grey of a later grey image); decoding (cv::imdecode) allocates a temporary image per frame, which
-// OpenCV 4.6 cannot decode into a given buffer; nothing else is allocated per frame.
+// grey of a later grey image); PNG and JPEG decode into images kept from frame to frame
+// (libpng's row list is its one allocation per PNG; other formats go through
+// cv::imdecode, which allocates); nothing else is allocated per frame.
 //
 // Thread-safety: as FrameSource: start()/stop() from one controlling thread, status()
 // and the const getters from any thread. One replay thread delivers the pairs; on its
