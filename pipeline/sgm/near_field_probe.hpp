@@ -31,6 +31,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "pipeline/sgm/band_pool.hpp"
 #include "pipeline/sgm/census_sgm.hpp"
 
 namespace stereod::sgm {
@@ -60,15 +61,18 @@ struct NearFieldProbeSettings {
 
 class NearFieldProbe {
   public:
-    // For images of width x height pixels; allocates its scratch.
-    NearFieldProbe(int width, int height, const NearFieldProbeSettings& settings = {});
+    // For images of width x height pixels, probed by up to `threads` threads at once;
+    // allocates its scratch (one set per thread).
+    NearFieldProbe(int width, int height, const NearFieldProbeSettings& settings = {},
+                   int threads = 1);
 
     // Probes the tiles of `region` (clipped to the image) against the census images of
     // the matcher's last compute() (`census`, whose image is `left`, rows `stride` bytes
     // apart), the matcher having searched disparities first..last. Afterwards
-    // evidenceTiles() lists the tiles that are near evidence.
+    // evidenceTiles() lists the tiles that are near evidence. With a pool, rows of tiles
+    // are shared out over min(threads, its threads) bands; the result is the same.
     void run(const uint8_t* left, size_t stride, const CensusSgm& census, PixelRect region,
-             int first, int last);
+             int first, int last, BandPool* pool = nullptr);
 
     // The tiles of the last run() that are near evidence, in pixels of the probed image.
     const std::vector<PixelRect>& evidenceTiles() const { return evidence_; }
@@ -81,14 +85,27 @@ class NearFieldProbe {
         int beyond_disparity = 0;
     };
 
+    // What one thread works in.
+    struct Scratch {
+        std::vector<uint16_t> curve;
+        std::vector<int> sample_x, sample_y;
+        int probed = 0;
+    };
+    // The part of the region run() probes, and what every tile of it shares.
+    struct Grid {
+        int x_begin, y_begin, x_end, y_end, tiles_x, tiles_y, first, last, beyond_last, bits;
+    };
+
     static bool informative(const CensusRows& rows, int x, int bits);
-    bool diverse(const CensusSgm& census, int step) const;
+    bool diverse(const CensusSgm& census, const Scratch& scratch, int step) const;
+    // Judges the tiles of tile rows ty0..ty1-1 (Tile::passed), with its own scratch.
+    void probeTileRows(const uint8_t* left, size_t stride, const CensusSgm& census,
+                       const Grid& grid, int ty0, int ty1, Scratch& scratch);
 
     int width_, height_;
     NearFieldProbeSettings settings_;
-    std::vector<uint16_t> curve_;
     std::vector<Tile> tiles_; // the region's tile grid, row-major
-    std::vector<int> sample_x_, sample_y_;
+    std::vector<Scratch> scratch_;
     std::vector<PixelRect> evidence_;
     int probed_ = 0;
 };

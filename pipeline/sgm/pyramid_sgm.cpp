@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "base/settings_error.hpp"
+#include "pipeline/sgm/band_pool.hpp"
 #include "pipeline/sgm/guided_spans.hpp"
 #include "pipeline/sgm/texture.hpp"
 
@@ -28,10 +29,11 @@ int halfFloor(int value)
     return value >= 0 ? value / 2 : -((-value + 1) / 2);
 }
 
-// 2x2 means, rounded: the coarse level's image (half_width x half_height, contiguous).
-void halve(const uint8_t* image, size_t stride, int half_width, int half_height, uint8_t* half)
+// 2x2 means, rounded: rows y0..y1-1 of the coarse level's image (half_width wide,
+// contiguous).
+void halveRows(const uint8_t* image, size_t stride, int half_width, int y0, int y1, uint8_t* half)
 {
-    for (int y = 0; y < half_height; ++y) {
+    for (int y = y0; y < y1; ++y) {
         const uint8_t* a = image + static_cast<size_t>(2 * y) * stride;
         const uint8_t* b = a + stride;
         uint8_t* out = half + static_cast<size_t>(y) * static_cast<size_t>(half_width);
@@ -113,7 +115,8 @@ size_t pyramidSgmMemoryBytes(const PyramidSgmSettings& s)
 
 struct PyramidSgm::Impl {
     explicit Impl(const PyramidSgmSettings& s)
-        : settings(s), full(s.full), full_last(s.full.min_disparity + s.full.num_disparities - 1)
+        : settings(s), full(s.full), full_last(s.full.min_disparity + s.full.num_disparities - 1),
+          bands(s.full.threads), pool(s.full.threads)
     {
         extended_last = full_last;
         int probe_width = s.full.width, probe_height = s.full.height;
@@ -135,16 +138,18 @@ struct PyramidSgm::Impl {
                 guide = std::make_unique<GuidedSpans>(s.full, c);
         }
         if (s.near_field_probe)
-            probe = std::make_unique<NearFieldProbe>(probe_width, probe_height);
+            probe = std::make_unique<NearFieldProbe>(probe_width, probe_height,
+                                                     NearFieldProbeSettings{}, s.full.threads);
     }
 
-    // The coarse level's result folded into the full level's (see the header).
-    void merge(const PyramidSgmOutput& out)
+    // Rows y0..y1-1 of the coarse level's result folded into the full level's (see the
+    // header). Reads coarse_near around each row: classifyCoarseRows() must have finished
+    // every coarse row.
+    void mergeRows(int y0, int y1, const PyramidSgmOutput& out)
     {
-        const int w = settings.full.width, h = settings.full.height;
+        const int w = settings.full.width;
         const int cw = coarse->settings().width, ch = coarse->settings().height;
-        markCoarseNearSurface();
-        for (int y = 0; y < h; ++y) {
+        for (int y = y0; y < y1; ++y) {
             const int cy = std::min(y / 2, ch - 1);
             const size_t row = static_cast<size_t>(y) * static_cast<size_t>(w);
             for (int x = 0; x < w; ++x) {
@@ -188,26 +193,15 @@ struct PyramidSgm::Impl {
                 out.confidence[i] = static_cast<uint8_t>(std::max(2, coarse_confidence[c] / 2));
             }
         }
-        if (out.coarse_only_px != nullptr)
-            writeCoarseOnly(out);
     }
 
-    // PyramidSgmOutput::coarse_only_px, after the merge. Which coarse matches may be given
-    // is decided once per coarse pixel, not once for each of the four it covers.
-    void writeCoarseOnly(const PyramidSgmOutput& out)
+    // Rows y0..y1-1 of PyramidSgmOutput::coarse_only_px, after mergeRows() of the same rows.
+    void writeCoarseOnlyRows(int y0, int y1, const PyramidSgmOutput& out) const
     {
-        const int w = settings.full.width, h = settings.full.height;
+        const int w = settings.full.width;
         const CensusSgmSettings& c = coarse->settings();
         constexpr float kNone = std::numeric_limits<float>::infinity();
-        for (int cy = 0; cy < c.height; ++cy)
-            for (int cx = 0; cx < c.width; ++cx) {
-                const size_t ci = static_cast<size_t>(cy) * static_cast<size_t>(c.width) +
-                                  static_cast<size_t>(cx);
-                coarse_given[ci] = std::isfinite(coarse_disparity[ci]) && coarse_limit[ci] == 0 &&
-                                   isTextured(half_left.data(), static_cast<size_t>(c.width),
-                                              c.width, c.height, cx, cy, c.textured_min_range);
-            }
-        for (int y = 0; y < h; ++y) {
+        for (int y = y0; y < y1; ++y) {
             const int cy = std::min(y / 2, c.height - 1);
             for (int x = 0; x < w; ++x) {
                 const size_t i =
@@ -224,21 +218,26 @@ struct PyramidSgm::Impl {
         }
     }
 
-    // coarse_near: the coarse pixels that measured a surface at or beyond the near end of
-    // the full range (within kMergeMarginPx of it), on texture: a flat patch matches any
-    // flat patch, and says nothing about nearness.
-    void markCoarseNearSurface()
+    // Coarse rows y0..y1-1, once per coarse pixel rather than once for each of the four
+    // it covers, one texture test for both:
+    //  - coarse_near: a surface measured at or beyond the near end of the full range
+    //    (within kMergeMarginPx of it), on texture: a flat patch matches any flat patch,
+    //    and says nothing about nearness;
+    //  - coarse_given: a match on texture that coarse_only_px may give.
+    void classifyCoarseRows(int y0, int y1)
     {
         const CensusSgmSettings& c = coarse->settings();
         const float full_edge = static_cast<float>(full_last - kMergeMarginPx);
-        for (int y = 0; y < c.height; ++y)
+        for (int y = y0; y < y1; ++y)
             for (int x = 0; x < c.width; ++x) {
                 const size_t i =
                     static_cast<size_t>(y) * static_cast<size_t>(c.width) + static_cast<size_t>(x);
                 const float coarse_px = 2.0f * coarse_disparity[i];
-                coarse_near[i] = std::isfinite(coarse_px) && coarse_px >= full_edge &&
-                                 isTextured(half_left.data(), static_cast<size_t>(c.width), c.width,
-                                            c.height, x, y, c.textured_min_range);
+                const bool textured = std::isfinite(coarse_px) &&
+                                      isTextured(half_left.data(), static_cast<size_t>(c.width),
+                                                 c.width, c.height, x, y, c.textured_min_range);
+                coarse_near[i] = textured && coarse_px >= full_edge;
+                coarse_given[i] = textured && coarse_limit[i] == 0;
             }
     }
 
@@ -275,10 +274,10 @@ struct PyramidSgm::Impl {
                                (region.y + region.height + scale - 1) / scale - region.y / scale};
         if (at_coarse)
             probe->run(half_left.data(), static_cast<size_t>(ls.width), level, scaled,
-                       ls.min_disparity, ls.min_disparity + ls.num_disparities - 1);
+                       ls.min_disparity, ls.min_disparity + ls.num_disparities - 1, &pool);
         else
             probe->run(left, left_stride, level, scaled, ls.min_disparity,
-                       ls.min_disparity + ls.num_disparities - 1);
+                       ls.min_disparity + ls.num_disparities - 1, &pool);
         const uint8_t mark = at_coarse ? kNearerThanExtendedRange : kNearerThanRange;
         const int w = settings.full.width, h = settings.full.height;
         for (const PixelRect& tile : probe->evidenceTiles()) {
@@ -300,10 +299,13 @@ struct PyramidSgm::Impl {
     std::vector<uint8_t> half_left, half_right;
     std::vector<float> coarse_disparity;
     std::vector<uint8_t> coarse_confidence, coarse_limit;
-    std::vector<uint8_t> coarse_near;  // markCoarseNearSurface()
-    std::vector<uint8_t> coarse_given; // writeCoarseOnly()
+    std::vector<uint8_t> coarse_near, coarse_given; // classifyCoarseRows()
     std::unique_ptr<NearFieldProbe> probe;
     PyramidSgmTimings timings;
+    // The levels' own work between and after their matches (halving, merging) over the
+    // same number of threads as the matches.
+    int bands;
+    BandPool pool;
 };
 
 PyramidSgm::PyramidSgm(const PyramidSgmSettings& settings)
@@ -318,11 +320,15 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
                          size_t right_stride, PixelRect probe_region, const PyramidSgmOutput& out)
 {
     Impl& m = *impl_;
+    const int bands = m.bands;
     const Clock::time_point t0 = Clock::now();
     if (m.coarse) {
         const CensusSgmSettings& c = m.coarse->settings();
-        halve(left, left_stride, c.width, c.height, m.half_left.data());
-        halve(right, right_stride, c.width, c.height, m.half_right.data());
+        m.pool.run(bands, [&](int band) {
+            const int y0 = c.height * band / bands, y1 = c.height * (band + 1) / bands;
+            halveRows(left, left_stride, c.width, y0, y1, m.half_left.data());
+            halveRows(right, right_stride, c.width, y0, y1, m.half_right.data());
+        });
         m.coarse->compute(
             m.half_left.data(), static_cast<size_t>(c.width), m.half_right.data(),
             static_cast<size_t>(c.width),
@@ -335,8 +341,18 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
                    {out.disparity_px, out.confidence, out.near_field},
                    m.guide ? m.guide->spans() : nullptr);
     const Clock::time_point t2 = Clock::now();
-    if (m.coarse)
-        m.merge(out);
+    if (m.coarse) {
+        const int ch = m.coarse->settings().height, h = m.settings.full.height;
+        m.pool.run(bands, [&](int band) {
+            m.classifyCoarseRows(ch * band / bands, ch * (band + 1) / bands);
+        });
+        m.pool.run(bands, [&](int band) {
+            const int y0 = h * band / bands, y1 = h * (band + 1) / bands;
+            m.mergeRows(y0, y1, out);
+            if (out.coarse_only_px != nullptr)
+                m.writeCoarseOnlyRows(y0, y1, out);
+        });
+    }
     const Clock::time_point t3 = Clock::now();
     m.runProbe(left, left_stride, probe_region, out);
     m.timings = {msBetween(t1, t2), msBetween(t0, t1) + msBetween(t2, t3),
