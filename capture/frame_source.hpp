@@ -97,6 +97,14 @@ class FrameSource {
 
     // Size of the frames this source delivers (known once constructed).
     virtual cv::Size frameSize() const = 0;
+
+    // True for a source that waits for room in the ring rather than dropping (a lockstep
+    // replay, whose every pair is meant to be processed): the worker then takes the pairs
+    // oldest first. Otherwise a pair is about now: the worker takes the newest waiting and
+    // drops the older ones (counted with the ring's drops), so that a reading's age stays
+    // within one pair's processing and one frame interval while the worker is behind,
+    // rather than growing to the ring's length in frames.
+    virtual bool keepsEveryPair() const noexcept { return false; }
 };
 
 } // namespace stereod

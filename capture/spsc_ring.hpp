@@ -1,11 +1,14 @@
 #pragma once
 // Bounded lock-free ring between one producer (a frame source) and one consumer (the
 // worker). When the ring is full, push() drops the oldest item, counts the drop, and
-// destroys it on the producer's thread (for frame pairs that gives the buffers back).
+// destroys it on the producer's thread (for frame pairs that gives the buffers back). A
+// consumer that wants the freshest item rather than every item takes it with
+// popNewest(), which drops and counts the older ones on the consumer's thread.
 //
 // Contract:
 //  - exactly one producer thread calls push()/pushWait(); exactly one consumer thread
-//    calls pop()/tryPop(); stop(), counters and size() may be called from any thread;
+//    calls pop()/popNewest()/tryPop(); stop(), counters and size() may be called from any
+//    thread;
 //  - no call takes a lock; pop() and pushWait() block on atomic wait/notify (futex);
 //  - stop() wakes a blocked pop() (which then returns what is still queued, then
 //    nothing) and a blocked pushWait() (which then gives up and drops its item);
@@ -109,6 +112,22 @@ template <typename T> class SpscRing {
         }
     }
 
+    // Consumer: waits like pop(), then takes the newest item waiting; the older ones are
+    // dropped (counted in dropped()) and destroyed here. Returns nothing only once
+    // stopped and drained.
+    std::optional<T> popNewest()
+    {
+        std::optional<T> item = pop();
+        if (!item)
+            return item;
+        while (std::optional<T> newer = tryPop()) {
+            dropped_.fetch_add(1, std::memory_order_relaxed);
+            item.reset(); // the older item's resources go back before the newer is held
+            item.swap(newer);
+        }
+        return item;
+    }
+
     // Any thread. Wakes both ends; later pushes still work but pop() no longer waits.
     void stop()
     {
@@ -125,6 +144,7 @@ template <typename T> class SpscRing {
     bool stopped() const { return stopped_.load(std::memory_order_acquire); }
     std::size_t capacity() const { return capacity_; }
     uint64_t pushed() const { return pushed_.load(std::memory_order_relaxed); }
+    // Items dropped: by push() on a full ring, and by popNewest() for a newer one.
     uint64_t dropped() const { return dropped_.load(std::memory_order_relaxed); }
 
     // Any thread; exact only when neither end is moving.

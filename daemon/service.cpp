@@ -114,6 +114,7 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
         worker_->setWithholdWhenFailed(config_.calibration_health.withhold_when_failed);
     }
     worker_->updateZones(config_.zones);
+    worker_->setTakesEveryPair(source_ && source_->keepsEveryPair());
 
     budgetDescriptors();
     ServerOptions server_options;

@@ -150,7 +150,8 @@ void Worker::applyPendingSettings()
 
 void Worker::run()
 {
-    while (std::optional<StereoPair> pair = ring_.pop()) {
+    const auto next = [this] { return takes_every_pair_ ? ring_.pop() : ring_.popNewest(); };
+    while (std::optional<StereoPair> pair = next()) {
         // Once stopped, the pairs still queued are given back unprocessed: nobody waits
         // for their results, and the stop must not wait for them either.
         if (ring_.stopped())

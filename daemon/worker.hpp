@@ -79,6 +79,10 @@ class Worker {
     {
         withhold_when_failed_.store(withhold, std::memory_order_relaxed);
     }
+    // Whether the worker takes the newest pair waiting (dropping the older ones, counted
+    // with the ring's drops) or every pair oldest first: FrameSource::keepsEveryPair().
+    // Newest first unless told. Call before start().
+    void setTakesEveryPair(bool every) noexcept { takes_every_pair_ = every; }
 
     // Hands over the camera pose and keep-out zones; the worker applies them before its
     // next pair (zones whose name stays keep their hysteresis). Validated by the caller
@@ -127,6 +131,7 @@ class Worker {
     StereoProcessor* processor_; // null: uncalibrated
     CalibrationHealthMonitor* health_ = nullptr;
     std::atomic<bool> withhold_when_failed_{false};
+    bool takes_every_pair_ = false; // set before start(), read by the thread
     std::thread thread_;
     const double max_skew_ms_; // source.max_skew_ms, which needs a restart to change
     std::atomic<ProcessorSettings*> pending_settings_{nullptr}; // owned; see updateSettings()

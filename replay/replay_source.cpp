@@ -553,6 +553,11 @@ void ReplaySource::run() noexcept
     }
 }
 
+bool ReplaySource::keepsEveryPair() const noexcept
+{
+    return options_.pacing == ReplayPacing::Lockstep;
+}
+
 SourceStatus ReplaySource::status() const
 {
     SourceStatus out;

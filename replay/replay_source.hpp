@@ -116,6 +116,7 @@ class ReplaySource final : public FrameSource {
 
     // Size of the first readable pair; empty when nothing is readable.
     cv::Size frameSize() const override { return frame_size_; }
+    bool keepsEveryPair() const noexcept override;
 
     // The recording's calibration.yaml, or empty when it has none (the service uses it
     // when no calibration is given).

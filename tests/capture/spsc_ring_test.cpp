@@ -13,6 +13,17 @@
 namespace stereod {
 namespace {
 
+// Pushes `count` frames of the pool, numbered 0.. in their sequence.
+void pushFrames(FramePool& pool, SpscRing<FrameHandle>& ring, uint64_t count)
+{
+    for (uint64_t seq = 0; seq < count; ++seq) {
+        FrameHandle frame = pool.acquire();
+        ASSERT_TRUE(frame);
+        frame->sequence = seq;
+        ring.push(std::move(frame));
+    }
+}
+
 TEST(SpscRing, CapacityIsRoundedUpToAPowerOfTwoOfAtLeastTwo)
 {
     EXPECT_EQ(SpscRing<int>(0).capacity(), 2u);
@@ -84,12 +95,7 @@ TEST(SpscRing, DroppedFrameGoesBackToItsPool)
 {
     FramePool pool(4, cv::Size(8, 4));
     SpscRing<FrameHandle> ring(2);
-    for (uint64_t seq = 0; seq < 3; ++seq) {
-        FrameHandle frame = pool.acquire();
-        ASSERT_TRUE(frame);
-        frame->sequence = seq;
-        ring.push(std::move(frame));
-    }
+    pushFrames(pool, ring, 3);
     // Three pushed into two slots: the first was destroyed by the push that dropped it.
     EXPECT_EQ(ring.dropped(), 1u);
     EXPECT_EQ(pool.inUse(), 2u);
@@ -104,6 +110,26 @@ TEST(SpscRing, DroppedFrameGoesBackToItsPool)
     EXPECT_EQ((*second)->sequence, 2u);
     second.reset();
     EXPECT_EQ(pool.inUse(), 0u);
+}
+
+TEST(SpscRing, PopNewestTakesTheNewestAndDropsTheOlderOnesBackToTheirPool)
+{
+    FramePool pool(4, cv::Size(8, 4));
+    SpscRing<FrameHandle> ring(4);
+    pushFrames(pool, ring, 3);
+    std::optional<FrameHandle> newest = ring.popNewest();
+    ASSERT_TRUE(newest.has_value());
+    EXPECT_EQ((*newest)->sequence, 2u);
+    EXPECT_EQ(ring.dropped(), 2u);
+    EXPECT_EQ(ring.size(), 0u);
+    EXPECT_EQ(pool.inUse(), 1u) << "the two older frames went back to the pool";
+
+    // One waiting: nothing dropped. Stopped and empty: nothing, without waiting.
+    ring.push(pool.acquire());
+    EXPECT_TRUE(ring.popNewest().has_value());
+    EXPECT_EQ(ring.dropped(), 2u);
+    ring.stop();
+    EXPECT_FALSE(ring.popNewest().has_value());
 }
 
 TEST(SpscRing, DestroyingTheRingReleasesWhatItHolds)

@@ -41,6 +41,8 @@ class FakeSource final : public FrameSource {
     void stop() noexcept override;
     SourceStatus status() const override;
     cv::Size frameSize() const override { return size_; }
+    // It waits for room (pushWait()): every pair it delivers is processed.
+    bool keepsEveryPair() const noexcept override { return true; }
 
     // Delivers `pairs` more pairs, as fast as the ring takes them.
     void deliver(uint64_t pairs);
