@@ -50,9 +50,9 @@ Taken takeWaitingPairs(bool every_pair)
     worker.start();
     const uint64_t expected = every_pair ? kWaiting : 1;
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-    while ((publisher.publishedCount() < expected || ring.size() > 0 ||
-            worker.busySinceNs() != 0) &&
-           std::chrono::steady_clock::now() < deadline)
+    while (
+        (publisher.publishedCount() < expected || ring.size() > 0 || worker.busySinceNs() != 0) &&
+        std::chrono::steady_clock::now() < deadline)
         std::this_thread::sleep_for(std::chrono::milliseconds(1));
     Taken taken;
     taken.published = publisher.publishedCount();

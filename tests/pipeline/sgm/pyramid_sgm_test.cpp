@@ -271,19 +271,24 @@ TEST(PyramidSgmTest, ThreadsGiveWhatOneThreadGives)
     EXPECT_EQ(differ, 0u);
 }
 
+// The full level's match of the pair, for the probe to read its census images.
+void matchFullLevel(const SyntheticPair& pair, CensusSgm& core)
+{
+    const size_t area = pair.left.size();
+    std::vector<float> d(area);
+    std::vector<uint8_t> c(area), r(area);
+    core.compute(pair.left.data(), kWidth, pair.right.data(), kWidth,
+                 {d.data(), c.data(), r.data()});
+}
+
 // The probe alone, on the full level's census: a textured surface beyond the range marks
 // the tiles on it and nothing else; a scene within the range marks none.
 TEST(NearFieldProbeTest, MarksTheTilesOfASurfaceBeyondTheRangeOnly)
 {
     for (const int disparity : {20, 90}) {
         const SyntheticPair pair = sceneWith(disparity);
-        CensusSgmSettings s = settingsFor(false).full;
-        CensusSgm core(s);
-        const size_t area = pair.left.size();
-        std::vector<float> d(area);
-        std::vector<uint8_t> c(area), r(area);
-        core.compute(pair.left.data(), kWidth, pair.right.data(), kWidth,
-                     {d.data(), c.data(), r.data()});
+        CensusSgm core(settingsFor(false).full);
+        matchFullLevel(pair, core);
         NearFieldProbe probe(kWidth, kHeight);
         probe.run(pair.left.data(), kWidth, core, kWholeImage, 0, kNumDisparities - 1);
         EXPECT_GT(probe.probedTiles(), 100);
@@ -308,11 +313,7 @@ TEST(NearFieldProbeTest, ThreadsFindWhatOneThreadFinds)
 {
     const SyntheticPair pair = sceneWith(90);
     CensusSgm core(settingsFor(false).full);
-    const size_t area = pair.left.size();
-    std::vector<float> d(area);
-    std::vector<uint8_t> c(area), r(area);
-    core.compute(pair.left.data(), kWidth, pair.right.data(), kWidth,
-                 {d.data(), c.data(), r.data()});
+    matchFullLevel(pair, core);
     NearFieldProbe alone(kWidth, kHeight);
     alone.run(pair.left.data(), kWidth, core, kWholeImage, 0, kNumDisparities - 1);
     ASSERT_FALSE(alone.evidenceTiles().empty());
