@@ -1,6 +1,8 @@
 #include "replay/mcap_records.hpp"
 
+#include <concepts>
 #include <limits>
+#include <type_traits>
 
 #include <zlib.h>
 #include <zstd.h>
@@ -144,183 +146,208 @@ std::map<uint16_t, uint64_t> ByteReader::u16u64Map()
     return map;
 }
 
+namespace {
+
+// Each record's fields in file order, as the specification lists them: the one description
+// that the serializer (FieldWriter, record const) and the parser (FieldReader, every read
+// bounds-checked by ByteReader) both follow, so the two cannot drift apart. A field's C++
+// type is its width on disk: FieldReader takes it by reference, so a mismatch does not compile.
+template <typename T, typename Record>
+concept RecordOf = std::same_as<std::remove_const_t<T>, Record>;
+
+template <RecordOf<Header> R, typename V> void fields(R& h, V& v)
+{
+    v.str(h.profile);
+    v.str(h.library);
+}
+
+template <RecordOf<Schema> R, typename V> void fields(R& s, V& v)
+{
+    v.u16(s.id);
+    v.str(s.name);
+    v.str(s.encoding);
+    v.str(s.data);
+}
+
+template <RecordOf<Channel> R, typename V> void fields(R& c, V& v)
+{
+    v.u16(c.id);
+    v.u16(c.schema_id);
+    v.str(c.topic);
+    v.str(c.message_encoding);
+    v.stringMap(c.metadata);
+}
+
+template <RecordOf<MessageView> R, typename V> void fields(R& m, V& v)
+{
+    v.u16(m.channel_id);
+    v.u32(m.sequence);
+    v.u64(m.log_time_ns);
+    v.u64(m.publish_time_ns);
+    v.rest(m.data);
+}
+
+template <RecordOf<ChunkView> R, typename V> void fields(R& c, V& v)
+{
+    v.u64(c.message_start_time);
+    v.u64(c.message_end_time);
+    v.u64(c.uncompressed_size);
+    v.u32(c.uncompressed_crc);
+    v.str(c.compression);
+    v.u64Bytes(c.records);
+}
+
+template <RecordOf<ChunkIndex> R, typename V> void fields(R& c, V& v)
+{
+    v.u64(c.message_start_time);
+    v.u64(c.message_end_time);
+    v.u64(c.chunk_start_offset);
+    v.u64(c.chunk_length);
+    v.u16u64Map(c.message_index_offsets);
+    v.u64(c.message_index_length);
+    v.str(c.compression);
+    v.u64(c.compressed_size);
+    v.u64(c.uncompressed_size);
+}
+
+template <RecordOf<Statistics> R, typename V> void fields(R& s, V& v)
+{
+    v.u64(s.message_count);
+    v.u16(s.schema_count);
+    v.u32(s.channel_count);
+    v.u32(s.attachment_count);
+    v.u32(s.metadata_count);
+    v.u32(s.chunk_count);
+    v.u64(s.message_start_time);
+    v.u64(s.message_end_time);
+    v.u16u64Map(s.channel_message_counts);
+}
+
+template <RecordOf<Footer> R, typename V> void fields(R& f, V& v)
+{
+    v.u64(f.summary_start);
+    v.u64(f.summary_offset_start);
+    v.u32(f.summary_crc);
+}
+
+struct FieldWriter {
+    ByteWriter& w;
+    void u16(uint16_t v) { w.u16(v); }
+    void u32(uint32_t v) { w.u32(v); }
+    void u64(uint64_t v) { w.u64(v); }
+    void str(std::string_view v) { w.str(v); }
+    void stringMap(const std::map<std::string, std::string>& v) { w.stringMap(v); }
+    void u16u64Map(const std::map<uint16_t, uint64_t>& v) { w.u16u64Map(v); }
+    // The record's last field, running to its end (a Message's data).
+    void rest(std::string_view v) { w.bytes(v); }
+    // uint64 length + bytes (a Chunk's records).
+    void u64Bytes(std::string_view v)
+    {
+        w.u64(v.size());
+        w.bytes(v);
+    }
+};
+
+struct FieldReader {
+    ByteReader& r;
+    void u16(uint16_t& v) { v = r.u16(); }
+    void u32(uint32_t& v) { v = r.u32(); }
+    void u64(uint64_t& v) { v = r.u64(); }
+    void str(std::string& v) { v = r.str(); }
+    void stringMap(std::map<std::string, std::string>& v) { v = r.stringMap(); }
+    void u16u64Map(std::map<uint16_t, uint64_t>& v) { v = r.u16u64Map(); }
+    void rest(std::string_view& v) { v = r.rest(); }
+    void u64Bytes(std::string_view& v)
+    {
+        const uint64_t size = r.u64();
+        v = r.bytes(size);
+    }
+};
+
+template <typename Record> void writeRecord(ByteWriter& w, Op op, const Record& record)
+{
+    const auto at = w.beginRecord(op);
+    FieldWriter writer{w};
+    fields(record, writer);
+    w.endRecord(at);
+}
+
+// `name` is the record's in the parser's error messages.
+template <typename Record> Record parseRecord(std::string_view content, const char* name)
+{
+    ByteReader r(content, name);
+    FieldReader reader{r};
+    Record record;
+    fields(record, reader);
+    return record;
+}
+
+} // namespace
+
 void writeHeader(ByteWriter& w, const Header& h)
 {
-    const auto at = w.beginRecord(Op::Header);
-    w.str(h.profile);
-    w.str(h.library);
-    w.endRecord(at);
+    writeRecord(w, Op::Header, h);
 }
-
 void writeSchema(ByteWriter& w, const Schema& s)
 {
-    const auto at = w.beginRecord(Op::Schema);
-    w.u16(s.id);
-    w.str(s.name);
-    w.str(s.encoding);
-    w.str(s.data);
-    w.endRecord(at);
+    writeRecord(w, Op::Schema, s);
 }
-
 void writeChannel(ByteWriter& w, const Channel& c)
 {
-    const auto at = w.beginRecord(Op::Channel);
-    w.u16(c.id);
-    w.u16(c.schema_id);
-    w.str(c.topic);
-    w.str(c.message_encoding);
-    w.stringMap(c.metadata);
-    w.endRecord(at);
+    writeRecord(w, Op::Channel, c);
 }
-
 void writeMessage(ByteWriter& w, const MessageView& m)
 {
-    const auto at = w.beginRecord(Op::Message);
-    w.u16(m.channel_id);
-    w.u32(m.sequence);
-    w.u64(m.log_time_ns);
-    w.u64(m.publish_time_ns);
-    w.bytes(m.data);
-    w.endRecord(at);
+    writeRecord(w, Op::Message, m);
 }
-
+void writeChunk(ByteWriter& w, const ChunkView& c)
+{
+    writeRecord(w, Op::Chunk, c);
+}
 void writeChunkIndex(ByteWriter& w, const ChunkIndex& c)
 {
-    const auto at = w.beginRecord(Op::ChunkIndex);
-    w.u64(c.message_start_time);
-    w.u64(c.message_end_time);
-    w.u64(c.chunk_start_offset);
-    w.u64(c.chunk_length);
-    w.u16u64Map(c.message_index_offsets);
-    w.u64(c.message_index_length);
-    w.str(c.compression);
-    w.u64(c.compressed_size);
-    w.u64(c.uncompressed_size);
-    w.endRecord(at);
+    writeRecord(w, Op::ChunkIndex, c);
 }
-
 void writeStatistics(ByteWriter& w, const Statistics& s)
 {
-    const auto at = w.beginRecord(Op::Statistics);
-    w.u64(s.message_count);
-    w.u16(s.schema_count);
-    w.u32(s.channel_count);
-    w.u32(s.attachment_count);
-    w.u32(s.metadata_count);
-    w.u32(s.chunk_count);
-    w.u64(s.message_start_time);
-    w.u64(s.message_end_time);
-    w.u16u64Map(s.channel_message_counts);
-    w.endRecord(at);
+    writeRecord(w, Op::Statistics, s);
 }
-
 void writeFooter(ByteWriter& w, const Footer& f)
 {
-    const auto at = w.beginRecord(Op::Footer);
-    w.u64(f.summary_start);
-    w.u64(f.summary_offset_start);
-    w.u32(f.summary_crc);
-    w.endRecord(at);
+    writeRecord(w, Op::Footer, f);
 }
 
 Header parseHeader(std::string_view content)
 {
-    ByteReader r(content, "Header");
-    Header h;
-    h.profile = r.str();
-    h.library = r.str();
-    return h;
+    return parseRecord<Header>(content, "Header");
 }
-
 Schema parseSchema(std::string_view content)
 {
-    ByteReader r(content, "Schema");
-    Schema s;
-    s.id = r.u16();
-    s.name = r.str();
-    s.encoding = r.str();
-    s.data = r.str();
-    return s;
+    return parseRecord<Schema>(content, "Schema");
 }
-
 Channel parseChannel(std::string_view content)
 {
-    ByteReader r(content, "Channel");
-    Channel c;
-    c.id = r.u16();
-    c.schema_id = r.u16();
-    c.topic = r.str();
-    c.message_encoding = r.str();
-    c.metadata = r.stringMap();
-    return c;
+    return parseRecord<Channel>(content, "Channel");
 }
-
 MessageView parseMessage(std::string_view content)
 {
-    ByteReader r(content, "Message");
-    MessageView m;
-    m.channel_id = r.u16();
-    m.sequence = r.u32();
-    m.log_time_ns = r.u64();
-    m.publish_time_ns = r.u64();
-    m.data = r.rest();
-    return m;
+    return parseRecord<MessageView>(content, "Message");
 }
-
-ChunkIndex parseChunkIndex(std::string_view content)
-{
-    ByteReader r(content, "ChunkIndex");
-    ChunkIndex c;
-    c.message_start_time = r.u64();
-    c.message_end_time = r.u64();
-    c.chunk_start_offset = r.u64();
-    c.chunk_length = r.u64();
-    c.message_index_offsets = r.u16u64Map();
-    c.message_index_length = r.u64();
-    c.compression = r.str();
-    c.compressed_size = r.u64();
-    c.uncompressed_size = r.u64();
-    return c;
-}
-
-Statistics parseStatistics(std::string_view content)
-{
-    ByteReader r(content, "Statistics");
-    Statistics s;
-    s.message_count = r.u64();
-    s.schema_count = r.u16();
-    s.channel_count = r.u32();
-    s.attachment_count = r.u32();
-    s.metadata_count = r.u32();
-    s.chunk_count = r.u32();
-    s.message_start_time = r.u64();
-    s.message_end_time = r.u64();
-    s.channel_message_counts = r.u16u64Map();
-    return s;
-}
-
-Footer parseFooter(std::string_view content)
-{
-    ByteReader r(content, "Footer");
-    Footer f;
-    f.summary_start = r.u64();
-    f.summary_offset_start = r.u64();
-    f.summary_crc = r.u32();
-    return f;
-}
-
 ChunkView parseChunk(std::string_view content)
 {
-    ByteReader r(content, "Chunk");
-    ChunkView c;
-    c.message_start_time = r.u64();
-    c.message_end_time = r.u64();
-    c.uncompressed_size = r.u64();
-    c.uncompressed_crc = r.u32();
-    c.compression = r.str();
-    const uint64_t size = r.u64();
-    c.records = r.bytes(size);
-    return c;
+    return parseRecord<ChunkView>(content, "Chunk");
+}
+ChunkIndex parseChunkIndex(std::string_view content)
+{
+    return parseRecord<ChunkIndex>(content, "ChunkIndex");
+}
+Statistics parseStatistics(std::string_view content)
+{
+    return parseRecord<Statistics>(content, "Statistics");
+}
+Footer parseFooter(std::string_view content)
+{
+    return parseRecord<Footer>(content, "Footer");
 }
 
 namespace {

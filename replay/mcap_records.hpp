@@ -103,6 +103,16 @@ struct MessageView {
     std::string_view data;
 };
 
+// A Chunk record, with `records` compressed (as stored); the buffer is someone else's.
+struct ChunkView {
+    uint64_t message_start_time = 0;
+    uint64_t message_end_time = 0;
+    uint64_t uncompressed_size = 0;
+    uint32_t uncompressed_crc = 0; // 0: not available
+    std::string compression;
+    std::string_view records;
+};
+
 struct ChunkIndex {
     uint64_t message_start_time = 0;
     uint64_t message_end_time = 0;
@@ -194,11 +204,13 @@ class ByteReader {
     const char* what_;
 };
 
-// Record serializers: each appends one whole record (opcode, length, content).
+// Record serializers: each appends one whole record (opcode, length, content). The
+// serializers and the parsers below follow one field list per record (mcap_records.cpp).
 void writeHeader(ByteWriter& w, const Header& h);
 void writeSchema(ByteWriter& w, const Schema& s);
 void writeChannel(ByteWriter& w, const Channel& c);
 void writeMessage(ByteWriter& w, const MessageView& m);
+void writeChunk(ByteWriter& w, const ChunkView& c);
 void writeChunkIndex(ByteWriter& w, const ChunkIndex& c);
 void writeStatistics(ByteWriter& w, const Statistics& s);
 void writeFooter(ByteWriter& w, const Footer& f);
@@ -209,20 +221,10 @@ Header parseHeader(std::string_view content);
 Schema parseSchema(std::string_view content);
 Channel parseChannel(std::string_view content);
 MessageView parseMessage(std::string_view content);
+ChunkView parseChunk(std::string_view content);
 ChunkIndex parseChunkIndex(std::string_view content);
 Statistics parseStatistics(std::string_view content);
 Footer parseFooter(std::string_view content);
-
-// A Chunk record's content, with `records` still compressed.
-struct ChunkView {
-    uint64_t message_start_time = 0;
-    uint64_t message_end_time = 0;
-    uint64_t uncompressed_size = 0;
-    uint32_t uncompressed_crc = 0; // 0: not available
-    std::string compression;
-    std::string_view records;
-};
-ChunkView parseChunk(std::string_view content);
 
 // The records of a chunk, uncompressed (zstd or none) and CRC-checked when the chunk
 // carries a CRC. Throws McapError for an unknown compression, a size or CRC mismatch, a

@@ -167,15 +167,9 @@ void Writer::flushChunk()
 
     out_.clear();
     ByteWriter w(out_);
-    const auto at = w.beginRecord(Op::Chunk);
-    w.u64(chunk_start_time_);
-    w.u64(chunk_end_time_);
-    w.u64(chunk_records_.size());
-    w.u32(crc32(0, chunk_records_.data(), chunk_records_.size()));
-    w.str(index.compression);
-    w.u64(stored.size());
-    w.bytes(stored);
-    w.endRecord(at);
+    writeChunk(w, ChunkView{chunk_start_time_, chunk_end_time_, chunk_records_.size(),
+                            crc32(0, chunk_records_.data(), chunk_records_.size()),
+                            index.compression, stored});
     index.chunk_length = out_.size();
 
     // One Message Index per channel of the chunk, in channel order.

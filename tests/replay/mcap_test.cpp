@@ -118,6 +118,98 @@ TEST(McapRecords, RecordsRoundTrip)
     EXPECT_THROW(parseChannel(std::string_view(buf).substr(kRecordPrefixSize, 12)), McapError);
 }
 
+// Little-endian bytes of `v`, `n` wide: the expected layouts below are spelled out by hand
+// from the specification's tables, not by the code under test.
+std::string le(uint64_t v, int n)
+{
+    std::string s;
+    for (int i = 0; i < n; ++i) {
+        s.push_back(static_cast<char>((v >> (8 * i)) & 0xFF));
+    }
+    return s;
+}
+
+TEST(McapRecords, ChunkIsLaidOutAsTheSpecificationSays)
+{
+    std::string buf;
+    ByteWriter w(buf);
+    writeChunk(w, ChunkView{10, 20, 3, 0xAABBCCDDu, "zstd", "xyz"});
+    const std::string content =
+        le(10, 8) + le(20, 8) + le(3, 8) + le(0xAABBCCDD, 4) + le(4, 4) + "zstd" + le(3, 8) + "xyz";
+    EXPECT_EQ(buf, std::string(1, '\x06') + le(content.size(), 8) + content);
+
+    const ChunkView back = parseChunk(content);
+    EXPECT_EQ(back.message_start_time, 10u);
+    EXPECT_EQ(back.message_end_time, 20u);
+    EXPECT_EQ(back.uncompressed_size, 3u);
+    EXPECT_EQ(back.uncompressed_crc, 0xAABBCCDDu);
+    EXPECT_EQ(back.compression, "zstd");
+    EXPECT_EQ(back.records, "xyz");
+    // Every cut, including one inside the records the length field promises, is refused.
+    for (std::size_t n = 0; n < content.size(); ++n) {
+        EXPECT_THROW(parseChunk(std::string_view(content).substr(0, n)), McapError) << n;
+    }
+}
+
+TEST(McapRecords, SummaryRecordsRoundTripAndRefuseEveryCut)
+{
+    ChunkIndex index;
+    index.message_start_time = 1;
+    index.message_end_time = 2;
+    index.chunk_start_offset = 3;
+    index.chunk_length = 4;
+    index.message_index_offsets = {{1, 5}, {2, 6}};
+    index.message_index_length = 7;
+    index.compression = "zstd";
+    index.compressed_size = 8;
+    index.uncompressed_size = 9;
+    Statistics stats;
+    stats.message_count = 11;
+    stats.schema_count = 12;
+    stats.channel_count = 13;
+    stats.attachment_count = 14;
+    stats.metadata_count = 15;
+    stats.chunk_count = 16;
+    stats.message_start_time = 17;
+    stats.message_end_time = 18;
+    stats.channel_message_counts = {{1, 19}};
+
+    std::string buf;
+    ByteWriter w(buf);
+    writeChunkIndex(w, index);
+    const std::size_t stats_at = buf.size();
+    writeStatistics(w, stats);
+    ASSERT_EQ(static_cast<Op>(buf[0]), Op::ChunkIndex);
+    ASSERT_EQ(static_cast<Op>(buf[stats_at]), Op::Statistics);
+    const std::string_view index_content =
+        std::string_view(buf).substr(kRecordPrefixSize, stats_at - kRecordPrefixSize);
+    const std::string_view stats_content =
+        std::string_view(buf).substr(stats_at + kRecordPrefixSize);
+    // 8 * 4 + (4 + 2 * 10) + 8 + (4 + 4) + 8 * 2, and 8 + 2 + 4 * 4 + 8 * 2 + (4 + 10).
+    EXPECT_EQ(index_content.size(), 88u);
+    EXPECT_EQ(stats_content.size(), 56u);
+
+    const ChunkIndex index_back = parseChunkIndex(index_content);
+    EXPECT_EQ(index_back.chunk_start_offset, 3u);
+    EXPECT_EQ(index_back.message_index_offsets, index.message_index_offsets);
+    EXPECT_EQ(index_back.message_index_length, 7u);
+    EXPECT_EQ(index_back.compression, "zstd");
+    EXPECT_EQ(index_back.uncompressed_size, 9u);
+    const Statistics stats_back = parseStatistics(stats_content);
+    EXPECT_EQ(stats_back.message_count, 11u);
+    EXPECT_EQ(stats_back.schema_count, 12u);
+    EXPECT_EQ(stats_back.chunk_count, 16u);
+    EXPECT_EQ(stats_back.message_end_time, 18u);
+    EXPECT_EQ(stats_back.channel_message_counts, stats.channel_message_counts);
+
+    for (std::size_t n = 0; n < index_content.size(); ++n) {
+        EXPECT_THROW(parseChunkIndex(index_content.substr(0, n)), McapError) << n;
+    }
+    for (std::size_t n = 0; n < stats_content.size(); ++n) {
+        EXPECT_THROW(parseStatistics(stats_content.substr(0, n)), McapError) << n;
+    }
+}
+
 TEST(McapFile, WrittenFileStartsAndEndsWithMagic)
 {
     test::TempDir dir;
