@@ -44,6 +44,7 @@
 #include "pipeline/calibration.hpp"
 #include "pipeline/census_sgm_matcher.hpp"
 #include "pipeline/cv_conversions.hpp"
+#include "pipeline/matcher_defaults.hpp"
 #include "pipeline/nearest_object.hpp"
 #include "pipeline/sgm/census_sgm.hpp"
 #include "pipeline/stereo_processor.hpp"
@@ -148,7 +149,8 @@ ProcessorSettings settingsFor(const Case& c, const MatcherChoice& m)
 {
     ProcessorSettings settings;
     settings.matcher = matcherDefaults(m.kind, m.sgbm_mode, m.tuning);
-    settings.matcher.num_disparities = c.num_disparities;
+    if (c.num_disparities > 0)
+        settings.matcher.num_disparities = c.num_disparities;
     settings.matcher.guided_search = m.guided;
     settings.compute_cloud = true;
     return settings;
@@ -355,32 +357,30 @@ void benchPipeline(benchmark::State& state, const Case& c, const MatcherChoice& 
 }
 
 // cv::StereoBM / cv::StereoSGBM with the parameters the pipeline's settings give them.
-cv::Ptr<cv::StereoMatcher> makeOpenCvMatcher(const MatcherSettings& s, const DisparityRange& range)
+cv::Ptr<cv::StereoMatcher> makeOpenCvMatcher(const MatcherSettings& settings,
+                                             const DisparityRange& range)
 {
-    const int channels = 1; // grayscale input
+    const MatcherSettings s = effectiveMatcherSettings(settings);
     if (s.kind == MatcherKind::Bm) {
         cv::Ptr<cv::StereoBM> bm = cv::StereoBM::create(range.num_disparities, s.block_size);
         bm->setMinDisparity(range.min_disparity);
-        bm->setUniquenessRatio(s.uniqueness_ratio);
-        bm->setSpeckleWindowSize(s.speckle_window_px);
+        bm->setUniquenessRatio(*s.uniqueness_ratio);
+        bm->setSpeckleWindowSize(*s.speckle_window_px);
         // StereoBM applies the speckle range to its fixed-point output as is (SGBM scales
         // it by 16 itself), so the same range in pixels is 16 x speckle_range_px here.
-        bm->setSpeckleRange(s.speckle_range_px * cv::StereoMatcher::DISP_SCALE);
-        bm->setDisp12MaxDiff(s.lr_max_diff_px);
+        bm->setSpeckleRange(*s.speckle_range_px * cv::StereoMatcher::DISP_SCALE);
+        bm->setDisp12MaxDiff(*s.lr_max_diff_px);
         bm->setPreFilterCap(s.pre_filter_cap);
         bm->setTextureThreshold(s.texture_threshold);
         return bm;
     }
-    const int area = channels * s.block_size * s.block_size;
-    const int p1 = s.p1 > 0 ? s.p1 : 8 * area;
-    const int p2 = s.p2 > 0 ? s.p2 : 32 * area;
     // OpenCV's mode for each SgbmMode, in the enum's order (Sgbm, ThreeWay, Hh, Hh4).
     constexpr int kModes[] = {cv::StereoSGBM::MODE_SGBM, cv::StereoSGBM::MODE_SGBM_3WAY,
                               cv::StereoSGBM::MODE_HH, cv::StereoSGBM::MODE_HH4};
     const int mode = kModes[static_cast<int>(s.sgbm_mode)];
-    return cv::StereoSGBM::create(range.min_disparity, range.num_disparities, s.block_size, p1, p2,
-                                  s.lr_max_diff_px, s.pre_filter_cap, s.uniqueness_ratio,
-                                  s.speckle_window_px, s.speckle_range_px, mode);
+    return cv::StereoSGBM::create(range.min_disparity, range.num_disparities, s.block_size, *s.p1,
+                                  *s.p2, *s.lr_max_diff_px, s.pre_filter_cap, *s.uniqueness_ratio,
+                                  *s.speckle_window_px, *s.speckle_range_px, mode);
 }
 
 // census-sgm's core as the pipeline runs it for this case (the range is fixed by
@@ -391,7 +391,7 @@ sgm::PyramidSgmSettings censusAloneSettings(const Case& c, const MatcherChoice& 
     const MatcherSettings settings = settingsFor(c, m).matcher;
     DisparityRange range;
     range.min_disparity = settings.min_disparity;
-    range.num_disparities = settings.num_disparities;
+    range.num_disparities = settings.num_disparities.value_or(0);
     sgm::PyramidSgmSettings core = pyramidSgmSettings(settings, range);
     core.full.width = c.size.width;
     core.full.height = c.size.height;

@@ -16,6 +16,7 @@
 #include "base/system_error.hpp"
 #include "config/key_table.hpp"
 #include "pipeline/census_sgm_matcher.hpp"
+#include "pipeline/matcher_defaults.hpp"
 #include "pipeline/zones.hpp"
 #include "ros2/topic_names.hpp"
 
@@ -338,21 +339,23 @@ void checkMatcher(Checker& checker, const MatcherSettings& matcher)
         checker.integer("matcher.max_num_disparities", matcher.max_num_disparities, 16,
                         kMaxDisparities);
     }
-    if (matcher.num_disparities != 0) {
-        if (matcher.num_disparities % 16 != 0) {
+    if (matcher.num_disparities) {
+        if (*matcher.num_disparities % 16 != 0) {
             checker.fail("matcher.num_disparities", "not a multiple of 16", "auto or " + steps);
-        } else if (matcher.num_disparities < 16 || matcher.num_disparities > kMaxDisparities) {
+        } else if (*matcher.num_disparities < 16 || *matcher.num_disparities > kMaxDisparities) {
             checker.fail("matcher.num_disparities", "out of range", "auto or " + steps);
         }
     }
     checker.integer("matcher.min_disparity", matcher.min_disparity, -kMaxDisparities,
                     kMaxDisparities, " px");
 
-    checker.integer("matcher.uniqueness_ratio", matcher.uniqueness_ratio, 0, 100, " percent");
-    checker.integer("matcher.speckle_window_px", matcher.speckle_window_px, 0, 1000000, " px");
-    checker.integer("matcher.speckle_range_px", matcher.speckle_range_px, 0, kMaxDisparities,
+    // The shared settings, with the chosen matcher's values where the file leaves them.
+    const MatcherSettings effective = effectiveMatcherSettings(matcher);
+    checker.integer("matcher.uniqueness_ratio", *effective.uniqueness_ratio, 0, 100, " percent");
+    checker.integer("matcher.speckle_window_px", *effective.speckle_window_px, 0, 1000000, " px");
+    checker.integer("matcher.speckle_range_px", *effective.speckle_range_px, 0, kMaxDisparities,
                     " px");
-    if (matcher.lr_max_diff_px < -1 || matcher.lr_max_diff_px > kMaxDisparities) {
+    if (*effective.lr_max_diff_px < -1 || *effective.lr_max_diff_px > kMaxDisparities) {
         checker.fail("matcher.lr_max_diff_px", "out of range",
                      "-1 (off) or 0 to " + std::to_string(kMaxDisparities) + " px");
     }
@@ -380,22 +383,21 @@ void checkMatcher(Checker& checker, const MatcherSettings& matcher)
 
     // SGBM keeps its path costs in 16 bits, so penalties stay below 32768.
     constexpr int kMaxPenalty = 32767;
-    if (matcher.p1 != 0) {
-        checker.integer("matcher.p1", matcher.p1, 1, kMaxPenalty);
+    if (matcher.p1) {
+        checker.integer("matcher.p1", *matcher.p1, 1, kMaxPenalty);
     }
-    if (matcher.p2 != 0) {
-        checker.integer("matcher.p2", matcher.p2, 1, kMaxPenalty);
+    if (matcher.p2) {
+        checker.integer("matcher.p2", *matcher.p2, 1, kMaxPenalty);
     }
     if (!bm && checker.usable({"matcher.p1", "matcher.p2", "matcher.block_size"})) {
         // The automatic penalties, for one (grayscale) channel: 8*bs^2 and 32*bs^2.
-        const int area = matcher.block_size * matcher.block_size;
-        const int p1 = matcher.p1 != 0 ? matcher.p1 : 8 * area;
-        const int p2 = matcher.p2 != 0 ? matcher.p2 : 32 * area;
+        const int p1 = *effective.p1;
+        const int p2 = *effective.p2;
         if (p2 <= p1) {
-            if (matcher.p2 != 0) {
+            if (matcher.p2) {
                 checker.fail("matcher.p2", "not above matcher.p1",
                              "> " + std::to_string(p1) +
-                                 (matcher.p1 != 0 ? "" : ", the automatic p1 of 8*block_size^2"));
+                                 (matcher.p1 ? "" : ", the automatic p1 of 8*block_size^2"));
             } else {
                 checker.fail("matcher.p1", "not below the automatic p2",
                              "< " + std::to_string(p2) + " (32*block_size^2), or set matcher.p2");

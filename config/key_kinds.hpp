@@ -97,29 +97,40 @@ template <class Access> KeyDef integerKey(std::string path, bool live, Access ac
     return def;
 }
 
-// "auto" (stored as 0) or a positive integer.
+// "auto" (std::nullopt: the matcher decides, effectiveMatcherSettings) or an integer of at
+// least `least` (the rest of its range is checked by validation); with `off`, also "off",
+// stored as 0, the matcher's value for the feature turned off.
 template <class Access>
-KeyDef autoIntegerKey(std::string path, bool live, Access access, std::string expected)
+KeyDef autoIntegerKey(std::string path, bool live, Access access, std::string expected,
+                      int least = 1, bool off = false)
 {
     KeyDef def{std::move(path), live, {}, {}};
-    def.read = [access, expected](const YAML::Node& node, ServiceConfig& config,
-                                  const ReadContext&) -> ReadResult {
+    def.read = [access, expected, least, off](const YAML::Node& node, ServiceConfig& config,
+                                              const ReadContext&) -> ReadResult {
         if (node.IsScalar() && node.Scalar() == "auto") {
+            access(config) = std::nullopt;
+            return std::nullopt;
+        }
+        if (off && node.IsScalar() && node.Scalar() == "off") {
             access(config) = 0;
             return std::nullopt;
         }
         const auto value = node.IsScalar() ? parseInteger(node.Scalar()) : std::nullopt;
         if (!value) {
-            return ReadFailure{"not auto or an integer", expected};
+            return ReadFailure{off ? "not auto, off or an integer" : "not auto or an integer",
+                               expected};
         }
-        if (*value < 1 || *value > std::numeric_limits<int>::max()) {
+        if (*value < least || *value > std::numeric_limits<int>::max()) {
             return ReadFailure{"out of range", expected};
         }
         access(config) = static_cast<int>(*value);
         return std::nullopt;
     };
-    def.show = [access](const ServiceConfig& config) {
-        return access(config) == 0 ? std::string("auto") : std::to_string(access(config));
+    def.show = [access, off](const ServiceConfig& config) {
+        const std::optional<int>& value = access(config);
+        if (!value)
+            return std::string("auto");
+        return off && *value == 0 ? std::string("off") : std::to_string(*value);
     };
     return def;
 }

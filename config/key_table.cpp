@@ -239,18 +239,22 @@ std::vector<KeyDef> buildKeyTable()
     add(integerKey(
         "matcher.block_size", kLive,
         [](auto& c) -> auto& { return c.processing.matcher.block_size; }));
-    add(integerKey(
+    add(autoIntegerKey(
         "matcher.uniqueness_ratio", kLive,
-        [](auto& c) -> auto& { return c.processing.matcher.uniqueness_ratio; }));
-    add(integerKey(
+        [](auto& c) -> auto& { return c.processing.matcher.uniqueness_ratio; },
+        "auto or a percentage from 0 to 100", 0));
+    add(autoIntegerKey(
         "matcher.speckle_window_px", kLive,
-        [](auto& c) -> auto& { return c.processing.matcher.speckle_window_px; }));
-    add(integerKey(
+        [](auto& c) -> auto& { return c.processing.matcher.speckle_window_px; },
+        "auto or pixels, 0 disables", 0));
+    add(autoIntegerKey(
         "matcher.speckle_range_px", kLive,
-        [](auto& c) -> auto& { return c.processing.matcher.speckle_range_px; }));
-    add(integerKey(
+        [](auto& c) -> auto& { return c.processing.matcher.speckle_range_px; }, "auto or pixels",
+        0));
+    add(autoIntegerKey(
         "matcher.lr_max_diff_px", kLive,
-        [](auto& c) -> auto& { return c.processing.matcher.lr_max_diff_px; }));
+        [](auto& c) -> auto& { return c.processing.matcher.lr_max_diff_px; },
+        "auto, -1 (off) or pixels", -1));
     add(autoIntegerKey(
         "matcher.p1", kLive, [](auto& c) -> auto& { return c.processing.matcher.p1; },
         "auto or an integer from 1 to 32767"));
@@ -277,7 +281,7 @@ std::vector<KeyDef> buildKeyTable()
     add(autoIntegerKey(
         "matcher.p2_gradient_scale", kLive,
         [](auto& c) -> auto& { return c.processing.matcher.p2_gradient_scale; },
-        "auto or grey levels"));
+        "auto, off or grey levels", 1, true));
     add(choiceKey(
         "matcher.tuning", kLive, [](auto& c) -> auto& { return c.processing.matcher.tuning; },
         kMatcherTunings));

@@ -151,22 +151,6 @@ ServiceConfig parseDocument(const std::string& text, const std::string& origin,
         problems.push_back(Problem{0, "", message + ": " + error.msg});
         throw ConfigError(inLineOrder(std::move(problems)));
     }
-    // The settings every matcher shares take the chosen matcher's own values where the
-    // file does not set them.
-    {
-        MatcherSettings tuned = config.processing.matcher;
-        applyMatcherDefaults(tuned);
-        MatcherSettings& m = config.processing.matcher;
-        const auto unset = [&](const char* key) { return locations.lines.count(key) == 0; };
-        if (unset("matcher.uniqueness_ratio"))
-            m.uniqueness_ratio = tuned.uniqueness_ratio;
-        if (unset("matcher.lr_max_diff_px"))
-            m.lr_max_diff_px = tuned.lr_max_diff_px;
-        if (unset("matcher.speckle_window_px"))
-            m.speckle_window_px = tuned.speckle_window_px;
-        if (unset("matcher.speckle_range_px"))
-            m.speckle_range_px = tuned.speckle_range_px;
-    }
     overrideKeys(config, overrides, locations);
     auto value_problems = checkValues(config, locations);
     problems.insert(problems.end(), std::make_move_iterator(value_problems.begin()),

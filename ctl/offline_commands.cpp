@@ -135,11 +135,15 @@ ProcessorSettings depthSettings(const DepthOptions& options)
     // Switched from census-sgm to OpenCV's or back here, or to another tuning: the new
     // matcher's (tuning's) own values for the settings they share.
     if ((configured == MatcherKind::CensusSgm) != (matcher.kind == MatcherKind::CensusSgm) ||
-        configured_tuning != matcher.tuning)
-        applyMatcherDefaults(matcher);
+        configured_tuning != matcher.tuning) {
+        matcher.uniqueness_ratio.reset();
+        matcher.speckle_window_px.reset();
+        matcher.speckle_range_px.reset();
+        matcher.lr_max_diff_px.reset();
+    }
     if (options.min_depth_m) {
         matcher.min_depth_m = *options.min_depth_m;
-        matcher.num_disparities = 0; // derived from the closest depth
+        matcher.num_disparities.reset(); // derived from the closest depth
     }
     if (options.max_disparity) {
         constexpr int kStep = 16; // the matchers search multiples of 16 disparities

@@ -7,6 +7,7 @@
 #include <sched.h>
 
 #include "base/settings_error.hpp"
+#include "pipeline/matcher_defaults.hpp"
 
 namespace stereod {
 namespace {
@@ -77,30 +78,28 @@ int availableCores()
     return 1;
 }
 
-sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& s, const DisparityRange& range)
+sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& settings,
+                                         const DisparityRange& range)
 {
+    // The tuning also sets core fields the configuration does not reach (gap filling,
+    // textured cost, periodic patterns); every setting it does reach is set by now.
+    const MatcherSettings s = effectiveMatcherSettings(settings);
     sgm::CensusSgmSettings c = censusSgmTuning(s.tuning);
     c.width = 0;
     c.height = 0;
     c.min_disparity = range.min_disparity;
     c.num_disparities = range.num_disparities;
-    if (s.census_width != 0)
-        c.census_width = s.census_width;
-    if (s.census_height != 0)
-        c.census_height = s.census_height;
-    if (s.paths != 0)
-        c.paths = s.paths;
-    if (s.p1 != 0)
-        c.p1 = s.p1;
-    if (s.p2 != 0)
-        c.p2 = s.p2;
-    if (s.p2_gradient_scale > 0)
-        c.p2_gradient_scale = s.p2_gradient_scale;
-    c.uniqueness_percent = s.uniqueness_ratio;
-    c.lr_max_diff_px = s.lr_max_diff_px;
-    c.speckle_window_px = s.speckle_window_px;
-    c.speckle_range_px = s.speckle_range_px;
-    c.threads = s.threads > 0 ? s.threads : std::min(availableCores(), 8);
+    c.census_width = *s.census_width;
+    c.census_height = *s.census_height;
+    c.paths = *s.paths;
+    c.p1 = *s.p1;
+    c.p2 = *s.p2;
+    c.p2_gradient_scale = *s.p2_gradient_scale;
+    c.uniqueness_percent = *s.uniqueness_ratio;
+    c.lr_max_diff_px = *s.lr_max_diff_px;
+    c.speckle_window_px = *s.speckle_window_px;
+    c.speckle_range_px = *s.speckle_range_px;
+    c.threads = *s.threads;
     return c;
 }
 
@@ -120,12 +119,12 @@ void validateCensusSgm(const MatcherSettings& settings)
     DisparityRange range;
     range.min_disparity = settings.min_disparity;
     // The range comes from the calibration later; any valid count checks the rest.
-    range.num_disparities = settings.num_disparities > 0 ? settings.num_disparities : 16;
+    range.num_disparities = settings.num_disparities.value_or(16);
     const std::string most = "census-sgm searches at most " + std::to_string(sgm::kMaxDisparities) +
                              " disparities, got ";
     if (settings.num_disparities > sgm::kMaxDisparities)
-        throw SettingsError("num_disparities", most + std::to_string(settings.num_disparities));
-    if (settings.num_disparities == 0 && settings.max_num_disparities > sgm::kMaxDisparities)
+        throw SettingsError("num_disparities", most + std::to_string(*settings.num_disparities));
+    if (!settings.num_disparities && settings.max_num_disparities > sgm::kMaxDisparities)
         throw SettingsError("max_num_disparities",
                             most + std::to_string(settings.max_num_disparities));
     sgm::validatePyramidSgmSettings(pyramidSgmSettings(settings, range));

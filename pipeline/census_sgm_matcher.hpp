@@ -13,8 +13,7 @@
 namespace stereod {
 
 // The core's settings for these matcher settings and range (image size left 0x0):
-// automatic values (0) replaced by the tuned defaults, threads 0 by the cores this
-// process may run on.
+// the settings that are unset take their effective values (effectiveMatcherSettings).
 sgm::CensusSgmSettings censusSgmSettings(const MatcherSettings& settings,
                                          const DisparityRange& range);
 

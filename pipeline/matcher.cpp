@@ -10,6 +10,7 @@
 
 #include "base/settings_error.hpp"
 #include "pipeline/census_sgm_matcher.hpp"
+#include "pipeline/matcher_defaults.hpp"
 
 namespace stereod {
 namespace {
@@ -42,18 +43,6 @@ int sgbmModeFlag(SgbmMode mode)
         return cv::StereoSGBM::MODE_HH4;
     }
     return cv::StereoSGBM::MODE_SGBM;
-}
-
-// SGBM's smoothness penalties: OpenCV's recommended 8 and 32 * channels * block area when
-// left at 0.
-int effectiveP1(const MatcherSettings& s)
-{
-    return s.p1 > 0 ? s.p1 : 8 * s.block_size * s.block_size;
-}
-
-int effectiveP2(const MatcherSettings& s)
-{
-    return s.p2 > 0 ? s.p2 : 32 * s.block_size * s.block_size;
 }
 
 // OpenCV's matchers say nothing about how sure they are: every reported pixel gets 255.
@@ -94,14 +83,15 @@ class FixedPointMatcher : public Matcher {
   protected:
     virtual cv::StereoMatcher* engine() = 0;
 
+    // `s`: with its effective values (effectiveMatcherSettings).
     void setCommon(cv::StereoMatcher& m, const MatcherSettings& s, const DisparityRange& range)
     {
         range_ = range;
         m.setMinDisparity(range.min_disparity);
         m.setNumDisparities(range.num_disparities);
         m.setBlockSize(s.block_size);
-        m.setSpeckleWindowSize(s.speckle_window_px);
-        m.setDisp12MaxDiff(s.lr_max_diff_px);
+        m.setSpeckleWindowSize(*s.speckle_window_px);
+        m.setDisp12MaxDiff(*s.lr_max_diff_px);
     }
 
     DisparityRange range_;
@@ -116,13 +106,14 @@ class BmMatcher final : public FixedPointMatcher {
         configure(settings, range);
     }
 
-    void configure(const MatcherSettings& s, const DisparityRange& range) override
+    void configure(const MatcherSettings& settings, const DisparityRange& range) override
     {
+        const MatcherSettings s = effectiveMatcherSettings(settings);
         setCommon(*bm_, s, range);
         // StereoBM compares the speckle range with its fixed-point output as is (SGBM
         // scales it by 16 itself): give it 1/16 px units.
-        bm_->setSpeckleRange(s.speckle_range_px * kDisparityScale);
-        bm_->setUniquenessRatio(s.uniqueness_ratio);
+        bm_->setSpeckleRange(*s.speckle_range_px * kDisparityScale);
+        bm_->setUniquenessRatio(*s.uniqueness_ratio);
         bm_->setPreFilterCap(s.pre_filter_cap);
         bm_->setTextureThreshold(s.texture_threshold);
     }
@@ -146,14 +137,15 @@ class SgbmMatcher final : public FixedPointMatcher {
         configure(settings, range);
     }
 
-    void configure(const MatcherSettings& s, const DisparityRange& range) override
+    void configure(const MatcherSettings& settings, const DisparityRange& range) override
     {
+        const MatcherSettings s = effectiveMatcherSettings(settings);
         setCommon(*sgbm_, s, range);
-        sgbm_->setSpeckleRange(s.speckle_range_px); // in pixels: SGBM scales it by 16
-        sgbm_->setUniquenessRatio(s.uniqueness_ratio);
+        sgbm_->setSpeckleRange(*s.speckle_range_px); // in pixels: SGBM scales it by 16
+        sgbm_->setUniquenessRatio(*s.uniqueness_ratio);
         sgbm_->setPreFilterCap(s.pre_filter_cap);
-        sgbm_->setP1(effectiveP1(s));
-        sgbm_->setP2(effectiveP2(s));
+        sgbm_->setP1(*s.p1);
+        sgbm_->setP2(*s.p2);
         sgbm_->setMode(sgbmModeFlag(s.sgbm_mode));
         name_ = matcherName(s);
     }
@@ -171,29 +163,30 @@ class SgbmMatcher final : public FixedPointMatcher {
 
 } // namespace
 
-void validateMatcherSettings(const MatcherSettings& s)
+void validateMatcherSettings(const MatcherSettings& settings)
 {
+    const MatcherSettings s = effectiveMatcherSettings(settings);
     if (s.kind != MatcherKind::Bm && s.kind != MatcherKind::Sgbm &&
         s.kind != MatcherKind::CensusSgm)
         invalid("kind", "unknown matcher");
-    if (s.num_disparities == 0 && !(s.min_depth_m > 0.0 && std::isfinite(s.min_depth_m)))
+    if (!s.num_disparities && !(s.min_depth_m > 0.0 && std::isfinite(s.min_depth_m)))
         invalid("min_depth_m", "must be a finite number > 0, got " + std::to_string(s.min_depth_m));
-    if (s.num_disparities < 0 || s.num_disparities % 16 != 0)
-        invalid("num_disparities", "must be 0 (derived from min_depth_m) or a positive "
+    if (s.num_disparities && (*s.num_disparities <= 0 || *s.num_disparities % 16 != 0))
+        invalid("num_disparities", "must be unset (derived from min_depth_m) or a positive "
                                    "multiple of 16, got " +
-                                       std::to_string(s.num_disparities));
+                                       std::to_string(*s.num_disparities));
     if (s.max_num_disparities <= 0 || s.max_num_disparities % 16 != 0)
         invalid("max_num_disparities",
                 "must be a positive multiple of 16, got " + std::to_string(s.max_num_disparities));
     if (s.num_disparities > s.max_num_disparities)
-        invalid("num_disparities", std::to_string(s.num_disparities) +
+        invalid("num_disparities", std::to_string(*s.num_disparities) +
                                        " exceeds max_num_disparities " +
                                        std::to_string(s.max_num_disparities));
     // Disparities are stored as 16 x d in a 16-bit integer.
     inRange("max_num_disparities", s.max_num_disparities, 16, 1024);
     inRange("min_disparity", s.min_disparity, -1024, 1024);
     if (s.kind == MatcherKind::CensusSgm) {
-        validateCensusSgm(s);
+        validateCensusSgm(settings);
         return;
     }
     if (s.block_size % 2 == 0)
@@ -204,23 +197,23 @@ void validateMatcherSettings(const MatcherSettings& s)
         // SGBM keeps its path costs in 16 bits: the automatic P2 = 32 * block_size^2 must
         // stay below 32768. (Past about 11 px larger blocks mostly blur depth edges.)
         inRange("block_size", s.block_size, 1, 31);
-    inRange("uniqueness_ratio", s.uniqueness_ratio, 0, 100);
-    if (s.speckle_window_px < 0)
+    inRange("uniqueness_ratio", *s.uniqueness_ratio, 0, 100);
+    if (*s.speckle_window_px < 0)
         invalid("speckle_window_px",
-                "must be >= 0 (0 disables), got " + std::to_string(s.speckle_window_px));
+                "must be >= 0 (0 disables), got " + std::to_string(*s.speckle_window_px));
     // StereoBM compares it in 1/16 px, so 16 x the range must fit its arithmetic.
-    inRange("speckle_range_px", s.speckle_range_px, 0, 1024);
-    if (s.speckle_window_px > 0 && s.speckle_range_px == 0)
+    inRange("speckle_range_px", *s.speckle_range_px, 0, 1024);
+    if (*s.speckle_window_px > 0 && *s.speckle_range_px == 0)
         invalid("speckle_range_px", "must be >= 1 when speckle_window_px enables the filter");
     inRange("pre_filter_cap", s.pre_filter_cap, 1, 63);
     if (s.texture_threshold < 0)
         invalid("texture_threshold", "must be >= 0, got " + std::to_string(s.texture_threshold));
-    // 0 selects the automatic penalty; SGBM's 16-bit path costs bound the rest.
-    inRange("p1", s.p1, 0, 32767);
-    inRange("p2", s.p2, 0, 32767);
-    if (s.kind == MatcherKind::Sgbm && effectiveP2(s) <= effectiveP1(s))
-        invalid("p2", "must be greater than p1 (" + std::to_string(effectiveP2(s)) +
-                          " <= " + std::to_string(effectiveP1(s)) + ")");
+    // SGBM's 16-bit path costs bound the penalties.
+    inRange("p1", *s.p1, 1, 32767);
+    inRange("p2", *s.p2, 1, 32767);
+    if (s.kind == MatcherKind::Sgbm && *s.p2 <= *s.p1)
+        invalid("p2", "must be greater than p1 (" + std::to_string(*s.p2) +
+                          " <= " + std::to_string(*s.p1) + ")");
 }
 
 std::unique_ptr<Matcher> makeMatcher(const MatcherSettings& settings, const DisparityRange& range)
@@ -237,24 +230,12 @@ std::unique_ptr<Matcher> makeMatcher(const MatcherSettings& settings, const Disp
     return std::make_unique<SgbmMatcher>(settings, range);
 }
 
-void applyMatcherDefaults(MatcherSettings& settings)
-{
-    const sgm::CensusSgmSettings& census = censusSgmTuning(settings.tuning);
-    const bool opencv = settings.kind != MatcherKind::CensusSgm;
-    // OpenCV's matchers: the values of OpenCV's stereo_match sample.
-    settings.uniqueness_ratio = opencv ? 10 : census.uniqueness_percent;
-    settings.speckle_window_px = opencv ? 100 : census.speckle_window_px;
-    settings.speckle_range_px = opencv ? 2 : census.speckle_range_px;
-    settings.lr_max_diff_px = opencv ? 1 : census.lr_max_diff_px;
-}
-
 MatcherSettings matcherDefaults(MatcherKind kind, SgbmMode mode, MatcherTuning tuning)
 {
     MatcherSettings settings;
     settings.kind = kind;
     settings.sgbm_mode = mode;
     settings.tuning = tuning;
-    applyMatcherDefaults(settings);
     return settings;
 }
 

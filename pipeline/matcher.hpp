@@ -73,14 +73,8 @@ void validateMatcherSettings(const MatcherSettings& settings);
 // A matcher of settings.kind searching `range`. Validates first (std::invalid_argument).
 std::unique_ptr<Matcher> makeMatcher(const MatcherSettings& settings, const DisparityRange& range);
 
-// The settings every matcher shares (uniqueness, left-right tolerance, speckle window and
-// range) set to the values tuned for settings.kind: census-sgm's on the real scenes of
-// shared/data, OpenCV's those of its own samples. A configuration that chooses a matcher
-// and does not set them gets these.
-void applyMatcherDefaults(MatcherSettings& settings);
-
-// The settings of matcher `kind` (and, for SGBM, `mode`; for census-sgm, `tuning`) with
-// that matcher's own values.
+// The settings of matcher `kind` (and, for SGBM, `mode`; for census-sgm, `tuning`), every
+// automatic setting unset: the matcher's own values (effectiveMatcherSettings).
 MatcherSettings matcherDefaults(MatcherKind kind, SgbmMode mode = SgbmMode::Sgbm,
                                 MatcherTuning tuning = MatcherTuning::Natural);
 

@@ -7,7 +7,6 @@
 
 #include "base/name_table.hpp"
 #include "model/disparity_range.hpp"
-#include "pipeline/sgm/census_sgm.hpp"
 
 namespace stereod {
 
@@ -76,65 +75,52 @@ inline constexpr NameTable<MatcherTuning, 3> kMatcherTunings{{{
 }}};
 static_assert(kMatcherTunings.wellFormed());
 
-// census-sgm's settings as tuned on the real scenes of shared/data.
-inline constexpr sgm::CensusSgmSettings kCensusSgmTuned{};
-
-// The automatic values of census-sgm for a tuning (planar and patterns: census_sgm.hpp).
-constexpr const sgm::CensusSgmSettings& censusSgmTuning(MatcherTuning tuning)
-{
-    switch (tuning) {
-    case MatcherTuning::Planar:
-        return sgm::kPlanarSceneSettings;
-    case MatcherTuning::Patterns:
-        return sgm::kPatternSceneSettings;
-    case MatcherTuning::Natural:
-        break;
-    }
-    return kCensusSgmTuned;
-}
-
 struct MatcherSettings {
     // Ours: on the real scenes of shared/data it reports half the wrong and too-far pixels
     // of OpenCV's SGBM in half the time (docs/configuration.md).
     MatcherKind kind = MatcherKind::CensusSgm;
     SgbmMode sgbm_mode = SgbmMode::Sgbm;
-    // census-sgm: the scenes its automatic settings (and the shared ones' defaults) suit.
+    // census-sgm: the scenes its unset settings' values suit.
     MatcherTuning tuning = MatcherTuning::Natural;
     // Closest distance the robot must see; sets the disparity range:
     // d_max = focal_px * baseline_m / min_depth_m - doffs_px.
     double min_depth_m = 0.5;
-    // 0: derived from min_depth_m (rounded up to a multiple of 16). Otherwise a fixed
+    // Every std::optional below is a setting the matcher decides when it is unset (the
+    // configuration's `auto`, or the key left out): effectiveMatcherSettings()
+    // (pipeline/matcher_defaults.hpp) is the one place that says what each becomes.
+    //
+    // Unset: derived from min_depth_m (rounded up to a multiple of 16). Otherwise a fixed
     // number of disparities, a positive multiple of 16.
-    int num_disparities = 0;
+    std::optional<int> num_disparities;
     // Upper bound on the derived range (cost grows linearly with it); a warning says so
     // when the cap keeps the configured min_depth_m out of sight.
     int max_num_disparities = 256;
     int min_disparity = 0;
     int block_size = 5; // OpenCV's matchers: odd; BM needs >= 5
-    // The next four, every matcher has. Their defaults are census-sgm's tuned values; a
-    // configuration choosing one of OpenCV's matchers gets OpenCV's (applyMatcherDefaults).
+    // The next four, every matcher has; unset, each matcher has its own.
     //
     // Percent margin of the best cost over the second.
-    int uniqueness_ratio = kCensusSgmTuned.uniqueness_percent;
+    std::optional<int> uniqueness_ratio;
     // Largest speckle removed, in pixels (0 disables), and the disparity variation within
     // one connected component.
-    int speckle_window_px = kCensusSgmTuned.speckle_window_px;
-    int speckle_range_px = kCensusSgmTuned.speckle_range_px;
+    std::optional<int> speckle_window_px;
+    std::optional<int> speckle_range_px;
     // Left-right consistency tolerance; < 0 disables.
-    int lr_max_diff_px = kCensusSgmTuned.lr_max_diff_px;
-    // Smoothness penalties, 0: automatic. census-sgm counts them in census bits
-    // (automatic: its tuned values); OpenCV's SGBM in its own cost units (8*bs^2, 32*bs^2).
-    int p1 = 0;
-    int p2 = 0;
+    std::optional<int> lr_max_diff_px;
+    // Smoothness penalties: census-sgm counts them in census bits, OpenCV's SGBM in its own
+    // cost units.
+    std::optional<int> p1;
+    std::optional<int> p2;
     int pre_filter_cap = 31;    // OpenCV's matchers only
     int texture_threshold = 10; // BM only: minimum texture in the block
 
-    // census-sgm only; 0 (automatic) takes the tuning's value.
-    int census_width = 0; // census window in pixels, odd; 0: automatic
-    int census_height = 0;
-    int paths = 0;             // aggregation paths, 3 or 5; 0: automatic
-    int p2_gradient_scale = 0; // P2 / (1 + |dI| / scale), grey levels; 0: automatic
-    int threads = 0;           // threads inside matching; 0: the cores available
+    // census-sgm only.
+    std::optional<int> census_width; // census window in pixels, odd
+    std::optional<int> census_height;
+    std::optional<int> paths; // aggregation paths, 3 or 5
+    // P2 / (1 + |dI| / scale), grey levels; 0: no adaptation (`off`).
+    std::optional<int> p2_gradient_scale;
+    std::optional<int> threads; // threads inside matching
     // census-sgm: a half-resolution level over twice the disparity range, merged into the
     // full-resolution match (pipeline/sgm/pyramid_sgm.hpp): the closest depth measured
     // halves for about a quarter more matching time.

@@ -61,8 +61,8 @@ DisparityRange chooseDisparityRange(const MatcherSettings& settings,
 {
     DisparityRange range;
     range.min_disparity = settings.min_disparity;
-    if (settings.num_disparities > 0) {
-        range.num_disparities = settings.num_disparities;
+    if (settings.num_disparities) {
+        range.num_disparities = *settings.num_disparities;
     } else {
         // Disparities min_disparity .. min_disparity + n - 1 are searched: n must reach
         // the disparity of the closest depth, d_max = f*B/Z_min - doffs.
@@ -123,9 +123,9 @@ DisparityRange validateProcessorSettings(const ProcessorSettings& settings,
     const int last_disparity = range.min_disparity + range.num_disparities - 1;
     if (last_disparity >= size.width) {
         // Name the key that set the range: the explicit count, or the cap it came from.
-        const char* key = settings.matcher.num_disparities > 0 ? "matcher.num_disparities"
-                          : range.capped                       ? "matcher.max_num_disparities"
-                                                               : "matcher.min_depth_m";
+        const char* key = settings.matcher.num_disparities ? "matcher.num_disparities"
+                          : range.capped                   ? "matcher.max_num_disparities"
+                                                           : "matcher.min_depth_m";
         throw SettingsError(key, "a disparity range up to " + std::to_string(last_disparity) +
                                      " px (" + std::to_string(range.num_disparities) +
                                      " disparities from " + std::to_string(range.min_disparity) +

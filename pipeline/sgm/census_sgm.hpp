@@ -91,6 +91,9 @@ struct CensusSgmSettings {
     bool use_simd = true; // false: the scalar reference kernels
 };
 
+// The defaults above: for natural, textured scenes (`matcher.tuning: natural`).
+inline constexpr CensusSgmSettings kNaturalSceneSettings{};
+
 // The settings for man-made scenes of uniform flat surfaces and repeating patterns
 // (`matcher.tuning: planar`; the defaults above are those for natural scenes). On a
 // uniform, repeating pattern (a chessboard) a row matches about as well one period off;

@@ -13,6 +13,8 @@
 #include <yaml-cpp/yaml.h>
 
 #include "config/service_config.hpp"
+#include "pipeline/census_sgm_matcher.hpp"
+#include "pipeline/matcher_defaults.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace stereod {
@@ -507,7 +509,7 @@ TEST(ConfigValues, NumbersAreDecimalAndModesOctal)
     EXPECT_EQ(
         parseConfig("matcher:\n  num_disparities: 64\n", "t").processing.matcher.num_disparities,
         64);
-    EXPECT_EQ(parseConfig("matcher:\n  p1: auto\n", "t").processing.matcher.p1, 0);
+    EXPECT_FALSE(parseConfig("matcher:\n  p1: auto\n", "t").processing.matcher.p1);
     for (const std::string mode : {"\"0660\"", "0660", "660", "0o660"}) {
         EXPECT_EQ(parseConfig("socket:\n  mode: " + mode + "\n", "t").socket.mode, 0660u) << mode;
     }
@@ -726,29 +728,29 @@ TEST(ConfigMatcher, EachMatcherTakesItsOwnSharedDefaultsUnlessSet)
 {
     EXPECT_EQ(defaultConfig().processing.matcher.kind, MatcherKind::CensusSgm);
     const ServiceConfig census = parseConfig("matcher:\n  algorithm: census-sgm\n", "t.yaml");
-    EXPECT_EQ(census.processing.matcher.kind, MatcherKind::CensusSgm);
-    EXPECT_EQ(census.processing.matcher.uniqueness_ratio, 9);
-    EXPECT_EQ(census.processing.matcher.lr_max_diff_px, 2);
-    EXPECT_EQ(census.processing.matcher.speckle_window_px, 200);
-    EXPECT_EQ(census.processing.matcher.speckle_range_px, 1);
+    EXPECT_EQ(effectiveMatcherSettings(census.processing.matcher).kind, MatcherKind::CensusSgm);
+    EXPECT_EQ(effectiveMatcherSettings(census.processing.matcher).uniqueness_ratio, 9);
+    EXPECT_EQ(effectiveMatcherSettings(census.processing.matcher).lr_max_diff_px, 2);
+    EXPECT_EQ(effectiveMatcherSettings(census.processing.matcher).speckle_window_px, 200);
+    EXPECT_EQ(effectiveMatcherSettings(census.processing.matcher).speckle_range_px, 1);
     const ServiceConfig set =
         parseConfig("matcher:\n  uniqueness_ratio: 12\n  algorithm: census-sgm\n", "t.yaml");
-    EXPECT_EQ(set.processing.matcher.uniqueness_ratio, 12);
-    EXPECT_EQ(set.processing.matcher.lr_max_diff_px, 2);
-    EXPECT_EQ(defaultConfig().processing.matcher.uniqueness_ratio, 9);
+    EXPECT_EQ(effectiveMatcherSettings(set.processing.matcher).uniqueness_ratio, 12);
+    EXPECT_EQ(effectiveMatcherSettings(set.processing.matcher).lr_max_diff_px, 2);
+    EXPECT_EQ(effectiveMatcherSettings(defaultConfig().processing.matcher).uniqueness_ratio, 9);
 
     for (const char* opencv : {"sgbm", "sgbm-3way", "bm"}) {
-        const MatcherSettings m =
+        const MatcherSettings m = effectiveMatcherSettings(
             parseConfig(std::string("matcher:\n  algorithm: ") + opencv + "\n", "t.yaml")
-                .processing.matcher;
+                .processing.matcher);
         EXPECT_EQ(m.uniqueness_ratio, 10) << opencv;
         EXPECT_EQ(m.lr_max_diff_px, 1) << opencv;
         EXPECT_EQ(m.speckle_window_px, 100) << opencv;
         EXPECT_EQ(m.speckle_range_px, 2) << opencv;
     }
-    const MatcherSettings sgbm_set =
+    const MatcherSettings sgbm_set = effectiveMatcherSettings(
         parseConfig("matcher:\n  algorithm: sgbm\n  speckle_window_px: 50\n", "t.yaml")
-            .processing.matcher;
+            .processing.matcher);
     EXPECT_EQ(sgbm_set.speckle_window_px, 50);
     EXPECT_EQ(sgbm_set.uniqueness_ratio, 10);
 }
@@ -757,20 +759,76 @@ TEST(ConfigMatcher, EachMatcherTakesItsOwnSharedDefaultsUnlessSet)
 // and a value the file sets still wins.
 TEST(ConfigMatcher, PlanarTuningTakesItsOwnSharedDefaultsUnlessSet)
 {
-    EXPECT_EQ(defaultConfig().processing.matcher.tuning, MatcherTuning::Natural);
-    const MatcherSettings planar =
-        parseConfig("matcher:\n  tuning: planar\n", "t.yaml").processing.matcher;
+    EXPECT_EQ(effectiveMatcherSettings(defaultConfig().processing.matcher).tuning,
+              MatcherTuning::Natural);
+    const MatcherSettings planar = effectiveMatcherSettings(
+        parseConfig("matcher:\n  tuning: planar\n", "t.yaml").processing.matcher);
     EXPECT_EQ(planar.tuning, MatcherTuning::Planar);
     EXPECT_EQ(planar.uniqueness_ratio, censusSgmTuning(MatcherTuning::Planar).uniqueness_percent);
     EXPECT_EQ(planar.speckle_window_px, censusSgmTuning(MatcherTuning::Planar).speckle_window_px);
     EXPECT_EQ(planar.speckle_range_px, censusSgmTuning(MatcherTuning::Planar).speckle_range_px);
     EXPECT_EQ(planar.lr_max_diff_px, censusSgmTuning(MatcherTuning::Planar).lr_max_diff_px);
-    EXPECT_NE(planar.speckle_window_px, defaultConfig().processing.matcher.speckle_window_px);
-    const MatcherSettings set =
+    EXPECT_NE(planar.speckle_window_px,
+              effectiveMatcherSettings(defaultConfig().processing.matcher).speckle_window_px);
+    const MatcherSettings set = effectiveMatcherSettings(
         parseConfig("matcher:\n  tuning: planar\n  uniqueness_ratio: 9\n", "t.yaml")
-            .processing.matcher;
+            .processing.matcher);
     EXPECT_EQ(set.uniqueness_ratio, 9);
     EXPECT_EQ(set.speckle_window_px, censusSgmTuning(MatcherTuning::Planar).speckle_window_px);
+}
+
+// matcher.p2_gradient_scale: left out or `auto`, the tuning decides; a number sets it;
+// `off` turns census-sgm's gradient adaptation off (the core gets 0), and shows as off.
+TEST(ConfigMatcher, GradientScaleIsAutoANumberOrOff)
+{
+    const auto matcher = [](const std::string& yaml) {
+        return parseConfig(yaml, "t.yaml").processing.matcher;
+    };
+    const DisparityRange range{0, 64};
+    const MatcherSettings absent = matcher("matcher:\n  min_depth_m: 0.5\n");
+    EXPECT_FALSE(absent.p2_gradient_scale);
+    EXPECT_EQ(censusSgmSettings(absent, range).p2_gradient_scale, 3);
+    const MatcherSettings automatic = matcher("matcher:\n  p2_gradient_scale: auto\n");
+    EXPECT_FALSE(automatic.p2_gradient_scale);
+    EXPECT_EQ(censusSgmSettings(automatic, range).p2_gradient_scale, 3);
+    const MatcherSettings number = matcher("matcher:\n  p2_gradient_scale: 6\n");
+    EXPECT_EQ(number.p2_gradient_scale, 6);
+    EXPECT_EQ(censusSgmSettings(number, range).p2_gradient_scale, 6);
+    const MatcherSettings off = matcher("matcher:\n  p2_gradient_scale: off\n");
+    EXPECT_EQ(off.p2_gradient_scale, 0);
+    EXPECT_EQ(censusSgmSettings(off, range).p2_gradient_scale, 0);
+    // The planar tuning's automatic value is already off; a number turns it on.
+    EXPECT_EQ(censusSgmSettings(matcher("matcher:\n  tuning: planar\n"), range).p2_gradient_scale,
+              0);
+    EXPECT_EQ(
+        censusSgmSettings(matcher("matcher:\n  tuning: planar\n  p2_gradient_scale: 4\n"), range)
+            .p2_gradient_scale,
+        4);
+
+    // A bad value names the key, the file and its line, and what would do.
+    for (const std::string value : {"none", "0", "-3"}) {
+        try {
+            parseConfig("matcher:\n  p2_gradient_scale: " + value + "\n", "robot.yaml");
+            FAIL() << value;
+        } catch (const ConfigError& error) {
+            const std::string what = error.what();
+            EXPECT_NE(what.find("robot.yaml:2"), std::string::npos) << what;
+            EXPECT_NE(what.find("matcher.p2_gradient_scale"), std::string::npos) << what;
+            EXPECT_NE(what.find("auto, off or grey levels"), std::string::npos) << what;
+        }
+    }
+}
+
+// The shared settings take `auto` too, which is the same as leaving them out.
+TEST(ConfigMatcher, SharedSettingsTakeAuto)
+{
+    const MatcherSettings m = parseConfig("matcher:\n  algorithm: sgbm\n  uniqueness_ratio: auto\n"
+                                          "  lr_max_diff_px: -1\n",
+                                          "t.yaml")
+                                  .processing.matcher;
+    EXPECT_FALSE(m.uniqueness_ratio);
+    EXPECT_EQ(effectiveMatcherSettings(m).uniqueness_ratio, 10);
+    EXPECT_EQ(m.lr_max_diff_px, -1);
 }
 
 // source.type ros2 takes its calibration from the camera_info topics beside the image

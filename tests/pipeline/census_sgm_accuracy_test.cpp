@@ -78,8 +78,10 @@ cv::Mat censusSgm(const cv::Mat& left, const cv::Mat& right, int num_disparities
     ProcessorSettings settings;
     settings.matcher = matcherDefaults(MatcherKind::CensusSgm, SgbmMode::Sgbm, tuning);
     settings.matcher.guided_search = guided;
-    settings.matcher.num_disparities = num_disparities;
-    settings.matcher.threads = threads;
+    if (num_disparities > 0)
+        settings.matcher.num_disparities = num_disparities;
+    if (threads > 0)
+        settings.matcher.threads = threads;
     settings.compute_cloud = false;
     StereoProcessor processor(makeRectifiedCalibration(left.size(), 100.0, 0.1), settings);
     DepthResult out;

@@ -127,7 +127,8 @@ DepthResult baumerScene(const StereoCalibration& calibration, const char* scene,
     const std::string samples = test::sharedDataDir() + "/real-rig/baumer/samples_baumer/";
     ProcessorSettings settings;
     settings.matcher = matcherDefaults(MatcherKind::CensusSgm);
-    settings.matcher.num_disparities = num_disparities;
+    if (num_disparities > 0)
+        settings.matcher.num_disparities = num_disparities;
     settings.compute_cloud = false;
     StereoProcessor processor(calibration, settings);
     DepthResult out;

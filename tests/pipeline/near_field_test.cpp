@@ -291,7 +291,8 @@ class RealRig : public ::testing::Test {
         const StereoCalibration& calibration = result_->calibration;
         ProcessorSettings settings;
         settings.matcher = matcherDefaults(MatcherKind::CensusSgm, SgbmMode::Sgbm, tuning);
-        settings.matcher.num_disparities = num_disparities; // 0: the default range
+        if (num_disparities > 0) // else the default range
+            settings.matcher.num_disparities = num_disparities;
         settings.compute_cloud = false;
         StereoProcessor processor(calibration, settings);
         const DisparityRange range = processor.disparityRange();
@@ -402,7 +403,8 @@ Tally sceneReadings(RangeChoice choice, const char* label)
             }
             ProcessorSettings settings;
             settings.matcher = matcherDefaults(MatcherKind::CensusSgm);
-            settings.matcher.num_disparities = n;
+            if (n > 0)
+                settings.matcher.num_disparities = n;
             settings.matcher.extended_range = choice != RangeChoice::CutNoExtension;
             settings.nearest.roi = region.roi;
             settings.nearest.min_depth_m = 0.001;

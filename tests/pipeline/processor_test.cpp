@@ -2,6 +2,7 @@
 // buffer reuse, depth and cloud geometry, live settings.
 
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <string>
@@ -11,7 +12,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "base/settings_error.hpp"
+#include "pipeline/census_sgm_matcher.hpp"
 #include "pipeline/matcher.hpp"
+#include "pipeline/matcher_defaults.hpp"
 #include "pipeline/stereo_processor.hpp"
 #include "tests/support/data_paths.hpp"
 
@@ -152,7 +155,7 @@ TEST(MatcherSettings, RejectsWhatOpenCvCannotRun)
     EXPECT_EQ(message(s), "block_size: must be within 1..31, got 33");
     s = opencv;
     s.num_disparities = 20;
-    EXPECT_EQ(message(s), "num_disparities: must be 0 (derived from min_depth_m) or a "
+    EXPECT_EQ(message(s), "num_disparities: must be unset (derived from min_depth_m) or a "
                           "positive multiple of 16, got 20");
     s = opencv;
     s.p1 = 900; // p2 defaults to 800
@@ -224,11 +227,79 @@ TEST_F(Processor, ProducesAReadingWithStampAndTimings)
     EXPECT_GE(out.timings.totalMs(), out.timings.match_ms);
 }
 
+// p2_gradient_scale unset: the tuning decides (natural adapts P2 at 3 grey levels, planar
+// does not); a number sets it; 0 (the configuration's `off`) turns adaptation off, and on
+// a real pair the depth differs from the automatic one.
+TEST_F(Processor, GradientScaleUnsetIsTheTuningsAndZeroTurnsAdaptationOff)
+{
+    const DisparityRange range{0, 16};
+    MatcherSettings unset;
+    EXPECT_EQ(censusSgmSettings(unset, range).p2_gradient_scale, 3);
+    MatcherSettings planar;
+    planar.tuning = MatcherTuning::Planar;
+    EXPECT_EQ(censusSgmSettings(planar, range).p2_gradient_scale, 0);
+    MatcherSettings set;
+    set.p2_gradient_scale = 7;
+    EXPECT_EQ(censusSgmSettings(set, range).p2_gradient_scale, 7);
+    MatcherSettings off;
+    off.p2_gradient_scale = 0;
+    EXPECT_EQ(censusSgmSettings(off, range).p2_gradient_scale, 0);
+    // Off changes nothing else the core gets.
+    sgm::CensusSgmSettings expected = censusSgmSettings(unset, range);
+    expected.p2_gradient_scale = 0;
+    const sgm::CensusSgmSettings core_off = censusSgmSettings(off, range);
+    EXPECT_EQ(std::memcmp(&expected, &core_off, sizeof expected), 0);
+
+    DepthResult automatic_out;
+    StereoProcessor(calibration_, settings_).process(left_, right_, 0, 0, automatic_out);
+    ProcessorSettings no_adaptation = settings_;
+    no_adaptation.matcher.p2_gradient_scale = 0;
+    DepthResult off_out;
+    StereoProcessor(calibration_, no_adaptation).process(left_, right_, 0, 0, off_out);
+    cv::Mat differs;
+    cv::compare(automatic_out.disparity, off_out.disparity, differs, cv::CMP_NE);
+    EXPECT_GT(cv::countNonZero(differs), 100);
+}
+
+// effectiveMatcherSettings: every automatic setting gets its matcher's (tuning's) value,
+// what is set stays, and census-sgm's own settings stay unset for OpenCV's matchers.
+TEST(MatcherDefaults, EachMatcherAndTuningHasItsValues)
+{
+    const MatcherSettings natural = effectiveMatcherSettings({});
+    EXPECT_EQ(natural.uniqueness_ratio, sgm::kNaturalSceneSettings.uniqueness_percent);
+    EXPECT_EQ(natural.census_width, sgm::kNaturalSceneSettings.census_width);
+    EXPECT_EQ(natural.paths, sgm::kNaturalSceneSettings.paths);
+    EXPECT_EQ(natural.p1, sgm::kNaturalSceneSettings.p1);
+    EXPECT_EQ(natural.threads, automaticMatcherThreads());
+    EXPECT_FALSE(natural.num_disparities); // the calibration decides it
+    for (const MatcherTuning tuning : {MatcherTuning::Planar, MatcherTuning::Patterns}) {
+        MatcherSettings s;
+        s.tuning = tuning;
+        const MatcherSettings e = effectiveMatcherSettings(s);
+        EXPECT_EQ(e.speckle_window_px, censusSgmTuning(tuning).speckle_window_px);
+        EXPECT_EQ(e.p2_gradient_scale, censusSgmTuning(tuning).p2_gradient_scale);
+    }
+    for (const MatcherAlgorithm& algorithm : kMatcherAlgorithms) {
+        if (algorithm.kind == MatcherKind::CensusSgm)
+            continue;
+        MatcherSettings s = matcherDefaults(algorithm.kind, algorithm.mode);
+        s.block_size = 7;
+        s.lr_max_diff_px = 3;
+        const MatcherSettings e = effectiveMatcherSettings(s);
+        EXPECT_EQ(e.uniqueness_ratio, 10) << algorithm.name;
+        EXPECT_EQ(e.speckle_window_px, 100) << algorithm.name;
+        EXPECT_EQ(e.lr_max_diff_px, 3) << algorithm.name;
+        EXPECT_EQ(e.p1, 8 * 49) << algorithm.name;
+        EXPECT_EQ(e.p2, 32 * 49) << algorithm.name;
+        EXPECT_FALSE(e.census_width || e.paths || e.p2_gradient_scale || e.threads)
+            << algorithm.name;
+    }
+}
+
 TEST_F(Processor, LeftColumnsThatCannotBeMatchedAreInvalid)
 {
     // OpenCV's matchers leave the whole band invalid.
     settings_.matcher.kind = MatcherKind::Sgbm;
-    applyMatcherDefaults(settings_.matcher);
     StereoProcessor p(calibration_, settings_);
     DepthResult out;
     p.process(left_, right_, 0, 0, out);
@@ -532,7 +603,6 @@ TEST_F(Processor, UpdateSettingsAppliesLiveAndRejectsInvalid)
 
     ProcessorSettings sgbm = settings_;
     sgbm.matcher.kind = MatcherKind::Sgbm;
-    applyMatcherDefaults(sgbm.matcher);
     p.updateSettings(sgbm);
     EXPECT_EQ(p.matcherName(), "sgbm");
     bad = sgbm;
@@ -548,7 +618,6 @@ TEST_F(Processor, UpdateSettingsAppliesLiveAndRejectsInvalid)
 
     ProcessorSettings bm = settings_;
     bm.matcher.kind = MatcherKind::Bm;
-    applyMatcherDefaults(bm.matcher);
     bm.matcher.block_size = 9;
     bm.matcher.min_depth_m = 0.45; // 22.2 - 5: 32 disparities
     p.updateSettings(bm);
@@ -577,7 +646,6 @@ TEST_F(Processor, MatcherSettingsReachOpenCv)
     };
     ProcessorSettings bm = settings_;
     bm.matcher.kind = MatcherKind::Bm;
-    applyMatcherDefaults(bm.matcher);
     bm.matcher.block_size = 9;
     const int bm_valid = validPixels(bm);
 
