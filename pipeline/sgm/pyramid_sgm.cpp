@@ -116,7 +116,7 @@ size_t pyramidSgmMemoryBytes(const PyramidSgmSettings& s)
 struct PyramidSgm::Impl {
     explicit Impl(const PyramidSgmSettings& s)
         : settings(s), full(s.full), full_last(s.full.min_disparity + s.full.num_disparities - 1),
-          bands(s.full.threads), pool(s.full.threads)
+          pool(s.full.threads)
     {
         extended_last = full_last;
         int probe_width = s.full.width, probe_height = s.full.height;
@@ -302,9 +302,8 @@ struct PyramidSgm::Impl {
     std::vector<uint8_t> coarse_near, coarse_given; // classifyCoarseRows()
     std::unique_ptr<NearFieldProbe> probe;
     PyramidSgmTimings timings;
-    // The levels' own work between and after their matches (halving, merging) over the
-    // same number of threads as the matches.
-    int bands;
+    // The levels' own work between and after their matches (halving, merging, the probe)
+    // over settings.full.threads, as many as the matches.
     BandPool pool;
 };
 
@@ -320,7 +319,7 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
                          size_t right_stride, PixelRect probe_region, const PyramidSgmOutput& out)
 {
     Impl& m = *impl_;
-    const int bands = m.bands;
+    const int bands = m.settings.full.threads;
     const Clock::time_point t0 = Clock::now();
     if (m.coarse) {
         const CensusSgmSettings& c = m.coarse->settings();
