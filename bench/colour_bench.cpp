@@ -1,7 +1,7 @@
 // colour_bench: what carrying the left camera's colour costs the pipeline at 640x480, per
 // stage, beside the grey stages it rides along with: the colour left rectified through
-// the same fixed-point maps (Rectifier, CV_8UC3), the cloud's colours (cloudColours), and
-// StereoProcessor::process() with and without the colour image. The plausible rig of the
+// the same fixed-point maps (Rectifier, CV_8UC3), the cloud's colours (PointCloudBuilder::colours),
+// and StereoProcessor::process() with and without the colour image. The plausible rig of the
 // benchmarks (bench_data: f = 0.9 x width, 0.5 degree rotation, 6 cm baseline) and the
 // Aloe photograph in colour, simulated as the rig's raw left view. Every case counts the
 // allocations per frame (bench/alloc_counter). Results: bench/README.md, "Colour".

@@ -12,15 +12,17 @@
 #include <opencv2/imgproc.hpp>
 
 #include "pipeline/cv_conversions.hpp"
+#include "pipeline/row_stripes.hpp"
 
 // Why the remap is ours and not cv::remap: the service promises no heap allocation per
 // frame in steady state, and OpenCV 4.6's cv::remap creates two temporary Mats for every
 // stripe of every call (its RemapInvoker buffers the map tiles), 20 to 56 allocations per
 // frame at 640x480 to 1280x720. The maps themselves are computed once by OpenCV; only the
 // per-frame resampling is done here, with OpenCV's fixed-point arithmetic so that the
-// output is the same. Rows are still shared out with cv::parallel_for_, given a
-// ParallelLoopBody rather than a lambda (whose std::function may need the heap): with the
-// TBB backend of Debian's OpenCV it allocates nothing per call once its workers run
+// output is the same. Rows are still shared out with cv::parallel_for_ (forRowStripes(),
+// row_stripes.hpp: a ParallelLoopBody rather than a std::function, which may need the
+// heap): with the TBB backend of Debian's OpenCV it allocates nothing per call once its
+// workers run
 // (counted with the benchmark's operator new and cv::Mat counters, and with a counting
 // malloc); tests/pipeline/hot_path_alloc_test.cpp keeps the first two at 0.
 
@@ -72,16 +74,15 @@ Neighbours borderNeighbours(const cv::Mat& src, int sx, int sy)
 }
 
 // Output rows [rows.start, rows.end). Holds references only: it lives on the caller's
-// stack for one call, and cv::parallel_for_ takes it by reference (no std::function, so
-// no capture that could need the heap).
-class RemapRows final : public cv::ParallelLoopBody {
+// stack for one call, and forRowStripes() takes it by reference.
+class RemapRows {
   public:
     RemapRows(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac, cv::Mat& out)
         : src_(src), map_xy_(map_xy), map_frac_(map_frac), out_(out)
     {
     }
 
-    void operator()(const cv::Range& rows) const override
+    void operator()(const cv::Range& rows) const
     {
         // Zeroed once so that the blend's fixed-length loop never reads indeterminate
         // values past a short last chunk (what it computes there is not stored).
@@ -156,7 +157,7 @@ class RemapRows final : public cv::ParallelLoopBody {
 // same fixed-point arithmetic, channel by channel: bit-identical to cv::remap too. A
 // plain per-pixel loop: the colour left is resampled for the outputs only (the matcher
 // works on grey), and at 640x480 this costs a few ms (bench/README.md, "Colour").
-class RemapRowsColour final : public cv::ParallelLoopBody {
+class RemapRowsColour {
   public:
     RemapRowsColour(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac,
                     cv::Mat& out)
@@ -164,7 +165,7 @@ class RemapRowsColour final : public cv::ParallelLoopBody {
     {
     }
 
-    void operator()(const cv::Range& rows) const override
+    void operator()(const cv::Range& rows) const
     {
         const auto interior_cols = static_cast<unsigned>(src_.cols - 1);
         const auto interior_rows = static_cast<unsigned>(src_.rows - 1);
@@ -243,16 +244,13 @@ void remapBilinear(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map
                     "map_frac must be CV_16UC1 with map_xy's size");
     out.create(map_xy.size(), src.type());
     requireArgument(!overlaps(src, out), "the output must not share the source's buffer");
-    // About 16 rows per stripe: enough stripes for the pool to balance the work, few
-    // enough that scheduling costs nothing next to the rows.
-    const double stripes = out.rows / 16.0;
     if (src.type() == CV_8UC3) {
-        RemapRowsColour body(src, map_xy, map_frac, out);
-        cv::parallel_for_(cv::Range(0, out.rows), body, stripes);
+        const RemapRowsColour body(src, map_xy, map_frac, out);
+        forRowStripes(0, out.rows, [&](int first, int end) { body(cv::Range(first, end)); });
         return;
     }
-    RemapRows body(src, map_xy, map_frac, out);
-    cv::parallel_for_(cv::Range(0, out.rows), body, stripes);
+    const RemapRows body(src, map_xy, map_frac, out);
+    forRowStripes(0, out.rows, [&](int first, int end) { body(cv::Range(first, end)); });
 }
 
 Rectifier::Rectifier(const StereoCalibration& calibration)

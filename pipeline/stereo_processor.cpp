@@ -14,6 +14,7 @@
 #include "pipeline/matcher.hpp"
 #include "pipeline/nearest_object.hpp"
 #include "pipeline/rectifier.hpp"
+#include "pipeline/row_stripes.hpp"
 #include "pipeline/triangulation.hpp"
 
 namespace stereod {
@@ -236,6 +237,7 @@ struct StereoProcessor::Impl {
     Rectifier rectifier;
     std::unique_ptr<Matcher> matcher;
     NearestObjectFinder nearest;
+    PointCloudBuilder cloud;
     double max_output_depth_m;     // the outputs' depth cap in force, metres
     cv::Mat left_gray, right_gray; // colour inputs converted, reused
     cv::Mat left_bgr;              // a BGRA left without its alpha, reused
@@ -327,15 +329,20 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& left_colour, c
 
     // The region's unmeasured pixels, at the nearest other evidence says they may be: the
     // right camera cannot see them, or the coarse level alone matched them.
+    // Row by row, in stripes over OpenCV's pool: the buffers are made before, so that no
+    // stripe reallocates what another writes.
     const cv::Rect region = regionPixels(p.settings.nearest.roi, out.disparity.size());
-    hiddenSurfaceBounds(out.disparity, region.y, region.y + region.height, p.inferred_px);
-    if (!p.coarse_only_px.empty())
-        nearerOf(p.coarse_only_px, region.y, region.y + region.height, p.inferred_px);
+    p.inferred_px.create(out.disparity.size(), CV_32FC1);
     if (p.inferred_depth_m.size() != out.disparity.size())
         p.inferred_depth_m = cv::Mat::zeros(out.disparity.size(), CV_32FC1);
-    const cv::Range rows(region.y, region.y + region.height);
-    cv::Mat inferred_rows = p.inferred_depth_m.rowRange(rows);
-    disparityToDepth(p.inferred_px.rowRange(rows), p.calibration.rectified, inferred_rows);
+    forRowStripes(region.y, region.y + region.height, [&](int first, int end) {
+        hiddenSurfaceBounds(out.disparity, first, end, p.inferred_px);
+        if (!p.coarse_only_px.empty())
+            nearerOf(p.coarse_only_px, first, end, p.inferred_px);
+        cv::Mat inferred_rows = p.inferred_depth_m.rowRange(first, end);
+        disparityToDepth(p.inferred_px.rowRange(first, end), p.calibration.rectified,
+                         inferred_rows);
+    });
     out.facts = regionFacts(p.nearest.measure(out.depth_m, out.confidence, out.near_field,
                                               p.inferred_depth_m, p.settings.nearest),
                             p.settings.nearest, p.nearFieldFacts(), stamp_ns, frame);
@@ -346,12 +353,12 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& left_colour, c
     // cloud from it.
     clearDepthBeyond(out.depth_m, static_cast<float>(p.max_output_depth_m));
     if (p.settings.compute_cloud)
-        buildPointCloud(out.depth_m, out.left_rectified, p.calibration.rectified, out.cloud);
+        p.cloud.build(out.depth_m, out.left_rectified, p.calibration.rectified, out.cloud);
     else
         out.cloud.clear();
     const Clock::time_point t5 = Clock::now();
     if (p.settings.compute_cloud && !out.left_rectified_colour.empty())
-        cloudColours(out.depth_m, out.left_rectified_colour, out.cloud_colour);
+        p.cloud.colours(out.depth_m, out.left_rectified_colour, out.cloud_colour);
     else
         out.cloud_colour.clear();
     const Clock::time_point t6 = Clock::now();

@@ -1,6 +1,7 @@
 #pragma once
 // The stereo chain for one pair: rectify -> match -> depth -> nearest object -> point
-// cloud. No sockets, no threads of its own, no knowledge of where frames come from: the
+// cloud. No sockets, no threads of its own (the matcher's bands aside, rows are shared out
+// over OpenCV's pool: row_stripes.hpp), no knowledge of where frames come from: the
 // service's worker, `stereoctl depth` and the benchmarks all run this same code.
 //
 // Thread-bound: one StereoProcessor per worker thread. All buffers are allocated in the

@@ -4,6 +4,8 @@
 #include <cstdint>
 #include <limits>
 
+#include "pipeline/row_stripes.hpp"
+
 namespace stereod {
 
 void disparityToDepth(const cv::Mat& disparity_px, const RectifiedGeometry& geometry,
@@ -43,45 +45,70 @@ void clearDepthBeyond(cv::Mat& depth_m, float max_depth_m)
     }
 }
 
-void buildPointCloud(const cv::Mat& depth_m, const cv::Mat& left_rectified,
-                     const RectifiedGeometry& geometry, std::vector<CloudPoint>& cloud)
+size_t PointCloudBuilder::countRows(const cv::Mat& depth_m)
+{
+    row_first_.resize(static_cast<size_t>(depth_m.rows) + 1);
+    forRowStripes(0, depth_m.rows, [&](int first, int end) {
+        for (int v = first; v < end; ++v) {
+            const float* z = depth_m.ptr<float>(v);
+            size_t count = 0;
+            for (int u = 0; u < depth_m.cols; ++u)
+                count += z[u] > 0.0f ? 1 : 0;
+            row_first_[static_cast<size_t>(v) + 1] = count;
+        }
+    });
+    row_first_[0] = 0;
+    for (size_t v = 1; v < row_first_.size(); ++v)
+        row_first_[v] += row_first_[v - 1];
+    return row_first_.back();
+}
+
+void PointCloudBuilder::build(const cv::Mat& depth_m, const cv::Mat& left_rectified,
+                              const RectifiedGeometry& geometry, std::vector<CloudPoint>& cloud)
 {
     CV_Assert(depth_m.type() == CV_32FC1 && left_rectified.type() == CV_8UC1 &&
               depth_m.size() == left_rectified.size());
-    cloud.clear();
     cloud.reserve(depth_m.total());
+    // Resizing from the last frame's count initialises only the points it adds.
+    cloud.resize(countRows(depth_m));
     const float inv_f = static_cast<float>(1.0 / geometry.focal_px);
     const float cx = static_cast<float>(geometry.cx_px);
     const float cy = static_cast<float>(geometry.cy_px);
-    for (int v = 0; v < depth_m.rows; ++v) {
-        const float* z = depth_m.ptr<float>(v);
-        const uint8_t* grey = left_rectified.ptr<uint8_t>(v);
-        const float row_factor = (static_cast<float>(v) - cy) * inv_f;
-        for (int u = 0; u < depth_m.cols; ++u) {
-            if (!(z[u] > 0.0f))
-                continue;
-            cloud.push_back(CloudPoint{(static_cast<float>(u) - cx) * inv_f * z[u],
-                                       row_factor * z[u], z[u], static_cast<float>(grey[u])});
+    forRowStripes(0, depth_m.rows, [&](int first, int end) {
+        for (int v = first; v < end; ++v) {
+            const float* z = depth_m.ptr<float>(v);
+            const uint8_t* grey = left_rectified.ptr<uint8_t>(v);
+            const float row_factor = (static_cast<float>(v) - cy) * inv_f;
+            CloudPoint* point = cloud.data() + row_first_[static_cast<size_t>(v)];
+            for (int u = 0; u < depth_m.cols; ++u) {
+                if (!(z[u] > 0.0f))
+                    continue;
+                *point++ = CloudPoint{(static_cast<float>(u) - cx) * inv_f * z[u],
+                                      row_factor * z[u], z[u], static_cast<float>(grey[u])};
+            }
         }
-    }
+    });
 }
 
-void cloudColours(const cv::Mat& depth_m, const cv::Mat& left_rectified_colour,
-                  std::vector<CloudColour>& colours)
+void PointCloudBuilder::colours(const cv::Mat& depth_m, const cv::Mat& left_rectified_colour,
+                                std::vector<CloudColour>& colours)
 {
     CV_Assert(depth_m.type() == CV_32FC1 && left_rectified_colour.type() == CV_8UC3 &&
               depth_m.size() == left_rectified_colour.size());
-    colours.clear();
     colours.reserve(depth_m.total());
-    for (int v = 0; v < depth_m.rows; ++v) {
-        const float* z = depth_m.ptr<float>(v);
-        const uint8_t* bgr = left_rectified_colour.ptr<uint8_t>(v);
-        for (int u = 0; u < depth_m.cols; ++u) {
-            if (!(z[u] > 0.0f))
-                continue;
-            colours.push_back(CloudColour{bgr[3 * u + 2], bgr[3 * u + 1], bgr[3 * u]});
+    colours.resize(countRows(depth_m));
+    forRowStripes(0, depth_m.rows, [&](int first, int end) {
+        for (int v = first; v < end; ++v) {
+            const float* z = depth_m.ptr<float>(v);
+            const uint8_t* bgr = left_rectified_colour.ptr<uint8_t>(v);
+            CloudColour* colour = colours.data() + row_first_[static_cast<size_t>(v)];
+            for (int u = 0; u < depth_m.cols; ++u) {
+                if (!(z[u] > 0.0f))
+                    continue;
+                *colour++ = CloudColour{bgr[3 * u + 2], bgr[3 * u + 1], bgr[3 * u]};
+            }
         }
-    }
+    });
 }
 
 } // namespace stereod

@@ -20,17 +20,30 @@ void disparityToDepth(const cv::Mat& disparity_px, const RectifiedGeometry& geom
 // Sets every depth beyond `max_depth_m` to 0 (invalid), in place; CV_32FC1.
 void clearDepthBeyond(cv::Mat& depth_m, float max_depth_m);
 
-// One point per valid (> 0) depth pixel (u, v): x = (u - cx) Z / f, y = (v - cy) Z / f,
-// z = Z, intensity = the grey level (0..255) of the rectified left image at (u, v).
-// `cloud` is cleared and refilled; its capacity is kept, and grown once to the full
-// image so that later frames do not allocate.
-void buildPointCloud(const cv::Mat& depth_m, const cv::Mat& left_rectified,
-                     const RectifiedGeometry& geometry, std::vector<CloudPoint>& cloud);
+// The point cloud of a depth map and its points' colours, the rows shared out over
+// OpenCV's thread pool (row_stripes.hpp): each row's points are counted first, so that
+// every stripe knows where its points go and the order is the single-threaded one.
+// Thread-bound: one builder per caller; its row offsets are kept across frames.
+class PointCloudBuilder {
+  public:
+    // One point per valid (> 0) depth pixel (u, v), in row-major order:
+    // x = (u - cx) Z / f, y = (v - cy) Z / f, z = Z, intensity = the grey level (0..255) of
+    // the rectified left image at (u, v). `cloud` is resized to the points; its capacity
+    // is grown once to the full image so that later frames do not allocate.
+    void build(const cv::Mat& depth_m, const cv::Mat& left_rectified,
+               const RectifiedGeometry& geometry, std::vector<CloudPoint>& cloud);
 
-// The colours of the points buildPointCloud() makes from `depth_m`, in the same order:
-// left_rectified_colour (CV_8UC3, BGR) at each valid (> 0) depth pixel, as r, g, b.
-// `colours` is cleared and refilled, its capacity kept and grown once to the full image.
-void cloudColours(const cv::Mat& depth_m, const cv::Mat& left_rectified_colour,
-                  std::vector<CloudColour>& colours);
+    // The colours of the points build() makes from `depth_m`, in the same order:
+    // left_rectified_colour (CV_8UC3, BGR) at each valid (> 0) depth pixel, as r, g, b.
+    // `colours` is resized, its capacity grown once to the full image.
+    void colours(const cv::Mat& depth_m, const cv::Mat& left_rectified_colour,
+                 std::vector<CloudColour>& colours);
+
+  private:
+    // row_first_[v]: the index of row v's first point; row_first_[rows]: the count.
+    size_t countRows(const cv::Mat& depth_m);
+
+    std::vector<size_t> row_first_;
+};
 
 } // namespace stereod

@@ -372,18 +372,22 @@ TEST_F(Processor, DepthAndCloudFollowTheGeometry)
             }
         }
     ASSERT_EQ(out.cloud.size(), valid);
-    // Every point projects back to a pixel with that depth and that grey level.
-    for (size_t i = 0; i < out.cloud.size(); i += 997) {
-        const CloudPoint& pt = out.cloud[i];
-        const double u = pt.x * g.focal_px / pt.z + g.cx_px;
-        const double v = pt.y * g.focal_px / pt.z + g.cy_px;
-        const int ui = static_cast<int>(std::lround(u));
-        const int vi = static_cast<int>(std::lround(v));
-        ASSERT_NEAR(u, ui, 1e-3);
-        ASSERT_NEAR(v, vi, 1e-3);
-        EXPECT_EQ(pt.z, out.depth_m.at<float>(vi, ui));
-        EXPECT_EQ(pt.intensity, static_cast<float>(out.left_rectified.at<uint8_t>(vi, ui)));
-    }
+    // Every point projects back to its pixel, with that depth and that grey level, in the
+    // pixels' row-major order (the rows are built in stripes on several threads).
+    size_t i = 0;
+    for (int vi = 0; vi < out.depth_m.rows; ++vi)
+        for (int ui = 0; ui < out.depth_m.cols; ++ui) {
+            if (!(out.depth_m.at<float>(vi, ui) > 0.0f))
+                continue;
+            const CloudPoint& pt = out.cloud[i++];
+            const double u = pt.x * g.focal_px / pt.z + g.cx_px;
+            const double v = pt.y * g.focal_px / pt.z + g.cy_px;
+            ASSERT_NEAR(u, ui, 1e-3) << "point " << i - 1;
+            ASSERT_NEAR(v, vi, 1e-3) << "point " << i - 1;
+            ASSERT_EQ(pt.z, out.depth_m.at<float>(vi, ui));
+            ASSERT_EQ(pt.intensity, static_cast<float>(out.left_rectified.at<uint8_t>(vi, ui)));
+        }
+    EXPECT_EQ(i, out.cloud.size());
 }
 
 // output.max_depth_m: the depth image and the cloud leave out what lies beyond the cap; the
@@ -564,7 +568,7 @@ TEST_F(Processor, CloudSkippedWhenNotWanted)
     p.process(left_, right_, 0, 0, out);
     EXPECT_TRUE(out.reading.valid);
     EXPECT_TRUE(out.cloud.empty());
-    EXPECT_EQ(out.timings.cloud_ms < 1.0, true);
+    EXPECT_EQ(out.cloud.capacity(), 0u); // never built, not built and thrown away
 }
 
 // The matcher names its own field; the processor, which holds its settings as `matcher`,
