@@ -65,19 +65,30 @@ void SpeckleFilter::labelBand(const int16_t* disparity, int16_t invalid, int max
         const int16_t* d = disparity + row;
         const int16_t* above = y > y0 ? d - w : nullptr;
         uint32_t left = kNone; // root of the left neighbour's region, if it joins
+        // The label of the upper neighbour the left one joined (0: it joined none). Inside a
+        // surface a pixel joins the same two regions as its left neighbour, already one:
+        // that join is skipped rather than looked up again.
+        uint32_t left_up_label = 0;
         for (size_t x = 0; x < w; ++x) {
             const size_t i = row + x;
             if (d[x] == invalid) {
                 label_[i] = 0;
                 left = kNone;
+                left_up_label = 0;
                 continue;
             }
-            uint32_t region =
-                left != kNone && together(d[x], d[x - 1], max_step) ? rootHalving(left) : kNone;
+            // `left` is a root: nothing has been joined since it was labelled.
+            uint32_t region = left != kNone && together(d[x], d[x - 1], max_step) ? left : kNone;
+            uint32_t up_label = 0;
             if (above != nullptr && above[x] != invalid && together(d[x], above[x], max_step)) {
-                const uint32_t up = rootHalving(label_[i - w] - 1);
-                region = region == kNone ? up : region == up ? region : join(region, up);
+                up_label = label_[i - w];
+                if (region == kNone || up_label != left_up_label) {
+                    const uint32_t up = rootHalving(up_label - 1);
+                    region = region == kNone ? up : region == up ? region : join(region, up);
+                }
             }
+            // Whichever way it went, a pixel that met its upper neighbour now holds its region.
+            left_up_label = up_label;
             if (region == kNone) {
                 region = static_cast<uint32_t>(i);
                 parent_[region] = region;

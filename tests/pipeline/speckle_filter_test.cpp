@@ -111,6 +111,33 @@ TEST(SpeckleFilterTest, RemovesTheRegionsOpenCvRemovesOnRealDisparities)
     }
 }
 
+// Noise, where regions meet and part in every shape (U-turns, spirals of joins, regions
+// that touch only through the row above): the same pixels as OpenCV's flood fill.
+TEST(SpeckleFilterTest, RemovesWhatOpenCvRemovesFromNoise)
+{
+    cv::RNG rng(20261127);
+    for (int trial = 0; trial < 6; ++trial) {
+        cv::Mat raw(97, 131, CV_16SC1);
+        // A few levels 0..3 px apart, a quarter of the pixels invalid.
+        for (int y = 0; y < raw.rows; ++y)
+            for (int x = 0; x < raw.cols; ++x)
+                raw.at<int16_t>(y, x) =
+                    rng.uniform(0, 4) == 0 ? kNone : static_cast<int16_t>(16 * rng.uniform(0, 4));
+        for (int max_step : {0, 16, 32})
+            for (int max_size : {2, 5, 30}) {
+                cv::Mat expected = raw.clone();
+                cv::filterSpeckles(expected, kNone, max_size - 1, max_step);
+                for (int bands : {1, 2, 5}) {
+                    SCOPED_TRACE("trial " + std::to_string(trial) + ", step " +
+                                 std::to_string(max_step) + ", size " + std::to_string(max_size) +
+                                 ", bands " + std::to_string(bands));
+                    EXPECT_EQ(
+                        cv::countNonZero(filtered(raw, max_step, max_size, bands) != expected), 0);
+                }
+            }
+    }
+}
+
 TEST(SpeckleFilterTest, ApplyIsTheThreePhasesOnOneBand)
 {
     // A staircase of 4-pixel-wide steps 1 px apart in 1/16 px, an isolated pixel and a
