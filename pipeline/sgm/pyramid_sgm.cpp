@@ -102,7 +102,8 @@ size_t pyramidSgmMemoryBytes(const PyramidSgmSettings& s)
     if (hasCoarseLevel(s)) {
         const CensusSgmSettings coarse = coarseLevelSettings(s.full);
         const size_t area = static_cast<size_t>(coarse.width) * static_cast<size_t>(coarse.height);
-        bytes += censusSgmMemoryBytes(coarse) + area * (2 + sizeof(float) + 3);
+        bytes += censusSgmMemoryBytes(coarse) + area * (2 + sizeof(float) + 3) +
+                 3 * static_cast<size_t>(coarse.width) * static_cast<size_t>(s.full.threads);
         if (isGuided(s))
             bytes += GuidedSpans::memoryBytes(s.full, coarse);
     }
@@ -131,6 +132,8 @@ struct PyramidSgm::Impl {
             coarse_limit.assign(area, 0);
             coarse_near.assign(area, 0);
             coarse_given.assign(area, 0);
+            texture_rows.assign(
+                3 * static_cast<size_t>(c.width) * static_cast<size_t>(s.full.threads), 0);
             extended_last = 2 * (c.min_disparity + c.num_disparities - 1);
             probe_width = c.width;
             probe_height = c.height;
@@ -224,21 +227,25 @@ struct PyramidSgm::Impl {
     //    (within kMergeMarginPx of it), on texture: a flat patch matches any flat patch,
     //    and says nothing about nearness;
     //  - coarse_given: a match on texture that coarse_only_px may give.
-    void classifyCoarseRows(int y0, int y1)
+    void classifyCoarseRows(int band, int y0, int y1)
     {
         const CensusSgmSettings& c = coarse->settings();
         const float full_edge = static_cast<float>(full_last - kMergeMarginPx);
-        for (int y = y0; y < y1; ++y)
-            for (int x = 0; x < c.width; ++x) {
-                const size_t i =
-                    static_cast<size_t>(y) * static_cast<size_t>(c.width) + static_cast<size_t>(x);
+        const size_t cw = static_cast<size_t>(c.width);
+        uint8_t* column_lo = texture_rows.data() + 3 * cw * static_cast<size_t>(band);
+        uint8_t* column_hi = column_lo + cw;
+        uint8_t* textured = column_hi + cw;
+        for (int y = y0; y < y1; ++y) {
+            texturedRow(half_left.data(), cw, c.width, c.height, y, c.textured_min_range, column_lo,
+                        column_hi, textured);
+            for (size_t x = 0; x < cw; ++x) {
+                const size_t i = static_cast<size_t>(y) * cw + x;
                 const float coarse_px = 2.0f * coarse_disparity[i];
-                const bool textured = std::isfinite(coarse_px) &&
-                                      isTextured(half_left.data(), static_cast<size_t>(c.width),
-                                                 c.width, c.height, x, y, c.textured_min_range);
-                coarse_near[i] = textured && coarse_px >= full_edge;
-                coarse_given[i] = textured && coarse_limit[i] == 0;
+                const bool on_texture = std::isfinite(coarse_px) && textured[x] != 0;
+                coarse_near[i] = on_texture && coarse_px >= full_edge;
+                coarse_given[i] = on_texture && coarse_limit[i] == 0;
             }
+        }
     }
 
     // The largest disparity (full-resolution pixels) of the near surfaces the coarse level
@@ -300,6 +307,7 @@ struct PyramidSgm::Impl {
     std::vector<float> coarse_disparity;
     std::vector<uint8_t> coarse_confidence, coarse_limit;
     std::vector<uint8_t> coarse_near, coarse_given; // classifyCoarseRows()
+    std::vector<uint8_t> texture_rows;              // its texturedRow() scratch, per band
     std::unique_ptr<NearFieldProbe> probe;
     PyramidSgmTimings timings;
     // The levels' own work between and after their matches (halving, merging, the probe)
@@ -343,7 +351,7 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
     if (m.coarse) {
         const int ch = m.coarse->settings().height, h = m.settings.full.height;
         m.pool.run(bands, [&](int band) {
-            m.classifyCoarseRows(ch * band / bands, ch * (band + 1) / bands);
+            m.classifyCoarseRows(band, ch * band / bands, ch * (band + 1) / bands);
         });
         m.pool.run(bands, [&](int band) {
             const int y0 = h * band / bands, y1 = h * (band + 1) / bands;

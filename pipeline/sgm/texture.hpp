@@ -1,7 +1,8 @@
 #pragma once
 // Whether a pixel has texture: the grey levels of the 5x3 pixels around it (clipped to the
 // image) span at least min_range. Where they do, the census tells matches apart; where
-// they do not, a pixel matches any patch as flat as itself.
+// they do not, a pixel matches any patch as flat as itself. texturedRow(): the same test
+// for a whole row.
 //
 // Reentrant.
 
@@ -25,6 +26,36 @@ inline bool isTextured(const uint8_t* image, size_t stride, int width, int heigh
         }
     }
     return hi - lo >= min_range;
+}
+
+// isTextured() for every pixel of row y at once: textured[x] = 1 where it holds, else 0.
+// The 3 rows' extremes per column first, then the 5 columns': a few operations per pixel
+// rather than fifteen reads. column_lo, column_hi: `width` bytes of scratch each.
+inline void texturedRow(const uint8_t* image, size_t stride, int width, int height, int y,
+                        int min_range, uint8_t* column_lo, uint8_t* column_hi, uint8_t* textured)
+{
+    const uint8_t* rows[3];
+    int count = 0;
+    for (int v = std::max(0, y - 1); v <= std::min(height - 1, y + 1); ++v)
+        rows[count++] = image + static_cast<size_t>(v) * stride;
+    for (int x = 0; x < width; ++x) {
+        uint8_t lo = rows[0][x], hi = rows[0][x];
+        for (int r = 1; r < count; ++r) {
+            lo = std::min(lo, rows[r][x]);
+            hi = std::max(hi, rows[r][x]);
+        }
+        column_lo[x] = lo;
+        column_hi[x] = hi;
+    }
+    for (int x = 0; x < width; ++x) {
+        const int x0 = std::max(0, x - 2), x1 = std::min(width - 1, x + 2);
+        uint8_t lo = column_lo[x0], hi = column_hi[x0];
+        for (int u = x0 + 1; u <= x1; ++u) {
+            lo = std::min(lo, column_lo[u]);
+            hi = std::max(hi, column_hi[u]);
+        }
+        textured[x] = hi - lo >= min_range ? 1 : 0;
+    }
 }
 
 } // namespace stereod::sgm
