@@ -8,8 +8,10 @@
 //   writer adds may mix samples of adjacent moments, which a statistic of the recent past
 //   tolerates. No allocation, no lock.
 // - RecentValues: the last N values of any type, oldest first, for one thread only (plain
-//   slots, no atomics); with mean() and perSecond() over it. Behind the worker's stage
-//   means, rate and latency percentiles, which it copies out with its stats.
+//   slots, no atomics); with mean() over it. Behind the worker's stage means and latency
+//   percentiles, which it copies out with its stats.
+//
+// The rate of recent events (every `fps`) is base/rate_estimate.hpp's.
 
 #include <algorithm>
 #include <array>
@@ -72,8 +74,8 @@ template <std::size_t N> class RollingWindow {
     std::atomic<uint64_t> added_{0};
 };
 
-// The last N values added, oldest first: the window of the worker's rolling means, rate
-// and latency percentiles.
+// The last N values added, oldest first: the window of the worker's rolling means and
+// latency percentiles.
 //
 // One thread only (add, size and [] from the same thread, no atomics): for a thread that
 // keeps its own figures and hands out copies of them, as the worker does with its stats.
@@ -102,17 +104,6 @@ template <std::size_t N> double mean(const RecentValues<double, N>& values) noex
     for (std::size_t i = 0; i < values.size(); ++i)
         sum += values[i];
     return values.size() == 0 ? 0.0 : sum / static_cast<double>(values.size());
-}
-
-// Events per second, from the times (ns) of the events held; 0 with fewer than two.
-template <std::size_t N> double perSecond(const RecentValues<int64_t, N>& times_ns) noexcept
-{
-    if (times_ns.size() < 2)
-        return 0.0;
-    const int64_t span_ns = times_ns[times_ns.size() - 1] - times_ns[0];
-    return span_ns > 0
-               ? static_cast<double>(times_ns.size() - 1) * 1e9 / static_cast<double>(span_ns)
-               : 0.0;
 }
 
 } // namespace stereod

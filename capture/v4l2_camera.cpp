@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include "base/latest_text.hpp"
+#include "base/rate_estimate.hpp"
 #include "base/system_error.hpp"
 #include "base/unique_fd.hpp"
 #include "capture/format_choice.hpp"
@@ -44,6 +45,8 @@ constexpr int64_t kMinStallReopenMs = 1000;
 // Extra pool frames for decoded formats beyond the kernel buffers: what a consumer
 // (stereo sync) may hold while the camera keeps going.
 constexpr std::size_t kExtraPoolFrames = 2;
+// Frames behind a camera's fps: about a second at 30 fps, as the replay's pairs.
+constexpr std::size_t kFpsFrames = 32;
 
 void wakeUp(int event_fd) noexcept
 {
@@ -185,9 +188,9 @@ class V4l2Camera::Impl {
         out.camera.dropped = dropped_.load(std::memory_order_relaxed);
         out.camera.bad_frames = bad_frames_.load(std::memory_order_relaxed);
         const int64_t last_ns = last_frame_ns_.load(std::memory_order_relaxed);
-        // A camera that stopped delivering has no rate, whatever its last window said.
+        // A camera that stopped delivering has no rate, whatever its last figure said.
         out.camera.fps = (last_ns != 0 && monotonicNowNs() - last_ns < 2'000 * kNsPerMs)
-                             ? fps_.load(std::memory_order_relaxed)
+                             ? fps_.perSecond()
                              : 0.0;
         out.kernel_monotonic_stamps = kernel_monotonic_.load(std::memory_order_relaxed);
         out.pool_exhausted = pool_exhausted_.load(std::memory_order_relaxed);
@@ -511,7 +514,7 @@ class V4l2Camera::Impl {
         frames_.fetch_add(1, std::memory_order_relaxed);
         last_frame_ns_.store(now_ns, std::memory_order_relaxed);
         bad_since_good_ = 0;
-        updateFps(now_ns);
+        fps_.add(now_ns);
         if (stalled_ || exhausted_ ||
             state_.load(std::memory_order_relaxed) != SourceState::Running) {
             stalled_ = false;
@@ -547,25 +550,6 @@ class V4l2Camera::Impl {
         return requeue(set, index);
     }
 
-    // Delivery rate over windows of at least one second.
-    void updateFps(int64_t now_ns) noexcept
-    {
-        if (fps_window_start_ns_ == 0) {
-            fps_window_start_ns_ = now_ns;
-            fps_window_frames_ = 0;
-            return;
-        }
-        ++fps_window_frames_;
-        const int64_t elapsed_ns = now_ns - fps_window_start_ns_;
-        if (elapsed_ns >= 1'000 * kNsPerMs) {
-            fps_.store(static_cast<double>(fps_window_frames_) * 1e9 /
-                           static_cast<double>(elapsed_ns),
-                       std::memory_order_relaxed);
-            fps_window_start_ns_ = now_ns;
-            fps_window_frames_ = 0;
-        }
-    }
-
     const CameraSettings& settings_;
     const uint32_t index_;
     const std::string name_;
@@ -593,8 +577,6 @@ class V4l2Camera::Impl {
     uint64_t bad_since_good_ = 0; // bad frames since the last good one
     bool exhausted_ = false;
     bool warned_stamps_ = false;
-    int64_t fps_window_start_ns_ = 0;
-    uint64_t fps_window_frames_ = 0;
 
     // Counters for status(): written by the capture thread, read anywhere.
     std::atomic<SourceState> state_{SourceState::Stopped};
@@ -605,7 +587,7 @@ class V4l2Camera::Impl {
     std::atomic<uint64_t> reopens_{0};
     std::atomic<uint64_t> sequence_gaps_{0};
     std::atomic<int64_t> last_frame_ns_{0};
-    std::atomic<double> fps_{0.0};
+    RateEstimate<kFpsFrames> fps_; // delivered frames
     std::atomic<bool> kernel_monotonic_{false};
 
     // Written per bad frame, so without a lock (a frame's problem fits in 160 characters).

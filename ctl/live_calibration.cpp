@@ -29,10 +29,10 @@
 #include "ctl/exit_codes.hpp"
 #include "ctl/output.hpp"
 #include "ctl/payload.hpp"
+#include "ctl/raw_pair.hpp"
 #include "ctl/signal_catcher.hpp"
 #include "pipeline/calibration_coverage.hpp"
 #include "pipeline/chessboard_calibration.hpp"
-#include "protocol/request.hpp"
 
 namespace stereod {
 
@@ -41,48 +41,24 @@ namespace {
 using json = nlohmann::ordered_json;
 using Clock = std::chrono::steady_clock;
 
-// One raw pair of the service, its buffers reused from pair to pair.
-struct RawPair {
-    uint64_t frame = 0;
-    int64_t left_stamp_ns = 0;
-    int64_t right_stamp_ns = 0;
-    cv::Mat left; // CV_8UC1, as captured (before rectification)
-    cv::Mat right;
-};
-
-// Reads the payloads of a `raw` event into `pair`. Throws ClientError when the event lacks
-// either image or announces sizes that do not add up.
-void readRawPair(ProtocolClient& client, const json& event, RawPair& pair)
+// Reads the grey pair of a `raw` event into `pair`; its frame number. Throws ClientError
+// naming the frame and the image that is missing, and as readRawPair does for a payload
+// that does not add up or is cut short. Payloads this stereoctl does not know are read
+// past: the calibration needs the grey pair only.
+uint64_t readCalibrationPair(ProtocolClient& client, const json& event, RawPair& pair)
 {
-    pair.frame = event.value("frame", uint64_t{0});
-    pair.left_stamp_ns = event.value("left_stamp_ns", int64_t{0});
-    pair.right_stamp_ns = event.value("right_stamp_ns", int64_t{0});
-    const auto payloads = event.find("payloads");
-    if (payloads == event.end() || !payloads->is_array()) {
-        throw ClientError("a raw event from " + client.socketPath() +
-                              " has no payloads list: " + event.dump(),
+    const uint64_t frame = event.value("frame", uint64_t{0});
+    const RawPairContents contents = readRawPair(client, event, pair, Results{});
+    if (!contents.left || !contents.right) {
+        throw ClientError(fmt::format("a raw event from {} (frame {}) lacks the {} u8_gray {}",
+                                      client.socketPath(), frame,
+                                      !contents.left && !contents.right ? "raw_left and raw_right"
+                                      : !contents.left                  ? "raw_left"
+                                                                        : "raw_right",
+                                      !contents.left && !contents.right ? "payloads" : "payload"),
                           0);
     }
-    bool have_left = false, have_right = false;
-    for (const json& header : *payloads) {
-        const Payload payload = parsePayload(header);
-        if (payload.name == snapshotItemName(SnapshotItem::RawLeft) &&
-            payload.format == kFormatGray) {
-            readImagePayload(client, payload, CV_8UC1, pair.left);
-            have_left = true;
-        } else if (payload.name == snapshotItemName(SnapshotItem::RawRight) &&
-                   payload.format == kFormatGray) {
-            readImagePayload(client, payload, CV_8UC1, pair.right);
-            have_right = true;
-        } else {
-            client.skipPayload(payload.bytes);
-        }
-    }
-    if (!have_left || !have_right) {
-        throw ClientError("a raw event from " + client.socketPath() +
-                              " lacks the raw_left or raw_right u8_gray payload",
-                          0);
-    }
+    return frame;
 }
 
 bool listed(const json& reply, const char* key, const char* value)
@@ -153,8 +129,8 @@ class LiveCollector {
     {
     }
 
-    // Judges one raw pair; true once --count pairs are accepted.
-    bool take(const RawPair& pair)
+    // Judges one raw pair (the service's frame `frame`); true once --count pairs are accepted.
+    bool take(uint64_t frame, const RawPair& pair)
     {
         ++frames_;
         if (!coverage_) {
@@ -165,7 +141,7 @@ class LiveCollector {
             throw ChessboardCalibrationError(fmt::format(
                 "the service's raw frames changed size: {}x{} and {}x{} at frame {}, {}x{} before; "
                 "a calibration holds for one resolution",
-                pair.left.cols, pair.left.rows, pair.right.cols, pair.right.rows, pair.frame,
+                pair.left.cols, pair.left.rows, pair.right.cols, pair.right.rows, frame,
                 image_size_.width, image_size_.height));
         }
         const bool left_found = findBoardCornersFast(pair.left, grid_, left_corners_);
@@ -174,7 +150,7 @@ class LiveCollector {
             const char* where = left_found    ? "board not found in the right image"
                                 : right_found ? "board not found in the left image"
                                               : "board not found";
-            say(where, fmt::format("frame {}: {}", pair.frame, where), false);
+            say(where, fmt::format("frame {}: {}", frame, where), false);
             return false;
         }
         ++board_in_both_;
@@ -182,10 +158,10 @@ class LiveCollector {
         if (judgement.duplicate_of) {
             ++refused_;
             say("duplicate of " + std::to_string(*judgement.duplicate_of),
-                fmt::format("frame {}: refused: {}", pair.frame, judgement.reason), true);
+                fmt::format("frame {}: refused: {}", frame, judgement.reason), true);
             return false;
         }
-        accept(pair, judgement.view.left);
+        accept(frame, pair, judgement.view.left);
         return static_cast<int>(pairs_.size()) >= options_.count;
     }
 
@@ -238,7 +214,7 @@ class LiveCollector {
     }
 
   private:
-    void accept(const RawPair& pair, const BoardAppearance& left)
+    void accept(uint64_t frame, const RawPair& pair, const BoardAppearance& left)
     {
         const int number = static_cast<int>(pairs_.size()) + 1;
         PairReport report;
@@ -255,7 +231,7 @@ class LiveCollector {
         say("accepted " + std::to_string(number),
             fmt::format("frame {}: accepted pair {}/{}: board at {:.0f} %, {:.0f} % of the left "
                         "image, {:.0f} % of its size, turned {:+.0f} (yaw) {:+.0f} (pitch) degrees",
-                        pair.frame, number, options_.count, 100.0 * left.centre_frac.x,
+                        frame, number, options_.count, 100.0 * left.centre_frac.x,
                         100.0 * left.centre_frac.y, 100.0 * left.size_frac, left.yaw_deg,
                         left.pitch_deg),
             true);
@@ -377,8 +353,8 @@ int runLiveCalibration(const CalibrateOptions& options)
                     continue;
                 }
                 skipped_by_service += event.value("skipped", 0);
-                readRawPair(client, event, pair);
-                if (collector.take(pair)) {
+                const uint64_t frame = readCalibrationPair(client, event, pair);
+                if (collector.take(frame, pair)) {
                     stop = Stop::Count;
                     break;
                 }

@@ -237,7 +237,7 @@ int runRecord(const RecordOptions& options)
         // its left image's stamp: the depth is the left camera's view, and a ROS user
         // pairs them with the image by stamp.
         // `xyzirgb`: the coloured cloud's points interleaved, capacity kept (writer thread).
-        write = [&bag, results, xyzirgb = std::vector<float>()](const PairBuffer& p) mutable {
+        write = [&bag, results, xyzirgb = std::vector<float>()](const RawPair& p) mutable {
             const int64_t left = p.left_realtime_ns.value_or(p.left_stamp_ns);
             const int64_t right = p.right_realtime_ns.value_or(p.right_stamp_ns);
             bag->write(p.left_colour.empty() ? p.left : p.left_colour,
@@ -263,7 +263,7 @@ int runRecord(const RecordOptions& options)
             fmt::print(stderr, "stereoctl: the service runs uncalibrated: the recording has no "
                                "calibration.yaml\n");
         }
-        write = [&csv](const PairBuffer& p) {
+        write = [&csv](const RawPair& p) {
             csv->write(p.left_colour.empty() ? p.left : p.left_colour,
                        p.right_colour.empty() ? p.right : p.right_colour, p.left_stamp_ns,
                        p.right_stamp_ns);
@@ -316,12 +316,13 @@ int runRecord(const RecordOptions& options)
             counts.service_skipped += event.value("skipped", uint64_t{0});
             const std::optional<std::size_t> slot = queue.takeFree();
             if (!slot) {
-                readRawPair(client, event, nullptr, results);
+                skipRawPair(client, event);
                 ++counts.queue_dropped;
-            } else if (readRawPair(client, event, &queue.buffer(*slot), results)) {
+            } else if (readRawPair(client, event, queue.buffer(*slot), results).complete()) {
                 queue.push(*slot);
                 ++counts.received;
             } else {
+                // A pair this stereoctl cannot record whole is not recorded.
                 queue.giveBack(*slot);
             }
             progress.update(counts, pair_writer.written(), queue.queued(), queue.capacity(), false);

@@ -1,9 +1,9 @@
 #pragma once
 // The recorder's pair buffers and its writer thread (`stereoctl record`, ctl/record_command.cpp):
-// a fixed pool of PairBuffers that the socket reader fills and a writer thread writes, so
+// a fixed pool of RawPairs that the socket reader fills and a writer thread writes, so
 // that a disk slower than the cameras drops pairs instead of holding the socket.
 //
-// Thread contract: PairQueue is thread-safe (reader and writer); a PairBuffer belongs to
+// Thread contract: PairQueue is thread-safe (reader and writer); a RawPair belongs to
 // whoever holds its index (see PairQueue::buffer()); PairWriter is made and joined by the
 // reader thread. Ownership: the queue owns the buffers; the writer borrows the queue.
 // Units: stamps in ns.
@@ -20,38 +20,9 @@
 #include <thread>
 #include <vector>
 
-#include <opencv2/core/mat.hpp>
-
-#include "model/cloud_point.hpp"
+#include "ctl/raw_pair.hpp"
 
 namespace stereod {
-
-// One raw pair of the service as recorded, with its results; reused from pair to pair.
-struct PairBuffer {
-    cv::Mat left;
-    cv::Mat right;
-    // The cameras' colour as captured (CV_8UC3, BGR), empty where a camera kept none: what
-    // is recorded in its place (a colour PNG, a bgr8 image in a bag).
-    cv::Mat left_colour;
-    cv::Mat right_colour;
-    // Each camera's own capture stamps (the source's: CLOCK_MONOTONIC for cameras, the
-    // recorded ones on replay): what a CSV+PNG recording keeps, to be replayed as it was.
-    int64_t left_stamp_ns = 0;
-    int64_t right_stamp_ns = 0;
-    // The same frames in the service's one time base, CLOCK_REALTIME: what a bag carries
-    // (header.stamp and log time), as ROS does. A service older than these fields gives
-    // none: the bag then keeps the source's stamps.
-    std::optional<int64_t> left_realtime_ns;
-    std::optional<int64_t> right_realtime_ns;
-    // The pair's results (--with), when the event carried them. The buffers keep their
-    // size from pair to pair.
-    cv::Mat depth_m; // CV_32FC1 metres, 0 = none
-    bool depth_present = false;
-    std::vector<CloudPoint> cloud;
-    bool cloud_present = false; // (a cloud may have no point)
-    // One colour per cloud point when the left camera kept its colour, else none.
-    std::vector<CloudColour> cloud_colour;
-};
 
 // Pair buffers travelling between the socket reader and the writer thread: a fixed set,
 // each either free or queued for writing.
@@ -122,10 +93,10 @@ class PairQueue {
     std::size_t capacity() const noexcept { return buffers_.size(); }
     // Owned by whoever took the index: the reader between takeFree() and push(), the
     // writer between pop() and release().
-    PairBuffer& buffer(std::size_t index) { return buffers_[index]; }
+    RawPair& buffer(std::size_t index) { return buffers_[index]; }
 
   private:
-    std::vector<PairBuffer> buffers_;
+    std::vector<RawPair> buffers_;
     mutable std::mutex mutex_;
     std::condition_variable changed_;
     std::vector<std::size_t> free_; // guarded by mutex_
@@ -140,7 +111,7 @@ class PairQueue {
 // from any thread.
 class PairWriter {
   public:
-    using WriteFn = std::function<void(const PairBuffer&)>;
+    using WriteFn = std::function<void(const RawPair&)>;
 
     PairWriter(WriteFn write, PairQueue& queue) : write_(std::move(write)), queue_(queue)
     {
@@ -175,7 +146,7 @@ class PairWriter {
     {
         while (const std::optional<std::size_t> index = queue_.pop()) {
             if (!failed()) {
-                const PairBuffer& pair = queue_.buffer(*index);
+                const RawPair& pair = queue_.buffer(*index);
                 try {
                     write_(pair);
                     written_.fetch_add(1, std::memory_order_acq_rel);

@@ -323,8 +323,8 @@ void Worker::processPair(StereoPair& pair)
         probe_ms_.add(result.timings.near_field_probe_ms);
     }
     ++stats_.frames;
-    processed_ns_.add(publish_start_ns);
-    stats_.fps = perSecond(processed_ns_);
+    processed_.add(publish_start_ns);
+    stats_.fps = processed_.perSecond();
     stats_.stage_mean_ms.rectify_ms = mean(rectify_ms_);
     stats_.stage_mean_ms.match_ms = mean(match_ms_);
     stats_.stage_mean_ms.depth_ms = mean(depth_ms_);

@@ -32,6 +32,7 @@
 #include <string>
 #include <thread>
 
+#include "base/rate_estimate.hpp"
 #include "base/rolling_window.hpp"
 #include "base/unique_fd.hpp"
 #include "capture/frame_source.hpp"
@@ -148,7 +149,7 @@ class Worker {
     PipelineStats stats_;
     RecentValues<double, kWindow> rectify_ms_, match_ms_, depth_ms_, nearest_ms_, cloud_ms_,
         zones_ms_, publish_ms_, extended_ms_, probe_ms_;
-    RecentValues<int64_t, kWindow> processed_ns_;         // when each pair was done, for the rate
+    RateEstimate<kWindow> processed_;                     // pairs done, for the rate
     RecentValues<double, kLatencyWindow> latency_ms_;     // capture stamp to publication
     std::array<double, kLatencyWindow> latency_sorted_{}; // scratch for the percentiles
     LogLimiter log_limiter_; // failing pairs: one line per 5 s, the rest counted

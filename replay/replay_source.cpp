@@ -149,7 +149,7 @@ int ReplaySource::start(PairRing& ring)
     }
     ring_ = &ring;
     stop_requested_.store(false, std::memory_order_release);
-    recent_count_ = 0;
+    fps_.restart();
     state_.store(SourceState::Running, std::memory_order_release);
     try {
         thread_done_.store(false, std::memory_order_release);
@@ -400,17 +400,7 @@ bool ReplaySource::sleepUntil(int64_t deadline_ns)
 
 void ReplaySource::recordDelivery(int64_t stamp_ns, int64_t skew_ns) noexcept
 {
-    recent_stamps_ns_[recent_count_ % recent_stamps_ns_.size()] = stamp_ns;
-    ++recent_count_;
-    const std::size_t span = std::min(recent_count_, recent_stamps_ns_.size());
-    if (span >= 2) {
-        const int64_t oldest_ns =
-            recent_stamps_ns_[(recent_count_ - span) % recent_stamps_ns_.size()];
-        if (stamp_ns > oldest_ns)
-            fps_.store(static_cast<double>(span - 1) * 1e9 /
-                           static_cast<double>(stamp_ns - oldest_ns),
-                       std::memory_order_relaxed);
-    }
+    fps_.add(stamp_ns);
 
     // Single writer: plain load/store suffice for the running sums.
     skew_.add(skew_ns);
@@ -571,8 +561,7 @@ SourceStatus ReplaySource::status() const
         camera_error[kLeft] = camera_error_[kLeft];
         camera_error[kRight] = camera_error_[kRight];
     }
-    const double fps =
-        out.state == SourceState::Running ? fps_.load(std::memory_order_relaxed) : 0.0;
+    const double fps = out.state == SourceState::Running ? fps_.perSecond() : 0.0;
     for (int side : {kLeft, kRight}) {
         CameraStatus camera;
         camera.name = kSideName[side];

@@ -58,6 +58,7 @@
 #include <utility>
 #include <vector>
 
+#include "base/rate_estimate.hpp"
 #include "base/rolling_window.hpp"
 #include "capture/frame_pool.hpp"
 #include "capture/frame_source.hpp"
@@ -193,8 +194,6 @@ class ReplaySource final : public FrameSource {
     cv::Mat right_colour_;            // the same for the right image (keep_right_colour)
     std::vector<uint8_t> file_bytes_; // the image file being decoded, capacity kept
     uint64_t next_pass_ = 0;          // loops continue the numbering after a restart
-    std::array<int64_t, 32> recent_stamps_ns_{}; // delivery times, for the measured fps
-    std::size_t recent_count_ = 0;
 
     PairRing* ring_ = nullptr; // borrowed between start() and stop()
     std::thread thread_;
@@ -215,7 +214,7 @@ class ReplaySource final : public FrameSource {
     std::atomic<uint64_t> frames_[2]{};
     std::atomic<uint64_t> bad_frames_[2]{};
     std::atomic<uint64_t> dropped_{0}; // pairs skipped for want of pool buffers
-    std::atomic<double> fps_{0.0};
+    RateEstimate<32> fps_; // delivered pairs (restarted by start() before the thread runs)
     RollingWindow<kSkewWindowPairs> skew_; // recorded right - left of recent pairs
     mutable std::mutex status_mutex_;
     std::string last_error_;      // guarded by status_mutex_

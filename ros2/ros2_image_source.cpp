@@ -380,17 +380,7 @@ void Ros2ImageSource::noteBad(int side, std::string reason)
 void Ros2ImageSource::noteArrival(Side& side, int64_t now_ns) noexcept
 {
     side.last_arrival_ns.store(now_ns, std::memory_order_release);
-    side.arrivals_ns[side.arrival_count % side.arrivals_ns.size()] = now_ns;
-    ++side.arrival_count;
-    if (side.arrival_count >= 2) {
-        const std::size_t span = std::min(side.arrival_count, side.arrivals_ns.size());
-        const int64_t oldest_ns =
-            side.arrivals_ns[(side.arrival_count - span) % side.arrivals_ns.size()];
-        if (now_ns > oldest_ns)
-            side.fps.store(static_cast<double>(span - 1) * 1e9 /
-                               static_cast<double>(now_ns - oldest_ns),
-                           std::memory_order_relaxed);
-    }
+    side.fps.add(now_ns);
 }
 
 SourceStatus Ros2ImageSource::status() const
@@ -410,7 +400,7 @@ SourceStatus Ros2ImageSource::status() const
         camera.frames = s.frames.load(std::memory_order_relaxed);
         camera.dropped = s.dropped.load(std::memory_order_relaxed);
         camera.bad_frames = s.bad.load(std::memory_order_relaxed);
-        camera.fps = s.fps.load(std::memory_order_relaxed);
+        camera.fps = s.fps.perSecond();
         camera.unpaired = sync.drops[side].total();
         {
             const std::lock_guard lock(status_mutex_);

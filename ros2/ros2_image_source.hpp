@@ -63,6 +63,7 @@
 
 #include <opencv2/core/types.hpp>
 
+#include "base/rate_estimate.hpp"
 #include "capture/frame_pool.hpp"
 #include "capture/frame_source.hpp"
 #include "capture/stereo_sync.hpp"
@@ -135,9 +136,7 @@ class Ros2ImageSource final : public FrameSource {
         std::atomic<uint64_t> dropped{0}; // no free frame in the pool
         std::atomic<uint64_t> bad{0};
         std::atomic<int64_t> last_arrival_ns{0}; // CLOCK_MONOTONIC; 0: none yet
-        std::atomic<double> fps{0.0};
-        std::array<int64_t, 16> arrivals_ns{}; // reading thread only: for fps
-        std::size_t arrival_count = 0;
+        RateEstimate<16> fps;                    // arrivals; add() on the reading thread only
     };
 
     // One camera's camera_info topic.

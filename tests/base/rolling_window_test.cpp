@@ -102,24 +102,5 @@ TEST(RecentValues, MeanIsOfTheValuesHeldOnly)
     EXPECT_DOUBLE_EQ(mean(values), 2.0);
 }
 
-TEST(RecentValues, PerSecondCountsIntervalsOverTheSpan)
-{
-    RecentValues<int64_t, 4> times_ns;
-    times_ns.add(0);
-    EXPECT_DOUBLE_EQ(perSecond(times_ns), 0.0); // one event: no interval yet
-    for (int64_t t : {100'000'000, 200'000'000, 300'000'000, 400'000'000})
-        times_ns.add(t);
-    // The four held span 0.3 s with three intervals: 10 per second.
-    EXPECT_DOUBLE_EQ(perSecond(times_ns), 10.0);
-}
-
-TEST(RecentValues, PerSecondIsZeroWhenTimeDoesNotAdvance)
-{
-    RecentValues<int64_t, 4> times_ns;
-    times_ns.add(5);
-    times_ns.add(5);
-    EXPECT_DOUBLE_EQ(perSecond(times_ns), 0.0);
-}
-
 } // namespace
 } // namespace stereod

@@ -17,6 +17,7 @@
 
 #include "ctl/client.hpp"
 #include "tests/support/process.hpp"
+#include "tests/support/scripted_peer.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace stereod {
@@ -25,57 +26,9 @@ namespace {
 using namespace std::chrono_literals;
 using Json = nlohmann::ordered_json;
 
-// A listening socket whose one connection is served by `script` on its own thread.
-class ScriptedPeer {
-  public:
-    ScriptedPeer(const std::string& path, std::function<void(int fd)> script)
-    {
-        listen_fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-        sockaddr_un address{};
-        address.sun_family = AF_UNIX;
-        std::strncpy(address.sun_path, path.c_str(), sizeof(address.sun_path) - 1);
-        EXPECT_EQ(::bind(listen_fd_, reinterpret_cast<sockaddr*>(&address), sizeof(address)), 0)
-            << std::strerror(errno);
-        EXPECT_EQ(::listen(listen_fd_, 4), 0);
-        thread_ = std::thread([this, script = std::move(script)] {
-            const int fd = ::accept(listen_fd_, nullptr, nullptr);
-            if (fd >= 0) {
-                script(fd);
-                ::close(fd);
-            }
-        });
-    }
-    ~ScriptedPeer()
-    {
-        thread_.join();
-        ::close(listen_fd_);
-    }
-
-  private:
-    int listen_fd_ = -1;
-    std::thread thread_;
-};
-
-void writeAll(int fd, const std::string& bytes)
-{
-    std::size_t done = 0;
-    while (done < bytes.size()) {
-        const ssize_t n = ::send(fd, bytes.data() + done, bytes.size() - done, MSG_NOSIGNAL);
-        ASSERT_GT(n, 0) << std::strerror(errno);
-        done += static_cast<std::size_t>(n);
-    }
-}
-
-// Reads up to and including the first newline.
-std::string readRequestLine(int fd)
-{
-    std::string line;
-    char c = 0;
-    while (::read(fd, &c, 1) == 1 && c != '\n') {
-        line.push_back(c);
-    }
-    return line;
-}
+using test::readRequestLine;
+using test::ScriptedPeer;
+using test::writeAll;
 
 // The message of the E that `call` must throw; a test failure (and "") if it throws none.
 template <typename E, typename Call> std::string messageOf(Call&& call)
