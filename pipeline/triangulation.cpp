@@ -45,8 +45,12 @@ void clearDepthBeyond(cv::Mat& depth_m, float max_depth_m)
     }
 }
 
-size_t PointCloudBuilder::countRows(const cv::Mat& depth_m)
+void PointCloudBuilder::build(const cv::Mat& depth_m, const cv::Mat& left_rectified,
+                              const RectifiedGeometry& geometry, std::vector<CloudPoint>& cloud)
 {
+    CV_Assert(depth_m.type() == CV_32FC1 && left_rectified.type() == CV_8UC1 &&
+              depth_m.size() == left_rectified.size());
+    // Each row's points counted first, then their first indices.
     row_first_.resize(static_cast<size_t>(depth_m.rows) + 1);
     forRowStripes(0, depth_m.rows, [&](int first, int end) {
         for (int v = first; v < end; ++v) {
@@ -60,17 +64,10 @@ size_t PointCloudBuilder::countRows(const cv::Mat& depth_m)
     row_first_[0] = 0;
     for (size_t v = 1; v < row_first_.size(); ++v)
         row_first_[v] += row_first_[v - 1];
-    return row_first_.back();
-}
-
-void PointCloudBuilder::build(const cv::Mat& depth_m, const cv::Mat& left_rectified,
-                              const RectifiedGeometry& geometry, std::vector<CloudPoint>& cloud)
-{
-    CV_Assert(depth_m.type() == CV_32FC1 && left_rectified.type() == CV_8UC1 &&
-              depth_m.size() == left_rectified.size());
+    built_from_ = depth_m.data;
     cloud.reserve(depth_m.total());
     // Resizing from the last frame's count initialises only the points it adds.
-    cloud.resize(countRows(depth_m));
+    cloud.resize(row_first_.back());
     const float inv_f = static_cast<float>(1.0 / geometry.focal_px);
     const float cx = static_cast<float>(geometry.cx_px);
     const float cy = static_cast<float>(geometry.cy_px);
@@ -91,12 +88,13 @@ void PointCloudBuilder::build(const cv::Mat& depth_m, const cv::Mat& left_rectif
 }
 
 void PointCloudBuilder::colours(const cv::Mat& depth_m, const cv::Mat& left_rectified_colour,
-                                std::vector<CloudColour>& colours)
+                                std::vector<CloudColour>& colours) const
 {
     CV_Assert(depth_m.type() == CV_32FC1 && left_rectified_colour.type() == CV_8UC3 &&
-              depth_m.size() == left_rectified_colour.size());
+              depth_m.size() == left_rectified_colour.size() && depth_m.data == built_from_ &&
+              row_first_.size() == static_cast<size_t>(depth_m.rows) + 1);
     colours.reserve(depth_m.total());
-    colours.resize(countRows(depth_m));
+    colours.resize(row_first_.back());
     forRowStripes(0, depth_m.rows, [&](int first, int end) {
         for (int v = first; v < end; ++v) {
             const float* z = depth_m.ptr<float>(v);

@@ -33,17 +33,17 @@ class PointCloudBuilder {
     void build(const cv::Mat& depth_m, const cv::Mat& left_rectified,
                const RectifiedGeometry& geometry, std::vector<CloudPoint>& cloud);
 
-    // The colours of the points build() makes from `depth_m`, in the same order:
-    // left_rectified_colour (CV_8UC3, BGR) at each valid (> 0) depth pixel, as r, g, b.
+    // The colours of the points the last build() made, in the same order: the colour
+    // left image (CV_8UC3, BGR) at each valid (> 0) depth pixel, as r, g, b. `depth_m` is
+    // the one build() was given (asserted): its rows' point counts are build()'s.
     // `colours` is resized, its capacity grown once to the full image.
     void colours(const cv::Mat& depth_m, const cv::Mat& left_rectified_colour,
-                 std::vector<CloudColour>& colours);
+                 std::vector<CloudColour>& colours) const;
 
   private:
     // row_first_[v]: the index of row v's first point; row_first_[rows]: the count.
-    size_t countRows(const cv::Mat& depth_m);
-
     std::vector<size_t> row_first_;
+    const uchar* built_from_ = nullptr; // the depth the last build() counted
 };
 
 } // namespace stereod
