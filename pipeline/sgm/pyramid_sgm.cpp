@@ -329,25 +329,60 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
     Impl& m = *impl_;
     const int bands = m.settings.full.threads;
     const Clock::time_point t0 = Clock::now();
-    if (m.coarse) {
+    // The coarse level: halving, then its match.
+    const auto match_coarse = [&](int halving_bands) {
         const CensusSgmSettings& c = m.coarse->settings();
-        m.pool.run(bands, [&](int band) {
-            const int y0 = c.height * band / bands, y1 = c.height * (band + 1) / bands;
+        auto halve = [&](int band) {
+            const int y0 = c.height * band / halving_bands;
+            const int y1 = c.height * (band + 1) / halving_bands;
             halveRows(left, left_stride, c.width, y0, y1, m.half_left.data());
             halveRows(right, right_stride, c.width, y0, y1, m.half_right.data());
-        });
+        };
+        if (halving_bands == 1)
+            halve(0);
+        else
+            m.pool.run(halving_bands, halve);
         m.coarse->compute(
             m.half_left.data(), static_cast<size_t>(c.width), m.half_right.data(),
             static_cast<size_t>(c.width),
             {m.coarse_disparity.data(), m.coarse_confidence.data(), m.coarse_limit.data()});
-        if (m.guide)
-            m.guide->predict(m.coarse_disparity.data(), m.coarse_limit.data());
+    };
+    const auto match_full = [&] {
+        m.full.compute(left, left_stride, right, right_stride,
+                       {out.disparity_px, out.confidence, out.near_field},
+                       m.guide ? m.guide->spans() : nullptr);
+    };
+    // Each level's wall time, from t0; both levels end by t2.
+    double full_ms = 0.0, coarse_ms = 0.0;
+    Clock::time_point t2;
+    if (m.coarse && !m.guide && bands > 1) {
+        // Without guidance the levels do not depend on each other until the merge: they
+        // run at the same time, the full level on this thread and the coarse one on the
+        // pool's, each with its own band threads. What one level leaves idle (the bands'
+        // uneven ends, its single-threaded steps) the other fills; each level's time
+        // then includes the other's share of the cores.
+        m.pool.run(2, [&](int level) {
+            if (level == 0) {
+                match_full();
+                full_ms = msBetween(t0, Clock::now());
+            } else {
+                match_coarse(1);
+                coarse_ms = msBetween(t0, Clock::now());
+            }
+        });
+        t2 = Clock::now();
+    } else {
+        if (m.coarse) {
+            match_coarse(bands);
+            if (m.guide)
+                m.guide->predict(m.coarse_disparity.data(), m.coarse_limit.data());
+        }
+        const Clock::time_point t1 = Clock::now();
+        coarse_ms = msBetween(t0, t1);
+        match_full();
+        t2 = Clock::now();
+        full_ms = msBetween(t1, t2);
     }
-    const Clock::time_point t1 = Clock::now();
-    m.full.compute(left, left_stride, right, right_stride,
-                   {out.disparity_px, out.confidence, out.near_field},
-                   m.guide ? m.guide->spans() : nullptr);
-    const Clock::time_point t2 = Clock::now();
     if (m.coarse) {
         const int ch = m.coarse->settings().height, h = m.settings.full.height;
         m.pool.run(bands, [&](int band) {
@@ -362,8 +397,7 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
     }
     const Clock::time_point t3 = Clock::now();
     m.runProbe(left, left_stride, probe_region, out);
-    m.timings = {msBetween(t1, t2), msBetween(t0, t1) + msBetween(t2, t3),
-                 msBetween(t3, Clock::now())};
+    m.timings = {full_ms, coarse_ms + msBetween(t2, t3), msBetween(t3, Clock::now())};
 }
 
 const PyramidSgmTimings& PyramidSgm::timings() const
