@@ -266,10 +266,12 @@ struct PyramidSgm::Impl {
         return nearest;
     }
 
-    // The probe over the region, at the level the widest range was searched at.
-    void runProbe(const uint8_t* left, size_t left_stride, PixelRect region,
-                  const PyramidSgmOutput& out)
+    // The probe over the region, at the level the widest range was searched at; with a
+    // pool, rows of tiles shared out over its threads. Its evidence is marked by
+    // markProbeEvidence(), once the merge has written near_field.
+    void runProbe(const uint8_t* left, size_t left_stride, PixelRect region, BandPool* with)
     {
+        probed = false;
         if (!probe || region.width <= 0 || region.height <= 0)
             return;
         const bool at_coarse = coarse != nullptr;
@@ -281,11 +283,19 @@ struct PyramidSgm::Impl {
                                (region.y + region.height + scale - 1) / scale - region.y / scale};
         if (at_coarse)
             probe->run(half_left.data(), static_cast<size_t>(ls.width), level, scaled,
-                       ls.min_disparity, ls.min_disparity + ls.num_disparities - 1, &pool);
+                       ls.min_disparity, ls.min_disparity + ls.num_disparities - 1, with);
         else
             probe->run(left, left_stride, level, scaled, ls.min_disparity,
-                       ls.min_disparity + ls.num_disparities - 1, &pool);
-        const uint8_t mark = at_coarse ? kNearerThanExtendedRange : kNearerThanRange;
+                       ls.min_disparity + ls.num_disparities - 1, with);
+        probed = true;
+    }
+
+    void markProbeEvidence(const PyramidSgmOutput& out) const
+    {
+        if (!probed)
+            return;
+        const int scale = coarse != nullptr ? 2 : 1;
+        const uint8_t mark = coarse != nullptr ? kNearerThanExtendedRange : kNearerThanRange;
         const int w = settings.full.width, h = settings.full.height;
         for (const PixelRect& tile : probe->evidenceTiles()) {
             const int x0 = tile.x * scale, x1 = std::min(w, (tile.x + tile.width) * scale);
@@ -309,6 +319,7 @@ struct PyramidSgm::Impl {
     std::vector<uint8_t> coarse_near, coarse_given; // classifyCoarseRows()
     std::vector<uint8_t> texture_rows;              // its texturedRow() scratch, per band
     std::unique_ptr<NearFieldProbe> probe;
+    bool probed = false; // the last compute() ran the probe
     PyramidSgmTimings timings;
     // The levels' own work between and after their matches (halving, merging, the probe)
     // over settings.full.threads, as many as the matches.
@@ -353,7 +364,8 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
                        m.guide ? m.guide->spans() : nullptr);
     };
     // Each level's wall time, from t0; both levels end by t2.
-    double full_ms = 0.0, coarse_ms = 0.0;
+    double full_ms = 0.0, coarse_ms = 0.0, probe_ms = 0.0;
+    bool probe_ran = false;
     Clock::time_point t2;
     if (m.coarse && !m.guide && bands > 1) {
         // Without guidance the levels do not depend on each other until the merge: they
@@ -367,13 +379,22 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
                 full_ms = msBetween(t0, Clock::now());
             } else {
                 match_coarse(1);
+                m.classifyCoarseRows(0, 0, m.coarse->settings().height);
                 coarse_ms = msBetween(t0, Clock::now());
+                const Clock::time_point probe_start = Clock::now();
+                m.runProbe(left, left_stride, probe_region, nullptr);
+                probe_ms = msBetween(probe_start, Clock::now());
             }
         });
+        probe_ran = true;
         t2 = Clock::now();
     } else {
         if (m.coarse) {
             match_coarse(bands);
+            const int ch = m.coarse->settings().height;
+            m.pool.run(bands, [&](int band) {
+                m.classifyCoarseRows(band, ch * band / bands, ch * (band + 1) / bands);
+            });
             if (m.guide)
                 m.guide->predict(m.coarse_disparity.data(), m.coarse_limit.data());
         }
@@ -384,10 +405,7 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
         full_ms = msBetween(t1, t2);
     }
     if (m.coarse) {
-        const int ch = m.coarse->settings().height, h = m.settings.full.height;
-        m.pool.run(bands, [&](int band) {
-            m.classifyCoarseRows(band, ch * band / bands, ch * (band + 1) / bands);
-        });
+        const int h = m.settings.full.height;
         m.pool.run(bands, [&](int band) {
             const int y0 = h * band / bands, y1 = h * (band + 1) / bands;
             m.mergeRows(y0, y1, out);
@@ -396,8 +414,12 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
         });
     }
     const Clock::time_point t3 = Clock::now();
-    m.runProbe(left, left_stride, probe_region, out);
-    m.timings = {full_ms, coarse_ms + msBetween(t2, t3), msBetween(t3, Clock::now())};
+    if (!probe_ran) {
+        m.runProbe(left, left_stride, probe_region, &m.pool);
+        probe_ms = msBetween(t3, Clock::now());
+    }
+    m.markProbeEvidence(out);
+    m.timings = {full_ms, coarse_ms + msBetween(t2, t3), probe_ms};
 }
 
 const PyramidSgmTimings& PyramidSgm::timings() const
