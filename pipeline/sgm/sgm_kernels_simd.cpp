@@ -383,8 +383,10 @@ static_assert(5 * 255 < (1 << (16 - kTagBits)) - 1, "summed paths and tag fit in
 static_assert(kWinnerGroup <= (1 << kTagBits), "a group index fits in the tag");
 
 // winners_backward() for kOthers other paths: a count known to the compiler unrolls the
-// sum and keeps the rows' pointers in registers.
-template <int kOthers, bool kSpans>
+// sum and keeps the rows' pointers in registers. kWhole: num_disparities == lanes (every
+// range of a multiple of kLaneAlign disparities), so no vector of a pixel's lanes reaches
+// past the range and the per-vector tests fall away.
+template <int kOthers, bool kSpans, bool kWhole>
 void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int width, int lanes,
                        const PathRows& others, int min_disparity, int num_disparities,
                        uint8_t* path_scratch, uint16_t* sum_scratch, const WinnerRows& out,
@@ -501,6 +503,9 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
             auto best_key = none16;
             if constexpr (kSpans) {
                 best_key = hn::LoadU(d16, group_best + (p0 - p_first));
+            } else if (count == kWinnerGroup) { // every group but a row's last: unrolled
+                for (int g = 0; g < kWinnerGroup; ++g)
+                    best_key = hn::Min(best_key, hn::LoadU(d16, keys_of(g) + p0 - g));
             } else {
                 for (int g = 0; g < count; ++g)
                     best_key = hn::Min(best_key, hn::LoadU(d16, keys_of(g) + p0 - g));
@@ -540,7 +545,7 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
         auto lane_tag = hn::Set(d16, static_cast<uint16_t>(span.first / n16));
         // Sums the paths for the lanes of this vector.
         const auto visit = [&](int k0, hn::Vec<D8> v) {
-            if (k0 >= num_disparities)
+            if (!kWhole && k0 >= num_disparities)
                 return;
             auto lo = hn::PromoteTo(d16, hn::LowerHalf(dh, v));
             auto hi = hn::PromoteTo(d16, hn::UpperHalf(dh, v));
@@ -555,7 +560,7 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
             lane_tag = hn::Add(lane_tag, one16);
             next = hn::Min(next, hn::Max(best, lo));
             best = hn::Min(best, lo);
-            if (k0 + n16 < num_disparities) {
+            if (kWhole || k0 + n16 < num_disparities) {
                 hi = hn::ShiftLeft<kTagBits>(hi);
                 hn::StoreU(hn::Or(hi, right_tag), d16, key + k0 + n16);
                 hi = hn::Or(hi, lane_tag);
@@ -714,14 +719,18 @@ void WinnersBackward(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int wid
 {
     // At most 4 (sgm_kernels.hpp): the summed paths and a tag fit 16 bits.
     WithCount<4>(others.count, [&](auto count) {
+        const auto with = [&](auto spanned, auto whole) {
+            WinnersBackwardOf<count(), spanned(), whole()>(
+                cost, p2, p1, width, lanes, others, min_disparity, num_disparities, path_scratch,
+                sum_scratch, out, right_lane, scratch, spans);
+        };
+        using Yes = std::true_type;
+        using No = std::false_type;
+        const bool whole = num_disparities == lanes;
         if (spans != nullptr)
-            WinnersBackwardOf<count(), true>(cost, p2, p1, width, lanes, others, min_disparity,
-                                             num_disparities, path_scratch, sum_scratch, out,
-                                             right_lane, scratch, spans);
+            whole ? with(Yes(), Yes()) : with(Yes(), No());
         else
-            WinnersBackwardOf<count(), false>(cost, p2, p1, width, lanes, others, min_disparity,
-                                              num_disparities, path_scratch, sum_scratch, out,
-                                              right_lane, scratch, spans);
+            whole ? with(No(), Yes()) : with(No(), No());
     });
 }
 
