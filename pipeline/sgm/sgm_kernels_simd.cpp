@@ -159,13 +159,34 @@ void CensusRow(const uint8_t* center, size_t stride, int width, int census_width
     }
 }
 
-void CostRow(const CensusRows& census, int width, int min_disparity, int num_disparities, int lanes,
-             uint8_t cost_invalid, uint8_t* cost, const LaneSpan* spans)
+// f(std::integral_constant<int, count>()) for count in kFirst..kLast (the last for any
+// count past it): a kernel instantiated per count, dispatched once per row.
+template <int kLast, int kFirst = 0, class F> HWY_INLINE void WithCount(int count, const F& f)
+{
+    if constexpr (kFirst < kLast) {
+        if (count != kFirst)
+            return WithCount<kLast, kFirst + 1>(count, f);
+    }
+    f(std::integral_constant<int, kFirst>());
+}
+
+// cost_row() for kPlanes census planes: a count known to the compiler unrolls the planes
+// and keeps the rows' pointers in registers (the cost stores could alias them as far as
+// it knows, which would load them again for every vector).
+template <int kPlanes>
+void CostRowOf(const CensusRows& census, int width, int min_disparity, int num_disparities,
+               int lanes, uint8_t cost_invalid, uint8_t* cost, const LaneSpan* spans)
 {
     const D8 d;
     const int n = static_cast<int>(hn::Lanes(d));
     const auto iota = hn::Iota(d, 0);
     const auto invalid = hn::Set(d, cost_invalid);
+    const uint8_t* left_rows[kPlanes];
+    const uint8_t* right_rows[kPlanes];
+    for (int p = 0; p < kPlanes; ++p) {
+        left_rows[p] = census.left[p];
+        right_rows[p] = census.right_reversed[p];
+    }
     for (int x = 0; x < width; ++x) {
         uint8_t* c = cost + static_cast<size_t>(x) * static_cast<size_t>(lanes);
         // The lanes whose right pixel is inside the image, and not padding.
@@ -180,14 +201,14 @@ void CostRow(const CensusRows& census, int width, int min_disparity, int num_dis
         const std::ptrdiff_t j0 = width - 1 - x + min_disparity;
         // The left pixel's census bytes, read once: the cost stores below may alias
         // any byte as far as the compiler knows, so it would read them again per vector.
-        uint8_t left[8];
-        for (int p = 0; p < census.planes; ++p)
-            left[p] = census.left[p][x];
+        uint8_t left[kPlanes];
+        for (int p = 0; p < kPlanes; ++p)
+            left[p] = left_rows[p][x];
         const auto distance = [&](int k0) {
             auto sum = hn::Zero(d);
-            for (int p = 0; p < census.planes; ++p) {
+            for (int p = 0; p < kPlanes; ++p) {
                 const auto l = hn::Set(d, left[p]);
-                const auto r = hn::LoadU(d, census.right_reversed[p] + j0 + k0);
+                const auto r = hn::LoadU(d, right_rows[p] + j0 + k0);
                 sum = hn::Add(sum, hn::PopulationCount(hn::Xor(l, r)));
             }
             return sum;
@@ -209,6 +230,16 @@ void CostRow(const CensusRows& census, int width, int min_disparity, int num_dis
             hn::StoreU(hn::IfThenElse(outside, invalid, distance(k0)), d, c + k0);
         }
     }
+}
+
+void CostRow(const CensusRows& census, int width, int min_disparity, int num_disparities, int lanes,
+             uint8_t cost_invalid, uint8_t* cost, const LaneSpan* spans)
+{
+    // 1 .. 8 planes: census windows of up to 64 bits.
+    WithCount<8, 1>(census.planes, [&](auto planes) {
+        CostRowOf<planes()>(census, width, min_disparity, num_disparities, lanes, cost_invalid,
+                            cost, spans);
+    });
 }
 
 // The first step of a path over lanes first .. end-1: L = C, written to l; returns min L
@@ -297,17 +328,6 @@ HWY_INLINE hn::Vec<D8> StepInSpan(const uint8_t* cost, const uint8_t* prev, Lane
         visit(k0, v);
     }
     return MinOfBytes(running_min);
-}
-
-// f(std::integral_constant<int, count>()) for count in kFirst..kLast (the last for any
-// count past it): a kernel instantiated per count, dispatched once per row.
-template <int kLast, int kFirst = 0, class F> HWY_INLINE void WithCount(int count, const F& f)
-{
-    if constexpr (kFirst < kLast) {
-        if (count != kFirst)
-            return WithCount<kLast, kFirst + 1>(count, f);
-    }
-    f(std::integral_constant<int, kFirst>());
 }
 
 // paths_forward() for kAbove paths from above: a count known to the compiler unrolls the
