@@ -77,29 +77,51 @@ using D8 = hn::CappedTag<uint8_t, kLaneAlign>;
 using D16 = hn::Repartition<uint16_t, D8>; // same bytes, half the lanes
 using D32 = hn::Repartition<uint32_t, D8>;
 
-// Smallest 16-bit lane of a vector: on x86, the halves' minimum and SSE4's phminposuw
-// (one instruction), rather than Highway's reduction over the whole 256-bit vector.
-HWY_INLINE uint16_t MinOfU16(hn::Vec<D16> v)
-{
 #if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX2 // 32-byte vectors, and SSE4's phminposuw
-    const hn::Full128<uint16_t> d128;
-    return hn::GetLane(
-        hn::MinOfLanes(d128, hn::Min(hn::LowerHalf(d128, v), hn::UpperHalf(d128, v))));
-#else
-    return hn::GetLane(hn::MinOfLanes(D16(), v));
-#endif
+// The smallest 16-bit lane of a vector's halves in lane 0 (its position in lane 1):
+// SSE4's phminposuw, one instruction, rather than Highway's reduction, which also
+// broadcasts the result to every lane.
+HWY_INLINE __m128i MinPosOfU16(hn::Vec<D16> v)
+{
+    return _mm_minpos_epu16(
+        _mm_min_epu16(_mm256_castsi256_si128(v.raw), _mm256_extracti128_si256(v.raw, 1)));
 }
 
-// Smallest byte of a vector, in every byte: the smaller of each byte pair, then
-// MinOfU16(). It lies on the path along the row's chain from one pixel to the next, so
-// its latency counts.
+// Smallest 16-bit lane of a vector.
+HWY_INLINE uint16_t MinOfU16(hn::Vec<D16> v)
+{
+    return static_cast<uint16_t>(_mm_cvtsi128_si32(MinPosOfU16(v)));
+}
+
+// The smallest 16-bit lane of v, at most 255, in every byte: broadcast from the vector
+// register, with no trip through a general one.
+HWY_INLINE hn::Vec<D8> BroadcastSmallest(hn::Vec<D16> v)
+{
+    return hn::Vec<D8>{_mm256_broadcastb_epi8(MinPosOfU16(v))};
+}
+#else
+// Smallest 16-bit lane of a vector.
+HWY_INLINE uint16_t MinOfU16(hn::Vec<D16> v)
+{
+    return hn::GetLane(hn::MinOfLanes(D16(), v));
+}
+
+// The smallest 16-bit lane of v, at most 255, in every byte.
+HWY_INLINE hn::Vec<D8> BroadcastSmallest(hn::Vec<D16> v)
+{
+    return hn::Set(D8(), static_cast<uint8_t>(MinOfU16(v)));
+}
+#endif
+
+// Smallest byte of a vector, in every byte: the smaller of each byte pair, then the
+// smallest pair. It lies on the path along the row's chain from one pixel to the next,
+// so its latency counts.
 HWY_INLINE hn::Vec<D8> MinOfBytes(hn::Vec<D8> v)
 {
     const D16 d16;
     const auto wide = hn::BitCast(d16, v);
-    const auto pairs =
-        hn::Min(hn::And(wide, hn::Set(d16, uint16_t{0xFF})), hn::ShiftRight<8>(wide));
-    return hn::Set(D8(), static_cast<uint8_t>(MinOfU16(pairs)));
+    return BroadcastSmallest(
+        hn::Min(hn::And(wide, hn::Set(d16, uint16_t{0xFF})), hn::ShiftRight<8>(wide)));
 }
 
 void CensusRow(const uint8_t* center, size_t stride, int width, int census_width, int census_height,
