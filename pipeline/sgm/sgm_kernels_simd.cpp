@@ -430,9 +430,21 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
         const LaneInterval span = lanesOf(spans, x, lanes);
         return LaneInterval{span.first, std::min(span.end, num_disparities)};
     };
-    // With spans: the smallest key of the group per position p = k + g (a right pixel),
-    // over the lanes each pixel summed, from position `first`; 0xFFFF elsewhere.
-    uint16_t* group_best = sum_scratch + static_cast<size_t>(kWinnerGroup) * (group_stride + 32);
+    // With spans: the lanes of each group slot that hold a key, those its pixel summed.
+    // Every other entry of the slot reads 0xFFFF, as in the full search, so that the right
+    // view's pass below takes the group's minimum in registers: a gather through memory
+    // would store and reload overlapping vectors one entry apart, which the processor
+    // cannot forward from store to load.
+    LaneInterval keyed[kWinnerGroup] = {};
+    const auto rekey = [&](int g, LaneInterval span) {
+        uint16_t* key = keys_of(g);
+        const LaneInterval old = keyed[g];
+        for (int k0 = old.first; k0 < std::min(old.end, span.first); k0 += n16)
+            hn::StoreU(none16, d16, key + k0);
+        for (int k0 = std::max(old.first, span.end); k0 < old.end; k0 += n16)
+            hn::StoreU(none16, d16, key + k0);
+        keyed[g] = span;
+    };
 
     const auto finish_group = [&](int x_first, int count) {
         for (int g = 0; g < count; ++g) {
@@ -476,35 +488,19 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
         int p_first = 0;
         int p_end = num_disparities + count - 1;
         if constexpr (kSpans) {
-            // Only the lanes each pixel summed hold its keys: the group's smallest per
-            // position, gathered over them.
+            // Only the positions the group's lanes reach: the rest offer nothing.
             int first = num_disparities, end = 0;
             for (int g = 0; g < count; ++g) {
-                const LaneInterval lanes_summed = summed(x_first - g);
-                first = std::min(first, lanes_summed.first);
-                end = std::max(end, lanes_summed.end);
+                first = std::min(first, keyed[g].first);
+                end = std::max(end, keyed[g].end);
             }
             p_first = first;
             p_end = end + count - 1;
-            for (int p0 = p_first; p0 < p_end; p0 += n16)
-                hn::StoreU(none16, d16, group_best + (p0 - p_first));
-            for (int g = 0; g < count; ++g) {
-                const LaneInterval lanes_summed = summed(x_first - g);
-                for (int k0 = lanes_summed.first; k0 < lanes_summed.end; k0 += n16) {
-                    uint16_t* at = group_best + (k0 + g - p_first);
-                    hn::StoreU(hn::Min(hn::LoadU(d16, at), hn::LoadU(d16, keys_of(g) + k0)), d16,
-                               at);
-                }
-            }
         }
         for (int p0 = p_first; p0 < p_end; p0 += n16) {
             auto best_key = none16;
-            if constexpr (kSpans) {
-                best_key = hn::LoadU(d16, group_best + (p0 - p_first));
-            } else {
-                for (int g = 0; g < count; ++g)
-                    best_key = hn::Min(best_key, hn::LoadU(d16, keys_of(g) + p0 - g));
-            }
+            for (int g = 0; g < count; ++g)
+                best_key = hn::Min(best_key, hn::LoadU(d16, keys_of(g) + p0 - g));
             const auto sums = hn::ShiftRight<kTagBits>(best_key);
             const auto g_of = hn::Sub(hn::Set(d16, static_cast<uint16_t>(kWinnerGroup - 1)),
                                       hn::And(best_key, tag_mask));
@@ -536,6 +532,8 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
         const auto right_tag = hn::Set(d16, static_cast<uint16_t>(kWinnerGroup - 1 - g));
         auto best = none16; // per lane: smallest sum << kTagBits | k / n16
         auto next = none16; // per lane: the second smallest
+        if constexpr (kSpans)
+            rekey(g, summed(x));
         // k0 / n16 of the next half vector, in every lane
         auto lane_tag = hn::Set(d16, static_cast<uint16_t>(span.first / n16));
         // Sums the paths for the lanes of this vector.
