@@ -341,7 +341,7 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
             static_cast<size_t>(c.width),
             {m.coarse_disparity.data(), m.coarse_confidence.data(), m.coarse_limit.data()});
         if (m.guide)
-            m.guide->predict(m.coarse_disparity.data(), m.coarse_limit.data());
+            m.guide->predict(m.coarse_disparity.data(), m.coarse_limit.data(), &m.pool);
     }
     const Clock::time_point t1 = Clock::now();
     m.full.compute(left, left_stride, right, right_stride,
