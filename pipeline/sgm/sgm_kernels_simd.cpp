@@ -402,6 +402,9 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
     const auto tag_mask = hn::Set(d16, uint16_t{(1u << kTagBits) - 1});
     const auto v_n16 = hn::Set(d16, static_cast<uint16_t>(n16));
     const auto v_p1 = hn::Set(d, p1);
+    // Half vectors per block of lanes: a span's first tag without a division by the
+    // run-time vector size, one per pixel.
+    const int tags_per_block = kLaneAlign / n16;
     // The vector index of a lane (k / n16) must fit the tag too.
     HWY_DASSERT(num_disparities / n16 <= (1 << kTagBits));
 
@@ -464,7 +467,7 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
                 hn::Lt(hn::Sub(k_first, hn::Set(d16, static_cast<uint16_t>(best - 1))), three16);
             const uint16_t second = MinOfU16(hn::IfThenElse(near, v_next, v_first));
             const int x = x_first - g;
-            const LaneInterval lanes_summed = kSpans ? summed(x) : LaneInterval{0, num_disparities};
+            const LaneInterval lanes_summed = kSpans ? keyed[g] : LaneInterval{0, num_disparities};
             const auto sum_at = [&](int k) {
                 return k >= lanes_summed.first && k < lanes_summed.end
                            ? static_cast<uint16_t>(key[k] >> kTagBits)
@@ -535,7 +538,8 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
         if constexpr (kSpans)
             rekey(g, summed(x));
         // k0 / n16 of the next half vector, in every lane
-        auto lane_tag = hn::Set(d16, static_cast<uint16_t>(span.first / n16));
+        auto lane_tag =
+            hn::Set(d16, static_cast<uint16_t>(span.first / kLaneAlign * tags_per_block));
         // Sums the paths for the lanes of this vector.
         const auto visit = [&](int k0, hn::Vec<D8> v) {
             if (k0 >= num_disparities)
