@@ -82,23 +82,22 @@ void GuidedSpans::gatherRows(const float* coarse_disparity, const uint8_t* coars
                 own_measured[x] = 1;
             }
         }
-        // The window along the row: the pads stand for the pixels beyond the edges.
-        int16_t* along_lo = along_.lo.data() + padded_row;
-        int16_t* along_hi = along_.hi.data() + padded_row;
-        uint8_t* along_measured = along_.measured.data() + padded_row;
-        for (int x = 0; x < cw; ++x) {
-            int16_t lo = own_lo[x], hi = own_hi[x];
-            uint8_t measured = own_measured[x];
-            for (int dx = 1; dx <= kGuideRadius; ++dx) {
-                lo = std::min({lo, own_lo[x - dx], own_lo[x + dx]});
-                hi = std::max({hi, own_hi[x - dx], own_hi[x + dx]});
-                measured =
-                    static_cast<uint8_t>(measured + own_measured[x - dx] + own_measured[x + dx]);
+        // The window along the row: the pads stand for the pixels beyond the edges. One
+        // field at a time, which the compiler makes vector code of.
+        const auto along = [cw](const auto* own, auto* into, const auto& combine) {
+            for (int x = 0; x < cw; ++x) {
+                auto v = own[x];
+                for (int dx = 1; dx <= kGuideRadius; ++dx)
+                    v = combine(v, combine(own[x - dx], own[x + dx]));
+                into[x] = v;
             }
-            along_lo[x] = lo;
-            along_hi[x] = hi;
-            along_measured[x] = measured;
-        }
+        };
+        along(own_lo, along_.lo.data() + padded_row,
+              [](int16_t a, int16_t b) { return std::min(a, b); });
+        along(own_hi, along_.hi.data() + padded_row,
+              [](int16_t a, int16_t b) { return std::max(a, b); });
+        along(own_measured, along_.measured.data() + padded_row,
+              [](uint8_t a, uint8_t b) { return static_cast<uint8_t>(a + b); });
     }
 }
 
