@@ -27,12 +27,14 @@
 // mean bad-2 and too-far as the full search's, fewer pixels reported (up to 9 points).
 //
 // The standard library only. Thread-bound: one predictor per matcher; every buffer is
-// allocated in the constructor, predict() allocates nothing.
+// allocated in the constructor, predict() allocates nothing. With a pool, predict() shares
+// the rows out over min(full.threads, its threads) bands (the result is the same).
 
 #include <cstddef>
 #include <cstdint>
 #include <vector>
 
+#include "pipeline/sgm/band_pool.hpp"
 #include "pipeline/sgm/census_sgm.hpp"
 
 namespace stereod::sgm {
@@ -49,41 +51,52 @@ inline constexpr int kGuideMinMeasured = 4;
 // coarse level's at the same place.
 inline constexpr int kGuideAgreePx = 2;
 
-// Bytes of working memory a predictor for these levels allocates.
 class GuidedSpans {
   public:
-    // full, coarse: the two levels' settings (sizes and ranges).
+    // full, coarse: the two levels' settings (sizes and ranges); full.threads bands at most.
     GuidedSpans(const CensusSgmSettings& full, const CensusSgmSettings& coarse);
 
     // coarse_disparity: the coarse level's disparities (coarse pixels, +inf where none),
-    // coarse_limit: its near-end flags; both coarse width x height.
-    void predict(const float* coarse_disparity, const uint8_t* coarse_limit);
+    // coarse_limit: its near-end flags; both coarse width x height. pool: the matcher's
+    // band threads, or nullptr: the caller's thread alone.
+    void predict(const float* coarse_disparity, const uint8_t* coarse_limit,
+                 BandPool* pool = nullptr);
 
     // The full level's spans, width x height, valid until the next predict().
-    const LaneSpan* spans() const;
+    const LaneSpan* spans() const { return spans_.data(); }
     // Whether full-resolution pixel i (row-major) searches less than the whole range.
-    bool narrow(size_t i) const;
+    bool narrow(size_t i) const { return spans_[i].first != 0 || spans_[i].end != units_; }
     // The share of the full level's lanes the last prediction searches, 0..1.
     double searchedShare() const;
     // Bytes of working memory a predictor for these levels allocates.
     static size_t memoryBytes(const CensusSgmSettings& full, const CensusSgmSettings& coarse);
 
-    // A coarse pixel's window, gathered along the row first, then down the columns.
-    struct Window {
-        int16_t lo = 0;       // smallest lane predicted (below 0: the whole range)
-        int16_t hi = 0;       // largest
-        uint8_t measured = 0; // pixels with a disparity
-    };
-
   private:
-    LaneSpan spanOf(const Window& window) const;
+    // Per coarse pixel, rows of kPad + width + kPad entries: the pads hold a window of no
+    // measurement, so that a window is gathered without a test at the image's edges.
+    // A window's lanes run lo .. hi (lo below 0: the whole range), `measured` of its
+    // pixels measured a disparity.
+    struct Windows {
+        std::vector<int16_t> lo, hi;
+        std::vector<uint8_t> measured;
+    };
+    static constexpr int kPad = kGuideRadius;
+
+    // Coarse rows y0..y1-1 of own_ (each pixel's own lanes) and along_ (its row's window).
+    void gatherRows(const float* coarse_disparity, const uint8_t* coarse_limit, int y0, int y1);
+    // Coarse rows y0..y1-1 of the windows down the columns, made into the spans of the
+    // full-resolution rows they cover; returns the lanes they search (in kLaneAlign units).
+    size_t spanRows(int y0, int y1);
 
     int width_, height_, coarse_width_, coarse_height_;
     int min_disparity_, num_disparities_, units_;
-    std::vector<Window> own_;   // per coarse pixel: its own lanes
-    std::vector<Window> along_; // per coarse pixel: its row's window
-    std::vector<LaneSpan> coarse_spans_;
+    int threads_;
+    size_t padded_width_;
+    Windows own_;   // per coarse pixel: its own lanes
+    Windows along_; // per coarse pixel: its row's window
+    Windows none_;  // one row of no measurement: the rows above and below the image
     std::vector<LaneSpan> spans_;
+    std::vector<size_t> band_searched_; // per band of the last predict()
     double searched_share_ = 1.0;
 };
 

@@ -396,7 +396,7 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
                 m.classifyCoarseRows(band, ch * band / bands, ch * (band + 1) / bands);
             });
             if (m.guide)
-                m.guide->predict(m.coarse_disparity.data(), m.coarse_limit.data());
+                m.guide->predict(m.coarse_disparity.data(), m.coarse_limit.data(), &m.pool);
         }
         const Clock::time_point t1 = Clock::now();
         coarse_ms = msBetween(t0, t1);

@@ -88,12 +88,11 @@ inline constexpr size_t winnersScratch(int width, int min_disparity, int lanes)
 }
 
 // Entries of sum_scratch that winners_backward() needs: the summed paths of 16 pixels,
-// each with 16 entries of margin on both sides, two vectors per pixel, and the right
-// view's best of a group over the lanes (with spans).
+// each with 16 entries of margin on both sides, and two vectors per pixel.
 inline constexpr int kWinnerGroup = 16;
 inline constexpr size_t winnersSumScratch(int lanes)
 {
-    return static_cast<size_t>(kWinnerGroup + 1) * static_cast<size_t>(lanes + 32 + kLaneAlign);
+    return static_cast<size_t>(kWinnerGroup) * static_cast<size_t>(lanes + 32 + kLaneAlign);
 }
 
 // The best and second-best disparity lane of each pixel of a row over the summed paths,

@@ -446,6 +446,9 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
     const auto tag_mask = hn::Set(d16, uint16_t{(1u << kTagBits) - 1});
     const auto v_n16 = hn::Set(d16, static_cast<uint16_t>(n16));
     const auto v_p1 = hn::Set(d, p1);
+    // Half vectors per block of lanes: a span's first tag without a division by the
+    // run-time vector size, one per pixel.
+    const int tags_per_block = kLaneAlign / n16;
     // The vector index of a lane (k / n16) must fit the tag too.
     HWY_DASSERT(num_disparities / n16 <= (1 << kTagBits));
 
@@ -474,9 +477,21 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
         const LaneInterval span = lanesOf(spans, x, lanes);
         return LaneInterval{span.first, std::min(span.end, num_disparities)};
     };
-    // With spans: the smallest key of the group per position p = k + g (a right pixel),
-    // over the lanes each pixel summed, from position `first`; 0xFFFF elsewhere.
-    uint16_t* group_best = sum_scratch + static_cast<size_t>(kWinnerGroup) * (group_stride + 32);
+    // With spans: the lanes of each group slot that hold a key, those its pixel summed.
+    // Every other entry of the slot reads 0xFFFF, as in the full search, so that the right
+    // view's pass below takes the group's minimum in registers: a gather through memory
+    // would store and reload overlapping vectors one entry apart, which the processor
+    // cannot forward from store to load.
+    LaneInterval keyed[kWinnerGroup] = {};
+    const auto rekey = [&](int g, LaneInterval span) {
+        uint16_t* key = keys_of(g);
+        const LaneInterval old = keyed[g];
+        for (int k0 = old.first; k0 < std::min(old.end, span.first); k0 += n16)
+            hn::StoreU(none16, d16, key + k0);
+        for (int k0 = std::max(old.first, span.end); k0 < old.end; k0 += n16)
+            hn::StoreU(none16, d16, key + k0);
+        keyed[g] = span;
+    };
 
     const auto finish_group = [&](int x_first, int count) {
         for (int g = 0; g < count; ++g) {
@@ -496,7 +511,7 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
                 hn::Lt(hn::Sub(k_first, hn::Set(d16, static_cast<uint16_t>(best - 1))), three16);
             const uint16_t second = MinOfU16(hn::IfThenElse(near, v_next, v_first));
             const int x = x_first - g;
-            const LaneInterval lanes_summed = kSpans ? summed(x) : LaneInterval{0, num_disparities};
+            const LaneInterval lanes_summed = kSpans ? keyed[g] : LaneInterval{0, num_disparities};
             const auto sum_at = [&](int k) {
                 return k >= lanes_summed.first && k < lanes_summed.end
                            ? static_cast<uint16_t>(key[k] >> kTagBits)
@@ -520,32 +535,18 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
         int p_first = 0;
         int p_end = num_disparities + count - 1;
         if constexpr (kSpans) {
-            // Only the lanes each pixel summed hold its keys: the group's smallest per
-            // position, gathered over them.
+            // Only the positions the group's lanes reach: the rest offer nothing.
             int first = num_disparities, end = 0;
             for (int g = 0; g < count; ++g) {
-                const LaneInterval lanes_summed = summed(x_first - g);
-                first = std::min(first, lanes_summed.first);
-                end = std::max(end, lanes_summed.end);
+                first = std::min(first, keyed[g].first);
+                end = std::max(end, keyed[g].end);
             }
             p_first = first;
             p_end = end + count - 1;
-            for (int p0 = p_first; p0 < p_end; p0 += n16)
-                hn::StoreU(none16, d16, group_best + (p0 - p_first));
-            for (int g = 0; g < count; ++g) {
-                const LaneInterval lanes_summed = summed(x_first - g);
-                for (int k0 = lanes_summed.first; k0 < lanes_summed.end; k0 += n16) {
-                    uint16_t* at = group_best + (k0 + g - p_first);
-                    hn::StoreU(hn::Min(hn::LoadU(d16, at), hn::LoadU(d16, keys_of(g) + k0)), d16,
-                               at);
-                }
-            }
         }
         for (int p0 = p_first; p0 < p_end; p0 += n16) {
             auto best_key = none16;
-            if constexpr (kSpans) {
-                best_key = hn::LoadU(d16, group_best + (p0 - p_first));
-            } else if (count == kWinnerGroup) { // every group but a row's last: unrolled
+            if (count == kWinnerGroup) { // every group but a row's last: unrolled
                 for (int g = 0; g < kWinnerGroup; ++g)
                     best_key = hn::Min(best_key, hn::LoadU(d16, keys_of(g) + p0 - g));
             } else {
@@ -583,8 +584,11 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
         const auto right_tag = hn::Set(d16, static_cast<uint16_t>(kWinnerGroup - 1 - g));
         auto best = none16; // per lane: smallest sum << kTagBits | k / n16
         auto next = none16; // per lane: the second smallest
+        if constexpr (kSpans)
+            rekey(g, summed(x));
         // k0 / n16 of the next half vector, in every lane
-        auto lane_tag = hn::Set(d16, static_cast<uint16_t>(span.first / n16));
+        auto lane_tag =
+            hn::Set(d16, static_cast<uint16_t>(span.first / kLaneAlign * tags_per_block));
         // Sums the paths for the lanes of this vector.
         const auto visit = [&](int k0, hn::Vec<D8> v) {
             if (!kWhole && k0 >= num_disparities)
