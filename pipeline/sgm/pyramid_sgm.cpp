@@ -266,12 +266,10 @@ struct PyramidSgm::Impl {
         return nearest;
     }
 
-    // The probe over the region, at the level the widest range was searched at; with a
-    // pool, rows of tiles shared out over its threads. Its evidence is marked by
-    // markProbeEvidence(), once the merge has written near_field.
-    void runProbe(const uint8_t* left, size_t left_stride, PixelRect region, BandPool* with)
+    // The probe over the region, at the level the widest range was searched at.
+    void runProbe(const uint8_t* left, size_t left_stride, PixelRect region,
+                  const PyramidSgmOutput& out)
     {
-        probed = false;
         if (!probe || region.width <= 0 || region.height <= 0)
             return;
         const bool at_coarse = coarse != nullptr;
@@ -283,19 +281,11 @@ struct PyramidSgm::Impl {
                                (region.y + region.height + scale - 1) / scale - region.y / scale};
         if (at_coarse)
             probe->run(half_left.data(), static_cast<size_t>(ls.width), level, scaled,
-                       ls.min_disparity, ls.min_disparity + ls.num_disparities - 1, with);
+                       ls.min_disparity, ls.min_disparity + ls.num_disparities - 1, &pool);
         else
             probe->run(left, left_stride, level, scaled, ls.min_disparity,
-                       ls.min_disparity + ls.num_disparities - 1, with);
-        probed = true;
-    }
-
-    void markProbeEvidence(const PyramidSgmOutput& out) const
-    {
-        if (!probed)
-            return;
-        const int scale = coarse != nullptr ? 2 : 1;
-        const uint8_t mark = coarse != nullptr ? kNearerThanExtendedRange : kNearerThanRange;
+                       ls.min_disparity + ls.num_disparities - 1, &pool);
+        const uint8_t mark = at_coarse ? kNearerThanExtendedRange : kNearerThanRange;
         const int w = settings.full.width, h = settings.full.height;
         for (const PixelRect& tile : probe->evidenceTiles()) {
             const int x0 = tile.x * scale, x1 = std::min(w, (tile.x + tile.width) * scale);
@@ -319,7 +309,6 @@ struct PyramidSgm::Impl {
     std::vector<uint8_t> coarse_near, coarse_given; // classifyCoarseRows()
     std::vector<uint8_t> texture_rows;              // its texturedRow() scratch, per band
     std::unique_ptr<NearFieldProbe> probe;
-    bool probed = false; // the last compute() ran the probe
     PyramidSgmTimings timings;
     // The levels' own work between and after their matches (halving, merging, the probe)
     // over settings.full.threads, as many as the matches.
@@ -340,72 +329,30 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
     Impl& m = *impl_;
     const int bands = m.settings.full.threads;
     const Clock::time_point t0 = Clock::now();
-    // The coarse level: halving, then its match.
-    const auto match_coarse = [&](int halving_bands) {
+    if (m.coarse) {
         const CensusSgmSettings& c = m.coarse->settings();
-        auto halve = [&](int band) {
-            const int y0 = c.height * band / halving_bands;
-            const int y1 = c.height * (band + 1) / halving_bands;
+        m.pool.run(bands, [&](int band) {
+            const int y0 = c.height * band / bands, y1 = c.height * (band + 1) / bands;
             halveRows(left, left_stride, c.width, y0, y1, m.half_left.data());
             halveRows(right, right_stride, c.width, y0, y1, m.half_right.data());
-        };
-        if (halving_bands == 1)
-            halve(0);
-        else
-            m.pool.run(halving_bands, halve);
+        });
         m.coarse->compute(
             m.half_left.data(), static_cast<size_t>(c.width), m.half_right.data(),
             static_cast<size_t>(c.width),
             {m.coarse_disparity.data(), m.coarse_confidence.data(), m.coarse_limit.data()});
-    };
-    const auto match_full = [&] {
-        m.full.compute(left, left_stride, right, right_stride,
-                       {out.disparity_px, out.confidence, out.near_field},
-                       m.guide ? m.guide->spans() : nullptr);
-    };
-    // Each level's wall time, from t0; both levels end by t2.
-    double full_ms = 0.0, coarse_ms = 0.0, probe_ms = 0.0;
-    bool probe_ran = false;
-    Clock::time_point t2;
-    if (m.coarse && !m.guide && bands > 1) {
-        // Without guidance the levels do not depend on each other until the merge: they
-        // run at the same time, the full level on this thread and the coarse one on the
-        // pool's, each with its own band threads. What one level leaves idle (the bands'
-        // uneven ends, its single-threaded steps) the other fills; each level's time
-        // then includes the other's share of the cores.
-        m.pool.run(2, [&](int level) {
-            if (level == 0) {
-                match_full();
-                full_ms = msBetween(t0, Clock::now());
-            } else {
-                match_coarse(1);
-                m.classifyCoarseRows(0, 0, m.coarse->settings().height);
-                coarse_ms = msBetween(t0, Clock::now());
-                const Clock::time_point probe_start = Clock::now();
-                m.runProbe(left, left_stride, probe_region, nullptr);
-                probe_ms = msBetween(probe_start, Clock::now());
-            }
-        });
-        probe_ran = true;
-        t2 = Clock::now();
-    } else {
-        if (m.coarse) {
-            match_coarse(bands);
-            const int ch = m.coarse->settings().height;
-            m.pool.run(bands, [&](int band) {
-                m.classifyCoarseRows(band, ch * band / bands, ch * (band + 1) / bands);
-            });
-            if (m.guide)
-                m.guide->predict(m.coarse_disparity.data(), m.coarse_limit.data(), &m.pool);
-        }
-        const Clock::time_point t1 = Clock::now();
-        coarse_ms = msBetween(t0, t1);
-        match_full();
-        t2 = Clock::now();
-        full_ms = msBetween(t1, t2);
+        if (m.guide)
+            m.guide->predict(m.coarse_disparity.data(), m.coarse_limit.data(), &m.pool);
     }
+    const Clock::time_point t1 = Clock::now();
+    m.full.compute(left, left_stride, right, right_stride,
+                   {out.disparity_px, out.confidence, out.near_field},
+                   m.guide ? m.guide->spans() : nullptr);
+    const Clock::time_point t2 = Clock::now();
     if (m.coarse) {
-        const int h = m.settings.full.height;
+        const int ch = m.coarse->settings().height, h = m.settings.full.height;
+        m.pool.run(bands, [&](int band) {
+            m.classifyCoarseRows(band, ch * band / bands, ch * (band + 1) / bands);
+        });
         m.pool.run(bands, [&](int band) {
             const int y0 = h * band / bands, y1 = h * (band + 1) / bands;
             m.mergeRows(y0, y1, out);
@@ -414,12 +361,9 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
         });
     }
     const Clock::time_point t3 = Clock::now();
-    if (!probe_ran) {
-        m.runProbe(left, left_stride, probe_region, &m.pool);
-        probe_ms = msBetween(t3, Clock::now());
-    }
-    m.markProbeEvidence(out);
-    m.timings = {full_ms, coarse_ms + msBetween(t2, t3), probe_ms};
+    m.runProbe(left, left_stride, probe_region, out);
+    m.timings = {msBetween(t1, t2), msBetween(t0, t1) + msBetween(t2, t3),
+                 msBetween(t3, Clock::now())};
 }
 
 const PyramidSgmTimings& PyramidSgm::timings() const

@@ -35,11 +35,8 @@
 // over the region the reading comes from, and its evidence tiles are marked too.
 //
 // Thread-bound, like CensusSgm; each level's matcher runs its own band threads, and the
-// merge runs in bands over as many threads of the pyramid's own. Without the guided
-// search, and with two or more threads, the two levels run at the same time (the full one
-// on the caller's thread, the coarse one on one of the pyramid's), so that what one
-// level's bands leave idle the other's fill. All buffers are allocated in the
-// constructor: compute() allocates nothing.
+// halving and the merge run in bands over as many threads of the pyramid's own. All
+// buffers are allocated in the constructor: compute() allocates nothing.
 
 #include <cstddef>
 #include <cstdint>
@@ -67,12 +64,9 @@ inline constexpr uint8_t kExplainedConfidence = 2;
 
 // What the last compute() spent on each part, milliseconds.
 struct PyramidSgmTimings {
-    double full_ms = 0.0; // the full-resolution match
-    // The coarse level: halving, matching, predicting, merging. When the levels run at
-    // the same time, each level's time is its own wall time from the start, so the two
-    // overlap.
-    double extended_ms = 0.0;
-    double probe_ms = 0.0; // the near-field probe
+    double full_ms = 0.0;     // the full-resolution match
+    double extended_ms = 0.0; // the coarse level: halving, matching, predicting, merging
+    double probe_ms = 0.0;    // the near-field probe
 };
 
 struct PyramidSgmSettings {
