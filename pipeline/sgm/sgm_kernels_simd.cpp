@@ -544,15 +544,17 @@ void WinnersBackwardOf(const uint8_t* cost, const uint8_t* p2, uint8_t p1, int w
             p_first = first;
             p_end = end + count - 1;
         }
-        for (int p0 = p_first; p0 < p_end; p0 += n16) {
+        // The smallest key of the group's first `pixels` pixels at position p0.
+        const auto group_min = [&](int p0, int pixels) {
             auto best_key = none16;
-            if (count == kWinnerGroup) { // every group but a row's last: unrolled
-                for (int g = 0; g < kWinnerGroup; ++g)
-                    best_key = hn::Min(best_key, hn::LoadU(d16, keys_of(g) + p0 - g));
-            } else {
-                for (int g = 0; g < count; ++g)
-                    best_key = hn::Min(best_key, hn::LoadU(d16, keys_of(g) + p0 - g));
-            }
+            for (int g = 0; g < pixels; ++g)
+                best_key = hn::Min(best_key, hn::LoadU(d16, keys_of(g) + p0 - g));
+            return best_key;
+        };
+        for (int p0 = p_first; p0 < p_end; p0 += n16) {
+            // Every group but a row's last is whole: a count the compiler knows unrolls it.
+            const auto best_key =
+                count == kWinnerGroup ? group_min(p0, kWinnerGroup) : group_min(p0, count);
             const auto sums = hn::ShiftRight<kTagBits>(best_key);
             const auto g_of = hn::Sub(hn::Set(d16, static_cast<uint16_t>(kWinnerGroup - 1)),
                                       hn::And(best_key, tag_mask));
