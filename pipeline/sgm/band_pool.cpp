@@ -1,59 +1,99 @@
 #include "pipeline/sgm/band_pool.hpp"
 
+#include <stdexcept>
+#include <string>
+
 namespace stereod::sgm {
+namespace {
+
+constexpr uint32_t kBandBits = 8;
+constexpr uint32_t kBandMask = (1u << kBandBits) - 1;
+
+void relax()
+{
+#if defined(__x86_64__) || defined(__i386__)
+    __builtin_ia32_pause();
+#elif defined(__aarch64__) || defined(__arm__)
+    asm volatile("yield");
+#endif
+}
+
+// Returns the value of `word` once it differs from `old`: spins for BandPool::kSpin, then
+// sleeps on it (std::atomic::wait, a futex).
+uint32_t awaitChange(const std::atomic<uint32_t>& word, uint32_t old)
+{
+    using Clock = std::chrono::steady_clock;
+    const Clock::time_point until = Clock::now() + BandPool::kSpin;
+    for (int spins = 0;; ++spins) {
+        const uint32_t now = word.load(std::memory_order_acquire);
+        if (now != old)
+            return now;
+        // The clock is read every 64 spins: a few microseconds apart.
+        if ((spins & 63) == 63 && Clock::now() >= until)
+            break;
+        relax();
+    }
+    for (;;) {
+        word.wait(old, std::memory_order_acquire);
+        const uint32_t now = word.load(std::memory_order_acquire);
+        if (now != old)
+            return now;
+    }
+}
+
+} // namespace
 
 BandPool::BandPool(int threads)
 {
+    if (threads < 1 || threads > 64)
+        throw std::invalid_argument("BandPool: threads must be 1 to 64, not " +
+                                    std::to_string(threads));
     for (int band = 1; band < threads; ++band)
         threads_.emplace_back([this, band] { workerLoop(band); });
 }
 
 BandPool::~BandPool()
 {
-    {
-        std::lock_guard lock(mutex_);
-        stop_ = true;
-    }
-    wake_.notify_all();
+    stop_.store(true, std::memory_order_release);
+    work_.fetch_add(1u << kBandBits, std::memory_order_release);
+    work_.notify_all();
     for (std::thread& t : threads_)
         t.join();
 }
 
+int BandPool::threads() const
+{
+    return static_cast<int>(threads_.size()) + 1;
+}
+
 void BandPool::runErased(int bands, void* context, Trampoline call)
 {
-    {
-        std::lock_guard lock(mutex_);
+    if (bands > 1) {
         context_ = context;
         call_ = call;
-        bands_ = bands;
-        pending_ = bands - 1;
-        ++generation_;
+        pending_.store(static_cast<uint32_t>(bands - 1), std::memory_order_relaxed);
+        const uint32_t next = ((work_.load(std::memory_order_relaxed) >> kBandBits) + 1)
+                              << kBandBits;
+        work_.store(next | static_cast<uint32_t>(bands), std::memory_order_release);
+        work_.notify_all();
     }
-    if (bands > 1)
-        wake_.notify_all();
     call(context, 0);
-    std::unique_lock lock(mutex_);
-    done_.wait(lock, [this] { return pending_ == 0; });
+    for (uint32_t left = pending_.load(std::memory_order_acquire); bands > 1 && left != 0;)
+        left = awaitChange(pending_, left);
 }
 
 void BandPool::workerLoop(int band)
 {
-    uint64_t seen = 0;
-    std::unique_lock lock(mutex_);
+    uint32_t seen = 0;
     for (;;) {
-        wake_.wait(lock, [&] { return stop_ || generation_ != seen; });
-        if (stop_)
+        seen = awaitChange(work_, seen);
+        if (stop_.load(std::memory_order_acquire))
             return;
-        seen = generation_;
-        if (band >= bands_)
+        if (static_cast<uint32_t>(band) >= (seen & kBandMask))
             continue;
-        void* context = context_;
-        const Trampoline call = call_;
-        lock.unlock();
-        call(context, band);
-        lock.lock();
-        if (--pending_ == 0)
-            done_.notify_one();
+        call_(context_, band);
+        if (pending_.fetch_sub(1, std::memory_order_acq_rel) == 1)
+            pending_.notify_one();
     }
 }
 

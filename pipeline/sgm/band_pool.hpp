@@ -3,11 +3,17 @@
 // all of them: the caller's thread takes band 0, the pool's threads the others. Threads
 // start in the constructor and stop in the destructor; run() allocates nothing.
 //
+// A matcher calls run() a dozen times per frame, a few hundred microseconds apart. A
+// thread put to sleep between two of them takes tens to hundreds of microseconds to be
+// scheduled again (more on a loaded or virtual machine), so the pool's threads, and the
+// caller waiting for them, first spin for a short while (kSpin) before they sleep: within
+// a frame they rarely sleep, between frames they do.
+//
 // Thread-bound: run() is called from one thread at a time.
 
-#include <condition_variable>
+#include <atomic>
+#include <chrono>
 #include <cstdint>
-#include <mutex>
 #include <thread>
 #include <type_traits>
 #include <vector>
@@ -16,7 +22,10 @@ namespace stereod::sgm {
 
 class BandPool {
   public:
-    // threads: how many bands run at once, the caller's thread included (>= 1).
+    // How long a thread spins on its condition before it sleeps.
+    static constexpr std::chrono::microseconds kSpin{100};
+
+    // threads: how many bands run at once, the caller's thread included (1 to 64).
     explicit BandPool(int threads);
     ~BandPool();
 
@@ -32,20 +41,22 @@ class BandPool {
         });
     }
 
+    int threads() const;
+
   private:
     using Trampoline = void (*)(void*, int);
     void runErased(int bands, void* context, Trampoline call);
     void workerLoop(int band);
 
-    std::mutex mutex_;
-    std::condition_variable wake_; // a new generation of work, or stop
-    std::condition_variable done_; // the last band of a generation finished
-    uint64_t generation_ = 0;      // guarded by mutex_
-    int bands_ = 0;                // guarded by mutex_
-    int pending_ = 0;              // guarded by mutex_
-    bool stop_ = false;            // guarded by mutex_
-    void* context_ = nullptr;      // guarded by mutex_
-    Trampoline call_ = nullptr;    // guarded by mutex_
+    // One word, so that a thread which sits a run out (its band >= the run's bands) reads
+    // nothing else of it: the run's number << 8 | its bands. The number wraps; threads
+    // compare it for a change only.
+    std::atomic<uint32_t> work_{0};
+    std::atomic<uint32_t> pending_{0}; // bands of the current run not yet returned
+    std::atomic<bool> stop_{false};
+    // Written before work_ announces a run, read only by the bands that take part in it.
+    void* context_ = nullptr;
+    Trampoline call_ = nullptr;
     std::vector<std::thread> threads_;
 };
 
