@@ -152,12 +152,13 @@ size_t censusSgmMemoryBytes(const CensusSgmSettings& s)
 }
 
 struct CensusSgm::Impl {
-    explicit Impl(const CensusSgmSettings& s)
+    Impl(const CensusSgmSettings& s, BandPool* shared_pool)
         : settings(s), kernels(s.use_simd ? &simdKernels() : &scalarKernels()),
           lanes(roundUp(s.num_disparities, kLaneAlign)), planes((censusBits(s) + 7) / 8),
           rx(s.census_width / 2), ry(s.census_height / 2),
-          padded_stride(static_cast<size_t>(s.width + 2 * rx)), pool(s.threads),
-          speckle(s.width, s.height)
+          padded_stride(static_cast<size_t>(s.width + 2 * rx)),
+          own_pool(shared_pool != nullptr ? nullptr : std::make_unique<BandPool>(s.threads)),
+          pool(shared_pool != nullptr ? *shared_pool : *own_pool), speckle(s.width, s.height)
     {
         const size_t area = static_cast<size_t>(s.width) * static_cast<size_t>(s.height);
         const size_t padded_rows = static_cast<size_t>(s.height + 2 * ry);
@@ -611,14 +612,19 @@ struct CensusSgm::Impl {
     std::vector<int16_t> fixed, filtered;           // 16 x disparity, kNoDisparity = none
     std::vector<uint8_t> periodic_raw, periodic;    // periodic_pattern.hpp, width x height
     std::vector<BandScratch> bands;
-    BandPool pool;
+    std::unique_ptr<BandPool> own_pool; // null when the pool is shared
+    BandPool& pool;
     SpeckleFilter speckle;
 };
 
-CensusSgm::CensusSgm(const CensusSgmSettings& settings)
+CensusSgm::CensusSgm(const CensusSgmSettings& settings, BandPool* pool)
 {
     validateCensusSgmSettings(settings);
-    impl_ = std::make_unique<Impl>(settings);
+    if (pool != nullptr && pool->threads() < settings.threads)
+        throw std::invalid_argument("CensusSgm: a shared pool of " +
+                                    std::to_string(pool->threads()) + " threads for " +
+                                    std::to_string(settings.threads) + " bands");
+    impl_ = std::make_unique<Impl>(settings, pool);
 }
 
 CensusSgm::~CensusSgm() = default;

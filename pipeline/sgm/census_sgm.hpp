@@ -148,10 +148,15 @@ struct CensusRowPointers {
     CensusRows rows{left, right, right_reversed, 0};
 };
 
+class BandPool;
+
 class CensusSgm {
   public:
-    // Validates (std::invalid_argument), allocates every buffer and starts the threads.
-    explicit CensusSgm(const CensusSgmSettings& settings);
+    // Validates (std::invalid_argument), allocates every buffer and starts the threads:
+    // its own, or those of `pool` when given (at least settings.threads of them), which
+    // must outlive it and be called from the same thread (several levels of one matcher
+    // share one pool, so that its threads stay warm from one level to the next).
+    explicit CensusSgm(const CensusSgmSettings& settings, BandPool* pool = nullptr);
     ~CensusSgm();
 
     CensusSgm(const CensusSgm&) = delete;

@@ -18,6 +18,12 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+// +inf: no disparity. Nothing measured is below it.
+constexpr float kNone = std::numeric_limits<float>::infinity();
+
+// Full-resolution pixels mergeRows() skips together when nothing in them needs merging.
+constexpr int kMergeChunk = 32;
+
 double msBetween(Clock::time_point a, Clock::time_point b)
 {
     return std::chrono::duration<double, std::milli>(b - a).count();
@@ -102,7 +108,7 @@ size_t pyramidSgmMemoryBytes(const PyramidSgmSettings& s)
     if (hasCoarseLevel(s)) {
         const CensusSgmSettings coarse = coarseLevelSettings(s.full);
         const size_t area = static_cast<size_t>(coarse.width) * static_cast<size_t>(coarse.height);
-        bytes += censusSgmMemoryBytes(coarse) + area * (2 + sizeof(float) + 3) +
+        bytes += censusSgmMemoryBytes(coarse) + area * (2 + sizeof(float) + 5) +
                  3 * static_cast<size_t>(coarse.width) * static_cast<size_t>(s.full.threads);
         if (isGuided(s))
             bytes += GuidedSpans::memoryBytes(s.full, coarse);
@@ -116,14 +122,14 @@ size_t pyramidSgmMemoryBytes(const PyramidSgmSettings& s)
 
 struct PyramidSgm::Impl {
     explicit Impl(const PyramidSgmSettings& s)
-        : settings(s), full(s.full), full_last(s.full.min_disparity + s.full.num_disparities - 1),
-          pool(s.full.threads)
+        : settings(s), pool(s.full.threads), full(s.full, &pool),
+          full_last(s.full.min_disparity + s.full.num_disparities - 1)
     {
         extended_last = full_last;
         int probe_width = s.full.width, probe_height = s.full.height;
         if (hasCoarseLevel(s)) {
             const CensusSgmSettings c = coarseLevelSettings(s.full);
-            coarse = std::make_unique<CensusSgm>(c);
+            coarse = std::make_unique<CensusSgm>(c, &pool);
             const size_t area = static_cast<size_t>(c.width) * static_cast<size_t>(c.height);
             half_left.assign(area, 0);
             half_right.assign(area, 0);
@@ -132,6 +138,7 @@ struct PyramidSgm::Impl {
             coarse_limit.assign(area, 0);
             coarse_near.assign(area, 0);
             coarse_given.assign(area, 0);
+            coarse_special.assign(area, 0);
             texture_rows.assign(
                 3 * static_cast<size_t>(c.width) * static_cast<size_t>(s.full.threads), 0);
             extended_last = 2 * (c.min_disparity + c.num_disparities - 1);
@@ -155,69 +162,101 @@ struct PyramidSgm::Impl {
         for (int y = y0; y < y1; ++y) {
             const int cy = std::min(y / 2, ch - 1);
             const size_t row = static_cast<size_t>(y) * static_cast<size_t>(w);
-            for (int x = 0; x < w; ++x) {
-                const int cx = std::min(x / 2, cw - 1);
-                const size_t c =
-                    static_cast<size_t>(cy) * static_cast<size_t>(cw) + static_cast<size_t>(cx);
-                const size_t i = row + static_cast<size_t>(x);
-                if (coarse_limit[c] != 0) {
-                    out.near_field[i] = kNearerThanExtendedRange;
+            const uint8_t* special = coarse_special.data() + static_cast<size_t>(cy) * cw;
+            for (int x0 = 0; x0 < w; x0 += kMergeChunk) {
+                // Most of an image is neither near evidence of either level nor a near
+                // surface of the coarse one: a chunk with none of them keeps what the
+                // full level found, as it is. (A guided search checks every pixel.)
+                const bool whole = x0 + kMergeChunk <= 2 * cw;
+                if (!guide && whole &&
+                    quietChunk(special + x0 / 2, out.near_field + row + static_cast<size_t>(x0)))
                     continue;
-                }
-                if (guide && guide->narrow(i) && std::isfinite(out.disparity_px[i]) &&
-                    !(std::abs(2.0f * coarse_disparity[c] - out.disparity_px[i]) <=
-                      static_cast<float>(kGuideAgreePx))) {
-                    // A narrow search, which has no competitor outside its span to be
-                    // told apart from: the coarse level's match over the whole range at
-                    // this place must agree (an unmeasured one does not).
-                    out.disparity_px[i] = std::numeric_limits<float>::infinity();
-                    out.confidence[i] = 0;
-                }
-                if (coarse_near[c] == 0) {
-                    // The full range's near end, next to a near surface the coarse level
-                    // measured: at least as near as that surface, the nearest around.
-                    if (out.near_field[i] == kNearerThanRange) {
-                        const float around = nearestSurfaceAround(cx, cy);
-                        if (around > 0.0f) {
-                            out.near_field[i] = kNoNearEvidence;
-                            out.disparity_px[i] = around;
-                            out.confidence[i] = kExplainedConfidence;
-                        }
-                    }
-                    continue;
-                }
-                const float coarse_px = 2.0f * coarse_disparity[c];
-                const float fine = out.disparity_px[i];
-                out.near_field[i] = kNoNearEvidence;
-                if (std::isfinite(fine) &&
-                    std::abs(fine - coarse_px) <= static_cast<float>(kMergeMarginPx))
-                    continue; // the full level agrees, to a finer pixel
-                out.disparity_px[i] = coarse_px;
-                out.confidence[i] = static_cast<uint8_t>(std::max(2, coarse_confidence[c] / 2));
+                for (int x = x0; x < std::min(w, x0 + kMergeChunk); ++x)
+                    mergePixel(x, cy, row + static_cast<size_t>(x), out);
             }
         }
     }
 
+    // Whether the kMergeChunk pixels from `near_field` on, over the kMergeChunk / 2 coarse
+    // pixels from `special` on, are left as they are by mergePixel(). Fixed lengths and no
+    // branch: vector loops.
+    static bool quietChunk(const uint8_t* special, const uint8_t* near_field)
+    {
+        uint8_t any = 0;
+        for (int c = 0; c < kMergeChunk / 2; ++c)
+            any |= special[c];
+        for (int x = 0; x < kMergeChunk; ++x)
+            any |= static_cast<uint8_t>(near_field[x] == kNearerThanRange);
+        return any == 0;
+    }
+
+    // Full-resolution pixel x of the row whose coarse row is cy, at index i.
+    void mergePixel(int x, int cy, size_t i, const PyramidSgmOutput& out)
+    {
+        const int cw = coarse->settings().width;
+        const int cx = std::min(x / 2, cw - 1);
+        const size_t c =
+            static_cast<size_t>(cy) * static_cast<size_t>(cw) + static_cast<size_t>(cx);
+        if (coarse_limit[c] != 0) {
+            out.near_field[i] = kNearerThanExtendedRange;
+            return;
+        }
+        if (guide && guide->narrow(i) && std::isfinite(out.disparity_px[i]) &&
+            !(std::abs(2.0f * coarse_disparity[c] - out.disparity_px[i]) <=
+              static_cast<float>(kGuideAgreePx))) {
+            // A narrow search, which has no competitor outside its span to be told apart
+            // from: the coarse level's match over the whole range at this place must agree
+            // (an unmeasured one does not).
+            out.disparity_px[i] = std::numeric_limits<float>::infinity();
+            out.confidence[i] = 0;
+        }
+        if (coarse_near[c] == 0) {
+            // The full range's near end, next to a near surface the coarse level measured:
+            // at least as near as that surface, the nearest around.
+            if (out.near_field[i] == kNearerThanRange) {
+                const float around = nearestSurfaceAround(cx, cy);
+                if (around > 0.0f) {
+                    out.near_field[i] = kNoNearEvidence;
+                    out.disparity_px[i] = around;
+                    out.confidence[i] = kExplainedConfidence;
+                }
+            }
+            return;
+        }
+        const float coarse_px = 2.0f * coarse_disparity[c];
+        const float fine = out.disparity_px[i];
+        out.near_field[i] = kNoNearEvidence;
+        if (std::isfinite(fine) && std::abs(fine - coarse_px) <= static_cast<float>(kMergeMarginPx))
+            return; // the full level agrees, to a finer pixel
+        out.disparity_px[i] = coarse_px;
+        out.confidence[i] = static_cast<uint8_t>(std::max(2, coarse_confidence[c] / 2));
+    }
+
     // Rows y0..y1-1 of PyramidSgmOutput::coarse_only_px, after mergeRows() of the same rows.
+    // Coarse pixel by coarse pixel, the two full-resolution ones it covers in the row
+    // together.
     void writeCoarseOnlyRows(int y0, int y1, const PyramidSgmOutput& out) const
     {
         const int w = settings.full.width;
         const CensusSgmSettings& c = coarse->settings();
-        constexpr float kNone = std::numeric_limits<float>::infinity();
+        const int paired = std::min(c.width, w / 2);
         for (int y = y0; y < y1; ++y) {
-            const int cy = std::min(y / 2, c.height - 1);
-            for (int x = 0; x < w; ++x) {
-                const size_t i =
-                    static_cast<size_t>(y) * static_cast<size_t>(w) + static_cast<size_t>(x);
-                out.coarse_only_px[i] = kNone;
-                if (std::isfinite(out.disparity_px[i]))
-                    continue;
-                const int cx = std::min(x / 2, c.width - 1);
-                const size_t ci = static_cast<size_t>(cy) * static_cast<size_t>(c.width) +
-                                  static_cast<size_t>(cx);
-                if (coarse_given[ci] != 0)
-                    out.coarse_only_px[i] = 2.0f * coarse_disparity[ci];
+            const size_t crow =
+                static_cast<size_t>(std::min(y / 2, c.height - 1)) * static_cast<size_t>(c.width);
+            const size_t row = static_cast<size_t>(y) * static_cast<size_t>(w);
+            const float* fine = out.disparity_px + row;
+            float* only = out.coarse_only_px + row;
+            const auto offered = [&](int cx) {
+                const size_t ci = crow + static_cast<size_t>(cx);
+                return coarse_given[ci] != 0 ? 2.0f * coarse_disparity[ci] : kNone;
+            };
+            for (int cx = 0; cx < paired; ++cx) {
+                const float v = offered(cx);
+                only[2 * cx] = fine[2 * cx] < kNone ? kNone : v;
+                only[2 * cx + 1] = fine[2 * cx + 1] < kNone ? kNone : v;
             }
+            for (int x = 2 * paired; x < w; ++x)
+                only[x] = fine[x] < kNone ? kNone : offered(std::min(x / 2, c.width - 1));
         }
     }
 
@@ -238,12 +277,19 @@ struct PyramidSgm::Impl {
         for (int y = y0; y < y1; ++y) {
             texturedRow(half_left.data(), cw, c.width, c.height, y, c.textured_min_range, column_lo,
                         column_hi, textured);
+            // No branch: a vector loop.
+            const size_t row = static_cast<size_t>(y) * cw;
+            const float* disparity = coarse_disparity.data() + row;
+            const uint8_t* limit = coarse_limit.data() + row;
+            uint8_t* near = coarse_near.data() + row;
+            uint8_t* given = coarse_given.data() + row;
+            uint8_t* special = coarse_special.data() + row;
             for (size_t x = 0; x < cw; ++x) {
-                const size_t i = static_cast<size_t>(y) * cw + x;
-                const float coarse_px = 2.0f * coarse_disparity[i];
-                const bool on_texture = std::isfinite(coarse_px) && textured[x] != 0;
-                coarse_near[i] = on_texture && coarse_px >= full_edge;
-                coarse_given[i] = on_texture && coarse_limit[i] == 0;
+                const float coarse_px = 2.0f * disparity[x];
+                const bool on_texture = (coarse_px < kNone) & (textured[x] != 0);
+                near[x] = on_texture & (coarse_px >= full_edge);
+                given[x] = on_texture & (limit[x] == 0);
+                special[x] = near[x] | limit[x];
             }
         }
     }
@@ -298,6 +344,9 @@ struct PyramidSgm::Impl {
     }
 
     PyramidSgmSettings settings;
+    // Every band of the pyramid's work (both levels' matches, halving, merging, the probe)
+    // over settings.full.threads: one set of threads, warm from one part to the next.
+    BandPool pool;
     CensusSgm full;
     int full_last;
     int extended_last = 0;
@@ -307,12 +356,10 @@ struct PyramidSgm::Impl {
     std::vector<float> coarse_disparity;
     std::vector<uint8_t> coarse_confidence, coarse_limit;
     std::vector<uint8_t> coarse_near, coarse_given; // classifyCoarseRows()
-    std::vector<uint8_t> texture_rows;              // its texturedRow() scratch, per band
+    std::vector<uint8_t> coarse_special; // coarse_near | coarse_limit: mergeRows() looks closer
+    std::vector<uint8_t> texture_rows;   // its texturedRow() scratch, per band
     std::unique_ptr<NearFieldProbe> probe;
     PyramidSgmTimings timings;
-    // The levels' own work between and after their matches (halving, merging, the probe)
-    // over settings.full.threads, as many as the matches.
-    BandPool pool;
 };
 
 PyramidSgm::PyramidSgm(const PyramidSgmSettings& settings)

@@ -30,24 +30,21 @@ inline bool isTextured(const uint8_t* image, size_t stride, int width, int heigh
 
 // isTextured() for every pixel of row y at once: textured[x] = 1 where it holds, else 0.
 // The 3 rows' extremes per column first, then the 5 columns': a few operations per pixel
-// rather than fifteen reads. column_lo, column_hi: `width` bytes of scratch each.
+// rather than fifteen reads. Both loops have no branch inside (a row outside the image
+// stands in as its neighbour, which changes no extreme; the columns near the ends are
+// done apart), so that the compiler makes them vector loops. column_lo, column_hi:
+// `width` bytes of scratch each.
 inline void texturedRow(const uint8_t* image, size_t stride, int width, int height, int y,
                         int min_range, uint8_t* column_lo, uint8_t* column_hi, uint8_t* textured)
 {
-    const uint8_t* rows[3];
-    int count = 0;
-    for (int v = std::max(0, y - 1); v <= std::min(height - 1, y + 1); ++v)
-        rows[count++] = image + static_cast<size_t>(v) * stride;
+    const uint8_t* above = image + static_cast<size_t>(std::max(0, y - 1)) * stride;
+    const uint8_t* row = image + static_cast<size_t>(y) * stride;
+    const uint8_t* below = image + static_cast<size_t>(std::min(height - 1, y + 1)) * stride;
     for (int x = 0; x < width; ++x) {
-        uint8_t lo = rows[0][x], hi = rows[0][x];
-        for (int r = 1; r < count; ++r) {
-            lo = std::min(lo, rows[r][x]);
-            hi = std::max(hi, rows[r][x]);
-        }
-        column_lo[x] = lo;
-        column_hi[x] = hi;
+        column_lo[x] = std::min(std::min(above[x], row[x]), below[x]);
+        column_hi[x] = std::max(std::max(above[x], row[x]), below[x]);
     }
-    for (int x = 0; x < width; ++x) {
+    const auto clipped = [&](int x) {
         const int x0 = std::max(0, x - 2), x1 = std::min(width - 1, x + 2);
         uint8_t lo = column_lo[x0], hi = column_hi[x0];
         for (int u = x0 + 1; u <= x1; ++u) {
@@ -55,7 +52,22 @@ inline void texturedRow(const uint8_t* image, size_t stride, int width, int heig
             hi = std::max(hi, column_hi[u]);
         }
         textured[x] = hi - lo >= min_range ? 1 : 0;
+    };
+    const int interior_end = std::max(2, width - 2);
+    for (int x = 0; x < std::min(2, width); ++x)
+        clipped(x);
+    const uint8_t* lo = column_lo;
+    const uint8_t* hi = column_hi;
+    const int range = std::clamp(min_range, 0, 256);
+    for (int x = 2; x < interior_end; ++x) {
+        const uint8_t l = std::min(
+            std::min(std::min(lo[x - 2], lo[x - 1]), std::min(lo[x], lo[x + 1])), lo[x + 2]);
+        const uint8_t h = std::max(
+            std::max(std::max(hi[x - 2], hi[x - 1]), std::max(hi[x], hi[x + 1])), hi[x + 2]);
+        textured[x] = static_cast<uint8_t>(h - l >= range);
     }
+    for (int x = std::max(2, interior_end); x < width; ++x)
+        clipped(x);
 }
 
 } // namespace stereod::sgm
