@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cstdlib>
+#include <stdexcept>
+#include <string>
 
 namespace stereod::sgm {
 namespace {
@@ -12,19 +14,29 @@ bool together(int a, int b, int max_step)
     return std::abs(a - b) <= max_step;
 }
 
+constexpr int kMaxWidth = 65535; // run ends are 16-bit
+
 } // namespace
 
 size_t speckleFilterBytes(int width, int height)
 {
     const size_t area = static_cast<size_t>(width) * static_cast<size_t>(height);
-    return area * 3 * sizeof(uint32_t);
+    return area * (2 * sizeof(uint16_t) + 2 * sizeof(uint32_t)) +
+           static_cast<size_t>(height) * sizeof(uint32_t);
 }
 
-SpeckleFilter::SpeckleFilter(int width, int height)
-    : width_(width), height_(height),
-      label_(static_cast<size_t>(width) * static_cast<size_t>(height)), parent_(label_.size()),
-      size_(label_.size())
+SpeckleFilter::SpeckleFilter(int width, int height) : width_(width), height_(height)
 {
+    if (width < 1 || width > kMaxWidth || height < 1)
+        throw std::invalid_argument("SpeckleFilter: a " + std::to_string(width) + "x" +
+                                    std::to_string(height) + " image (width 1 to " +
+                                    std::to_string(kMaxWidth) + ")");
+    const size_t area = static_cast<size_t>(width) * static_cast<size_t>(height);
+    runs_.assign(static_cast<size_t>(height), 0);
+    begin_.assign(area, 0);
+    end_.assign(area, 0);
+    parent_.assign(area, 0);
+    size_.assign(area, 0);
 }
 
 void SpeckleFilter::apply(int16_t* disparity, int16_t invalid, int max_step, int max_size)
@@ -55,49 +67,58 @@ uint32_t SpeckleFilter::join(uint32_t a, uint32_t b)
 void SpeckleFilter::labelBand(const int16_t* disparity, int16_t invalid, int max_step, int y0,
                               int y1)
 {
-    // One pass in raster order joining each pixel to its left and upper neighbours when
-    // they belong together (union-find): the same regions as a flood from every pixel,
-    // read in memory order and without a stack.
-    constexpr uint32_t kNone = UINT32_MAX;
-    const size_t w = static_cast<size_t>(width_);
+    const int w = width_;
     for (int y = y0; y < y1; ++y) {
-        const size_t row = static_cast<size_t>(y) * w;
-        const int16_t* d = disparity + row;
-        const int16_t* above = y > y0 ? d - w : nullptr;
-        uint32_t left = kNone; // root of the left neighbour's region, if it joins
-        // The label of the upper neighbour the left one joined (0: it joined none). Inside a
-        // surface a pixel joins the same two regions as its left neighbour, already one:
-        // that join is skipped rather than looked up again.
-        uint32_t left_up_label = 0;
-        for (size_t x = 0; x < w; ++x) {
-            const size_t i = row + x;
-            if (d[x] == invalid) {
-                label_[i] = 0;
-                left = kNone;
-                left_up_label = 0;
-                continue;
-            }
-            // `left` is a root: nothing has been joined since it was labelled.
-            uint32_t region = left != kNone && together(d[x], d[x - 1], max_step) ? left : kNone;
-            uint32_t up_label = 0;
-            if (above != nullptr && above[x] != invalid && together(d[x], above[x], max_step)) {
-                up_label = label_[i - w];
-                if (region == kNone || up_label != left_up_label) {
-                    const uint32_t up = rootHalving(up_label - 1);
-                    region = region == kNone ? up : region == up ? region : join(region, up);
-                }
-            }
-            // Whichever way it went, a pixel that met its upper neighbour now holds its region.
-            left_up_label = up_label;
-            if (region == kNone) {
-                region = static_cast<uint32_t>(i);
-                parent_[region] = region;
-                size_[region] = 0;
-            }
-            ++size_[region];
-            label_[i] = region + 1;
-            left = region;
+        const int16_t* d = disparity + static_cast<size_t>(y) * static_cast<size_t>(w);
+        const uint32_t first = static_cast<uint32_t>(y) * static_cast<uint32_t>(w);
+        uint32_t run = first;
+        int x = 0;
+        for (;;) {
+            while (x < w && d[x] == invalid)
+                ++x;
+            if (x == w)
+                break;
+            const int begin = x++;
+            while (x < w && d[x] != invalid && together(d[x], d[x - 1], max_step))
+                ++x;
+            begin_[run] = static_cast<uint16_t>(begin);
+            end_[run] = static_cast<uint16_t>(x);
+            parent_[run] = run;
+            size_[run] = static_cast<uint32_t>(x - begin);
+            ++run;
         }
+        runs_[static_cast<size_t>(y)] = run - first;
+        if (y > y0)
+            joinRows(disparity, max_step, y);
+    }
+}
+
+void SpeckleFilter::joinRows(const int16_t* disparity, int max_step, int y)
+{
+    const size_t w = static_cast<size_t>(width_);
+    const int16_t* d = disparity + static_cast<size_t>(y) * w;
+    const int16_t* above = d - w;
+    uint32_t a = static_cast<uint32_t>(y - 1) * static_cast<uint32_t>(w);
+    const uint32_t a_end = a + runs_[static_cast<size_t>(y) - 1];
+    uint32_t b = static_cast<uint32_t>(y) * static_cast<uint32_t>(w);
+    const uint32_t b_end = b + runs_[static_cast<size_t>(y)];
+    // Both rows' runs in order of position: each pair that overlaps is looked at once, and
+    // the first pixel of the overlap that belongs with the one above joins the two.
+    while (a < a_end && b < b_end) {
+        const int from = std::max(begin_[a], begin_[b]);
+        const int to = std::min(end_[a], end_[b]);
+        for (int x = from; x < to; ++x) {
+            if (together(d[x], above[x], max_step)) {
+                const uint32_t ra = rootHalving(a), rb = rootHalving(b);
+                if (ra != rb)
+                    join(ra, rb);
+                break;
+            }
+        }
+        if (end_[a] <= end_[b])
+            ++a;
+        else
+            ++b;
     }
 }
 
@@ -108,26 +129,12 @@ uint32_t SpeckleFilter::root(uint32_t region) const
     return region;
 }
 
-void SpeckleFilter::joinBands(const int16_t* disparity, int16_t invalid, int max_step,
+void SpeckleFilter::joinBands(const int16_t* disparity, int16_t /*invalid*/, int max_step,
                               const int* band_starts, int bands)
 {
-    const size_t w = static_cast<size_t>(width_);
-    for (int band = 1; band < bands; ++band) {
-        const size_t below = static_cast<size_t>(band_starts[band]) * w;
-        if (band_starts[band] <= 0 || band_starts[band] >= height_)
-            continue;
-        for (size_t x = 0; x < w; ++x) {
-            const size_t q = below + x;
-            const size_t p = q - w;
-            if (disparity[p] == invalid || disparity[q] == invalid ||
-                !together(disparity[p], disparity[q], max_step))
-                continue;
-            const uint32_t a = rootHalving(label_[p] - 1);
-            const uint32_t b = rootHalving(label_[q] - 1);
-            if (a != b)
-                join(a, b);
-        }
-    }
+    for (int band = 1; band < bands; ++band)
+        if (band_starts[band] > 0 && band_starts[band] < height_)
+            joinRows(disparity, max_step, band_starts[band]);
 }
 
 void SpeckleFilter::removeBand(int16_t* disparity, int16_t invalid, int max_size, int y0,
@@ -135,18 +142,13 @@ void SpeckleFilter::removeBand(int16_t* disparity, int16_t invalid, int max_size
 {
     const size_t w = static_cast<size_t>(width_);
     const auto small = static_cast<uint32_t>(std::max(0, max_size));
-    // Neighbours along a row mostly share their label: its verdict is kept for the next.
-    uint32_t last_label = 0;
-    bool last_small = false;
-    for (size_t i = static_cast<size_t>(y0) * w; i < static_cast<size_t>(y1) * w; ++i) {
-        if (disparity[i] == invalid)
-            continue;
-        if (label_[i] != last_label) {
-            last_label = label_[i];
-            last_small = size_[root(last_label - 1)] < small;
-        }
-        if (last_small)
-            disparity[i] = invalid;
+    for (int y = y0; y < y1; ++y) {
+        int16_t* d = disparity + static_cast<size_t>(y) * w;
+        const uint32_t first = static_cast<uint32_t>(y) * static_cast<uint32_t>(w);
+        const uint32_t end = first + runs_[static_cast<size_t>(y)];
+        for (uint32_t run = first; run < end; ++run)
+            if (size_[root(run)] < small)
+                std::fill(d + begin_[run], d + end_[run], invalid);
     }
 }
 

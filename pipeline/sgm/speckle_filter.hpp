@@ -4,6 +4,10 @@
 // max_size pixels are set invalid. The same rule as OpenCV's filterSpeckles, without
 // allocating: every buffer is sized in the constructor.
 //
+// A region is found as runs: the pixels of a row that belong together along it, one run
+// for each, joined with the runs of the row above that touch it. A surface then costs a
+// test per pixel along its rows and one per run across them, and the removal fills runs.
+//
 // Band-parallel: labelBand() labels the regions inside each band of rows (bands on
 // different threads), joinBands() joins the regions that touch across band borders (one
 // thread, one pass over the border rows), and removeBand() clears the small ones (bands on
@@ -22,6 +26,7 @@ size_t speckleFilterBytes(int width, int height);
 
 class SpeckleFilter {
   public:
+    // width: 1 to 65535 (std::invalid_argument otherwise).
     SpeckleFilter(int width, int height);
 
     // All three phases on one thread. disparity: width * height values, row-major;
@@ -43,14 +48,19 @@ class SpeckleFilter {
     uint32_t rootHalving(uint32_t region);
     // Joins two roots into one; returns it.
     uint32_t join(uint32_t a, uint32_t b);
+    // Joins each run of row y with the runs of row y - 1 that it touches where a pixel and
+    // the one above it belong together.
+    void joinRows(const int16_t* disparity, int max_step, int y);
 
     int width_;
     int height_;
-    // Region of each pixel: 1 + the index of the first pixel labelled in it; 0 = none
-    // (an invalid pixel).
-    std::vector<uint32_t> label_;
-    // Per region (by its first pixel): the region it was joined into (itself when none),
-    // and its pixel count, whole once it is a root.
+    // Runs of row y: indices y * width .. y * width + runs_[y] - 1; run i covers the pixels
+    // begin_[i] .. end_[i] - 1 of its row.
+    std::vector<uint32_t> runs_;
+    std::vector<uint16_t> begin_;
+    std::vector<uint16_t> end_;
+    // Per run: the run its region was joined into (itself when none), and its region's
+    // pixel count, whole once it is a root.
     std::vector<uint32_t> parent_;
     std::vector<uint32_t> size_;
 };

@@ -1,7 +1,5 @@
 // The band threads: every band of every run exactly once, runs that leave threads out,
 // and a pool that stops while its threads sleep or spin.
-#include "pipeline/sgm/band_pool.hpp"
-
 #include <atomic>
 #include <chrono>
 #include <stdexcept>
@@ -9,6 +7,8 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+
+#include "pipeline/sgm/band_pool.hpp"
 
 namespace stereod::sgm {
 namespace {
@@ -28,7 +28,8 @@ TEST(BandPoolTest, RunsEveryBandOfEveryRunOnce)
             int expected = 0;
             for (int r = 0; r <= run; ++r)
                 expected += band < 1 + r % kThreads ? 1 : 0;
-            ASSERT_EQ(calls[static_cast<size_t>(band)], expected) << "run " << run << " band " << band;
+            ASSERT_EQ(calls[static_cast<size_t>(band)], expected)
+                << "run " << run << " band " << band;
         }
     }
 }
