@@ -112,17 +112,23 @@ TEST(SpeckleFilterTest, RemovesTheRegionsOpenCvRemovesOnRealDisparities)
 }
 
 // Noise, where regions meet and part in every shape (U-turns, spirals of joins, regions
-// that touch only through the row above): the same pixels as OpenCV's flood fill.
+// that touch only through the row above): the same pixels as OpenCV's flood fill. Rows of
+// widths around the filter's 64-pixel chunks, and sparse noise whose runs cross them.
 TEST(SpeckleFilterTest, RemovesWhatOpenCvRemovesFromNoise)
 {
     cv::RNG rng(20261127);
-    for (int trial = 0; trial < 6; ++trial) {
-        cv::Mat raw(97, 131, CV_16SC1);
-        // A few levels 0..3 px apart, a quarter of the pixels invalid.
+    const int widths[] = {131, 1, 63, 64, 65, 200};
+    for (int trial = 0; trial < 12; ++trial) {
+        cv::Mat raw(97, widths[trial % 6], CV_16SC1);
+        // A few levels 0..3 px apart, a quarter of the pixels invalid; or two levels and
+        // one pixel in 16 invalid, for long runs.
+        const bool sparse = trial >= 6;
         for (int y = 0; y < raw.rows; ++y)
             for (int x = 0; x < raw.cols; ++x)
                 raw.at<int16_t>(y, x) =
-                    rng.uniform(0, 4) == 0 ? kNone : static_cast<int16_t>(16 * rng.uniform(0, 4));
+                    rng.uniform(0, sparse ? 16 : 4) == 0
+                        ? kNone
+                        : static_cast<int16_t>(16 * rng.uniform(0, sparse ? 2 : 4));
         for (int max_step : {0, 16, 32})
             for (int max_size : {2, 5, 30}) {
                 cv::Mat expected = raw.clone();
