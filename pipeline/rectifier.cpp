@@ -1,6 +1,7 @@
 #include "pipeline/rectifier.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -77,8 +78,10 @@ Neighbours borderNeighbours(const cv::Mat& src, int sx, int sy)
 // stack for one call, and forRowStripes() takes it by reference.
 class RemapRows {
   public:
-    RemapRows(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac, cv::Mat& out)
-        : src_(src), map_xy_(map_xy), map_frac_(map_frac), out_(out)
+    // offsets: remapOffsets() of map_xy for src's size and row step, or null.
+    RemapRows(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac,
+              const cv::Mat* offsets, cv::Mat& out)
+        : src_(src), map_xy_(map_xy), map_frac_(map_frac), offsets_(offsets), out_(out)
     {
     }
 
@@ -97,7 +100,10 @@ class RemapRows {
             for (int x0 = 0; x0 < out_.cols; x0 += kChunk) {
                 const int n = std::min(kChunk, out_.cols - x0);
                 std::memcpy(frac, frac_row + x0, static_cast<size_t>(n) * sizeof(uint16_t));
-                gather(xy + 2 * x0, n, top, bottom);
+                if (offsets_ != nullptr)
+                    gatherAt(offsets_->ptr<int32_t>(y) + x0, xy + 2 * x0, n, top, bottom);
+                else
+                    gather(xy + 2 * x0, n, top, bottom);
                 blend(top, bottom, frac, blended);
                 std::memcpy(dst + x0, blended, static_cast<size_t>(n));
             }
@@ -130,6 +136,28 @@ class RemapRows {
         }
     }
 
+    // gather() with each neighbourhood's place in the source found beforehand: one load of
+    // its offset and one 16-bit load per pair of neighbours (the left one in the low
+    // byte, as pack() puts it, on a little-endian machine).
+    void gatherAt(const int32_t* offsets, const int16_t* xy, int n, uint16_t* top,
+                  uint16_t* bottom) const
+    {
+        static_assert(std::endian::native == std::endian::little);
+        const uint8_t* const src = src_.data;
+        const size_t step = src_.step[0];
+        for (int i = 0; i < n; ++i) {
+            const int32_t offset = offsets[i];
+            if (offset >= 0) {
+                std::memcpy(&top[i], src + offset, sizeof(uint16_t));
+                std::memcpy(&bottom[i], src + offset + step, sizeof(uint16_t));
+            } else {
+                const Neighbours border = borderNeighbours(src_, xy[2 * i], xy[2 * i + 1]);
+                top[i] = border.top;
+                bottom[i] = border.bottom;
+            }
+        }
+    }
+
     static void blend(const uint16_t* top, const uint16_t* bottom, const uint16_t* frac,
                       uint8_t* out)
     {
@@ -150,6 +178,7 @@ class RemapRows {
     const cv::Mat& src_;
     const cv::Mat& map_xy_;
     const cv::Mat& map_frac_;
+    const cv::Mat* offsets_;
     cv::Mat& out_;
 };
 
@@ -232,9 +261,8 @@ bool overlaps(const cv::Mat& a, const cv::Mat& b)
     return a.datastart < b.dataend && b.datastart < a.dataend;
 }
 
-} // namespace
-
-void remapBilinear(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac, cv::Mat& out)
+// The checks of remapBilinear(); sizes `out`.
+void prepareRemap(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac, cv::Mat& out)
 {
     requireArgument(!src.empty() && (src.type() == CV_8UC1 || src.type() == CV_8UC3),
                     "the source must be a non-empty CV_8UC1 or CV_8UC3 image");
@@ -244,13 +272,52 @@ void remapBilinear(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map
                     "map_frac must be CV_16UC1 with map_xy's size");
     out.create(map_xy.size(), src.type());
     requireArgument(!overlaps(src, out), "the output must not share the source's buffer");
+}
+
+// Whether `offsets` were made for this source: grey, its size and its row step.
+bool offsetsFit(const cv::Mat& offsets, const cv::Mat& map_xy, const cv::Mat& src,
+                cv::Size made_for, size_t made_for_step)
+{
+    return !offsets.empty() && offsets.size() == map_xy.size() && src.type() == CV_8UC1 &&
+           src.size() == made_for && src.step[0] == made_for_step;
+}
+
+} // namespace
+
+void remapBilinear(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac, cv::Mat& out)
+{
+    prepareRemap(src, map_xy, map_frac, out);
     if (src.type() == CV_8UC3) {
         const RemapRowsColour body(src, map_xy, map_frac, out);
         forRowStripes(0, out.rows, [&](int first, int end) { body(cv::Range(first, end)); });
         return;
     }
-    const RemapRows body(src, map_xy, map_frac, out);
+    const RemapRows body(src, map_xy, map_frac, nullptr, out);
     forRowStripes(0, out.rows, [&](int first, int end) { body(cv::Range(first, end)); });
+}
+
+cv::Mat remapOffsets(const cv::Mat& map_xy, cv::Size src_size, size_t src_step)
+{
+    requireArgument(!map_xy.empty() && map_xy.type() == CV_16SC2,
+                    "map_xy must be a non-empty CV_16SC2 map");
+    requireArgument(static_cast<size_t>(src_size.height) * src_step < (size_t{1} << 31),
+                    "the source is too large for 32-bit offsets");
+    cv::Mat offsets(map_xy.size(), CV_32SC1);
+    const auto interior_cols = static_cast<unsigned>(src_size.width - 1);
+    const auto interior_rows = static_cast<unsigned>(src_size.height - 1);
+    for (int y = 0; y < map_xy.rows; ++y) {
+        const int16_t* xy = map_xy.ptr<int16_t>(y);
+        int32_t* offset = offsets.ptr<int32_t>(y);
+        for (int x = 0; x < map_xy.cols; ++x) {
+            const int sx = xy[2 * x], sy = xy[2 * x + 1];
+            const bool inside = static_cast<unsigned>(sx) < interior_cols &&
+                                static_cast<unsigned>(sy) < interior_rows;
+            offset[x] = inside ? static_cast<int32_t>(static_cast<size_t>(sy) * src_step +
+                                                      static_cast<size_t>(sx))
+                               : -1;
+        }
+    }
+    return offsets;
 }
 
 Rectifier::Rectifier(const StereoCalibration& calibration)
@@ -259,32 +326,67 @@ Rectifier::Rectifier(const StereoCalibration& calibration)
         return;
     const cv::Size size = toCv(calibration.rectified.image_size);
     cv::initUndistortRectifyMap(calibration.left.camera_matrix, calibration.left.distortion,
-                                calibration.R1, calibration.P1, size, CV_16SC2, left_map_xy_,
-                                left_map_frac_);
+                                calibration.R1, calibration.P1, size, CV_16SC2, left_.xy,
+                                left_.frac);
     cv::initUndistortRectifyMap(calibration.right.camera_matrix, calibration.right.distortion,
-                                calibration.R2, calibration.P2, size, CV_16SC2, right_map_xy_,
-                                right_map_frac_);
+                                calibration.R2, calibration.P2, size, CV_16SC2, right_.xy,
+                                right_.frac);
+    // A camera's grey frame is a continuous image of the calibrated size.
+    raw_size_ = size;
+    raw_step_ = static_cast<size_t>(size.width);
+    left_.offsets = remapOffsets(left_.xy, raw_size_, raw_step_);
+    right_.offsets = remapOffsets(right_.xy, raw_size_, raw_step_);
 }
 
 void Rectifier::rectifyLeft(const cv::Mat& raw, cv::Mat& out) const
 {
-    apply(raw, left_map_xy_, left_map_frac_, out);
+    apply(raw, left_, out);
 }
 
 void Rectifier::rectifyRight(const cv::Mat& raw, cv::Mat& out) const
 {
-    apply(raw, right_map_xy_, right_map_frac_, out);
+    apply(raw, right_, out);
 }
 
-void Rectifier::apply(const cv::Mat& raw, const cv::Mat& map_xy, const cv::Mat& map_frac,
-                      cv::Mat& out)
+void Rectifier::rectifyPair(const cv::Mat& left_raw, const cv::Mat& right_raw, cv::Mat& left_out,
+                            cv::Mat& right_out) const
 {
-    if (map_xy.empty()) {
+    if (!remaps() || !offsetsFit(left_.offsets, left_.xy, left_raw, raw_size_, raw_step_) ||
+        !offsetsFit(right_.offsets, right_.xy, right_raw, raw_size_, raw_step_)) {
+        rectifyLeft(left_raw, left_out);
+        rectifyRight(right_raw, right_out);
+        return;
+    }
+    prepareRemap(left_raw, left_.xy, left_.frac, left_out);
+    prepareRemap(right_raw, right_.xy, right_.frac, right_out);
+    requireArgument(!overlaps(left_raw, right_out) && !overlaps(right_raw, left_out),
+                    "an output must not share an input's buffer");
+    // Both images' rows in one call: one wake-up of the pool's threads, not two.
+    const RemapRows left(left_raw, left_.xy, left_.frac, &left_.offsets, left_out);
+    const RemapRows right(right_raw, right_.xy, right_.frac, &right_.offsets, right_out);
+    const int rows = left_out.rows;
+    forRowStripes(0, 2 * rows, [&](int first, int end) {
+        if (first < rows)
+            left(cv::Range(first, std::min(end, rows)));
+        if (end > rows)
+            right(cv::Range(std::max(first, rows) - rows, end - rows));
+    });
+}
+
+void Rectifier::apply(const cv::Mat& raw, const Maps& maps, cv::Mat& out) const
+{
+    if (maps.xy.empty()) {
         // copyTo() reuses `out` when size and type match.
         raw.copyTo(out);
         return;
     }
-    remapBilinear(raw, map_xy, map_frac, out);
+    if (!offsetsFit(maps.offsets, maps.xy, raw, raw_size_, raw_step_)) {
+        remapBilinear(raw, maps.xy, maps.frac, out);
+        return;
+    }
+    prepareRemap(raw, maps.xy, maps.frac, out);
+    const RemapRows body(raw, maps.xy, maps.frac, &maps.offsets, out);
+    forRowStripes(0, out.rows, [&](int first, int end) { body(cv::Range(first, end)); });
 }
 
 } // namespace stereod

@@ -17,7 +17,7 @@ class Rectifier {
     explicit Rectifier(const StereoCalibration& calibration);
 
     // True when rectify() resamples (full calibration); false when it only copies.
-    bool remaps() const { return !left_map_xy_.empty(); }
+    bool remaps() const { return !left_.xy.empty(); }
 
     // Rectifies one raw CV_8UC1 image, or the left camera's colour (CV_8UC3, BGR) with the
     // same maps, into `out`, which is reused when it already has the calibrated size and
@@ -26,13 +26,21 @@ class Rectifier {
     // `raw`.
     void rectifyLeft(const cv::Mat& raw, cv::Mat& out) const;
     void rectifyRight(const cv::Mat& raw, cv::Mat& out) const;
+    // Both grey images of a pair at once: the same results as the two calls above, their
+    // rows shared out over the pool's threads together.
+    void rectifyPair(const cv::Mat& left_raw, const cv::Mat& right_raw, cv::Mat& left_out,
+                     cv::Mat& right_out) const;
 
   private:
-    static void apply(const cv::Mat& raw, const cv::Mat& map_xy, const cv::Mat& map_frac,
-                      cv::Mat& out);
+    struct Maps {
+        cv::Mat xy, frac; // CV_16SC2 integer coordinates, CV_16UC1 fractions
+        cv::Mat offsets;  // remapOffsets() for a continuous grey image of the calibrated size
+    };
+    void apply(const cv::Mat& raw, const Maps& maps, cv::Mat& out) const;
 
-    cv::Mat left_map_xy_, left_map_frac_; // CV_16SC2 integer coordinates, CV_16UC1 fractions
-    cv::Mat right_map_xy_, right_map_frac_;
+    Maps left_, right_;
+    cv::Size raw_size_;
+    size_t raw_step_ = 0;
 };
 
 // Bilinear resampling of a CV_8UC1 or CV_8UC3 image through fixed-point maps, the same
@@ -50,5 +58,11 @@ class Rectifier {
 // Reentrant.
 void remapBilinear(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac,
                    cv::Mat& out);
+
+// Where each output pixel's 2x2 neighbourhood starts in a CV_8UC1 source of src_size whose
+// rows are src_step bytes apart (CV_32SC1, map_xy's size): y * src_step + x, or -1 where
+// the neighbourhood is not wholly inside. The Rectifier computes them once per camera, so
+// that a frame's resampling loads one offset rather than two coordinates and a bounds test.
+cv::Mat remapOffsets(const cv::Mat& map_xy, cv::Size src_size, size_t src_step);
 
 } // namespace stereod

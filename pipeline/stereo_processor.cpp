@@ -293,11 +293,12 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& left_colour, c
         p.last_frame_bad = false;
     }
 
-    p.rectifier.rectifyLeft(left_gray, out.left_rectified);
     cv::Mat right_rectified = right_gray;
     if (p.rectifier.remaps()) {
-        p.rectifier.rectifyRight(right_gray, p.right_rectified);
+        p.rectifier.rectifyPair(left_gray, right_gray, out.left_rectified, p.right_rectified);
         right_rectified = p.right_rectified;
+    } else {
+        p.rectifier.rectifyLeft(left_gray, out.left_rectified);
     }
     const Clock::time_point t_grey = Clock::now();
     // The colour left, for the outputs only, through the same maps.

@@ -180,6 +180,56 @@ TEST(RealRig, PixelsWithoutRawDataAreBlack)
               (static_cast<int>(rectified.total()) - outside_count) / 2);
 }
 
+// The Rectifier's own paths (offsets found once per camera, both images in one call) give
+// what remapBilinear() gives from the maps alone, to the grey level; a frame that is not a
+// continuous image of the calibrated size takes the maps alone.
+TEST(RealRig, OffsetsAndPairsResampleExactlyAsTheMaps)
+{
+    const StereoCalibration& c = realRig();
+    const Rectifier rectifier(c);
+    const cv::Size size = toCv(c.rectified.image_size);
+    const Maps left_maps = fixedPointMaps(c.left, c.R1, c.P1, size);
+    const Maps right_maps = fixedPointMaps(c.right, c.R2, c.P2, size);
+    for (int i : {1, 6}) {
+        const cv::Mat left = readGray(samplePath("left", i));
+        const cv::Mat right = readGray(samplePath("right", i));
+        ASSERT_TRUE(left.isContinuous() && right.isContinuous());
+        cv::Mat expected_left, expected_right;
+        remapBilinear(left, left_maps.xy, left_maps.frac, expected_left);
+        remapBilinear(right, right_maps.xy, right_maps.frac, expected_right);
+        cv::Mat pair_left, pair_right, one_left, one_right;
+        rectifier.rectifyPair(left, right, pair_left, pair_right);
+        rectifier.rectifyLeft(left, one_left);
+        rectifier.rectifyRight(right, one_right);
+        EXPECT_EQ(cv::countNonZero(pair_left != expected_left), 0) << "pair " << i;
+        EXPECT_EQ(cv::countNonZero(pair_right != expected_right), 0) << "pair " << i;
+        EXPECT_EQ(cv::countNonZero(one_left != expected_left), 0) << "pair " << i;
+        EXPECT_EQ(cv::countNonZero(one_right != expected_right), 0) << "pair " << i;
+        // Rows further apart than the calibrated width: the maps alone, the same result.
+        cv::Mat wider(left.rows, left.cols + 16, CV_8UC1, cv::Scalar(255));
+        left.copyTo(wider(cv::Rect(0, 0, left.cols, left.rows)));
+        cv::Mat view_left;
+        rectifier.rectifyLeft(wider(cv::Rect(0, 0, left.cols, left.rows)), view_left);
+        EXPECT_EQ(cv::countNonZero(view_left != expected_left), 0) << "pair " << i;
+    }
+    // The offsets themselves: y * step + x inside, -1 where the neighbourhood leaves the
+    // image, as many as the maps have there.
+    const cv::Mat offsets = remapOffsets(left_maps.xy, size, static_cast<size_t>(size.width));
+    ASSERT_EQ(offsets.type(), CV_32SC1);
+    int inside = 0;
+    for (int y = 0; y < offsets.rows; ++y)
+        for (int x = 0; x < offsets.cols; ++x) {
+            const cv::Vec2s xy = left_maps.xy.at<cv::Vec2s>(y, x);
+            const bool whole =
+                xy[0] >= 0 && xy[0] < size.width - 1 && xy[1] >= 0 && xy[1] < size.height - 1;
+            const int32_t offset = offsets.at<int32_t>(y, x);
+            ASSERT_EQ(offset, whole ? xy[1] * size.width + xy[0] : -1) << x << ", " << y;
+            inside += whole ? 1 : 0;
+        }
+    EXPECT_GT(inside, static_cast<int>(offsets.total() / 2));
+    EXPECT_LT(inside, static_cast<int>(offsets.total())); // alpha 1: corners outside
+}
+
 // The benchmark's rig (mild distortion, a 0.5 degree turn, alpha 0) on a real scene, the
 // raw pair simulated from the rectified Aloe images.
 TEST(PlausibleRig, RectifiesASimulatedRawPairLikeOpenCvRemap)
