@@ -18,9 +18,10 @@ void relax()
 #endif
 }
 
-// Returns the value of `word` once it differs from `old`: spins for BandPool::kSpin, then
-// sleeps on it (std::atomic::wait, a futex).
-uint32_t awaitChange(const std::atomic<uint32_t>& word, uint32_t old)
+// Returns the value of `word` once it differs from `old`: spins for BandPool::kSpin, or
+// until `resting` is set, then sleeps on it (std::atomic::wait, a futex).
+uint32_t awaitChange(const std::atomic<uint32_t>& word, uint32_t old,
+                     const std::atomic<bool>* resting = nullptr)
 {
     using Clock = std::chrono::steady_clock;
     const Clock::time_point until = Clock::now() + BandPool::kSpin;
@@ -28,6 +29,8 @@ uint32_t awaitChange(const std::atomic<uint32_t>& word, uint32_t old)
         const uint32_t now = word.load(std::memory_order_acquire);
         if (now != old)
             return now;
+        if (resting != nullptr && resting->load(std::memory_order_relaxed))
+            break;
         // The clock is read every 64 spins: a few microseconds apart.
         if ((spins & 63) == 63 && Clock::now() >= until)
             break;
@@ -61,6 +64,11 @@ BandPool::~BandPool()
         t.join();
 }
 
+void BandPool::rest()
+{
+    resting_.store(true, std::memory_order_relaxed);
+}
+
 int BandPool::threads() const
 {
     return static_cast<int>(threads_.size()) + 1;
@@ -68,6 +76,7 @@ int BandPool::threads() const
 
 void BandPool::runErased(int bands, void* context, Trampoline call)
 {
+    resting_.store(false, std::memory_order_relaxed);
     if (bands > 1) {
         context_ = context;
         call_ = call;
@@ -86,7 +95,7 @@ void BandPool::workerLoop(int band)
 {
     uint32_t seen = 0;
     for (;;) {
-        seen = awaitChange(work_, seen);
+        seen = awaitChange(work_, seen, &resting_);
         if (stop_.load(std::memory_order_acquire))
             return;
         if (static_cast<uint32_t>(band) >= (seen & kBandMask))

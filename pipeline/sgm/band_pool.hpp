@@ -43,6 +43,11 @@ class BandPool {
 
     int threads() const;
 
+    // Tells the pool's threads that no run follows soon (the caller's work with the pool
+    // is done for this frame): they sleep at once rather than spin, leaving the cores to
+    // what runs next. The next run() wakes them as usual.
+    void rest();
+
   private:
     using Trampoline = void (*)(void*, int);
     void runErased(int bands, void* context, Trampoline call);
@@ -54,6 +59,7 @@ class BandPool {
     std::atomic<uint32_t> work_{0};
     std::atomic<uint32_t> pending_{0}; // bands of the current run not yet returned
     std::atomic<bool> stop_{false};
+    std::atomic<bool> resting_{false}; // rest() until the next run()
     // Written before work_ announces a run, read only by the bands that take part in it.
     void* context_ = nullptr;
     Trampoline call_ = nullptr;

@@ -409,6 +409,9 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
     }
     const Clock::time_point t3 = Clock::now();
     m.runProbe(left, left_stride, probe_region, out);
+    // The frame's matching is done: what follows (depth, the reading, the cloud) runs on
+    // other threads, which the band threads' spinning would take cores from.
+    m.pool.rest();
     m.timings = {msBetween(t1, t2), msBetween(t0, t1) + msBetween(t2, t3),
                  msBetween(t3, Clock::now())};
 }

@@ -48,6 +48,20 @@ TEST(BandPoolTest, WakesThreadsThatHaveGoneToSleep)
     EXPECT_EQ(sum, 15);
 }
 
+TEST(BandPoolTest, RestsAfterAFrameAndWakesForTheNext)
+{
+    BandPool pool(3);
+    std::vector<int> calls(3, 0);
+    for (int frame = 0; frame < 50; ++frame) {
+        for (int run = 0; run < 4; ++run)
+            pool.run(3, [&](int band) { ++calls[static_cast<size_t>(band)]; });
+        pool.rest();
+        if (frame % 10 == 0) // let them fall asleep now and then
+            std::this_thread::sleep_for(std::chrono::microseconds(200));
+    }
+    EXPECT_EQ(calls, (std::vector<int>{200, 200, 200}));
+}
+
 TEST(BandPoolTest, StopsWhetherItsThreadsSpinOrSleep)
 {
     for (int wait_us : {0, 1000}) {
