@@ -150,6 +150,9 @@ class RemapRows {
             if (offset >= 0) {
                 std::memcpy(&top[i], src + offset, sizeof(uint16_t));
                 std::memcpy(&bottom[i], src + offset + step, sizeof(uint16_t));
+            } else if (offset == kOutside) {
+                top[i] = 0;
+                bottom[i] = 0;
             } else {
                 const Neighbours border = borderNeighbours(src_, xy[2 * i], xy[2 * i + 1]);
                 top[i] = border.top;
@@ -312,9 +315,12 @@ cv::Mat remapOffsets(const cv::Mat& map_xy, cv::Size src_size, size_t src_step)
             const int sx = xy[2 * x], sy = xy[2 * x + 1];
             const bool inside = static_cast<unsigned>(sx) < interior_cols &&
                                 static_cast<unsigned>(sy) < interior_rows;
-            offset[x] = inside ? static_cast<int32_t>(static_cast<size_t>(sy) * src_step +
+            const bool outside =
+                sx < -1 || sx >= src_size.width || sy < -1 || sy >= src_size.height;
+            offset[x] = inside    ? static_cast<int32_t>(static_cast<size_t>(sy) * src_step +
                                                       static_cast<size_t>(sx))
-                               : -1;
+                        : outside ? kOutside
+                                  : kOnTheEdge;
         }
     }
     return offsets;

@@ -212,22 +212,28 @@ TEST(RealRig, OffsetsAndPairsResampleExactlyAsTheMaps)
         rectifier.rectifyLeft(wider(cv::Rect(0, 0, left.cols, left.rows)), view_left);
         EXPECT_EQ(cv::countNonZero(view_left != expected_left), 0) << "pair " << i;
     }
-    // The offsets themselves: y * step + x inside, -1 where the neighbourhood leaves the
-    // image, as many as the maps have there.
+    // The offsets themselves: y * step + x inside, kOutside where no neighbour is inside,
+    // kOnTheEdge between, as many of each as the maps have.
     const cv::Mat offsets = remapOffsets(left_maps.xy, size, static_cast<size_t>(size.width));
     ASSERT_EQ(offsets.type(), CV_32SC1);
-    int inside = 0;
+    const cv::Mat outside = whollyOutside(left_maps.xy, size);
+    int inside = 0, edge = 0;
     for (int y = 0; y < offsets.rows; ++y)
         for (int x = 0; x < offsets.cols; ++x) {
             const cv::Vec2s xy = left_maps.xy.at<cv::Vec2s>(y, x);
             const bool whole =
                 xy[0] >= 0 && xy[0] < size.width - 1 && xy[1] >= 0 && xy[1] < size.height - 1;
-            const int32_t offset = offsets.at<int32_t>(y, x);
-            ASSERT_EQ(offset, whole ? xy[1] * size.width + xy[0] : -1) << x << ", " << y;
+            const int32_t expected = whole                            ? xy[1] * size.width + xy[0]
+                                     : outside.at<uint8_t>(y, x) != 0 ? kOutside
+                                                                      : kOnTheEdge;
+            ASSERT_EQ(offsets.at<int32_t>(y, x), expected) << x << ", " << y;
             inside += whole ? 1 : 0;
+            edge += expected == kOnTheEdge ? 1 : 0;
         }
+    // Alpha 1: corners without raw data, and pixels on the raw image's edge.
     EXPECT_GT(inside, static_cast<int>(offsets.total() / 2));
-    EXPECT_LT(inside, static_cast<int>(offsets.total())); // alpha 1: corners outside
+    EXPECT_GT(cv::countNonZero(outside), 1000);
+    EXPECT_EQ(edge, countStraddling(left_maps.xy, size));
 }
 
 // The benchmark's rig (mild distortion, a 0.5 degree turn, alpha 0) on a real scene, the
