@@ -585,15 +585,25 @@ struct CensusSgm::Impl {
     void finishRows(const std::vector<int16_t>& source, int y0, int y1, const CensusSgmOutput& out)
     {
         const size_t w = static_cast<size_t>(settings.width);
-        constexpr float kNone = std::numeric_limits<float>::infinity();
-        for (size_t i = static_cast<size_t>(y0) * w; i < static_cast<size_t>(y1) * w; ++i) {
-            const int16_t d = source[i];
-            if (d == kNoDisparity) {
-                out.disparity_px[i] = kNone;
-                out.confidence[i] = 0;
-            } else {
-                out.disparity_px[i] = static_cast<float>(d) * (1.0f / kSubpixel);
-            }
+        const size_t first = static_cast<size_t>(y0) * w, end = static_cast<size_t>(y1) * w;
+        finishPixels(source.data() + first, end - first, out.disparity_px + first,
+                     out.confidence + first);
+    }
+
+    // Every output written whatever the pixel, the choice made on bits (the compiler keeps
+    // a branch for a choice between floats), and the arrays declared apart (a byte store
+    // may otherwise alias anything): a vector loop.
+    static void finishPixels(const int16_t* __restrict fixed_point, size_t count,
+                             float* __restrict disparity, uint8_t* __restrict confidence)
+    {
+        constexpr uint32_t kNoneBits = 0x7f800000u; // +inf
+        static_assert(std::bit_cast<float>(kNoneBits) == std::numeric_limits<float>::infinity());
+        for (size_t i = 0; i < count; ++i) {
+            const uint32_t none = fixed_point[i] == kNoDisparity ? ~0u : 0u;
+            const auto value =
+                std::bit_cast<uint32_t>(static_cast<float>(fixed_point[i]) * (1.0f / kSubpixel));
+            disparity[i] = std::bit_cast<float>((value & ~none) | (kNoneBits & none));
+            confidence[i] = static_cast<uint8_t>(confidence[i] & ~none);
         }
     }
 
