@@ -75,7 +75,7 @@ bool NearFieldProbe::diverse(const CensusSgm& census, const Scratch& scratch, in
 }
 
 void NearFieldProbe::probeTileRows(const uint8_t* left, size_t stride, const CensusSgm& census,
-                                   const Grid& grid, int ty0, int ty1, Scratch& scratch)
+                                   const Grid& grid, int ty0, int ty_step, Scratch& scratch)
 {
     const int t = settings_.tile_px;
     const SgmKernels& kernels = census.kernels();
@@ -83,7 +83,7 @@ void NearFieldProbe::probeTileRows(const uint8_t* left, size_t stride, const Cen
     std::vector<int>& sample_y = scratch.sample_y;
     std::vector<uint16_t>& curve = scratch.curve;
     CensusRowPointers rows;
-    for (int ty = ty0; ty < ty1; ++ty)
+    for (int ty = ty0; ty < grid.tiles_y; ty += ty_step)
         for (int tx = 0; tx < grid.tiles_x; ++tx) {
             Tile& tile = tiles_[static_cast<size_t>(ty) * static_cast<size_t>(grid.tiles_x) +
                                 static_cast<size_t>(tx)];
@@ -163,13 +163,15 @@ void NearFieldProbe::run(const uint8_t* left, size_t stride, const CensusSgm& ce
 
     const int bands =
         pool != nullptr ? std::min(static_cast<int>(scratch_.size()), grid.tiles_y) : 1;
+    // Band k takes every bands-th row of tiles from row k: a region's texture, which sets a
+    // tile's work, is rarely spread evenly from its top to its bottom.
     if (bands > 1)
         pool->run(bands, [&](int band) {
-            probeTileRows(left, stride, census, grid, grid.tiles_y * band / bands,
-                          grid.tiles_y * (band + 1) / bands, scratch_[static_cast<size_t>(band)]);
+            probeTileRows(left, stride, census, grid, band, bands,
+                          scratch_[static_cast<size_t>(band)]);
         });
     else
-        probeTileRows(left, stride, census, grid, 0, grid.tiles_y, scratch_[0]);
+        probeTileRows(left, stride, census, grid, 0, 1, scratch_[0]);
     probed_ = 0;
     for (const Scratch& scratch : scratch_)
         probed_ += scratch.probed;

@@ -98,9 +98,10 @@ class NearFieldProbe {
 
     static bool informative(const CensusRows& rows, int x, int bits);
     bool diverse(const CensusSgm& census, const Scratch& scratch, int step) const;
-    // Judges the tiles of tile rows ty0..ty1-1 (Tile::passed), with its own scratch.
+    // Judges the tiles of tile rows ty0, ty0 + ty_step, ... (Tile::passed), with its own
+    // scratch.
     void probeTileRows(const uint8_t* left, size_t stride, const CensusSgm& census,
-                       const Grid& grid, int ty0, int ty1, Scratch& scratch);
+                       const Grid& grid, int ty0, int ty_step, Scratch& scratch);
 
     int width_, height_;
     NearFieldProbeSettings settings_;
