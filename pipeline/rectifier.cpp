@@ -277,12 +277,12 @@ void prepareRemap(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_
     requireArgument(!overlaps(src, out), "the output must not share the source's buffer");
 }
 
-// Whether `offsets` were made for this source: grey, its size and its row step.
-bool offsetsFit(const cv::Mat& offsets, const cv::Mat& map_xy, const cv::Mat& src,
-                cv::Size made_for, size_t made_for_step)
+// Whether the Rectifier's offsets (made for a continuous grey image of the maps' size)
+// serve this source.
+bool offsetsFit(const cv::Mat& offsets, const cv::Mat& src)
 {
-    return !offsets.empty() && offsets.size() == map_xy.size() && src.type() == CV_8UC1 &&
-           src.size() == made_for && src.step[0] == made_for_step;
+    return !offsets.empty() && src.type() == CV_8UC1 && src.size() == offsets.size() &&
+           src.step[0] == static_cast<size_t>(src.cols);
 }
 
 } // namespace
@@ -338,10 +338,8 @@ Rectifier::Rectifier(const StereoCalibration& calibration)
                                 calibration.R2, calibration.P2, size, CV_16SC2, right_.xy,
                                 right_.frac);
     // A camera's grey frame is a continuous image of the calibrated size.
-    raw_size_ = size;
-    raw_step_ = static_cast<size_t>(size.width);
-    left_.offsets = remapOffsets(left_.xy, raw_size_, raw_step_);
-    right_.offsets = remapOffsets(right_.xy, raw_size_, raw_step_);
+    left_.offsets = remapOffsets(left_.xy, size, static_cast<size_t>(size.width));
+    right_.offsets = remapOffsets(right_.xy, size, static_cast<size_t>(size.width));
 }
 
 void Rectifier::rectifyLeft(const cv::Mat& raw, cv::Mat& out) const
@@ -357,8 +355,7 @@ void Rectifier::rectifyRight(const cv::Mat& raw, cv::Mat& out) const
 void Rectifier::rectifyPair(const cv::Mat& left_raw, const cv::Mat& right_raw, cv::Mat& left_out,
                             cv::Mat& right_out) const
 {
-    if (!remaps() || !offsetsFit(left_.offsets, left_.xy, left_raw, raw_size_, raw_step_) ||
-        !offsetsFit(right_.offsets, right_.xy, right_raw, raw_size_, raw_step_)) {
+    if (!offsetsFit(left_.offsets, left_raw) || !offsetsFit(right_.offsets, right_raw)) {
         rectifyLeft(left_raw, left_out);
         rectifyRight(right_raw, right_out);
         return;
@@ -379,14 +376,14 @@ void Rectifier::rectifyPair(const cv::Mat& left_raw, const cv::Mat& right_raw, c
     });
 }
 
-void Rectifier::apply(const cv::Mat& raw, const Maps& maps, cv::Mat& out) const
+void Rectifier::apply(const cv::Mat& raw, const Maps& maps, cv::Mat& out)
 {
     if (maps.xy.empty()) {
         // copyTo() reuses `out` when size and type match.
         raw.copyTo(out);
         return;
     }
-    if (!offsetsFit(maps.offsets, maps.xy, raw, raw_size_, raw_step_)) {
+    if (!offsetsFit(maps.offsets, raw)) {
         remapBilinear(raw, maps.xy, maps.frac, out);
         return;
     }

@@ -36,11 +36,9 @@ class Rectifier {
         cv::Mat xy, frac; // CV_16SC2 integer coordinates, CV_16UC1 fractions
         cv::Mat offsets;  // remapOffsets() for a continuous grey image of the calibrated size
     };
-    void apply(const cv::Mat& raw, const Maps& maps, cv::Mat& out) const;
+    static void apply(const cv::Mat& raw, const Maps& maps, cv::Mat& out);
 
     Maps left_, right_;
-    cv::Size raw_size_;
-    size_t raw_step_ = 0;
 };
 
 // Bilinear resampling of a CV_8UC1 or CV_8UC3 image through fixed-point maps, the same

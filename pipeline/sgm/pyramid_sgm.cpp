@@ -108,7 +108,7 @@ size_t pyramidSgmMemoryBytes(const PyramidSgmSettings& s)
     if (hasCoarseLevel(s)) {
         const CensusSgmSettings coarse = coarseLevelSettings(s.full);
         const size_t area = static_cast<size_t>(coarse.width) * static_cast<size_t>(coarse.height);
-        bytes += censusSgmMemoryBytes(coarse) + area * (2 + sizeof(float) + 5) +
+        bytes += censusSgmMemoryBytes(coarse) + area * (2 + sizeof(float) + 4) +
                  3 * static_cast<size_t>(coarse.width) * static_cast<size_t>(s.full.threads);
         if (isGuided(s))
             bytes += GuidedSpans::memoryBytes(s.full, coarse);
@@ -138,7 +138,6 @@ struct PyramidSgm::Impl {
             coarse_limit.assign(area, 0);
             coarse_near.assign(area, 0);
             coarse_given.assign(area, 0);
-            coarse_special.assign(area, 0);
             texture_rows.assign(
                 3 * static_cast<size_t>(c.width) * static_cast<size_t>(s.full.threads), 0);
             extended_last = 2 * (c.min_disparity + c.num_disparities - 1);
@@ -162,14 +161,16 @@ struct PyramidSgm::Impl {
         for (int y = y0; y < y1; ++y) {
             const int cy = std::min(y / 2, ch - 1);
             const size_t row = static_cast<size_t>(y) * static_cast<size_t>(w);
-            const uint8_t* special = coarse_special.data() + static_cast<size_t>(cy) * cw;
+            const size_t crow = static_cast<size_t>(cy) * static_cast<size_t>(cw);
             for (int x0 = 0; x0 < w; x0 += kMergeChunk) {
                 // Most of an image is neither near evidence of either level nor a near
                 // surface of the coarse one: a chunk with none of them keeps what the
                 // full level found, as it is. (A guided search checks every pixel.)
                 const bool whole = x0 + kMergeChunk <= 2 * cw;
+                const size_t c = crow + static_cast<size_t>(x0 / 2);
                 if (!guide && whole &&
-                    quietChunk(special + x0 / 2, out.near_field + row + static_cast<size_t>(x0)))
+                    quietChunk(coarse_near.data() + c, coarse_limit.data() + c,
+                               out.near_field + row + static_cast<size_t>(x0)))
                     continue;
                 for (int x = x0; x < std::min(w, x0 + kMergeChunk); ++x)
                     mergePixel(x, cy, row + static_cast<size_t>(x), out);
@@ -178,13 +179,13 @@ struct PyramidSgm::Impl {
     }
 
     // Whether the kMergeChunk pixels from `near_field` on, over the kMergeChunk / 2 coarse
-    // pixels from `special` on, are left as they are by mergePixel(). Fixed lengths and no
-    // branch: vector loops.
-    static bool quietChunk(const uint8_t* special, const uint8_t* near_field)
+    // pixels from `near` and `limit` on, are left as they are by mergePixel(). Fixed
+    // lengths and no branch: vector loops.
+    static bool quietChunk(const uint8_t* near, const uint8_t* limit, const uint8_t* near_field)
     {
         uint8_t any = 0;
         for (int c = 0; c < kMergeChunk / 2; ++c)
-            any |= special[c];
+            any |= static_cast<uint8_t>(near[c] | limit[c]);
         for (int x = 0; x < kMergeChunk; ++x)
             any |= static_cast<uint8_t>(near_field[x] == kNearerThanRange);
         return any == 0;
@@ -283,13 +284,11 @@ struct PyramidSgm::Impl {
             const uint8_t* limit = coarse_limit.data() + row;
             uint8_t* near = coarse_near.data() + row;
             uint8_t* given = coarse_given.data() + row;
-            uint8_t* special = coarse_special.data() + row;
             for (size_t x = 0; x < cw; ++x) {
                 const float coarse_px = 2.0f * disparity[x];
                 const bool on_texture = (coarse_px < kNone) & (textured[x] != 0);
                 near[x] = on_texture & (coarse_px >= full_edge);
                 given[x] = on_texture & (limit[x] == 0);
-                special[x] = near[x] | limit[x];
             }
         }
     }
@@ -356,8 +355,7 @@ struct PyramidSgm::Impl {
     std::vector<float> coarse_disparity;
     std::vector<uint8_t> coarse_confidence, coarse_limit;
     std::vector<uint8_t> coarse_near, coarse_given; // classifyCoarseRows()
-    std::vector<uint8_t> coarse_special; // coarse_near | coarse_limit: mergeRows() looks closer
-    std::vector<uint8_t> texture_rows;   // its texturedRow() scratch, per band
+    std::vector<uint8_t> texture_rows;              // its texturedRow() scratch, per band
     std::unique_ptr<NearFieldProbe> probe;
     PyramidSgmTimings timings;
 };

@@ -34,9 +34,10 @@
 // (the extended one, at the coarse level, or the full one when the extended range is off)
 // over the region the reading comes from, and its evidence tiles are marked too.
 //
-// Thread-bound, like CensusSgm; each level's matcher runs its own band threads, and the
-// halving and the merge run in bands over as many threads of the pyramid's own. All
-// buffers are allocated in the constructor: compute() allocates nothing.
+// Thread-bound, like CensusSgm. Both levels' matches, the halving, the merge and the probe
+// run in bands on one pool of the pyramid's (settings.full.threads), which rests once a
+// compute() is done. All buffers are allocated in the constructor: compute() allocates
+// nothing.
 
 #include <cstddef>
 #include <cstdint>

@@ -56,15 +56,12 @@ inline void texturedRow(const uint8_t* image, size_t stride, int width, int heig
     const int interior_end = std::max(2, width - 2);
     for (int x = 0; x < std::min(2, width); ++x)
         clipped(x);
-    const uint8_t* lo = column_lo;
-    const uint8_t* hi = column_hi;
-    const int range = std::clamp(min_range, 0, 256);
     for (int x = 2; x < interior_end; ++x) {
-        const uint8_t l = std::min(
-            std::min(std::min(lo[x - 2], lo[x - 1]), std::min(lo[x], lo[x + 1])), lo[x + 2]);
-        const uint8_t h = std::max(
-            std::max(std::max(hi[x - 2], hi[x - 1]), std::max(hi[x], hi[x + 1])), hi[x + 2]);
-        textured[x] = static_cast<uint8_t>(h - l >= range);
+        const uint8_t lo = std::min(
+            {column_lo[x - 2], column_lo[x - 1], column_lo[x], column_lo[x + 1], column_lo[x + 2]});
+        const uint8_t hi = std::max(
+            {column_hi[x - 2], column_hi[x - 1], column_hi[x], column_hi[x + 1], column_hi[x + 2]});
+        textured[x] = static_cast<uint8_t>(hi - lo >= min_range);
     }
     for (int x = std::max(2, interior_end); x < width; ++x)
         clipped(x);
