@@ -11,12 +11,12 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
-#include <unistd.h>
 
 #include "ctl/client.hpp"
 #include "ros2/camera_frames.hpp"
 #include "tests/daemon/live_view_service.hpp"
 #include "tests/support/data_paths.hpp"
+#include "tests/support/dds_domain.hpp"
 #include "tests/support/depth_values.hpp"
 #include "tests/support/process.hpp"
 
@@ -29,13 +29,13 @@ using test::ProcessResult;
 using test::runProcess;
 
 // The replaying service of the live view's tests (Tsukuba, three identical pairs, so every
-// frame's depth and reading are the same), with ROS 2 on in a domain of this process's own.
+// frame's depth and reading are the same), with ROS 2 on in a domain no other running test holds.
 class Ros2Interop : public test::LiveViewE2e {
   protected:
     void SetUp() override
     {
         LiveViewE2e::SetUp();
-        domain_ = std::to_string(1 + ::getpid() % 200);
+        domain_ = domain_lease_.text();
         ::setenv("ROS_DOMAIN_ID", domain_.c_str(), 1);
     }
 
@@ -57,6 +57,7 @@ class Ros2Interop : public test::LiveViewE2e {
         return Json::parse(sub.out);
     }
 
+    test::DdsDomainLease domain_lease_;
     std::string domain_;
 };
 

@@ -1,6 +1,6 @@
 // source.type ros2, fed by a ROS 2 camera driver nobody here wrote: a publisher built from
 // eProsima Fast DDS (tests/ros2/fastdds_image_publisher.cpp) sends the Tsukuba pair on the
-// two image topics over the loopback interface, in a DDS domain of this process's own, and
+// two image topics over the loopback interface, in a DDS domain no other running test holds, and
 // `stereod` reads its pairs from them. The distance is held to the same pair replayed from
 // files; stamps too far apart, a malformed image and a publisher that goes away and comes
 // back are each seen in what the service says. Without a calibration file the calibration
@@ -16,13 +16,13 @@
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
-#include <unistd.h>
 
 #include "ctl/client.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/calibration_formats.hpp"
 #include "tests/daemon/live_view_service.hpp"
 #include "tests/support/data_paths.hpp"
+#include "tests/support/dds_domain.hpp"
 #include "tests/support/process.hpp"
 
 namespace stereod {
@@ -37,8 +37,7 @@ class Ros2Source : public test::LiveViewE2e {
     void SetUp() override
     {
         LiveViewE2e::SetUp();
-        // Apart from the interop test's domain (1 + pid % 200) when both run at once.
-        domain_ = std::to_string(201 + ::getpid() % 30);
+        domain_ = domain_lease_.text();
         ::setenv("ROS_DOMAIN_ID", domain_.c_str(), 1);
     }
 
@@ -164,6 +163,7 @@ class Ros2Source : public test::LiveViewE2e {
         return warnings;
     }
 
+    test::DdsDomainLease domain_lease_;
     std::string domain_;
     std::unique_ptr<ChildProcess> ros2_service_;
     std::unique_ptr<ChildProcess> publisher_;

@@ -3,8 +3,8 @@
 // reader of status(); its camera_info taken while the calibration and status() are read;
 // the publisher's thread against the thread that offers results and one that reads its
 // counters and sets a late calibration's geometry. Everything in one process, on the
-// loopback interface, in a DDS domain of the test's own; the peers are Cyclone DDS entities
-// on a participant of their own (sharing the process's domain with the code under test).
+// loopback interface, in a DDS domain no other running test holds; the peers are Cyclone DDS
+// entities on a participant of their own (sharing the process's domain with the code under test).
 #include <atomic>
 #include <chrono>
 #include <cstring>
@@ -17,23 +17,23 @@
 #include <dds/ddsi/ddsi_serdata.h>
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
-#include <unistd.h>
 
 #include "base/clock.hpp"
 #include "ros2/dds_participant.hpp"
 #include "ros2/ros2_image_source.hpp"
 #include "ros2/ros2_publisher.hpp"
 #include "ros2_dds_types.h"
+#include "tests/support/dds_domain.hpp"
 
 namespace stereod::ros2 {
 namespace {
 
 using namespace std::chrono_literals;
 
-DdsDiscovery testDomain(int offset)
+DdsDiscovery testDomain(const test::DdsDomainLease& lease)
 {
     DdsDiscovery discovery;
-    discovery.domain_id = static_cast<uint32_t>(100 + (::getpid() + offset) % 100);
+    discovery.domain_id = lease.id();
     discovery.localhost_only = true;
     return discovery;
 }
@@ -70,7 +70,8 @@ sensor_msgs_msg_dds__Image_ monoImage(std::vector<uint8_t>& pixels, uint8_t valu
 TEST(Ros2Threads, SourceReadsPairsWhileStatusIsReadAndStopsUnderLoad)
 {
     Ros2SourceOptions options;
-    options.discovery = testDomain(0);
+    const test::DdsDomainLease domain;
+    options.discovery = testDomain(domain);
     options.frame_size = cv::Size(64, 48);
     options.sync.max_skew_ns = 1'000'000;
     options.stall_timeout_ns = 1'000'000'000;
@@ -172,7 +173,8 @@ sensor_msgs_msg_dds__CameraInfo_ cameraInfo(bool right, double focal_px, double*
 TEST(Ros2Threads, SourceTakesCameraInfoWhileTheCalibrationAndStatusAreRead)
 {
     Ros2SourceOptions options;
-    options.discovery = testDomain(25);
+    const test::DdsDomainLease domain;
+    options.discovery = testDomain(domain);
     options.frame_size = cv::Size(64, 48);
     options.left_info_topic = "/stereo/left/camera_info";
     options.right_info_topic = "/stereo/right/camera_info";
@@ -244,7 +246,8 @@ TEST(Ros2Threads, PublisherPublishesWhileResultsAreOfferedAndCountersRead)
 {
     Ros2Settings settings;
     settings.ns = "/threads";
-    settings.discovery = testDomain(50);
+    const test::DdsDomainLease domain;
+    settings.discovery = testDomain(domain);
     settings.max_rate_hz = 1000;
     RectifiedGeometry geometry;
     geometry.image_size = ImageSize{64, 48};
