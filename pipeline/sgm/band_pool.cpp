@@ -58,7 +58,7 @@ BandPool::BandPool(int threads)
 BandPool::~BandPool()
 {
     stop_.store(true, std::memory_order_release);
-    work_.fetch_add(1u << kBandBits, std::memory_order_release);
+    work_.fetch_add(1u << kBandBits, std::memory_order_seq_cst);
     work_.notify_all();
     for (std::thread& t : threads_)
         t.join();
@@ -83,7 +83,12 @@ void BandPool::runErased(int bands, void* context, Trampoline call)
         pending_.store(static_cast<uint32_t>(bands - 1), std::memory_order_relaxed);
         const uint32_t next = ((work_.load(std::memory_order_relaxed) >> kBandBits) + 1)
                               << kBandBits;
-        work_.store(next | static_cast<uint32_t>(bands), std::memory_order_release);
+        // Sequentially consistent, not release: notify_all() skips the wake when it reads
+        // no sleeper, and a thread falls asleep by announcing itself, then reading work_.
+        // A release store may become visible after the read of the sleepers that follows
+        // it (x86 reorders a store with a later load), and both sides would miss each
+        // other: the thread asleep on a run it never sees, the caller waiting on its band.
+        work_.store(next | static_cast<uint32_t>(bands), std::memory_order_seq_cst);
         work_.notify_all();
     }
     call(context, 0);
@@ -101,7 +106,7 @@ void BandPool::workerLoop(int band)
         if (static_cast<uint32_t>(band) >= (seen & kBandMask))
             continue;
         call_(context_, band);
-        if (pending_.fetch_sub(1, std::memory_order_acq_rel) == 1)
+        if (pending_.fetch_sub(1, std::memory_order_seq_cst) == 1) // as work_ in runErased()
             pending_.notify_one();
     }
 }

@@ -1,7 +1,10 @@
 // The band threads: every band of every run exactly once, runs that leave threads out,
-// and a pool that stops while its threads sleep or spin.
+// runs announced while its threads fall asleep, and a pool that stops while its threads
+// sleep or spin.
 #include <atomic>
 #include <chrono>
+#include <cstdio>
+#include <cstdlib>
 #include <stdexcept>
 #include <thread>
 #include <vector>
@@ -60,6 +63,52 @@ TEST(BandPoolTest, RestsAfterAFrameAndWakesForTheNext)
             std::this_thread::sleep_for(std::chrono::microseconds(200));
     }
     EXPECT_EQ(calls, (std::vector<int>{200, 200, 200}));
+}
+
+// A run announced while a thread is on its way to sleep (after rest(), after its spin)
+// must still reach it. The caller waits between runs for times spread from nothing to
+// past the spin, so that announcements land at every step of falling asleep; a lost one
+// leaves run() waiting for ever, which the watchdog reports.
+TEST(BandPoolTest, NoRunIsLostWhileThreadsFallAsleep)
+{
+    constexpr long kRuns = 30000;
+    BandPool pool(2);
+    std::atomic<long> done{0};
+    std::atomic<bool> finished{false};
+    std::thread watchdog([&] {
+        long last = -1;
+        auto since = std::chrono::steady_clock::now();
+        while (!finished.load()) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(50));
+            const long now = done.load();
+            if (now != last) {
+                last = now;
+                since = std::chrono::steady_clock::now();
+            } else if (std::chrono::steady_clock::now() - since > std::chrono::seconds(10)) {
+                std::fprintf(stderr, "BandPoolTest: run %ld of %ld never returned\n", now, kRuns);
+                std::abort();
+            }
+        }
+    });
+    long calls = 0;
+    using Clock = std::chrono::steady_clock;
+    const long spin_ns = std::chrono::nanoseconds(BandPool::kSpin).count();
+    for (long run = 0; run < kRuns; ++run) {
+        long parts[2] = {0, 0};
+        pool.run(2, [&](int band) { parts[band] = 1; });
+        calls += parts[0] + parts[1];
+        if (run % 3 != 0)
+            pool.rest();
+        // 0 to 1.5 spins, busy, in steps that do not repeat with the rests.
+        const auto until =
+            Clock::now() + std::chrono::nanoseconds((run * 7919) % (spin_ns * 3 / 2));
+        while (Clock::now() < until) {
+        }
+        done.fetch_add(1);
+    }
+    finished.store(true);
+    watchdog.join();
+    EXPECT_EQ(calls, 2 * kRuns);
 }
 
 TEST(BandPoolTest, StopsWhetherItsThreadsSpinOrSleep)
