@@ -285,9 +285,9 @@ bool offsetsFit(const cv::Mat& offsets, const cv::Mat& src)
            src.step[0] == static_cast<size_t>(src.cols);
 }
 
-} // namespace
-
-void remapBilinear(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac, cv::Mat& out)
+// remapBilinear(), through `offsets` (remapOffsets() for this grey source) when given.
+void remap(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac,
+           const cv::Mat* offsets, cv::Mat& out)
 {
     prepareRemap(src, map_xy, map_frac, out);
     if (src.type() == CV_8UC3) {
@@ -295,8 +295,15 @@ void remapBilinear(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map
         forRowStripes(0, out.rows, [&](int first, int end) { body(cv::Range(first, end)); });
         return;
     }
-    const RemapRows body(src, map_xy, map_frac, nullptr, out);
+    const RemapRows body(src, map_xy, map_frac, offsets, out);
     forRowStripes(0, out.rows, [&](int first, int end) { body(cv::Range(first, end)); });
+}
+
+} // namespace
+
+void remapBilinear(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac, cv::Mat& out)
+{
+    remap(src, map_xy, map_frac, nullptr, out);
 }
 
 cv::Mat remapOffsets(const cv::Mat& map_xy, cv::Size src_size, size_t src_step)
@@ -383,13 +390,7 @@ void Rectifier::apply(const cv::Mat& raw, const Maps& maps, cv::Mat& out)
         raw.copyTo(out);
         return;
     }
-    if (!offsetsFit(maps.offsets, raw)) {
-        remapBilinear(raw, maps.xy, maps.frac, out);
-        return;
-    }
-    prepareRemap(raw, maps.xy, maps.frac, out);
-    const RemapRows body(raw, maps.xy, maps.frac, &maps.offsets, out);
-    forRowStripes(0, out.rows, [&](int first, int end) { body(cv::Range(first, end)); });
+    remap(raw, maps.xy, maps.frac, offsetsFit(maps.offsets, raw) ? &maps.offsets : nullptr, out);
 }
 
 } // namespace stereod

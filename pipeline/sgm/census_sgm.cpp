@@ -725,7 +725,7 @@ void CensusSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t* 
         int starts[64]; // threads <= 64 (validated)
         for (int band = 0; band < bands; ++band)
             starts[band] = band_start(band);
-        m.speckle.joinBands(result->data(), kNoDisparity, max_step, starts, bands);
+        m.speckle.joinBands(result->data(), max_step, starts, bands);
     }
     // The gaps run along columns too, across the bands: bridged between the speckle
     // removal and the last pass, on this thread.

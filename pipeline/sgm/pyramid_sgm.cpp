@@ -208,7 +208,7 @@ struct PyramidSgm::Impl {
             // A narrow search, which has no competitor outside its span to be told apart
             // from: the coarse level's match over the whole range at this place must agree
             // (an unmeasured one does not).
-            out.disparity_px[i] = std::numeric_limits<float>::infinity();
+            out.disparity_px[i] = kNone;
             out.confidence[i] = 0;
         }
         if (coarse_near[c] == 0) {

@@ -189,8 +189,8 @@ uint32_t SpeckleFilter::root(uint32_t region) const
     return region;
 }
 
-void SpeckleFilter::joinBands(const int16_t* disparity, int16_t /*invalid*/, int max_step,
-                              const int* band_starts, int bands)
+void SpeckleFilter::joinBands(const int16_t* disparity, int max_step, const int* band_starts,
+                              int bands)
 {
     for (int band = 1; band < bands; ++band)
         if (band_starts[band] > 0 && band_starts[band] < height_)

@@ -36,9 +36,8 @@ class SpeckleFilter {
     // Rows y0..y1-1: each region of the band gets its own label and size.
     void labelBand(const int16_t* disparity, int16_t invalid, int max_step, int y0, int y1);
     // After every band is labelled: joins regions across the borders between bands, which
-    // start at rows band_starts[1..bands-1].
-    void joinBands(const int16_t* disparity, int16_t invalid, int max_step, const int* band_starts,
-                   int bands);
+    // start at rows band_starts[1..bands-1]. (The runs already hold only valid pixels.)
+    void joinBands(const int16_t* disparity, int max_step, const int* band_starts, int bands);
     // After joinBands(): rows y0..y1-1 lose the pixels of regions of fewer than max_size.
     void removeBand(int16_t* disparity, int16_t invalid, int max_size, int y0, int y1) const;
 

@@ -62,7 +62,7 @@ cv::Mat filtered(const cv::Mat& disparity, int max_step, int max_size, int bands
     for (int b = 0; b < bands; ++b)
         filter.labelBand(data, kNone, max_step, starts[static_cast<size_t>(b)],
                          starts[static_cast<size_t>(b) + 1]);
-    filter.joinBands(data, kNone, max_step, starts.data(), bands);
+    filter.joinBands(data, max_step, starts.data(), bands);
     for (int b = 0; b < bands; ++b)
         filter.removeBand(data, kNone, max_size, starts[static_cast<size_t>(b)],
                           starts[static_cast<size_t>(b) + 1]);

@@ -35,8 +35,7 @@ class Ros2Interop : public test::LiveViewE2e {
     void SetUp() override
     {
         LiveViewE2e::SetUp();
-        domain_ = domain_lease_.text();
-        ::setenv("ROS_DOMAIN_ID", domain_.c_str(), 1);
+        ::setenv("ROS_DOMAIN_ID", domain_.text().c_str(), 1);
     }
 
     void startRos2Service(const std::string& extra_yaml = {})
@@ -51,14 +50,13 @@ class Ros2Interop : public test::LiveViewE2e {
 
     Json subscribe(int min_each)
     {
-        const ProcessResult sub = runProcess(
-            {STEREOD_FASTDDS_SUBSCRIBER, domain_, "/stereo", "60", std::to_string(min_each)});
+        const ProcessResult sub = runProcess({STEREOD_FASTDDS_SUBSCRIBER, domain_.text(), "/stereo",
+                                              "60", std::to_string(min_each)});
         EXPECT_EQ(sub.exit_code, 0) << sub.err;
         return Json::parse(sub.out);
     }
 
-    test::DdsDomainLease domain_lease_;
-    std::string domain_;
+    test::DdsDomainLease domain_;
 };
 
 TEST_F(Ros2Interop, FastDdsSubscriberGetsEveryTopicAndTheServicesOwnValues)
@@ -206,7 +204,7 @@ TEST_F(Ros2Interop, FastDdsSubscriberGetsEveryTopicAndTheServicesOwnValues)
     // The service's own count of what went out.
     const Json ros2 = status()["ros2"];
     EXPECT_EQ(ros2["publishing"], true) << ros2.dump();
-    EXPECT_EQ(ros2["domain_id"], std::stoi(domain_));
+    EXPECT_EQ(ros2["domain_id"], domain_.id());
     EXPECT_EQ(ros2["localhost_only"], true);
     EXPECT_GT(ros2["messages"].get<int>(), 5 * 8);
     EXPECT_EQ(ros2["write_errors"], 0);

@@ -37,8 +37,7 @@ class Ros2Source : public test::LiveViewE2e {
     void SetUp() override
     {
         LiveViewE2e::SetUp();
-        domain_ = domain_lease_.text();
-        ::setenv("ROS_DOMAIN_ID", domain_.c_str(), 1);
+        ::setenv("ROS_DOMAIN_ID", domain_.text().c_str(), 1);
     }
 
     void TearDown() override
@@ -91,7 +90,7 @@ class Ros2Source : public test::LiveViewE2e {
 
     void publish(double seconds, const std::vector<std::string>& options = {})
     {
-        std::vector<std::string> argv = {STEREOD_FASTDDS_IMAGE_PUBLISHER, domain_,
+        std::vector<std::string> argv = {STEREOD_FASTDDS_IMAGE_PUBLISHER, domain_.text(),
                                          std::to_string(seconds), test::tsukubaDir() + "/im3.png",
                                          test::tsukubaDir() + "/im4.png"};
         argv.insert(argv.end(), options.begin(), options.end());
@@ -163,8 +162,7 @@ class Ros2Source : public test::LiveViewE2e {
         return warnings;
     }
 
-    test::DdsDomainLease domain_lease_;
-    std::string domain_;
+    test::DdsDomainLease domain_;
     std::unique_ptr<ChildProcess> ros2_service_;
     std::unique_ptr<ChildProcess> publisher_;
 };
@@ -395,7 +393,7 @@ TEST_F(Ros2Source, ItsSubscriptionsAreAnnouncedAsANodeOnRosDiscoveryInfo)
     publish(60, {"--camera-info", left_info, right_info});
     // Four seconds of the domain (no stereod topic comes: the node does not publish).
     const test::ProcessResult peer =
-        test::runProcess({STEREOD_FASTDDS_SUBSCRIBER, domain_, "/stereo", "4", "1"});
+        test::runProcess({STEREOD_FASTDDS_SUBSCRIBER, domain_.text(), "/stereo", "4", "1"});
     ASSERT_EQ(peer.exit_code, 0) << peer.err;
     const Json result = Json::parse(peer.out);
     SCOPED_TRACE(result.dump());
