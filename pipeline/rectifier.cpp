@@ -1,10 +1,8 @@
 #include "pipeline/rectifier.hpp"
 
 #include <algorithm>
-#include <bit>
 #include <cstddef>
 #include <cstdint>
-#include <cstring>
 #include <stdexcept>
 #include <string>
 
@@ -13,6 +11,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "pipeline/cv_conversions.hpp"
+#include "pipeline/resample/remap_kernels.hpp"
 #include "pipeline/row_stripes.hpp"
 
 // Why the remap is ours and not cv::remap: the service promises no heap allocation per
@@ -32,7 +31,7 @@ namespace {
 
 // Sub-pixel positions as cv::initUndistortRectifyMap stores them: INTER_BITS = 5, so 32
 // steps per pixel in x and in y, and map_frac = fy * 32 + fx.
-constexpr int kInterBits = 5;
+constexpr int kInterBits = resample::kInterBits;
 constexpr int kInterTabSize = 1 << kInterBits;
 // Bilinear weights in fixed point, as OpenCV's remap: the four neighbours get
 // (32 - fx)(32 - fy), fx (32 - fy), (32 - fx) fy and fx fy, exact integers summing to
@@ -42,147 +41,60 @@ constexpr int kInterTabSize = 1 << kInterBits;
 // two steps, along x then along y:
 //   top = tl * 32 + (tr - tl) * fx        (0..8160, fits int16)
 //   out = (top * (32 - fy) + bottom * fy + 512) >> 10
-// which is the same integer as the four-term sum, with three multiplications.
+// which is the same integer as the four-term sum, with three multiplications. The grey
+// image's rows go through the remap kernels (pipeline/resample/remap_kernels.hpp).
 constexpr int kWeightBits = 2 * kInterBits;
 constexpr int kRounding = 1 << (kWeightBits - 1);
 
-// Output pixels resampled per pass: the neighbours of kChunk pixels are gathered first
-// (scalar loads: SSE2 has no gather), then blended in a loop of fixed length over local
-// arrays, which GCC vectorises even at -O2 (no aliasing to check, no remainder loop).
+resample::RemapSource sourceOf(const cv::Mat& src)
+{
+    return {src.data, src.step[0], src.cols, src.rows};
+}
+
+// Output pixels whose neighbourhoods are found per pass when no offsets were made
+// beforehand (a source other than the calibrated camera's continuous grey frame).
 constexpr int kChunk = 256;
 
-// The 2x2 neighbourhood at (sx, sy), packed as two pairs: left pixel in the low byte,
-// right pixel in the high byte.
-struct Neighbours {
-    uint16_t top;
-    uint16_t bottom;
-};
-
-uint16_t pack(unsigned left, unsigned right)
-{
-    return static_cast<uint16_t>(left | (right << 8));
-}
-
-// A neighbourhood not wholly inside the source: neighbours outside count as 0
-// (BORDER_CONSTANT), so one wholly outside gives 0, as in OpenCV's remapBilinear.
-Neighbours borderNeighbours(const cv::Mat& src, int sx, int sy)
-{
-    const auto at = [&src](int x, int y) -> unsigned {
-        const bool inside = x >= 0 && x < src.cols && y >= 0 && y < src.rows;
-        return inside ? src.ptr<uint8_t>(y)[x] : 0u;
-    };
-    return {pack(at(sx, sy), at(sx + 1, sy)), pack(at(sx, sy + 1), at(sx + 1, sy + 1))};
-}
-
-// Output rows [rows.start, rows.end). Holds references only: it lives on the caller's
-// stack for one call, and forRowStripes() takes it by reference.
+// Output rows [rows.start, rows.end) of a grey image. Holds references only: it lives on
+// the caller's stack for one call, and forRowStripes() takes it by reference.
 class RemapRows {
   public:
     // offsets: remapOffsets() of map_xy for src's size and row step, or null.
     RemapRows(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map_frac,
               const cv::Mat* offsets, cv::Mat& out)
-        : src_(src), map_xy_(map_xy), map_frac_(map_frac), offsets_(offsets), out_(out)
+        : src_(sourceOf(src)), map_xy_(map_xy), map_frac_(map_frac), offsets_(offsets), out_(out),
+          kernels_(resample::simdRemapKernels())
     {
     }
 
     void operator()(const cv::Range& rows) const
     {
-        // Zeroed once so that the blend's fixed-length loop never reads indeterminate
-        // values past a short last chunk (what it computes there is not stored).
-        alignas(64) uint16_t top[kChunk] = {};
-        alignas(64) uint16_t bottom[kChunk] = {};
-        alignas(64) uint16_t frac[kChunk] = {};
-        alignas(64) uint8_t blended[kChunk];
+        int32_t offsets[kChunk];
         for (int y = rows.start; y < rows.end; ++y) {
             const int16_t* xy = map_xy_.ptr<int16_t>(y);
-            const uint16_t* frac_row = map_frac_.ptr<uint16_t>(y);
+            const uint16_t* frac = map_frac_.ptr<uint16_t>(y);
             uint8_t* dst = out_.ptr<uint8_t>(y);
+            if (offsets_ != nullptr) {
+                kernels_.remap_row(src_, offsets_->ptr<int32_t>(y), xy, frac, out_.cols, dst);
+                continue;
+            }
             for (int x0 = 0; x0 < out_.cols; x0 += kChunk) {
                 const int n = std::min(kChunk, out_.cols - x0);
-                std::memcpy(frac, frac_row + x0, static_cast<size_t>(n) * sizeof(uint16_t));
-                if (offsets_ != nullptr)
-                    gatherAt(offsets_->ptr<int32_t>(y) + x0, xy + 2 * x0, n, top, bottom);
-                else
-                    gather(xy + 2 * x0, n, top, bottom);
-                blend(top, bottom, frac, blended);
-                std::memcpy(dst + x0, blended, static_cast<size_t>(n));
+                for (int i = 0; i < n; ++i)
+                    offsets[i] =
+                        resample::neighbourhoodOffset(xy[2 * (x0 + i)], xy[2 * (x0 + i) + 1], src_);
+                kernels_.remap_row(src_, offsets, xy + 2 * x0, frac + x0, n, dst + x0);
             }
         }
     }
 
   private:
-    void gather(const int16_t* xy, int n, uint16_t* top, uint16_t* bottom) const
-    {
-        const uint8_t* const src = src_.data;
-        const size_t step = src_.step[0];
-        // (unsigned)sx < interior_cols means sx and sx + 1 are both columns of the source
-        // (a negative sx wraps to a large number); the same for rows.
-        const auto interior_cols = static_cast<unsigned>(src_.cols - 1);
-        const auto interior_rows = static_cast<unsigned>(src_.rows - 1);
-        for (int i = 0; i < n; ++i) {
-            const int sx = xy[2 * i];
-            const int sy = xy[2 * i + 1];
-            if (static_cast<unsigned>(sx) < interior_cols &&
-                static_cast<unsigned>(sy) < interior_rows) {
-                const uint8_t* t = src + static_cast<size_t>(sy) * step + sx;
-                const uint8_t* b = t + step;
-                top[i] = pack(t[0], t[1]);
-                bottom[i] = pack(b[0], b[1]);
-            } else {
-                const Neighbours border = borderNeighbours(src_, sx, sy);
-                top[i] = border.top;
-                bottom[i] = border.bottom;
-            }
-        }
-    }
-
-    // gather() with each neighbourhood's place in the source found beforehand: one load of
-    // its offset and one 16-bit load per pair of neighbours (the left one in the low
-    // byte, as pack() puts it, on a little-endian machine).
-    void gatherAt(const int32_t* offsets, const int16_t* xy, int n, uint16_t* top,
-                  uint16_t* bottom) const
-    {
-        static_assert(std::endian::native == std::endian::little);
-        const uint8_t* const src = src_.data;
-        const size_t step = src_.step[0];
-        for (int i = 0; i < n; ++i) {
-            const int32_t offset = offsets[i];
-            if (offset >= 0) {
-                std::memcpy(&top[i], src + offset, sizeof(uint16_t));
-                std::memcpy(&bottom[i], src + offset + step, sizeof(uint16_t));
-            } else if (offset == kOutside) {
-                top[i] = 0;
-                bottom[i] = 0;
-            } else {
-                const Neighbours border = borderNeighbours(src_, xy[2 * i], xy[2 * i + 1]);
-                top[i] = border.top;
-                bottom[i] = border.bottom;
-            }
-        }
-    }
-
-    static void blend(const uint16_t* top, const uint16_t* bottom, const uint16_t* frac,
-                      uint8_t* out)
-    {
-        for (int i = 0; i < kChunk; ++i) {
-            const int fx = frac[i] & (kInterTabSize - 1);
-            const int fy = (frac[i] >> kInterBits) & (kInterTabSize - 1);
-            const int tl = top[i] & 0xff;
-            const int tr = top[i] >> 8;
-            const int bl = bottom[i] & 0xff;
-            const int br = bottom[i] >> 8;
-            const int16_t t = static_cast<int16_t>((tl << kInterBits) + (tr - tl) * fx);
-            const int16_t b = static_cast<int16_t>((bl << kInterBits) + (br - bl) * fx);
-            out[i] = static_cast<uint8_t>((t * (kInterTabSize - fy) + b * fy + kRounding) >>
-                                          kWeightBits);
-        }
-    }
-
-    const cv::Mat& src_;
+    const resample::RemapSource src_;
     const cv::Mat& map_xy_;
     const cv::Mat& map_frac_;
     const cv::Mat* offsets_;
     cv::Mat& out_;
+    const resample::RemapKernels& kernels_;
 };
 
 // The colour image (CV_8UC3, three interleaved channels) through the same maps and the
@@ -312,23 +224,13 @@ cv::Mat remapOffsets(const cv::Mat& map_xy, cv::Size src_size, size_t src_step)
                     "map_xy must be a non-empty CV_16SC2 map");
     requireArgument(static_cast<size_t>(src_size.height) * src_step < (size_t{1} << 31),
                     "the source is too large for 32-bit offsets");
+    const resample::RemapSource src{nullptr, src_step, src_size.width, src_size.height};
     cv::Mat offsets(map_xy.size(), CV_32SC1);
-    const auto interior_cols = static_cast<unsigned>(src_size.width - 1);
-    const auto interior_rows = static_cast<unsigned>(src_size.height - 1);
     for (int y = 0; y < map_xy.rows; ++y) {
         const int16_t* xy = map_xy.ptr<int16_t>(y);
         int32_t* offset = offsets.ptr<int32_t>(y);
-        for (int x = 0; x < map_xy.cols; ++x) {
-            const int sx = xy[2 * x], sy = xy[2 * x + 1];
-            const bool inside = static_cast<unsigned>(sx) < interior_cols &&
-                                static_cast<unsigned>(sy) < interior_rows;
-            const bool outside =
-                sx < -1 || sx >= src_size.width || sy < -1 || sy >= src_size.height;
-            offset[x] = inside    ? static_cast<int32_t>(static_cast<size_t>(sy) * src_step +
-                                                      static_cast<size_t>(sx))
-                        : outside ? kOutside
-                                  : kOnTheEdge;
-        }
+        for (int x = 0; x < map_xy.cols; ++x)
+            offset[x] = resample::neighbourhoodOffset(xy[2 * x], xy[2 * x + 1], src);
     }
     return offsets;
 }

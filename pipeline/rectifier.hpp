@@ -58,12 +58,11 @@ void remapBilinear(const cv::Mat& src, const cv::Mat& map_xy, const cv::Mat& map
                    cv::Mat& out);
 
 // Where each output pixel's 2x2 neighbourhood starts in a CV_8UC1 source of src_size whose
-// rows are src_step bytes apart (CV_32SC1, map_xy's size): y * src_step + x where it lies
-// wholly inside, kOnTheEdge where it straddles the source's edge, kOutside where no
-// neighbour is inside (the pixel is 0). The Rectifier computes them once per camera, so
-// that a frame's resampling loads one offset rather than two coordinates and a bounds test.
-inline constexpr int32_t kOnTheEdge = -1;
-inline constexpr int32_t kOutside = -2;
+// rows are src_step bytes apart (CV_32SC1, map_xy's size): resample::neighbourhoodOffset()
+// of each, y * src_step + x where it lies wholly inside, resample::kOnTheEdge where it
+// straddles the source's edge, resample::kOutside where no neighbour is inside (the pixel
+// is 0). The Rectifier computes them once per camera, so that a frame's resampling loads
+// one offset rather than two coordinates and a bounds test.
 cv::Mat remapOffsets(const cv::Mat& map_xy, cv::Size src_size, size_t src_step);
 
 } // namespace stereod

@@ -21,6 +21,7 @@
 #include <hwy/highway.h>
 
 #include "pipeline/sgm/sgm_kernels.hpp"
+#include "pipeline/simd_targets.hpp"
 
 HWY_BEFORE_NAMESPACE();
 namespace stereod::sgm {
@@ -897,31 +898,14 @@ SgmKernels chosenKernels()
 
 const SgmKernels& simdKernels()
 {
-    static const SgmKernels kernels = [] {
-        // Choose the target now, so that the table holds the chosen functions rather
-        // than the first-call trampolines.
-        hwy::GetChosenTarget().Update(hwy::SupportedTargets());
-        return chosenKernels();
-    }();
+    static const SgmKernels kernels = tableOfChosenTarget(chosenKernels);
     return kernels;
 }
 
 std::vector<SgmKernels> simdKernelsOfEveryTarget()
 {
     simdKernels();
-    std::vector<SgmKernels> every;
-    const std::vector<int64_t> targets = hwy::SupportedAndGeneratedTargets();
-    // Highway lists the best target first.
-    for (auto target = targets.rbegin(); target != targets.rend(); ++target) {
-        if (*target == HWY_SCALAR)
-            continue; // scalarKernels() is the reference
-        hwy::SetSupportedTargetsForTest(*target);
-        hwy::GetChosenTarget().Update(hwy::SupportedTargets());
-        every.push_back(chosenKernels());
-    }
-    hwy::SetSupportedTargetsForTest(0);
-    hwy::GetChosenTarget().Update(hwy::SupportedTargets());
-    return every;
+    return tablesOfEveryTarget(chosenKernels);
 }
 
 } // namespace stereod::sgm

@@ -21,6 +21,7 @@
 #include "pipeline/chessboard_calibration.hpp"
 #include "pipeline/cv_conversions.hpp"
 #include "pipeline/rectifier.hpp"
+#include "pipeline/resample/remap_kernels.hpp"
 #include "tests/support/data_paths.hpp"
 #include "tests/support/files.hpp"
 
@@ -224,11 +225,11 @@ TEST(RealRig, OffsetsAndPairsResampleExactlyAsTheMaps)
             const bool whole =
                 xy[0] >= 0 && xy[0] < size.width - 1 && xy[1] >= 0 && xy[1] < size.height - 1;
             const int32_t expected = whole                            ? xy[1] * size.width + xy[0]
-                                     : outside.at<uint8_t>(y, x) != 0 ? kOutside
-                                                                      : kOnTheEdge;
+                                     : outside.at<uint8_t>(y, x) != 0 ? resample::kOutside
+                                                                      : resample::kOnTheEdge;
             ASSERT_EQ(offsets.at<int32_t>(y, x), expected) << x << ", " << y;
             inside += whole ? 1 : 0;
-            edge += expected == kOnTheEdge ? 1 : 0;
+            edge += expected == resample::kOnTheEdge ? 1 : 0;
         }
     // Alpha 1: corners without raw data, and pixels on the raw image's edge.
     EXPECT_GT(inside, static_cast<int>(offsets.total() / 2));
