@@ -18,6 +18,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "base/system_error.hpp"
+#include "pipeline/row_stripes.hpp"
 
 namespace stereod {
 namespace {
@@ -267,22 +268,22 @@ void depthToMillimetres(const cv::Mat& depth_m, cv::Mat& depth_mm)
     };
     // Blocks of a fixed length: GCC vectorises those at -O2 too (its cheapest cost model
     // takes no loop whose length it does not know).
+    // Rows in stripes over OpenCV's pool: the publisher's thread would otherwise convert
+    // a frame alone while the pool's threads wait.
     constexpr int kBlock = 64;
-    cv::Size size = depth_m.size();
-    if (depth_m.isContinuous() && depth_mm.isContinuous()) {
-        size.width *= size.height;
-        size.height = 1;
-    }
-    for (int y = 0; y < size.height; ++y) {
-        const float* z = depth_m.ptr<float>(y);
-        uint16_t* mm = depth_mm.ptr<uint16_t>(y);
-        int x = 0;
-        for (; x + kBlock <= size.width; x += kBlock)
-            for (int i = 0; i < kBlock; ++i)
-                mm[x + i] = toMillimetres(z[x + i]);
-        for (; x < size.width; ++x)
-            mm[x] = toMillimetres(z[x]);
-    }
+    const int width = depth_m.cols;
+    forRowStripes(0, depth_m.rows, [&](int first, int end) {
+        for (int y = first; y < end; ++y) {
+            const float* z = depth_m.ptr<float>(y);
+            uint16_t* mm = depth_mm.ptr<uint16_t>(y);
+            int x = 0;
+            for (; x + kBlock <= width; x += kBlock)
+                for (int i = 0; i < kBlock; ++i)
+                    mm[x + i] = toMillimetres(z[x + i]);
+            for (; x < width; ++x)
+                mm[x] = toMillimetres(z[x]);
+        }
+    });
 }
 
 void writeDepthPng(const std::string& path, const cv::Mat& depth_m)

@@ -2,10 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 #include "base/percentile.hpp"
 #include "base/settings_error.hpp"
+#include "pipeline/row_stripes.hpp"
 
 namespace stereod {
 namespace {
@@ -70,20 +72,9 @@ size_t percentileIndex(double percentile, size_t count)
 }
 
 NearestObjectFinder::NearestObjectFinder(size_t max_region_pixels)
+    : depths_(max_region_pixels), inferred_(max_region_pixels)
 {
-    in_range_.reserve(max_region_pixels);
-    inferred_.reserve(max_region_pixels);
 }
-
-namespace {
-
-// The percentile of `values` (reordered in place); not empty.
-double percentileOf(std::vector<float>& values, double percentile)
-{
-    return static_cast<double>(lowerLinearPercentile(values.begin(), values.end(), percentile));
-}
-
-} // namespace
 
 ReadingFacts regionFacts(const RegionMeasurement& region, const NearestSettings& settings,
                          const NearFieldFacts& near, int64_t stamp_ns, uint64_t frame)
@@ -119,61 +110,97 @@ RegionMeasurement NearestObjectFinder::measure(const cv::Mat& depth_m, const cv:
     m.region_pixels = static_cast<uint32_t>(region_pixels);
     if (region_pixels == 0)
         return m;
-    // Grows once when the region is larger than reserved; after that clear() keeps it.
-    if (in_range_.capacity() < region_pixels)
-        in_range_.reserve(region_pixels);
-    if (inferred_.capacity() < region_pixels)
-        inferred_.reserve(region_pixels);
-    in_range_.clear();
-    inferred_.clear();
+    // Each row's depths go to its own slot of region.width values, then are gathered in
+    // row order: the rows are counted on OpenCV's pool. Grows once when the region is
+    // larger than reserved; after that the buffers keep their size.
+    if (depths_.size() < region_pixels)
+        depths_.resize(region_pixels);
+    if (inferred_.size() < region_pixels)
+        inferred_.resize(region_pixels);
+    if (rows_.size() < static_cast<size_t>(region.height))
+        rows_.resize(static_cast<size_t>(region.height));
 
     const float lo = static_cast<float>(settings.min_depth_m);
     const float hi = static_cast<float>(settings.max_depth_m);
     const uint8_t min_confidence =
         static_cast<uint8_t>(std::clamp(settings.min_confidence, 0, 255));
-    uint32_t valid = 0, in_range = 0, inferred = 0, nearer = 0, nearer_extended = 0;
-    for (int y = region.y; y < region.y + region.height; ++y) {
-        const float* z = depth_m.ptr<float>(y);
-        const uint8_t* conf = confidence.empty() ? nullptr : confidence.ptr<uint8_t>(y);
-        const uint8_t* near = near_field.empty() ? nullptr : near_field.ptr<uint8_t>(y);
-        const float* inferred_z =
-            inferred_depth_m.empty() ? nullptr : inferred_depth_m.ptr<float>(y);
-        for (int x = region.x; x < region.x + region.width; ++x) {
-            if (near != nullptr && near[x] != 0) {
-                ++nearer;
-                nearer_extended += near[x] >= 2;
-            }
-            const float depth = z[x];
-            if (!(depth > 0.0f) || !std::isfinite(depth)) {
-                // Unmeasured, but other evidence says how near it may be.
-                if (inferred_z != nullptr && inferred_z[x] > 0.0f && std::isfinite(inferred_z[x])) {
-                    ++inferred;
-                    if (inferred_z[x] >= lo && inferred_z[x] <= hi)
-                        inferred_.push_back(inferred_z[x]);
+    const auto width = static_cast<size_t>(region.width);
+    forRowStripes(0, region.height, [&](int first, int end) {
+        for (int r = first; r < end; ++r) {
+            const int y = region.y + r;
+            const float* z = depth_m.ptr<float>(y);
+            const uint8_t* conf = confidence.empty() ? nullptr : confidence.ptr<uint8_t>(y);
+            const uint8_t* near = near_field.empty() ? nullptr : near_field.ptr<uint8_t>(y);
+            const float* inferred_z =
+                inferred_depth_m.empty() ? nullptr : inferred_depth_m.ptr<float>(y);
+            float* depths = depths_.data() + static_cast<size_t>(r) * width;
+            float* inferred_depths = inferred_.data() + static_cast<size_t>(r) * width;
+            RowCounts c;
+            for (int x = region.x; x < region.x + region.width; ++x) {
+                if (near != nullptr && near[x] != 0) {
+                    ++c.nearer;
+                    c.nearer_extended += near[x] >= 2;
                 }
-                continue;
+                const float depth = z[x];
+                if (!(depth > 0.0f) || !std::isfinite(depth)) {
+                    // Unmeasured, but other evidence says how near it may be.
+                    if (inferred_z != nullptr && inferred_z[x] > 0.0f &&
+                        std::isfinite(inferred_z[x])) {
+                        ++c.inferred;
+                        if (inferred_z[x] >= lo && inferred_z[x] <= hi)
+                            inferred_depths[c.inferred_in_range++] = inferred_z[x];
+                    }
+                    continue;
+                }
+                if (conf != nullptr && conf[x] < min_confidence)
+                    continue;
+                ++c.valid;
+                if (depth >= lo && depth <= hi)
+                    depths[c.in_range++] = depth;
             }
-            if (conf != nullptr && conf[x] < min_confidence)
-                continue;
-            ++valid;
-            if (depth >= lo && depth <= hi) {
-                ++in_range;
-                in_range_.push_back(depth);
-            }
+            rows_[static_cast<size_t>(r)] = c;
         }
+    });
+
+    // The rows' depths gathered in row order, the in-range ones first and the inferred ones
+    // after them (together at most the region's pixels: a pixel is one or the other).
+    size_t in_range = 0, inferred_in_range = 0;
+    float nearest_inferred = std::numeric_limits<float>::infinity();
+    for (int r = 0; r < region.height; ++r) {
+        const RowCounts& c = rows_[static_cast<size_t>(r)];
+        m.valid_pixels += c.valid;
+        m.inferred_pixels += c.inferred;
+        m.nearer_than_range_pixels += c.nearer;
+        m.nearer_than_extended_pixels += c.nearer_extended;
+        const float* row = depths_.data() + static_cast<size_t>(r) * width;
+        std::copy(row, row + c.in_range, depths_.begin() + static_cast<std::ptrdiff_t>(in_range));
+        in_range += c.in_range;
     }
-    m.valid_pixels = valid;
-    m.in_range_pixels = in_range;
-    m.inferred_pixels = inferred;
-    m.nearer_than_range_pixels = nearer;
-    m.nearer_than_extended_pixels = nearer_extended;
-    if (!in_range_.empty())
-        m.percentile_depth_m = percentileOf(in_range_, settings.percentile);
+    for (int r = 0; r < region.height; ++r) {
+        const RowCounts& c = rows_[static_cast<size_t>(r)];
+        const float* row = inferred_.data() + static_cast<size_t>(r) * width;
+        const auto to = depths_.begin() + static_cast<std::ptrdiff_t>(in_range + inferred_in_range);
+        std::copy(row, row + c.inferred_in_range, to);
+        for (uint32_t i = 0; i < c.inferred_in_range; ++i)
+            nearest_inferred = std::min(nearest_inferred, row[i]);
+        inferred_in_range += c.inferred_in_range;
+    }
+    m.in_range_pixels = static_cast<uint32_t>(in_range);
+    const auto first = depths_.begin();
+    const auto in_range_end = first + static_cast<std::ptrdiff_t>(in_range);
+    if (in_range > 0)
+        m.percentile_depth_m =
+            static_cast<double>(lowerLinearPercentile(first, in_range_end, settings.percentile));
     // The inferred depths can only bring the reading nearer: one beyond the measured
-    // percentile must not carry it farther by adding to the count.
-    if (!inferred_.empty()) {
-        in_range_.insert(in_range_.end(), inferred_.begin(), inferred_.end());
-        const double with_inferred = percentileOf(in_range_, settings.percentile);
+    // percentile must not carry it farther by adding to the count. None below it cannot
+    // bring it nearer (the percentile of them all is then at least the measured one), so
+    // the second selection is made only when one is.
+    const bool may_be_nearer =
+        in_range == 0 || static_cast<double>(nearest_inferred) < m.percentile_depth_m;
+    if (inferred_in_range > 0 && may_be_nearer) {
+        const double with_inferred = static_cast<double>(lowerLinearPercentile(
+            first, in_range_end + static_cast<std::ptrdiff_t>(inferred_in_range),
+            settings.percentile));
         if (m.percentile_depth_m == 0.0 || with_inferred < m.percentile_depth_m)
             m.percentile_depth_m = with_inferred;
     }

@@ -72,10 +72,17 @@ class NearestObjectFinder {
     }
 
   private:
-    // The region's in-range depths (then with the inferred ones), and the inferred depths
-    // within the range; reused.
-    std::vector<float> in_range_;
+    // What measure() counted in one row of the region.
+    struct RowCounts {
+        uint32_t valid = 0, in_range = 0, inferred = 0, inferred_in_range = 0;
+        uint32_t nearer = 0, nearer_extended = 0;
+    };
+    // Per row of the region, a slot of its width: the row's in-range depths, and its
+    // inferred depths within the range; then depths_ gathers both, the in-range ones
+    // first. Reused.
+    std::vector<float> depths_;
     std::vector<float> inferred_;
+    std::vector<RowCounts> rows_;
 };
 
 } // namespace stereod

@@ -20,16 +20,17 @@
 namespace stereod {
 namespace {
 
-// In rows [begin, end): `into` takes the larger (nearer) of its disparity and `from`'s
-// where `from` has one (+inf: none).
-void nearerOf(const cv::Mat& from, int begin, int end, cv::Mat& into)
+// In the rows and columns of `area`: `into` takes the larger (nearer) of its disparity and
+// `from`'s where `from` has one (+inf: none). A select rather than a branch: vector code.
+void nearerOf(const cv::Mat& from, const cv::Rect& area, cv::Mat& into)
 {
-    for (int y = begin; y < end; ++y) {
+    for (int y = area.y; y < area.y + area.height; ++y) {
         const float* f = from.ptr<float>(y);
         float* t = into.ptr<float>(y);
-        for (int x = 0; x < from.cols; ++x)
-            if (std::isfinite(f[x]) && !(std::isfinite(t[x]) && t[x] >= f[x]))
-                t[x] = f[x];
+        for (int x = area.x; x < area.x + area.width; ++x) {
+            const bool take = std::isfinite(f[x]) & !(std::isfinite(t[x]) & (t[x] >= f[x]));
+            t[x] = take ? f[x] : t[x];
+        }
     }
 }
 
@@ -245,7 +246,7 @@ struct StereoProcessor::Impl {
     cv::Mat last_right;            // what the matcher saw last (see lastRightRectified())
     cv::Mat coarse_only_px;        // MatchOutput::coarse_only_px, reused
     cv::Mat inferred_px;           // unmeasured pixels' nearest disparities, reused
-    cv::Mat inferred_depth_m;      // ... as depths, in the region's rows
+    cv::Mat inferred_depth_m;      // ... as depths, in the region
     bool last_frame_bad = false;   // log a run of bad frames once
 };
 
@@ -336,13 +337,14 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& left_colour, c
     p.inferred_px.create(out.disparity.size(), CV_32FC1);
     if (p.inferred_depth_m.size() != out.disparity.size())
         p.inferred_depth_m = cv::Mat::zeros(out.disparity.size(), CV_32FC1);
+    // A shadow's run is found along the whole row; the rest is needed in the region alone.
     forRowStripes(region.y, region.y + region.height, [&](int first, int end) {
         hiddenSurfaceBounds(out.disparity, first, end, p.inferred_px);
+        const cv::Rect rows(region.x, first, region.width, end - first);
         if (!p.coarse_only_px.empty())
-            nearerOf(p.coarse_only_px, first, end, p.inferred_px);
-        cv::Mat inferred_rows = p.inferred_depth_m.rowRange(first, end);
-        disparityToDepth(p.inferred_px.rowRange(first, end), p.calibration.rectified,
-                         inferred_rows);
+            nearerOf(p.coarse_only_px, rows, p.inferred_px);
+        cv::Mat inferred_rows = p.inferred_depth_m(rows);
+        disparityToDepth(p.inferred_px(rows), p.calibration.rectified, inferred_rows);
     });
     out.facts = regionFacts(p.nearest.measure(out.depth_m, out.confidence, out.near_field,
                                               p.inferred_depth_m, p.settings.nearest),
