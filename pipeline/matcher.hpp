@@ -30,9 +30,10 @@ struct MatchOutput {
     // pipeline/sgm/near_field_probe.hpp). Only census-sgm looks for it; OpenCV's matchers
     // leave it 0 (pipeline/reading_verdict.hpp: their readings say the guard is off).
     cv::Mat near_field;
-    // CV_32FC1 where disparity_px has none: another estimate, of less precision, that a
-    // reading may count when it brings it nearer (census-sgm: its coarse level's match on
-    // texture); +inf elsewhere. Empty: the matcher has none (OpenCV's).
+    // CV_32FC1, in the region compute() watches (the reading's) where disparity_px has
+    // none: another estimate, of less precision, that a reading may count when it brings it
+    // nearer (census-sgm: its coarse level's match on texture); +inf elsewhere in the
+    // region, and outside it unspecified. Empty: the matcher has none (OpenCV's).
     cv::Mat coarse_only_px;
 };
 
@@ -44,7 +45,8 @@ class Matcher {
     // range lies outside the right image (x < min_disparity + num_disparities - 1) are
     // invalid for OpenCV's matchers; census-sgm searches the part that is inside and
     // keeps a disparity only well below where the image edge cut the search. watched: the
-    // region the reading comes from (pixels), where census-sgm's near-field probe looks.
+    // region the reading comes from (pixels), where census-sgm's near-field probe looks
+    // and its coarse_only_px is written.
     virtual void compute(const cv::Mat& left, const cv::Mat& right, const cv::Rect& watched,
                          MatchOutput& out) = 0;
 

@@ -1,3 +1,4 @@
+#include <bit>
 #include <cstring>
 
 #include "pipeline/resample/remap_kernels.hpp"
@@ -45,10 +46,11 @@ void gatherNeighbours(const RemapSource& src, const int32_t* offsets, const int1
     for (int i = 0; i < n; ++i) {
         const int32_t offset = offsets[i];
         if (offset >= 0) {
-            const uint8_t* t = src.data + offset;
-            const uint8_t* b = t + src.step;
-            top[i] = pack(t[0], t[1]);
-            bottom[i] = pack(b[0], b[1]);
+            // One 16-bit load per pair: the left neighbour lands in the low byte, as pack()
+            // puts it, on a little-endian machine.
+            static_assert(std::endian::native == std::endian::little);
+            std::memcpy(&top[i], src.data + offset, sizeof(uint16_t));
+            std::memcpy(&bottom[i], src.data + offset + src.step, sizeof(uint16_t));
         } else if (offset == kOutside) {
             top[i] = 0;
             bottom[i] = 0;

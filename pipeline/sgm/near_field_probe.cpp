@@ -147,10 +147,11 @@ void NearFieldProbe::run(const uint8_t* left, size_t stride, const CensusSgm& ce
 {
     evidence_.clear();
     Grid grid{};
-    grid.x_begin = std::clamp(region.x, 0, width_);
-    grid.y_begin = std::clamp(region.y, 0, height_);
-    grid.x_end = std::clamp(region.x + region.width, grid.x_begin, width_);
-    grid.y_end = std::clamp(region.y + region.height, grid.y_begin, height_);
+    const PixelRect inside = clippedTo(region, width_, height_);
+    grid.x_begin = inside.x;
+    grid.y_begin = inside.y;
+    grid.x_end = inside.x + inside.width;
+    grid.y_end = inside.y + inside.height;
     const int t = settings_.tile_px;
     grid.tiles_x = (grid.x_end - grid.x_begin + t - 1) / t;
     grid.tiles_y = (grid.y_end - grid.y_begin + t - 1) / t;

@@ -27,6 +27,7 @@
 // The core depends on the standard library and Highway only (no OpenCV), like the
 // matcher. Thread-bound: one probe per caller; run() allocates nothing.
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -40,6 +41,15 @@ namespace stereod::sgm {
 struct PixelRect {
     int x = 0, y = 0, width = 0, height = 0;
 };
+
+// The part of `rect` inside a width x height image (empty where none is).
+inline PixelRect clippedTo(PixelRect rect, int width, int height)
+{
+    const int x0 = std::clamp(rect.x, 0, width), y0 = std::clamp(rect.y, 0, height);
+    const int x1 = std::clamp(rect.x + rect.width, x0, width);
+    const int y1 = std::clamp(rect.y + rect.height, y0, height);
+    return {x0, y0, x1 - x0, y1 - y0};
+}
 
 struct NearFieldProbeSettings {
     int tile_px = 8;            // tile side, pixels of the probed image

@@ -236,28 +236,23 @@ struct PyramidSgm::Impl {
     // Rows y0..y1-1 of PyramidSgmOutput::coarse_only_px, after mergeRows() of the same rows.
     // Coarse pixel by coarse pixel, the two full-resolution ones it covers in the row
     // together.
-    void writeCoarseOnlyRows(int y0, int y1, const PyramidSgmOutput& out) const
+    // Rows y0..y1-1 of coarse_only_px, in `region` (clipped to the image) alone: only the
+    // reading counts them.
+    void writeCoarseOnlyRows(int y0, int y1, PixelRect region, const PyramidSgmOutput& out) const
     {
         const int w = settings.full.width;
         const CensusSgmSettings& c = coarse->settings();
-        const int paired = std::min(c.width, w / 2);
-        for (int y = y0; y < y1; ++y) {
+        for (int y = std::max(y0, region.y); y < std::min(y1, region.y + region.height); ++y) {
             const size_t crow =
                 static_cast<size_t>(std::min(y / 2, c.height - 1)) * static_cast<size_t>(c.width);
             const size_t row = static_cast<size_t>(y) * static_cast<size_t>(w);
             const float* fine = out.disparity_px + row;
             float* only = out.coarse_only_px + row;
-            const auto offered = [&](int cx) {
-                const size_t ci = crow + static_cast<size_t>(cx);
-                return coarse_given[ci] != 0 ? 2.0f * coarse_disparity[ci] : kNone;
-            };
-            for (int cx = 0; cx < paired; ++cx) {
-                const float v = offered(cx);
-                only[2 * cx] = fine[2 * cx] < kNone ? kNone : v;
-                only[2 * cx + 1] = fine[2 * cx + 1] < kNone ? kNone : v;
+            for (int x = region.x; x < region.x + region.width; ++x) {
+                const size_t ci = crow + static_cast<size_t>(std::min(x / 2, c.width - 1));
+                const float offered = coarse_given[ci] != 0 ? 2.0f * coarse_disparity[ci] : kNone;
+                only[x] = fine[x] < kNone ? kNone : offered;
             }
-            for (int x = 2 * paired; x < w; ++x)
-                only[x] = fine[x] < kNone ? kNone : offered(std::min(x / 2, c.width - 1));
         }
     }
 
@@ -395,6 +390,7 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
     const Clock::time_point t2 = Clock::now();
     if (m.coarse) {
         const int ch = m.coarse->settings().height, h = m.settings.full.height;
+        const PixelRect region = clippedTo(probe_region, m.settings.full.width, h);
         m.pool.run(bands, [&](int band) {
             m.classifyCoarseRows(band, ch * band / bands, ch * (band + 1) / bands);
         });
@@ -402,7 +398,7 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
             const int y0 = h * band / bands, y1 = h * (band + 1) / bands;
             m.mergeRows(y0, y1, out);
             if (out.coarse_only_px != nullptr)
-                m.writeCoarseOnlyRows(y0, y1, out);
+                m.writeCoarseOnlyRows(y0, y1, region, out);
         });
     }
     const Clock::time_point t3 = Clock::now();

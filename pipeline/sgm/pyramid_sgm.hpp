@@ -98,9 +98,11 @@ struct PyramidSgmOutput {
     float* disparity_px; // pixels; +inf where nothing trustworthy was found
     uint8_t* confidence; // 0 where invalid, else 1..255 (see docs/protocol.md)
     uint8_t* near_field; // kNoNearEvidence, kNearerThanRange or kNearerThanExtendedRange
-    // Where disparity_px has none: the coarse level's match on texture (full-resolution
-    // pixels), +inf elsewhere. Not part of the depth map (a coarse pixel's edges are a
-    // pixel wider); what the reading may count when it brings it nearer. Null: not written.
+    // In the region compute() is given (the reading's), where disparity_px has none: the
+    // coarse level's match on texture (full-resolution pixels), +inf elsewhere in the
+    // region; outside it, not written. Not part of the depth map (a coarse pixel's edges
+    // are a pixel wider); what the reading may count when it brings it nearer. Null: not
+    // written.
     float* coarse_only_px = nullptr;
 };
 
@@ -114,8 +116,9 @@ class PyramidSgm {
     PyramidSgm& operator=(const PyramidSgm&) = delete;
 
     // left, right: rectified 8-bit images of settings.full.width x height (as
-    // CensusSgm::compute()). probe_region: where the near-field probe looks, full-resolution
-    // pixels (clipped to the image; empty: nowhere).
+    // CensusSgm::compute()). probe_region: the reading's region, where the near-field probe
+    // looks and coarse_only_px is written, full-resolution pixels (clipped to the image;
+    // empty: nowhere).
     void compute(const uint8_t* left, size_t left_stride, const uint8_t* right, size_t right_stride,
                  PixelRect probe_region, const PyramidSgmOutput& out);
 

@@ -129,6 +129,31 @@ TEST(PyramidSgmTest, TheCoarseLevelsMatchesWhereTheFullLevelHasNoneAreGivenApart
     });
 }
 
+// Only the reading counts them: outside its region they are not even written.
+TEST(PyramidSgmTest, TheCoarseLevelsMatchesAreGivenInTheReadingsRegionAlone)
+{
+    const SyntheticPair pair = sceneWith(40);
+    const PixelRect region{200, 30, 150, 100};
+    const Output whole = match(pair, settingsFor(true));
+    const Output out = match(pair, settingsFor(true), region);
+    int given = 0;
+    for (int y = 0; y < pair.height; ++y) {
+        for (int x = 0; x < pair.width; ++x) {
+            const size_t i = pair.at(x, y);
+            const bool inside = x >= region.x && x < region.x + region.width && y >= region.y &&
+                                y < region.y + region.height;
+            if (!inside) {
+                ASSERT_EQ(out.coarse_only_px[i], -1.0f) << "pixel " << x << ", " << y;
+                continue;
+            }
+            const float a = whole.coarse_only_px[i], b = out.coarse_only_px[i];
+            ASSERT_TRUE((std::isinf(a) && std::isinf(b)) || a == b) << "pixel " << x << ", " << y;
+            given += std::isfinite(b);
+        }
+    }
+    EXPECT_GT(given, 0);
+}
+
 TEST(PyramidSgmTest, ASurfaceBeyondTheExtendedRangeIsNearEvidenceNeverANumber)
 {
     const SyntheticPair pair = sceneWith(150); // beyond 126
