@@ -156,6 +156,38 @@ TEST_P(RemapKernelsOnEveryTarget, RemapRowMatchesScalar)
     }
 }
 
+// Rows as a rectification map makes them: the source position moves about a pixel per
+// output pixel (here from half a pixel to two), the row drifts, and some steps go back.
+// The SIMD kernel picks the pairs of a run of such pixels out of one loaded window of each
+// row; runs that spread too wide, cross a row or reach the image's end are gathered pixel
+// by pixel. Both ways, the reference's bytes.
+TEST_P(RemapKernelsOnEveryTarget, SmoothMapsMatchScalar)
+{
+    std::mt19937 random(17);
+    std::uniform_int_distribution<int> jitter(0, 9);
+    std::uniform_int_distribution<int> frac(0, kTab * kTab - 1);
+    const Source source(300, 40, 300, random);
+    for (const double scale : {0.5, 0.9, 1.0, 1.1, 1.6, 2.0}) {
+        for (const double drift : {0.0, 0.01, -0.03}) {
+            for (const int start_y : {0, 17, 38}) {
+                RowMap row;
+                const int width = 290;
+                for (int x = 0; x < width; ++x) {
+                    const int back = jitter(random) == 0 ? -2 : 0; // now and then a step back
+                    const int px = static_cast<int>(-3.0 + scale * x) + back;
+                    const int py = start_y + static_cast<int>(drift * x);
+                    row.xy.push_back(static_cast<int16_t>(px));
+                    row.xy.push_back(static_cast<int16_t>(py));
+                    row.frac.push_back(static_cast<uint16_t>(frac(random)));
+                    row.offsets.push_back(neighbourhoodOffset(px, py, source.view));
+                }
+                ASSERT_EQ(remapped(GetParam(), source, row), fourTermSum(source, row))
+                    << "scale " << scale << ", drift " << drift << ", row " << start_y;
+            }
+        }
+    }
+}
+
 // Every neighbourhood of the image's last rows, down to the last pixel, stays inside it.
 TEST_P(RemapKernelsOnEveryTarget, TheImagesLastPixelsStayInside)
 {
