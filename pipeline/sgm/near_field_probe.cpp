@@ -37,6 +37,7 @@ NearFieldProbe::NearFieldProbe(int width, int height, const NearFieldProbeSettin
         // A curve holds at most one entry per column, rounded up for the kernels.
         scratch.curve.assign(static_cast<size_t>(width + 2 * kLaneAlign), 0);
         scratch.sample_x.reserve(tile_area);
+        scratch.sample_census.reserve(tile_area);
         scratch.sample_y.reserve(tile_area);
     }
 }
@@ -55,21 +56,25 @@ bool NearFieldProbe::informative(const CensusRows& rows, int x, int bits)
 // Whether the tile's samples differ from one another: one straight edge through a tile
 // gives every sample nearly the same census, and it matches any parallel edge of the same
 // polarity, in the range or beyond it, as well as its true match.
-bool NearFieldProbe::diverse(const CensusSgm& census, const Scratch& scratch, int step) const
+bool NearFieldProbe::diverse(const CensusSgm& census, Scratch& scratch, int step) const
 {
-    const size_t n = scratch.sample_x.size();
-    CensusRowPointers a, b;
+    // Each sample's census as one word (at most 64 bits), then the pairs' distances.
+    std::vector<uint64_t>& words = scratch.sample_census;
+    words.clear();
+    CensusRowPointers rows;
+    for (size_t i = 0; i < scratch.sample_x.size(); i += static_cast<size_t>(step)) {
+        census.censusRows(scratch.sample_y[i], rows);
+        uint64_t word = 0;
+        for (int p = 0; p < rows.rows.planes; ++p)
+            word |= static_cast<uint64_t>(rows.left[p][scratch.sample_x[i]]) << (8 * p);
+        words.push_back(word);
+    }
     long distance = 0, pairs = 0;
-    for (size_t i = 0; i < n; i += static_cast<size_t>(step)) {
-        census.censusRows(scratch.sample_y[i], a);
-        for (size_t j = i + static_cast<size_t>(step); j < n; j += static_cast<size_t>(step)) {
-            census.censusRows(scratch.sample_y[j], b);
-            for (int p = 0; p < a.rows.planes; ++p)
-                distance += kBitsOfByte[static_cast<uint8_t>(a.left[p][scratch.sample_x[i]] ^
-                                                             b.left[p][scratch.sample_x[j]])];
+    for (size_t i = 0; i < words.size(); ++i)
+        for (size_t j = i + 1; j < words.size(); ++j) {
+            distance += std::popcount(words[i] ^ words[j]);
             ++pairs;
         }
-    }
     const int bits = census.settings().census_width * census.settings().census_height - 1;
     return pairs > 0 && distance >= pairs * (bits * settings_.diversity_percent / 100);
 }

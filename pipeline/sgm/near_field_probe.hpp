@@ -99,6 +99,7 @@ class NearFieldProbe {
     struct Scratch {
         std::vector<uint16_t> curve;
         std::vector<int> sample_x, sample_y;
+        std::vector<uint64_t> sample_census; // diverse()'s, per sample it takes
         int probed = 0;
     };
     // The part of the region run() probes, and what every tile of it shares.
@@ -107,7 +108,7 @@ class NearFieldProbe {
     };
 
     static bool informative(const CensusRows& rows, int x, int bits);
-    bool diverse(const CensusSgm& census, const Scratch& scratch, int step) const;
+    bool diverse(const CensusSgm& census, Scratch& scratch, int step) const;
     // Judges the tiles of tile rows ty0, ty0 + ty_step, ... (Tile::passed), with its own
     // scratch.
     void probeTileRows(const uint8_t* left, size_t stride, const CensusSgm& census,
