@@ -72,7 +72,7 @@ size_t percentileIndex(double percentile, size_t count)
 }
 
 NearestObjectFinder::NearestObjectFinder(size_t max_region_pixels)
-    : depths_(max_region_pixels), inferred_(max_region_pixels)
+    : depths_(max_region_pixels), far_(max_region_pixels), inferred_(max_region_pixels)
 {
 }
 
@@ -115,6 +115,8 @@ RegionMeasurement NearestObjectFinder::measure(const cv::Mat& depth_m, const cv:
     // larger than reserved; after that the buffers keep their size.
     if (depths_.size() < region_pixels)
         depths_.resize(region_pixels);
+    if (far_.size() < region_pixels)
+        far_.resize(region_pixels);
     if (inferred_.size() < region_pixels)
         inferred_.resize(region_pixels);
     if (rows_.size() < static_cast<size_t>(region.height))
@@ -125,6 +127,7 @@ RegionMeasurement NearestObjectFinder::measure(const cv::Mat& depth_m, const cv:
     const uint8_t min_confidence =
         static_cast<uint8_t>(std::clamp(settings.min_confidence, 0, 255));
     const auto width = static_cast<size_t>(region.width);
+    const float cut = cut_m_;
     forRowStripes(0, region.height, [&](int first, int end) {
         for (int r = first; r < end; ++r) {
             const int y = region.y + r;
@@ -134,6 +137,7 @@ RegionMeasurement NearestObjectFinder::measure(const cv::Mat& depth_m, const cv:
             const float* inferred_z =
                 inferred_depth_m.empty() ? nullptr : inferred_depth_m.ptr<float>(y);
             float* depths = depths_.data() + static_cast<size_t>(r) * width;
+            float* far_depths = far_.data() + static_cast<size_t>(r) * width;
             float* inferred_depths = inferred_.data() + static_cast<size_t>(r) * width;
             RowCounts c;
             for (int x = region.x; x < region.x + region.width; ++x) {
@@ -147,25 +151,35 @@ RegionMeasurement NearestObjectFinder::measure(const cv::Mat& depth_m, const cv:
                     if (inferred_z != nullptr && inferred_z[x] > 0.0f &&
                         std::isfinite(inferred_z[x])) {
                         ++c.inferred;
-                        if (inferred_z[x] >= lo && inferred_z[x] <= hi)
+                        if (inferred_z[x] >= lo && inferred_z[x] <= hi) {
                             inferred_depths[c.inferred_in_range++] = inferred_z[x];
+                            c.nearest_inferred = std::min(c.nearest_inferred, inferred_z[x]);
+                        }
                     }
                     continue;
                 }
                 if (conf != nullptr && conf[x] < min_confidence)
                     continue;
                 ++c.valid;
-                if (depth >= lo && depth <= hi)
-                    depths[c.in_range++] = depth;
+                if (depth >= lo && depth <= hi) {
+                    if (depth <= cut)
+                        depths[c.in_range_near++] = depth;
+                    else
+                        far_depths[c.in_range_far++] = depth;
+                }
             }
             rows_[static_cast<size_t>(r)] = c;
         }
     });
 
-    // The rows' depths gathered in row order, the in-range ones first and the inferred ones
-    // after them (together at most the region's pixels: a pixel is one or the other).
-    size_t in_range = 0, inferred_in_range = 0;
+    // The in-range depths at or below the cut gathered first, in row order. When more than
+    // the percentile's index of them lie there, the percentile is among them alone: a
+    // selection over a few percent of the depths rather than all of them (the same value).
+    // Only otherwise are the others gathered after them.
+    size_t near_cut = 0, far = 0, inferred_in_range = 0;
     float nearest_inferred = std::numeric_limits<float>::infinity();
+    const auto first = depths_.begin();
+    const auto at = [&](size_t i) { return first + static_cast<std::ptrdiff_t>(i); };
     for (int r = 0; r < region.height; ++r) {
         const RowCounts& c = rows_[static_cast<size_t>(r)];
         m.valid_pixels += c.valid;
@@ -173,37 +187,59 @@ RegionMeasurement NearestObjectFinder::measure(const cv::Mat& depth_m, const cv:
         m.nearer_than_range_pixels += c.nearer;
         m.nearer_than_extended_pixels += c.nearer_extended;
         const float* row = depths_.data() + static_cast<size_t>(r) * width;
-        std::copy(row, row + c.in_range, depths_.begin() + static_cast<std::ptrdiff_t>(in_range));
-        in_range += c.in_range;
-    }
-    for (int r = 0; r < region.height; ++r) {
-        const RowCounts& c = rows_[static_cast<size_t>(r)];
-        const float* row = inferred_.data() + static_cast<size_t>(r) * width;
-        const auto to = depths_.begin() + static_cast<std::ptrdiff_t>(in_range + inferred_in_range);
-        std::copy(row, row + c.inferred_in_range, to);
-        for (uint32_t i = 0; i < c.inferred_in_range; ++i)
-            nearest_inferred = std::min(nearest_inferred, row[i]);
+        std::copy(row, row + c.in_range_near, at(near_cut));
+        near_cut += c.in_range_near;
+        far += c.in_range_far;
         inferred_in_range += c.inferred_in_range;
+        nearest_inferred = std::min(nearest_inferred, c.nearest_inferred);
     }
+    const size_t in_range = near_cut + far;
     m.in_range_pixels = static_cast<uint32_t>(in_range);
-    const auto first = depths_.begin();
-    const auto in_range_end = first + static_cast<std::ptrdiff_t>(in_range);
-    if (in_range > 0)
-        m.percentile_depth_m =
-            static_cast<double>(lowerLinearPercentile(first, in_range_end, settings.percentile));
+    // Appends each row's part of `from` (its slots) at `to` onwards.
+    const auto gather = [&](const std::vector<float>& from, uint32_t RowCounts::*count, size_t to) {
+        for (int r = 0; r < region.height; ++r) {
+            const uint32_t n = rows_[static_cast<size_t>(r)].*count;
+            const float* row = from.data() + static_cast<size_t>(r) * width;
+            std::copy(row, row + n, at(to));
+            to += n;
+        }
+    };
+    size_t index = 0;
+    if (in_range > 0) {
+        index = percentileIndex(settings.percentile, in_range);
+        if (near_cut <= index)
+            gather(far_, &RowCounts::in_range_far, near_cut);
+        const size_t among = near_cut > index ? near_cut : in_range;
+        m.percentile_depth_m = static_cast<double>(selectNth(first, at(among), index));
+    }
     // The inferred depths can only bring the reading nearer: one beyond the measured
     // percentile must not carry it farther by adding to the count. None below it cannot
     // bring it nearer (the percentile of them all is then at least the measured one), so
-    // the second selection is made only when one is.
-    const bool may_be_nearer =
-        in_range == 0 || static_cast<double>(nearest_inferred) < m.percentile_depth_m;
-    if (inferred_in_range > 0 && may_be_nearer) {
-        const double with_inferred = static_cast<double>(lowerLinearPercentile(
-            first, in_range_end + static_cast<std::ptrdiff_t>(inferred_in_range),
-            settings.percentile));
-        if (m.percentile_depth_m == 0.0 || with_inferred < m.percentile_depth_m)
-            m.percentile_depth_m = with_inferred;
+    // the second selection is made only when one is; and then only over the in-range
+    // depths up to the measured percentile (the selection left them first) with the
+    // inferred ones: the others lie at or beyond it, so a value below it has the same rank
+    // among these as among all of them.
+    if (inferred_in_range > 0 && in_range == 0) {
+        gather(inferred_, &RowCounts::inferred_in_range, 0);
+        m.percentile_depth_m = static_cast<double>(
+            lowerLinearPercentile(first, at(inferred_in_range), settings.percentile));
+    } else if (inferred_in_range > 0 &&
+               static_cast<double>(nearest_inferred) < m.percentile_depth_m) {
+        gather(inferred_, &RowCounts::inferred_in_range, index + 1);
+        const size_t candidates = index + 1 + inferred_in_range;
+        const size_t union_index =
+            percentileIndex(settings.percentile, in_range + inferred_in_range);
+        if (union_index < candidates) {
+            const double with_inferred =
+                static_cast<double>(selectNth(first, at(candidates), union_index));
+            if (with_inferred < m.percentile_depth_m)
+                m.percentile_depth_m = with_inferred;
+        }
     }
+    // The next frame's cut: a quarter beyond this percentile, where the scene's nearest
+    // depths will most likely lie again (only the selection's cost depends on it).
+    cut_m_ = in_range > 0 ? static_cast<float>(m.percentile_depth_m * kCutMargin)
+                          : std::numeric_limits<float>::infinity();
     return m;
 }
 

@@ -3,6 +3,7 @@
 // there, or "no reading" with the reason when the data do not support a number.
 
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -74,15 +75,22 @@ class NearestObjectFinder {
   private:
     // What measure() counted in one row of the region.
     struct RowCounts {
-        uint32_t valid = 0, in_range = 0, inferred = 0, inferred_in_range = 0;
+        uint32_t valid = 0, in_range_near = 0, in_range_far = 0, inferred = 0,
+                 inferred_in_range = 0;
         uint32_t nearer = 0, nearer_extended = 0;
+        float nearest_inferred = std::numeric_limits<float>::infinity();
     };
-    // Per row of the region, a slot of its width: the row's in-range depths, and its
-    // inferred depths within the range; then depths_ gathers both, the in-range ones
-    // first. Reused.
+    // The last percentile times this: the cut below which the next frame's percentile
+    // most likely lies.
+    static constexpr double kCutMargin = 1.25;
+    // Per row of the region, a slot of its width in each: the row's in-range depths at or
+    // below cut_m_, those beyond it, and its inferred depths within the range. depths_
+    // then gathers what the selections need. Reused.
     std::vector<float> depths_;
+    std::vector<float> far_;
     std::vector<float> inferred_;
     std::vector<RowCounts> rows_;
+    float cut_m_ = std::numeric_limits<float>::infinity();
 };
 
 } // namespace stereod

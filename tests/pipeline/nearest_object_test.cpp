@@ -1,9 +1,12 @@
 // The nearest-object statistic and its refusals, on depth maps whose answer is known.
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <vector>
 
 #include <gtest/gtest.h>
+#include <opencv2/core.hpp>
 
 #include "pipeline/nearest_object.hpp"
 
@@ -58,6 +61,68 @@ TEST(NearestObject, ReportsThePercentileOfInRangeDepths)
     EXPECT_DOUBLE_EQ(r.valid_fraction, 1.0);
     EXPECT_DOUBLE_EQ(r.in_range_fraction, 1.0);
     EXPECT_DOUBLE_EQ(r.min_valid_fraction, 0.10);
+}
+
+// The percentile of the in-range depths, then of those with the inferred ones when that
+// is nearer: what measure() reports, computed the plain way (sorted copies).
+double plainPercentile(const cv::Mat& depth, const cv::Mat& inferred, const NearestSettings& s)
+{
+    std::vector<float> in_range, with_inferred;
+    for (int y = 0; y < depth.rows; ++y)
+        for (int x = 0; x < depth.cols; ++x) {
+            const float z = depth.at<float>(y, x);
+            if (z > 0.0f && std::isfinite(z)) {
+                if (z >= s.min_depth_m && z <= s.max_depth_m)
+                    in_range.push_back(z);
+                continue;
+            }
+            const float i = inferred.at<float>(y, x);
+            if (i > 0.0f && std::isfinite(i) && i >= s.min_depth_m && i <= s.max_depth_m)
+                with_inferred.push_back(i);
+        }
+    const auto percentile = [&](std::vector<float> v) {
+        std::sort(v.begin(), v.end());
+        return static_cast<double>(v[percentileIndex(s.percentile, v.size())]);
+    };
+    double p = in_range.empty() ? 0.0 : percentile(in_range);
+    with_inferred.insert(with_inferred.end(), in_range.begin(), in_range.end());
+    if (!with_inferred.empty()) {
+        const double q = percentile(with_inferred);
+        if (p == 0.0 || q < p)
+            p = q;
+    }
+    return p;
+}
+
+// One finder over frames whose nearest depths come and go: the same frame after frame,
+// a scene that moves nearer or farther at once, inferred depths nearer and farther than
+// the measured ones, none in range. Its percentile (which each frame looks for first
+// among the depths near the last one's) is the plain one every time.
+TEST(NearestObject, ThePercentileIsThePlainOneWhateverTheFramesBefore)
+{
+    const NearestSettings s = wholeImage();
+    NearestObjectFinder finder;
+    cv::RNG random(5);
+    const struct {
+        double nearest_m, farthest_m, inferred_share, inferred_from_m;
+    } frames[] = {{1.0, 3.0, 0.0, 0.0}, {1.0, 3.0, 0.0, 0.0},   {1.0, 3.0, 0.1, 0.5},
+                  {4.0, 9.0, 0.1, 0.5}, {4.0, 9.0, 0.1, 6.0},   {0.3, 0.5, 0.05, 0.2},
+                  {0.3, 0.5, 0.0, 0.0}, {25.0, 30.0, 0.2, 2.0}, {25.0, 30.0, 0.0, 0.0},
+                  {2.0, 2.0, 0.3, 1.0}, {1.2, 8.0, 0.02, 1.1}};
+    for (const auto& f : frames) {
+        cv::Mat depth(60, 80, CV_32FC1), inferred(60, 80, CV_32FC1, cv::Scalar(0.0f));
+        random.fill(depth, cv::RNG::UNIFORM, f.nearest_m, f.farthest_m + 1e-6);
+        for (int y = 0; y < depth.rows; ++y)
+            for (int x = 0; x < depth.cols; ++x)
+                if (random.uniform(0.0, 1.0) < f.inferred_share) {
+                    depth.at<float>(y, x) = 0.0f;
+                    inferred.at<float>(y, x) = static_cast<float>(
+                        random.uniform(f.inferred_from_m, f.inferred_from_m + 3.0));
+                }
+        const RegionMeasurement m = finder.measure(depth, cv::Mat(), cv::Mat(), inferred, s);
+        EXPECT_EQ(m.percentile_depth_m, plainPercentile(depth, inferred, s))
+            << "depths " << f.nearest_m << " to " << f.farthest_m << " m";
+    }
 }
 
 TEST(NearestObject, AFewWrongNearPixelsDoNotMoveTheReading)
