@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <limits>
 
+#include "pipeline/cloud/cloud_kernels.hpp"
 #include "pipeline/row_stripes.hpp"
 
 namespace stereod {
@@ -71,18 +72,18 @@ void PointCloudBuilder::build(const cv::Mat& depth_m, const cv::Mat& left_rectif
     const float inv_f = static_cast<float>(1.0 / geometry.focal_px);
     const float cx = static_cast<float>(geometry.cx_px);
     const float cy = static_cast<float>(geometry.cy_px);
+    // (u - cx) / f per column, shared by every row (grown once to the image's width).
+    x_factor_.resize(static_cast<size_t>(depth_m.cols));
+    for (int u = 0; u < depth_m.cols; ++u)
+        x_factor_[static_cast<size_t>(u)] = (static_cast<float>(u) - cx) * inv_f;
+    const cloud::CloudKernels& kernels = cloud::simdCloudKernels();
     forRowStripes(0, depth_m.rows, [&](int first, int end) {
         for (int v = first; v < end; ++v) {
-            const float* z = depth_m.ptr<float>(v);
-            const uint8_t* grey = left_rectified.ptr<uint8_t>(v);
-            const float row_factor = (static_cast<float>(v) - cy) * inv_f;
-            CloudPoint* point = cloud.data() + row_first_[static_cast<size_t>(v)];
-            for (int u = 0; u < depth_m.cols; ++u) {
-                if (!(z[u] > 0.0f))
-                    continue;
-                *point++ = CloudPoint{(static_cast<float>(u) - cx) * inv_f * z[u],
-                                      row_factor * z[u], z[u], static_cast<float>(grey[u])};
-            }
+            const size_t from = row_first_[static_cast<size_t>(v)];
+            const size_t points = row_first_[static_cast<size_t>(v) + 1] - from;
+            kernels.points_row(depth_m.ptr<float>(v), left_rectified.ptr<uint8_t>(v),
+                               x_factor_.data(), (static_cast<float>(v) - cy) * inv_f, depth_m.cols,
+                               points, cloud.data() + from);
         }
     });
 }

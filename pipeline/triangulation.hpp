@@ -43,6 +43,7 @@ class PointCloudBuilder {
   private:
     // row_first_[v]: the index of row v's first point; row_first_[rows]: the count.
     std::vector<size_t> row_first_;
+    std::vector<float> x_factor_;       // (u - cx) / f of each column u
     const uchar* built_from_ = nullptr; // the depth the last build() counted
 };
 
