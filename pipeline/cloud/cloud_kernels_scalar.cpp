@@ -10,8 +10,8 @@ size_t pointsRow(const float* z, const uint8_t* grey, const float* x_factor, flo
     for (int u = 0; u < width && written < points; ++u) {
         if (!(z[u] > 0.0f))
             continue;
-        out[written++] = CloudPoint{x_factor[u] * z[u], row_factor * z[u], z[u],
-                                    static_cast<float>(grey[u])};
+        out[written++] =
+            CloudPoint{x_factor[u] * z[u], row_factor * z[u], z[u], static_cast<float>(grey[u])};
     }
     return written;
 }

@@ -219,6 +219,10 @@ struct CensusSgm::Impl {
             p2_by_step[g] =
                 static_cast<uint8_t>(std::clamp(static_cast<int>(std::lround(p2)), s.p1 + 1, s.p2));
         }
+        // The kernel's short table serves where P2 no longer changes past its last step
+        // (at the floor p1 + 1, or everywhere without adaptation).
+        short_steps = std::all_of(p2_by_step + kPenaltySteps, p2_by_step + 256,
+                                  [&](uint8_t p2) { return p2 == p2_by_step[kPenaltySteps - 1]; });
     }
 
     int abovePaths() const { return settings.paths == 5 ? 3 : 1; }
@@ -314,8 +318,13 @@ struct CensusSgm::Impl {
         const int x1 = std::min(w, w - dx);
         for (int x = 0; x < x0; ++x)
             p2[x] = p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(from[0]))];
-        for (int x = x0; x < x1; ++x)
-            p2[x] = p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(from[x + dx]))];
+        if (short_steps) {
+            kernels->step_penalties(row + x0, from + x0 + dx, x1 - x0, p2_by_step, p2 + x0);
+        } else {
+            for (int x = x0; x < x1; ++x)
+                p2[x] =
+                    p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(from[x + dx]))];
+        }
         for (int x = x1; x < w; ++x)
             p2[x] = p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(from[w - 1]))];
     }
@@ -327,8 +336,13 @@ struct CensusSgm::Impl {
         const int w = settings.width;
         const uint8_t* row = left + static_cast<size_t>(y) * stride;
         p2[0] = p2_by_step[0];
-        for (int x = 1; x < w; ++x)
-            p2[x] = p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(row[x - 1]))];
+        if (short_steps) {
+            kernels->step_penalties(row + 1, row, w - 1, p2_by_step, p2 + 1);
+        } else {
+            for (int x = 1; x < w; ++x)
+                p2[x] =
+                    p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(row[x - 1]))];
+        }
         p2[w] = p2_by_step[0];
     }
 
@@ -641,6 +655,7 @@ struct CensusSgm::Impl {
     int rx, ry;
     size_t padded_stride;
     uint8_t p2_by_step[256] = {};
+    bool short_steps = false; // p2_by_step is constant from kPenaltySteps - 1 on
     DecideSettings decide;
     std::vector<uint8_t> padded_left, padded_right;
     size_t plane_margin = 0, plane_stride = 0;

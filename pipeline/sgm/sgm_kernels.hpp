@@ -121,6 +121,9 @@ struct DecideSettings {
     float sharp_curvature = 1;  // the curvature of a fully sharp minimum: 2 p1 paths
 };
 
+// The intensity steps step_penalties() tells apart (two 16-byte table lookups).
+inline constexpr int kPenaltySteps = 32;
+
 // Disparities leave decide_row() in fixed point, 16 x pixels, kNoDisparity where none.
 inline constexpr int kSubpixel = 16;
 inline constexpr int16_t kNoDisparity = -32768;
@@ -217,6 +220,12 @@ struct SgmKernels {
     // costs of whole tiles within and beyond the range a matcher searched.
     void (*cost_curve)(const CensusRows& census, int x, int width, int first_disparity, int count,
                        uint16_t* curve);
+
+    // P2 of the steps between two rows of grey levels: p2[x] = by_step[min(|a[x] - b[x]|,
+    // kPenaltySteps - 1)] for x in 0..n-1. by_step holds kPenaltySteps entries: a table of
+    // P2 by intensity step that keeps its last value for every larger step.
+    void (*step_penalties)(const uint8_t* a, const uint8_t* b, int n, const uint8_t* by_step,
+                           uint8_t* p2);
 
     // One row of the 3x3 median of 16-bit disparities (up, row, down: rows y-1, y, y+1),
     // for x in 1 .. width-2: `invalid` stays invalid, and an invalid neighbour counts as

@@ -318,12 +318,20 @@ void medianRow(const int16_t* up, const int16_t* row, const int16_t* down, int w
     }
 }
 
+void stepPenalties(const uint8_t* a, const uint8_t* b, int n, const uint8_t* by_step, uint8_t* p2)
+{
+    for (int x = 0; x < n; ++x)
+        p2[x] = by_step[std::min(std::abs(static_cast<int>(a[x]) - static_cast<int>(b[x])),
+                                 kPenaltySteps - 1)];
+}
+
 } // namespace
 
 const SgmKernels& scalarKernels()
 {
-    static const SgmKernels kernels{"scalar",        censusRow, costRow,   pathsForward,
-                                    winnersBackward, decideRow, costCurve, medianRow};
+    static const SgmKernels kernels{"scalar",     censusRow,       costRow,
+                                    pathsForward, winnersBackward, decideRow,
+                                    costCurve,    stepPenalties,   medianRow};
     return kernels;
 }
 

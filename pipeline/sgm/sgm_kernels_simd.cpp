@@ -67,6 +67,10 @@ void CostCurve(const CensusRows& census, int x, int width, int first_disparity, 
 {
     scalarKernels().cost_curve(census, x, width, first_disparity, count, curve);
 }
+void StepPenalties(const uint8_t* a, const uint8_t* b, int n, const uint8_t* by_step, uint8_t* p2)
+{
+    scalarKernels().step_penalties(a, b, n, by_step, p2);
+}
 void MedianRow(const int16_t* up, const int16_t* row, const int16_t* down, int width,
                int16_t invalid, int16_t* dst)
 {
@@ -809,6 +813,29 @@ void CostCurve(const CensusRows& census, int x, int width, int first_disparity, 
     }
 }
 
+// Each step's P2 out of the table's two halves by byte shuffles, the step clamped to the
+// table: the half a step falls in is chosen after both lookups.
+void StepPenalties(const uint8_t* a, const uint8_t* b, int n, const uint8_t* by_step, uint8_t* p2)
+{
+    const D8 d;
+    const int lanes = static_cast<int>(hn::Lanes(d));
+    const auto low_table = hn::LoadDup128(d, by_step);
+    const auto high_table = hn::LoadDup128(d, by_step + 16);
+    const auto last = hn::Set(d, uint8_t{kPenaltySteps - 1});
+    const auto sixteen = hn::Set(d, uint8_t{16});
+    const auto within = hn::Set(d, uint8_t{15});
+    int x = 0;
+    for (; x + lanes <= n; x += lanes) {
+        const auto va = hn::LoadU(d, a + x), vb = hn::LoadU(d, b + x);
+        const auto step = hn::Min(hn::Or(hn::SaturatedSub(va, vb), hn::SaturatedSub(vb, va)), last);
+        const auto index = hn::And(step, within);
+        hn::StoreU(hn::IfThenElse(hn::Lt(step, sixteen), hn::TableLookupBytes(low_table, index),
+                                  hn::TableLookupBytes(high_table, index)),
+                   d, p2 + x);
+    }
+    scalarKernels().step_penalties(a + x, b + x, n - x, by_step, p2 + x);
+}
+
 void MedianRow(const int16_t* up, const int16_t* row, const int16_t* down, int width,
                int16_t invalid, int16_t* dst)
 {
@@ -880,6 +907,7 @@ HWY_EXPORT(PathsForward);
 HWY_EXPORT(WinnersBackward);
 HWY_EXPORT(DecideRow);
 HWY_EXPORT(CostCurve);
+HWY_EXPORT(StepPenalties);
 HWY_EXPORT(MedianRow);
 HWY_EXPORT(TargetName);
 
@@ -891,7 +919,8 @@ SgmKernels chosenKernels()
     return SgmKernels{HWY_DYNAMIC_DISPATCH(TargetName)(),    HWY_DYNAMIC_DISPATCH(CensusRow),
                       HWY_DYNAMIC_DISPATCH(CostRow),         HWY_DYNAMIC_DISPATCH(PathsForward),
                       HWY_DYNAMIC_DISPATCH(WinnersBackward), HWY_DYNAMIC_DISPATCH(DecideRow),
-                      HWY_DYNAMIC_DISPATCH(CostCurve),       HWY_DYNAMIC_DISPATCH(MedianRow)};
+                      HWY_DYNAMIC_DISPATCH(CostCurve),       HWY_DYNAMIC_DISPATCH(StepPenalties),
+                      HWY_DYNAMIC_DISPATCH(MedianRow)};
 }
 
 } // namespace

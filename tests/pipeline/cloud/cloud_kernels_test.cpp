@@ -49,7 +49,8 @@ Row randomRow(int width, double valid_share, std::mt19937& random)
         row.z.push_back(valid ? depth(random) : not_a_point[invalid(random)]);
         row.points += valid ? 1 : 0;
         row.grey.push_back(static_cast<uint8_t>(grey(random)));
-        row.x_factor.push_back((static_cast<float>(u) - 0.37f * static_cast<float>(width)) / 613.5f);
+        row.x_factor.push_back((static_cast<float>(u) - 0.37f * static_cast<float>(width)) /
+                               613.5f);
     }
     return row;
 }
@@ -66,7 +67,8 @@ std::vector<CloudPoint> pointsOf(const CloudKernels& kernels, const Row& row, fl
 
 bool sameBits(const std::vector<CloudPoint>& a, const std::vector<CloudPoint>& b)
 {
-    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(CloudPoint)) == 0;
+    return a.size() == b.size() &&
+           std::memcmp(a.data(), b.data(), a.size() * sizeof(CloudPoint)) == 0;
 }
 
 TEST(CloudKernelsTest, ScalarMakesAPointOfEachValidDepthInOrder)

@@ -581,6 +581,36 @@ TEST_P(SgmKernelsOnEveryTarget, CostCurveMatchesScalar)
             }
 }
 
+TEST_P(SgmKernelsOnEveryTarget, StepPenaltiesMatchScalar)
+{
+    Random random(9);
+    // A table as the matcher makes it (P2 falling with the step to a floor), and one of
+    // random values: every entry must be the one its step picks.
+    uint8_t falling[kPenaltySteps], scattered[kPenaltySteps];
+    for (int step = 0; step < kPenaltySteps; ++step) {
+        falling[step] = static_cast<uint8_t>(std::max(17, 160 * 3 / (3 + step)));
+        scattered[step] = static_cast<uint8_t>(random.uniform(0, 255));
+    }
+    for (const uint8_t* table : {falling, scattered})
+        for (int width : {1, 15, 16, 17, 31, 32, 33, 64, 100, 640}) {
+            SCOPED_TRACE("width " + std::to_string(width));
+            std::vector<uint8_t> a(static_cast<size_t>(width)), b(a.size());
+            for (size_t x = 0; x < a.size(); ++x) {
+                a[x] = static_cast<uint8_t>(random.uniform(0, 255));
+                // Small steps mostly, as between neighbouring pixels, and some large ones.
+                const int step = random.uniform(0, 99) < 80 ? random.uniform(-40, 40)
+                                                            : random.uniform(-255, 255);
+                b[x] = static_cast<uint8_t>(std::clamp(a[x] + step, 0, 255));
+            }
+            std::vector<uint8_t> expected(a.size(), 7), actual(a.size(), 7);
+            scalarKernels().step_penalties(a.data(), b.data(), width, table, expected.data());
+            GetParam().step_penalties(a.data(), b.data(), width, table, actual.data());
+            ASSERT_EQ(actual, expected);
+            for (size_t x = 0; x < a.size(); ++x)
+                ASSERT_EQ(expected[x], table[std::min(std::abs(a[x] - b[x]), kPenaltySteps - 1)]);
+        }
+}
+
 TEST_P(SgmKernelsOnEveryTarget, MedianRowMatchesScalar)
 {
     Random random(7);
