@@ -21,15 +21,15 @@ namespace stereod {
 namespace {
 
 // In the rows and columns of `area`: `into` takes the larger (nearer) of its disparity and
-// `from`'s where `from` has one (+inf: none). A select rather than a branch: vector code.
+// `from`'s where `from` has one (+inf: none).
 void nearerOf(const cv::Mat& from, const cv::Rect& area, cv::Mat& into)
 {
     for (int y = area.y; y < area.y + area.height; ++y) {
         const float* f = from.ptr<float>(y);
         float* t = into.ptr<float>(y);
         for (int x = area.x; x < area.x + area.width; ++x) {
-            const bool take = std::isfinite(f[x]) & !(std::isfinite(t[x]) & (t[x] >= f[x]));
-            t[x] = take ? f[x] : t[x];
+            const bool into_nearer = std::isfinite(t[x]) && t[x] >= f[x];
+            t[x] = std::isfinite(f[x]) && !into_nearer ? f[x] : t[x];
         }
     }
 }
