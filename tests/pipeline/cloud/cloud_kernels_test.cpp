@@ -68,7 +68,7 @@ std::vector<CloudPoint> pointsOf(const CloudKernels& kernels, const Row& row, fl
 bool sameBits(const std::vector<CloudPoint>& a, const std::vector<CloudPoint>& b)
 {
     return a.size() == b.size() &&
-           std::memcmp(a.data(), b.data(), a.size() * sizeof(CloudPoint)) == 0;
+           (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(CloudPoint)) == 0);
 }
 
 TEST(CloudKernelsTest, ScalarMakesAPointOfEachValidDepthInOrder)
