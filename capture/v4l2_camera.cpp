@@ -505,14 +505,16 @@ class V4l2Camera::Impl {
         frame->stamp_ns = stamp_ns;
         frame->source_stamp_ns = buffer.timestamp_ns;
         frame->sequence = sequence;
+        // Counted before it is handed over: a consumer holding a frame finds it in the
+        // status (the ring's push publishes the count with the frame).
+        frames_.fetch_add(1, std::memory_order_relaxed);
+        last_frame_ns_.store(now_ns, std::memory_order_relaxed);
         ring_->push(CapturedFrame{std::move(frame), index_});
         if (wake_ != nullptr) {
             wake_->fetch_add(1, std::memory_order_release);
             wake_->notify_all();
         }
 
-        frames_.fetch_add(1, std::memory_order_relaxed);
-        last_frame_ns_.store(now_ns, std::memory_order_relaxed);
         bad_since_good_ = 0;
         fps_.add(now_ns);
         if (stalled_ || exhausted_ ||
