@@ -268,10 +268,10 @@ void depthToMillimetres(const cv::Mat& depth_m, cv::Mat& depth_mm)
     };
     // Blocks of a fixed length: GCC vectorises those at -O2 too (its cheapest cost model
     // takes no loop whose length it does not know).
-    // Rows in stripes over OpenCV's pool: the publisher's thread would otherwise convert
-    // a frame alone while the pool's threads wait.
     constexpr int kBlock = 64;
     const int width = depth_m.cols;
+    // Rows in stripes over OpenCV's pool: the publisher's thread would otherwise convert
+    // a frame alone while the pool's threads wait.
     forRowStripes(0, depth_m.rows, [&](int first, int end) {
         for (int y = first; y < end; ++y) {
             const float* z = depth_m.ptr<float>(y);

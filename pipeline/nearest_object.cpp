@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <stdexcept>
 
@@ -178,16 +179,12 @@ RegionMeasurement NearestObjectFinder::measure(const cv::Mat& depth_m, const cv:
     // Only otherwise are the others gathered after them.
     size_t near_cut = 0, far = 0, inferred_in_range = 0;
     float nearest_inferred = std::numeric_limits<float>::infinity();
-    const auto first = depths_.begin();
-    const auto at = [&](size_t i) { return first + static_cast<std::ptrdiff_t>(i); };
     for (int r = 0; r < region.height; ++r) {
         const RowCounts& c = rows_[static_cast<size_t>(r)];
         m.valid_pixels += c.valid;
         m.inferred_pixels += c.inferred;
         m.nearer_than_range_pixels += c.nearer;
         m.nearer_than_extended_pixels += c.nearer_extended;
-        const float* row = depths_.data() + static_cast<size_t>(r) * width;
-        std::copy(row, row + c.in_range_near, at(near_cut));
         near_cut += c.in_range_near;
         far += c.in_range_far;
         inferred_in_range += c.inferred_in_range;
@@ -195,15 +192,19 @@ RegionMeasurement NearestObjectFinder::measure(const cv::Mat& depth_m, const cv:
     }
     const size_t in_range = near_cut + far;
     m.in_range_pixels = static_cast<uint32_t>(in_range);
-    // Appends each row's part of `from` (its slots) at `to` onwards.
+    const auto first = depths_.begin();
+    const auto at = [&](size_t i) { return first + static_cast<std::ptrdiff_t>(i); };
+    // Appends each row's part of `from` (its slots) at `to` onwards. From depths_ itself
+    // too: a row's values move only towards the front, past slots already gathered.
     const auto gather = [&](const std::vector<float>& from, uint32_t RowCounts::*count, size_t to) {
         for (int r = 0; r < region.height; ++r) {
             const uint32_t n = rows_[static_cast<size_t>(r)].*count;
             const float* row = from.data() + static_cast<size_t>(r) * width;
-            std::copy(row, row + n, at(to));
+            std::memmove(depths_.data() + to, row, n * sizeof(float)); // depths_ into itself too
             to += n;
         }
     };
+    gather(depths_, &RowCounts::in_range_near, 0);
     size_t index = 0;
     if (in_range > 0) {
         index = percentileIndex(settings.percentile, in_range);

@@ -309,6 +309,18 @@ struct CensusSgm::Impl {
 
     // The P2 of every pixel of row y for a step from (x + dx, y - 1) onto (x, y); a step
     // from outside the image counts as no intensity change.
+    // p2[x] = P2 for the step between a[x] and b[x], x in 0..n-1: by the kernel's short
+    // table where P2 no longer changes past its last step, else by the whole table.
+    void penaltiesOfSteps(const uint8_t* a, const uint8_t* b, int n, uint8_t* p2) const
+    {
+        if (short_steps) {
+            kernels->step_penalties(a, b, n, p2_by_step, p2);
+            return;
+        }
+        for (int x = 0; x < n; ++x)
+            p2[x] = p2_by_step[std::abs(static_cast<int>(a[x]) - static_cast<int>(b[x]))];
+    }
+
     void penaltiesFromAbove(const uint8_t* left, size_t stride, int y, int dx, uint8_t* p2) const
     {
         const int w = settings.width;
@@ -318,13 +330,7 @@ struct CensusSgm::Impl {
         const int x1 = std::min(w, w - dx);
         for (int x = 0; x < x0; ++x)
             p2[x] = p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(from[0]))];
-        if (short_steps) {
-            kernels->step_penalties(row + x0, from + x0 + dx, x1 - x0, p2_by_step, p2 + x0);
-        } else {
-            for (int x = x0; x < x1; ++x)
-                p2[x] =
-                    p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(from[x + dx]))];
-        }
+        penaltiesOfSteps(row + x0, from + x0 + dx, x1 - x0, p2 + x0);
         for (int x = x1; x < w; ++x)
             p2[x] = p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(from[w - 1]))];
     }
@@ -336,13 +342,7 @@ struct CensusSgm::Impl {
         const int w = settings.width;
         const uint8_t* row = left + static_cast<size_t>(y) * stride;
         p2[0] = p2_by_step[0];
-        if (short_steps) {
-            kernels->step_penalties(row + 1, row, w - 1, p2_by_step, p2 + 1);
-        } else {
-            for (int x = 1; x < w; ++x)
-                p2[x] =
-                    p2_by_step[std::abs(static_cast<int>(row[x]) - static_cast<int>(row[x - 1]))];
-        }
+        penaltiesOfSteps(row + 1, row, w - 1, p2 + 1);
         p2[w] = p2_by_step[0];
     }
 

@@ -233,11 +233,8 @@ struct PyramidSgm::Impl {
         out.confidence[i] = static_cast<uint8_t>(std::max(2, coarse_confidence[c] / 2));
     }
 
-    // Rows y0..y1-1 of PyramidSgmOutput::coarse_only_px, after mergeRows() of the same rows.
-    // Coarse pixel by coarse pixel, the two full-resolution ones it covers in the row
-    // together.
-    // Rows y0..y1-1 of coarse_only_px, in `region` (clipped to the image) alone: only the
-    // reading counts them.
+    // Rows y0..y1-1 of PyramidSgmOutput::coarse_only_px, after mergeRows() of the same rows,
+    // in `region` (clipped to the image) alone: only the reading counts them.
     void writeCoarseOnlyRows(int y0, int y1, PixelRect region, const PyramidSgmOutput& out) const
     {
         const int w = settings.full.width;
