@@ -110,6 +110,8 @@ sgm::PyramidSgmSettings pyramidSgmSettings(const MatcherSettings& settings,
     p.full = censusSgmSettings(settings, range);
     p.extended_range = settings.extended_range;
     p.guided_search = settings.guided_search;
+    if (settings.guided_max_share)
+        p.guided_max_share = *settings.guided_max_share;
     p.near_field_probe = true;
     return p;
 }

@@ -129,6 +129,11 @@ struct MatcherSettings {
     // full resolution searches only around what it measured, the whole range where that
     // is unreliable (pipeline/sgm/guided_spans.hpp).
     bool guided_search = false;
+    // With the guided search: the share of the full level's lanes above which a frame
+    // searches the whole range instead (sgm::PyramidSgmSettings::guided_max_share); unset:
+    // the pyramid's own. Not a configuration key: tests set it to measure the spans
+    // whatever they search.
+    std::optional<double> guided_max_share;
 };
 
 } // namespace stereod

@@ -87,6 +87,9 @@ CensusSgmSettings coarseLevelSettings(const CensusSgmSettings& full)
 void validatePyramidSgmSettings(const PyramidSgmSettings& s)
 {
     validateCensusSgmSettings(s.full);
+    if (!(s.guided_max_share >= 0.0 && s.guided_max_share <= 1.0))
+        throw SettingsError("guided_max_share", "must be a share within 0..1, got " +
+                                                    std::to_string(s.guided_max_share));
     if (hasCoarseLevel(s)) {
         const CensusSgmSettings coarse = coarseLevelSettings(s.full);
         const bool sized = s.full.width != 0 || s.full.height != 0;
@@ -168,7 +171,7 @@ struct PyramidSgm::Impl {
                 // full level found, as it is. (A guided search checks every pixel.)
                 const bool whole = x0 + kMergeChunk <= 2 * cw;
                 const size_t c = crow + static_cast<size_t>(x0 / 2);
-                if (!guide && whole &&
+                if (!guided_now && whole &&
                     quietChunk(coarse_near.data() + c, coarse_limit.data() + c,
                                out.near_field + row + static_cast<size_t>(x0)))
                     continue;
@@ -202,7 +205,7 @@ struct PyramidSgm::Impl {
             out.near_field[i] = kNearerThanExtendedRange;
             return;
         }
-        if (guide && guide->narrow(i) && std::isfinite(out.disparity_px[i]) &&
+        if (guided_now && guide->narrow(i) && std::isfinite(out.disparity_px[i]) &&
             !(std::abs(2.0f * coarse_disparity[c] - out.disparity_px[i]) <=
               static_cast<float>(kGuideAgreePx))) {
             // A narrow search, which has no competitor outside its span to be told apart
@@ -343,6 +346,7 @@ struct PyramidSgm::Impl {
     int extended_last = 0;
     std::unique_ptr<CensusSgm> coarse;  // null without the extended range
     std::unique_ptr<GuidedSpans> guide; // null without the guided search
+    bool guided_now = false;            // the last compute()'s full level took guide's spans
     std::vector<uint8_t> half_left, half_right;
     std::vector<float> coarse_disparity;
     std::vector<uint8_t> coarse_confidence, coarse_limit;
@@ -377,13 +381,15 @@ void PyramidSgm::compute(const uint8_t* left, size_t left_stride, const uint8_t*
             m.half_left.data(), static_cast<size_t>(c.width), m.half_right.data(),
             static_cast<size_t>(c.width),
             {m.coarse_disparity.data(), m.coarse_confidence.data(), m.coarse_limit.data()});
-        if (m.guide)
+        if (m.guide) {
             m.guide->predict(m.coarse_disparity.data(), m.coarse_limit.data(), &m.pool);
+            m.guided_now = m.guide->searchedShare() <= m.settings.guided_max_share;
+        }
     }
     const Clock::time_point t1 = Clock::now();
     m.full.compute(left, left_stride, right, right_stride,
                    {out.disparity_px, out.confidence, out.near_field},
-                   m.guide ? m.guide->spans() : nullptr);
+                   m.guided_now ? m.guide->spans() : nullptr);
     const Clock::time_point t2 = Clock::now();
     if (m.coarse) {
         const int ch = m.coarse->settings().height, h = m.settings.full.height;
@@ -414,7 +420,7 @@ const PyramidSgmTimings& PyramidSgm::timings() const
 
 double PyramidSgm::searchedShare() const
 {
-    return impl_->guide ? impl_->guide->searchedShare() : 1.0;
+    return impl_->guided_now ? impl_->guide->searchedShare() : 1.0;
 }
 
 const PyramidSgmSettings& PyramidSgm::settings() const

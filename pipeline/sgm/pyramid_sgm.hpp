@@ -77,6 +77,11 @@ struct PyramidSgmSettings {
     // With the extended range: the coarse level runs first and the full level searches
     // only the spans it predicts (guided_spans.hpp) rather than the whole range.
     bool guided_search = false;
+    // With the guided search: a frame whose spans would search more than this share of the
+    // full level's lanes searches the whole range instead, as without the guided search.
+    // The spans' kernels cost more per lane than the whole range's, and measured on two
+    // cores the guided pipeline was slower from a share of about 0.4 on (bench/README.md).
+    double guided_max_share = 0.4;
     // The near-field probe over the region compute() is given.
     bool near_field_probe = true;
 };
@@ -129,7 +134,8 @@ class PyramidSgm {
     int extendedRangeLast() const;
     const PyramidSgmTimings& timings() const;
     // The share of the full level's disparities the last compute() searched, 0..1 (1
-    // without the guided search).
+    // without the guided search, or when its spans would have searched more than
+    // guided_max_share).
     double searchedShare() const;
     // Tiles the near-field probe marked in the last compute(), and tiles it could probe.
     int nearEvidenceTiles() const;

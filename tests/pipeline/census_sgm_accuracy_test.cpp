@@ -78,6 +78,11 @@ cv::Mat censusSgm(const cv::Mat& left, const cv::Mat& right, int num_disparities
     ProcessorSettings settings;
     settings.matcher = matcherDefaults(MatcherKind::CensusSgm, SgbmMode::Sgbm, tuning);
     settings.matcher.guided_search = guided;
+    // The spans' own accuracy: taken whatever share of the range they search (a frame
+    // that would search most of it searches the whole range as the service runs it, which
+    // the full search's figures are).
+    if (guided)
+        settings.matcher.guided_max_share = 1.0;
     if (num_disparities > 0)
         settings.matcher.num_disparities = num_disparities;
     if (threads > 0)

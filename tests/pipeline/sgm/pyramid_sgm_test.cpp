@@ -38,6 +38,9 @@ PyramidSgmSettings settingsFor(bool extended, bool simd = true, bool guided = fa
 {
     PyramidSgmSettings s;
     s.guided_search = guided;
+    // kNumDisparities is two vectors of lanes, so a span searches half of them at least:
+    // the spans are taken whatever they search, so that the tests see them.
+    s.guided_max_share = 1.0;
     s.full.width = kWidth;
     s.full.height = kHeight;
     s.full.num_disparities = kNumDisparities;
@@ -46,18 +49,24 @@ PyramidSgmSettings settingsFor(bool extended, bool simd = true, bool guided = fa
     return s;
 }
 
-Output match(const SyntheticPair& pair, const PyramidSgmSettings& settings,
-             PixelRect probe = kWholeImage)
+// What `matcher` gives for the pair (every entry written over values it never writes).
+Output computeWith(PyramidSgm& matcher, const SyntheticPair& pair, PixelRect probe = kWholeImage)
 {
-    PyramidSgm matcher(settings);
     const size_t area = pair.left.size();
     Output out{std::vector<float>(area, -1.0f), std::vector<uint8_t>(area, 77),
                std::vector<uint8_t>(area, 77), std::vector<float>(area, -1.0f)};
     const auto stride = static_cast<size_t>(pair.width);
     matcher.compute(pair.left.data(), stride, pair.right.data(), stride, probe,
                     {out.disparity_px.data(), out.confidence.data(), out.near_field.data(),
-                     settings.extended_range ? out.coarse_only_px.data() : nullptr});
+                     matcher.settings().extended_range ? out.coarse_only_px.data() : nullptr});
     return out;
+}
+
+Output match(const SyntheticPair& pair, const PyramidSgmSettings& settings,
+             PixelRect probe = kWholeImage)
+{
+    PyramidSgm matcher(settings);
+    return computeWith(matcher, pair, probe);
 }
 
 // A background at 8 px and one rectangle in front of it at `disparity`.
@@ -217,10 +226,7 @@ TEST(PyramidSgmTest, TheGuidedSearchFindsWhatTheFullSearchFinds)
         const SyntheticPair pair = sceneWith(disparity);
         PyramidSgm guided(settingsFor(true, true, true));
         const size_t area = pair.left.size();
-        Output out{
-            std::vector<float>(area), std::vector<uint8_t>(area), std::vector<uint8_t>(area), {}};
-        guided.compute(pair.left.data(), kWidth, pair.right.data(), kWidth, kWholeImage,
-                       {out.disparity_px.data(), out.confidence.data(), out.near_field.data()});
+        const Output out = computeWith(guided, pair);
         EXPECT_LT(guided.searchedShare(), 0.75);
         const Output full = match(pair, settingsFor(true));
         int both = 0, agree = 0, full_reported = 0, guided_reported = 0;
@@ -245,6 +251,32 @@ TEST(PyramidSgmTest, TheGuidedSearchFindsWhatTheFullSearchFinds)
         });
         EXPECT_GT(near, inside * 3 / 4) << near << " of " << inside;
     }
+}
+
+// A frame whose spans would search more than guided_max_share of the lanes searches the
+// whole range: what the pyramid without the guided search gives, to the bit.
+TEST(PyramidSgmTest, AGuidedFrameThatWouldSearchMostLanesSearchesTheWholeRange)
+{
+    for (const int disparity : {40, 100}) {
+        SCOPED_TRACE("rectangle at " + std::to_string(disparity) + " px");
+        const SyntheticPair pair = sceneWith(disparity);
+        PyramidSgmSettings capped = settingsFor(true, true, true);
+        capped.guided_max_share = 0.4; // two vectors of lanes: a span is half of them at least
+        PyramidSgm guided(capped);
+        const Output out = computeWith(guided, pair);
+        EXPECT_EQ(guided.searchedShare(), 1.0);
+        const Output full = match(pair, settingsFor(true));
+        for (size_t i = 0; i < pair.left.size(); ++i) {
+            ASSERT_TRUE(out.disparity_px[i] == full.disparity_px[i] ||
+                        (std::isinf(out.disparity_px[i]) && std::isinf(full.disparity_px[i])))
+                << i;
+            ASSERT_EQ(out.confidence[i], full.confidence[i]) << i;
+            ASSERT_EQ(out.near_field[i], full.near_field[i]) << i;
+        }
+    }
+    PyramidSgmSettings wrong = settingsFor(true, true, true);
+    wrong.guided_max_share = 1.5;
+    EXPECT_THROW(validatePyramidSgmSettings(wrong), std::invalid_argument);
 }
 
 TEST(PyramidSgmTest, TheLevelsRanges)
