@@ -78,13 +78,11 @@ CloudKernels chosenKernels()
 
 const CloudKernels& simdCloudKernels()
 {
-    static const CloudKernels kernels = tableOfChosenTarget(chosenKernels);
-    return kernels;
+    return chosenTable(chosenKernels);
 }
 
 std::vector<CloudKernels> simdCloudKernelsOfEveryTarget()
 {
-    simdCloudKernels();
     return tablesOfEveryTarget(chosenKernels);
 }
 

@@ -187,13 +187,11 @@ RemapKernels chosenKernels()
 
 const RemapKernels& simdRemapKernels()
 {
-    static const RemapKernels kernels = tableOfChosenTarget(chosenKernels);
-    return kernels;
+    return chosenTable(chosenKernels);
 }
 
 std::vector<RemapKernels> simdRemapKernelsOfEveryTarget()
 {
-    simdRemapKernels();
     return tablesOfEveryTarget(chosenKernels);
 }
 

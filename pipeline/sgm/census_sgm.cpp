@@ -307,8 +307,6 @@ struct CensusSgm::Impl {
         return (v << 32) | (v >> 32);
     }
 
-    // The P2 of every pixel of row y for a step from (x + dx, y - 1) onto (x, y); a step
-    // from outside the image counts as no intensity change.
     // p2[x] = P2 for the step between a[x] and b[x], x in 0..n-1: by the kernel's short
     // table where P2 no longer changes past its last step, else by the whole table.
     void penaltiesOfSteps(const uint8_t* a, const uint8_t* b, int n, uint8_t* p2) const
@@ -321,6 +319,8 @@ struct CensusSgm::Impl {
             p2[x] = p2_by_step[std::abs(static_cast<int>(a[x]) - static_cast<int>(b[x]))];
     }
 
+    // The P2 of every pixel of row y for a step from (x + dx, y - 1) onto (x, y); a step
+    // from outside the image counts as no intensity change.
     void penaltiesFromAbove(const uint8_t* left, size_t stride, int y, int dx, uint8_t* p2) const
     {
         const int w = settings.width;

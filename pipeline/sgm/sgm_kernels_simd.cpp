@@ -927,13 +927,11 @@ SgmKernels chosenKernels()
 
 const SgmKernels& simdKernels()
 {
-    static const SgmKernels kernels = tableOfChosenTarget(chosenKernels);
-    return kernels;
+    return chosenTable(chosenKernels);
 }
 
 std::vector<SgmKernels> simdKernelsOfEveryTarget()
 {
-    simdKernels();
     return tablesOfEveryTarget(chosenKernels);
 }
 

@@ -15,6 +15,7 @@
 #include <gtest/gtest.h>
 
 #include "pipeline/cloud/cloud_kernels.hpp"
+#include "tests/pipeline/simd_target_name.hpp"
 
 namespace stereod::cloud {
 
@@ -96,9 +97,7 @@ class CloudKernelsOnEveryTarget : public ::testing::TestWithParam<CloudKernels> 
 
 INSTANTIATE_TEST_SUITE_P(Targets, CloudKernelsOnEveryTarget,
                          ::testing::ValuesIn(simdCloudKernelsOfEveryTarget()),
-                         [](const ::testing::TestParamInfo<CloudKernels>& param_info) {
-                             return std::string(param_info.param.target);
-                         });
+                         simdTargetName<CloudKernels>);
 
 TEST_P(CloudKernelsOnEveryTarget, PointsRowMatchesScalar)
 {

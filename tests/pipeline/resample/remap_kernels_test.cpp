@@ -13,6 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "pipeline/resample/remap_kernels.hpp"
+#include "tests/pipeline/simd_target_name.hpp"
 
 namespace stereod::resample {
 
@@ -136,9 +137,7 @@ class RemapKernelsOnEveryTarget : public ::testing::TestWithParam<RemapKernels> 
 
 INSTANTIATE_TEST_SUITE_P(Targets, RemapKernelsOnEveryTarget,
                          ::testing::ValuesIn(simdRemapKernelsOfEveryTarget()),
-                         [](const ::testing::TestParamInfo<RemapKernels>& param_info) {
-                             return std::string(param_info.param.target);
-                         });
+                         simdTargetName<RemapKernels>);
 
 TEST_P(RemapKernelsOnEveryTarget, RemapRowMatchesScalar)
 {

@@ -18,6 +18,7 @@
 
 #include "pipeline/sgm/sgm_kernels.hpp"
 #include "tests/pipeline/sgm/synthetic_pair.hpp"
+#include "tests/pipeline/simd_target_name.hpp"
 
 namespace stereod::sgm {
 
@@ -180,9 +181,7 @@ class SgmKernelsOnEveryTarget : public ::testing::TestWithParam<SgmKernels> {};
 
 INSTANTIATE_TEST_SUITE_P(Targets, SgmKernelsOnEveryTarget,
                          ::testing::ValuesIn(simdKernelsOfEveryTarget()),
-                         [](const ::testing::TestParamInfo<SgmKernels>& param_info) {
-                             return std::string(param_info.param.target);
-                         });
+                         simdTargetName<SgmKernels>);
 
 TEST(SgmKernelsTest, SimdTargetIsNamed)
 {
