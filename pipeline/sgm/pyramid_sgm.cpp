@@ -165,19 +165,48 @@ struct PyramidSgm::Impl {
             const int cy = std::min(y / 2, ch - 1);
             const size_t row = static_cast<size_t>(y) * static_cast<size_t>(w);
             const size_t crow = static_cast<size_t>(cy) * static_cast<size_t>(cw);
+            if (guided_now)
+                dropDisagreeingRow(row, crow, out);
             for (int x0 = 0; x0 < w; x0 += kMergeChunk) {
                 // Most of an image is neither near evidence of either level nor a near
                 // surface of the coarse one: a chunk with none of them keeps what the
-                // full level found, as it is. (A guided search checks every pixel.)
+                // full level found, as it is.
                 const bool whole = x0 + kMergeChunk <= 2 * cw;
                 const size_t c = crow + static_cast<size_t>(x0 / 2);
-                if (!guided_now && whole &&
-                    quietChunk(coarse_near.data() + c, coarse_limit.data() + c,
-                               out.near_field + row + static_cast<size_t>(x0)))
+                if (whole && quietChunk(coarse_near.data() + c, coarse_limit.data() + c,
+                                        out.near_field + row + static_cast<size_t>(x0)))
                     continue;
                 for (int x = x0; x < std::min(w, x0 + kMergeChunk); ++x)
                     mergePixel(x, cy, row + static_cast<size_t>(x), out);
             }
+        }
+    }
+
+    // With the guided search, before the rest of the merge: a narrowly searched pixel has
+    // no competitor outside its span to be told apart from, so the coarse level's match
+    // over the whole range at the same place must agree with its disparity (an unmeasured
+    // one does not). Not where the coarse level saw something nearer than its own range,
+    // which mergePixel() marks whatever the full level found. Full-resolution row at
+    // `row`, its coarse row at `crow`; no branch: a vector loop.
+    void dropDisagreeingRow(size_t row, size_t crow, const PyramidSgmOutput& out)
+    {
+        const int w = settings.full.width;
+        const int cw = coarse->settings().width;
+        const LaneSpan* spans = guide->spans() + row;
+        const LaneSpan whole = guide->wholeRange();
+        const float* coarse_row = coarse_disparity.data() + crow;
+        const uint8_t* limit_row = coarse_limit.data() + crow;
+        float* disparity = out.disparity_px + row;
+        uint8_t* confidence = out.confidence + row;
+        for (int x = 0; x < w; ++x) {
+            const int cx = std::min(x / 2, cw - 1);
+            const float fine = disparity[x];
+            const bool narrow = (spans[x].first != whole.first) | (spans[x].end != whole.end);
+            const bool agrees =
+                std::abs(2.0f * coarse_row[cx] - fine) <= static_cast<float>(kGuideAgreePx);
+            const bool drop = narrow & (limit_row[cx] == 0) & (fine < kNone) & !agrees;
+            disparity[x] = drop ? kNone : fine;
+            confidence[x] = drop ? uint8_t{0} : confidence[x];
         }
     }
 
@@ -204,15 +233,6 @@ struct PyramidSgm::Impl {
         if (coarse_limit[c] != 0) {
             out.near_field[i] = kNearerThanExtendedRange;
             return;
-        }
-        if (guided_now && guide->narrow(i) && std::isfinite(out.disparity_px[i]) &&
-            !(std::abs(2.0f * coarse_disparity[c] - out.disparity_px[i]) <=
-              static_cast<float>(kGuideAgreePx))) {
-            // A narrow search, which has no competitor outside its span to be told apart
-            // from: the coarse level's match over the whole range at this place must agree
-            // (an unmeasured one does not).
-            out.disparity_px[i] = kNone;
-            out.confidence[i] = 0;
         }
         if (coarse_near[c] == 0) {
             // The full range's near end, next to a near surface the coarse level measured:
