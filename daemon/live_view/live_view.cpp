@@ -315,20 +315,23 @@ void LiveView::onFrame(const PublishedFrame& frame, std::string_view reading_jso
         Mailbox& m = mailbox_;
         m.frame = true;
         m.stamp_ns = stamp_ns;
-        if (subscribed(kLeftImage))
+        for (const Channel channel : {kLeftImage, kDepth, kConfidence, kDisparity, kPoints})
+            m.taken[channel] = subscribed(channel);
+        if (m.taken[kLeftImage])
             m.left_encoding = ros2::leftImageForRos(r, m.left);
-        if (subscribed(kDepth))
+        if (m.taken[kDepth])
             ros2::copyTrustedDepth(r, frame.depth_valid, m.depth_m);
-        if (subscribed(kConfidence))
+        if (m.taken[kConfidence])
             r.confidence.copyTo(m.confidence);
-        if (subscribed(kDisparity))
+        if (m.taken[kDisparity])
             r.disparity.copyTo(m.disparity);
         m.min_disparity = static_cast<float>(frame.stats.range.min_disparity);
         m.max_disparity =
             static_cast<float>(frame.stats.range.min_disparity + frame.stats.range.num_disparities);
         m.cloud.clear();
         m.cloud_colour.clear();
-        if (subscribed(kPoints) && frame.depth_valid)
+        m.points_in_colour = !r.left_rectified_colour.empty();
+        if (m.taken[kPoints] && frame.depth_valid)
             ros2::subsampleCloud(r, settings_.points_step, m.cloud, m.cloud_colour);
     }
     wake_.notify_one();
@@ -372,6 +375,8 @@ void LiveView::feed()
         last_sent_ns[channel] = now_ns;
         return true;
     };
+    // A frame channel whose part of this frame was taken, when it is due.
+    const auto fresh = [&](Channel channel) { return work.taken[channel] && due(channel); };
     int64_t last_pump_ns = 0;
     RectifiedGeometry geometry; // the mailbox's, with each frame
     while (true) {
@@ -394,6 +399,8 @@ void LiveView::feed()
                 std::swap(work.depth_m, mailbox_.depth_m);
                 std::swap(work.confidence, mailbox_.confidence);
                 std::swap(work.disparity, mailbox_.disparity);
+                work.taken = mailbox_.taken;
+                work.points_in_colour = mailbox_.points_in_colour;
                 std::swap(work.cloud, mailbox_.cloud);
                 std::swap(work.cloud_colour, mailbox_.cloud_colour);
                 work.left_encoding = mailbox_.left_encoding;
@@ -408,27 +415,27 @@ void LiveView::feed()
         if (work.frame) {
             const int64_t t = work.stamp_ns;
             const ros2::Header left_header{ros2::Time::fromNs(t), kLeftOpticalFrame};
-            if (!work.left.empty() && due(kLeftImage)) {
+            if (!work.left.empty() && fresh(kLeftImage)) {
                 const auto step = static_cast<uint32_t>(work.left.cols * work.left.elemSize());
                 ros2::serializeImage(left_header, work.left.rows, work.left.cols,
                                      work.left_encoding, step, work.left.data,
                                      work.left.total() * work.left.elemSize(), message);
                 send(kLeftImage, t, message);
             }
-            if (!work.depth_m.empty() && due(kDepth)) {
+            if (!work.depth_m.empty() && fresh(kDepth)) {
                 ros2::depthWithNan(work.depth_m, depth_nan);
                 ros2::serializeImage(left_header, work.depth_m.rows, work.depth_m.cols, "32FC1",
                                      work.depth_m.cols * 4, depth_nan.data(), depth_nan.size() * 4,
                                      message);
                 send(kDepth, t, message);
             }
-            if (!work.confidence.empty() && due(kConfidence)) {
+            if (!work.confidence.empty() && fresh(kConfidence)) {
                 ros2::serializeImage(left_header, work.confidence.rows, work.confidence.cols,
                                      "mono8", work.confidence.cols, work.confidence.data,
                                      work.confidence.total(), message);
                 send(kConfidence, t, message);
             }
-            if (!work.disparity.empty() && due(kDisparity)) {
+            if (!work.disparity.empty() && fresh(kDisparity)) {
                 ros2::disparityForRos(work.disparity, work.min_disparity, disparity_ros);
                 ros2::DisparityImage image;
                 image.header = left_header;
@@ -444,9 +451,9 @@ void LiveView::feed()
                                               message);
                 send(kDisparity, t, message);
             }
-            if (due(kPoints)) {
+            if (fresh(kPoints)) {
                 static_assert(sizeof(CloudPoint) == 4 * sizeof(float));
-                if (!work.cloud_colour.empty() && work.cloud_colour.size() == work.cloud.size()) {
+                if (work.points_in_colour && work.cloud_colour.size() == work.cloud.size()) {
                     ros2::xyziRgbCloud(work.cloud, work.cloud_colour, cloud_rgb);
                     ros2::serializeXyziRgbCloud(left_header, cloud_rgb.data(), work.cloud.size(),
                                                 message);

@@ -143,11 +143,18 @@ class LiveView final : public PublishObserver {
   private:
     struct Mailbox {
         bool frame = false; // the frame channels below hold a result not sent yet
+        // The frame channels whose part of the result was taken (they had subscribers
+        // when it came): a channel subscribed since gets the next frame, never what its
+        // buffer held from an older one, nor an empty cloud.
+        std::array<bool, kChannelEnd> taken{};
         cv::Mat left, depth_m, confidence, disparity;
         const char* left_encoding = "mono8"; // "rgb8" where the left camera has colour
         std::vector<CloudPoint> cloud;
         std::vector<CloudColour> cloud_colour; // one per cloud point, or none (grey)
-        int64_t stamp_ns = 0;                  // the pair's realtime stamp
+        // The left camera is in colour: the cloud carries it, empty or not, so that the
+        // channel's layout does not change with a frame that has no depth.
+        bool points_in_colour = false;
+        int64_t stamp_ns = 0; // the pair's realtime stamp
         float min_disparity = 0.0f;
         float max_disparity = 0.0f;
     };

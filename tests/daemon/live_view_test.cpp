@@ -19,6 +19,7 @@
 #include "daemon/live_view/foxglove_protocol.hpp"
 #include "daemon/live_view/live_view.hpp"
 #include "pipeline/cv_conversions.hpp"
+#include "ros2/messages.hpp"
 #include "tests/support/descriptor_exhaustion.hpp"
 #include "tests/support/http_client.hpp"
 #include "tests/support/websocket_client.hpp"
@@ -40,11 +41,16 @@ RectifiedGeometry geometryOf(cv::Size size)
     return g;
 }
 
-PublishedFrame frameOf(cv::Size size)
+// colour: a left camera in colour, which the cloud carries.
+PublishedFrame frameOf(cv::Size size, bool colour = false)
 {
     PublishedFrame frame;
     DepthResult& r = frame.result;
     r.left_rectified = cv::Mat(size, CV_8UC1, cv::Scalar(128));
+    if (colour) {
+        r.left_rectified_colour = cv::Mat(size, CV_8UC3, cv::Scalar(30, 20, 10));
+        r.cloud_colour.assign(1000, CloudColour{10, 20, 30});
+    }
     r.disparity = cv::Mat(size, CV_32FC1, cv::Scalar(20.0f));
     r.confidence = cv::Mat(size, CV_8UC1, cv::Scalar(200));
     r.depth_m = cv::Mat(size, CV_32FC1, cv::Scalar(2.5f));
@@ -58,9 +64,9 @@ PublishedFrame frameOf(cv::Size size)
 // reading names its frame (0, 1, ...).
 class Producer {
   public:
-    Producer(LiveView& view, cv::Size size, std::chrono::milliseconds period)
-        : thread_([this, &view, size, period] {
-              PublishedFrame frame = frameOf(size);
+    Producer(LiveView& view, cv::Size size, std::chrono::milliseconds period, bool colour = false)
+        : thread_([this, &view, size, period, colour] {
+              PublishedFrame frame = frameOf(size, colour);
               while (!stop_.load()) {
                   const uint64_t number = frames_.load();
                   frame.result.frame = number;
@@ -158,6 +164,42 @@ TEST(LiveView, ChannelsArriveUnderTheirSubscriptionIdsAtTheirOwnRates)
     EXPECT_TRUE(status.listening);
     EXPECT_EQ(status.clients, 1u);
     EXPECT_GE(status.messages_sent, static_cast<uint64_t>(counts[7] + counts[9] + counts[11]));
+    view.stop();
+}
+
+// A client that subscribes while frames flow gets as its first cloud a whole frame's, in
+// the left camera's colours: never the empty, colourless cloud of a frame whose points
+// nobody had asked for when it came (the subscription landing between the frame's copy
+// and its sending).
+TEST(LiveView, ANewSubscriberFirstGetsAWholeCloudInColour)
+{
+    LiveViewSettings settings;
+    settings.port = 0;
+    settings.max_rate_hz = 500;
+    const cv::Size size(64, 48);
+    LiveView view(settings, geometryOf(size));
+    ASSERT_EQ(view.start(), "");
+    auto reader = subscribe(view, {{1, kNearest}}); // frames are taken with a client on
+    Producer producer(view, size, 1ms, true);
+    for (int attempt = 0; attempt < 40; ++attempt) {
+        auto client = subscribe(view, {{2, kPoints}});
+        std::optional<test::WebSocketClient::Message> first;
+        while (!first) {
+            auto message = client->receive(2s);
+            ASSERT_TRUE(message) << "no cloud for 2 s";
+            if (message->opcode == 2 && subscriptionOf(*message) == 2)
+                first = std::move(message);
+        }
+        const ros2::PointCloud2View cloud =
+            ros2::parsePointCloud2(std::string_view(first->payload).substr(13));
+        ASSERT_EQ(cloud.point_step, 20u) << "attempt " << attempt;
+        ASSERT_EQ(cloud.fields.size(), 5u);
+        EXPECT_EQ(cloud.fields[4].name, "rgb");
+        // Every points_step-th point of the frame's 1000.
+        ASSERT_EQ(cloud.width, 1000u / static_cast<uint32_t>(settings.points_step))
+            << "attempt " << attempt;
+    }
+    producer.stop();
     view.stop();
 }
 
