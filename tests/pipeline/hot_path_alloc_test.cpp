@@ -6,7 +6,10 @@
 // are the benchmark's (bench/alloc_counter.cpp), compiled into this executable only:
 // replacing operator new affects the whole program, so nothing else is tested here.
 
+#include <atomic>
+#include <chrono>
 #include <cstdint>
+#include <thread>
 
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
@@ -20,6 +23,27 @@ namespace stereod {
 namespace {
 
 constexpr int kFrames = 20;
+
+// Has every thread of OpenCV's pool run a job, as the service's first frames do: a
+// thread's first job sets up its state (allocations), and on a busy machine a worker can
+// wake only after the first calls have finished without it, then join one inside the
+// measured window. Each of the stripes, one per thread, waits until all have started, so
+// that no thread takes two.
+void startEveryPoolThread()
+{
+    const int threads = cv::getNumThreads();
+    std::atomic<int> started{0};
+    cv::parallel_for_(
+        cv::Range(0, threads),
+        [&](const cv::Range& stripes) {
+            started.fetch_add(stripes.end - stripes.start);
+            const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+            while (started.load() < threads && std::chrono::steady_clock::now() < give_up)
+                std::this_thread::yield();
+        },
+        threads);
+    ASSERT_EQ(started.load(), threads) << "a thread of OpenCV's pool never started";
+}
 
 class HotPathAllocations : public ::testing::Test {
   protected:
@@ -48,6 +72,7 @@ TEST_F(HotPathAllocations, RectifierAllocatesNothingAfterTheFirstFrame)
     cv::Mat left, right;
     rectifier.rectifyLeft(raw.left, left);
     rectifier.rectifyRight(raw.right, right);
+    startEveryPoolThread();
     const uint8_t* left_buffer = left.data;
     const uint8_t* right_buffer = right.data;
 
@@ -82,6 +107,7 @@ TEST_F(HotPathAllocations, ColourRectifyAllocatesNothingAfterTheFirstFrame)
 
     cv::Mat out;
     rectifier.rectifyLeft(colour, out);
+    startEveryPoolThread();
     const uint8_t* buffer = out.data;
     uint64_t cpp = 0;
     uint64_t mat = 0;
@@ -105,9 +131,10 @@ TEST_F(HotPathAllocations, DepthToMillimetresAllocatesNothingIntoAPreparedBuffer
     cv::Mat depth_mm(depth_m.size(), CV_16UC1);
     const uint8_t* buffer = depth_mm.data;
     // The first calls start OpenCV's thread pool's workers, as the service's first frames
-    // do (on a busy machine a worker may join a few calls late).
+    // do; startEveryPoolThread() makes sure of it.
     for (int frame = 0; frame < kFrames; ++frame)
         depthToMillimetres(depth_m, depth_mm);
+    startEveryPoolThread();
 
     uint64_t cpp = 0;
     uint64_t mat = 0;
