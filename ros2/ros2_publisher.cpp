@@ -180,7 +180,9 @@ void Ros2Publisher::offerFrame(const DepthResult& r, int64_t stamp_realtime_ns, 
         m.max_disparity = static_cast<float>(range.min_disparity + range.num_disparities);
         m.cloud.clear();
         m.cloud_colour.clear();
-        if (wanted(kPointsChannel) && depth_valid)
+        m.points_taken = wanted(kPointsChannel);
+        m.points_in_colour = !r.left_rectified_colour.empty();
+        if (m.points_taken && depth_valid)
             subsampleCloud(r, settings_.points_step, m.cloud, m.cloud_colour);
         m.reading = r.reading;
         m.reading_json.assign(reading_json);
@@ -354,11 +356,11 @@ void Ros2Publisher::publishFrame(const Mailbox& work, Scratch& scratch, int64_t 
         disparity.delta_d = 1.0f / 16.0f; // the matchers' sub-pixel step
         countWrite(dds_write(w[kDisparityChannel], &disparity));
     }
-    if (due(kPointsChannel)) {
+    if (work.points_taken && due(kPointsChannel)) {
         static_assert(sizeof(CloudPoint) == 4 * sizeof(float));
         // With colours, a fifth field `rgb` (PCL's packed float); the points interleaved.
         const bool coloured =
-            !work.cloud_colour.empty() && work.cloud_colour.size() == work.cloud.size();
+            work.points_in_colour && work.cloud_colour.size() == work.cloud.size();
         std::array<sensor_msgs_msg_dds__PointField_, 5> fields = {{
             {borrow("x"), 0, PointField::FLOAT32, 1},
             {borrow("y"), 4, PointField::FLOAT32, 1},

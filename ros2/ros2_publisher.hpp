@@ -126,8 +126,14 @@ class Ros2Publisher {
         int64_t stamp_realtime_ns = 0; // the pair's capture time, CLOCK_REALTIME
         cv::Mat left, depth_m, disparity;
         const char* left_encoding = "mono8"; // "rgb8" where the left camera has colour
+        // Whether the frame's cloud was taken (the points topic had readers then): a reader
+        // matched since gets the next frame's, not an empty one.
+        bool points_taken = false;
         std::vector<CloudPoint> cloud;
         std::vector<CloudColour> cloud_colour; // one per cloud point, or none (grey)
+        // The left camera is in colour: the cloud carries it, empty or not, so that the
+        // topic's layout does not change with a frame that has no depth.
+        bool points_in_colour = false;
         float min_disparity = 0.0f;
         float max_disparity = 0.0f;
         Reading reading;

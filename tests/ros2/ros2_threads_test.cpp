@@ -38,6 +38,47 @@ DdsDiscovery testDomain(const test::DdsDomainLease& lease)
     return discovery;
 }
 
+// The publisher tests' settings, on the test's own domain, up to 1000 frames a second.
+Ros2Settings publisherSettings(const std::string& ns, const test::DdsDomainLease& domain)
+{
+    Ros2Settings settings;
+    settings.ns = ns;
+    settings.discovery = testDomain(domain);
+    settings.max_rate_hz = 1000;
+    return settings;
+}
+
+// The publisher tests' rectified geometry: 64x48 pixels.
+RectifiedGeometry smallGeometry()
+{
+    RectifiedGeometry geometry;
+    geometry.image_size = ImageSize{64, 48};
+    geometry.focal_px = 60;
+    geometry.cx_px = 32;
+    geometry.cy_px = 24;
+    geometry.baseline_m = 0.1;
+    return geometry;
+}
+
+// A 64x48 result of uniform images, depth 1 m, as the publisher tests offer it.
+DepthResult smallResult()
+{
+    DepthResult result;
+    result.left_rectified = cv::Mat(48, 64, CV_8UC1, cv::Scalar(100));
+    result.disparity = cv::Mat(48, 64, CV_32FC1, cv::Scalar(6.0f));
+    result.depth_m = cv::Mat(48, 64, CV_32FC1, cv::Scalar(1.0f));
+    return result;
+}
+
+// The range the publisher tests' results were matched over.
+DisparityRange smallRange()
+{
+    DisparityRange range;
+    range.num_disparities = 16;
+    range.closest_depth_m = 0.4;
+    return range;
+}
+
 // A 64x48 mono8 image whose pixels all hold `value`, stamped `stamp_ns` (wall clock).
 // Waits (up to 10 s) until each of the two writers has matched a reader: until then,
 // written samples are lost.
@@ -244,17 +285,9 @@ TEST(Ros2Threads, SourceTakesCameraInfoWhileTheCalibrationAndStatusAreRead)
 
 TEST(Ros2Threads, PublisherPublishesWhileResultsAreOfferedAndCountersRead)
 {
-    Ros2Settings settings;
-    settings.ns = "/threads";
     const test::DdsDomainLease domain;
-    settings.discovery = testDomain(domain);
-    settings.max_rate_hz = 1000;
-    RectifiedGeometry geometry;
-    geometry.image_size = ImageSize{64, 48};
-    geometry.focal_px = 60;
-    geometry.cx_px = 32;
-    geometry.cy_px = 24;
-    geometry.baseline_m = 0.1;
+    const Ros2Settings settings = publisherSettings("/threads", domain);
+    const RectifiedGeometry geometry = smallGeometry();
     Ros2Publisher publisher(settings, geometry, NearestSettings{}, CameraPose{});
     ASSERT_EQ(publisher.start(), "");
 
@@ -272,16 +305,10 @@ TEST(Ros2Threads, PublisherPublishesWhileResultsAreOfferedAndCountersRead)
 
     std::atomic<bool> done{false};
     std::thread offering([&] {
-        DepthResult result;
-        result.left_rectified = cv::Mat(48, 64, CV_8UC1, cv::Scalar(100));
-        result.disparity = cv::Mat(48, 64, CV_32FC1, cv::Scalar(6.0f));
-        result.depth_m = cv::Mat(48, 64, CV_32FC1, cv::Scalar(1.0f));
-        DisparityRange range;
-        range.num_disparities = 16;
-        range.closest_depth_m = 0.4;
+        DepthResult result = smallResult();
         while (!done.load()) {
             ++result.frame;
-            publisher.offerFrame(result, realtimeOffsetNs() + monotonicNowNs(), true, range,
+            publisher.offerFrame(result, realtimeOffsetNs() + monotonicNowNs(), true, smallRange(),
                                  CameraPose{}, "{\"valid\":false}");
             std::this_thread::sleep_for(1ms);
         }
@@ -324,6 +351,64 @@ TEST(Ros2Threads, PublisherPublishesWhileResultsAreOfferedAndCountersRead)
     EXPECT_GT(received[0], 20u);
     EXPECT_GT(received[1], 20u);
     EXPECT_FALSE(counters.publishing);
+}
+
+// A reader of the points that matches while frames flow gets as its first cloud a whole
+// frame's, in the left camera's colours: never the empty, colourless cloud of a frame
+// whose points nobody read when it was offered (the match landing between the frame's
+// offer and its publishing). Frames are offered back to back, so that one always waits.
+TEST(Ros2Threads, APointsReaderMatchedMidStreamFirstGetsAWholeCloudInColour)
+{
+    const test::DdsDomainLease domain;
+    const Ros2Settings settings = publisherSettings("/midstream", domain);
+    Ros2Publisher publisher(settings, smallGeometry(), NearestSettings{}, CameraPose{});
+    ASSERT_EQ(publisher.start(), "");
+
+    constexpr uint32_t kPoints = 1000;
+    std::atomic<bool> done{false};
+    std::thread offering([&] {
+        DepthResult result = smallResult();
+        result.left_rectified_colour = cv::Mat(48, 64, CV_8UC3, cv::Scalar(30, 20, 10));
+        result.cloud.assign(kPoints, CloudPoint{0.1f, 0.2f, 1.0f, 100.0f});
+        result.cloud_colour.assign(kPoints, CloudColour{10, 20, 30});
+        while (!done.load()) {
+            ++result.frame;
+            publisher.offerFrame(result, realtimeOffsetNs() + monotonicNowNs(), true, smallRange(),
+                                 CameraPose{}, "{\"valid\":false}");
+            std::this_thread::yield();
+        }
+    });
+
+    DdsParticipant peer(settings.discovery);
+    for (int attempt = 0; attempt < 5; ++attempt) {
+        const dds_entity_t reader = peer.makeReader(
+            "rt/midstream/points", sensor_msgs_msg_dds__PointCloud2__desc, QosProfile::SensorData);
+        bool got = false;
+        const auto deadline = std::chrono::steady_clock::now() + 10s;
+        while (!got && std::chrono::steady_clock::now() < deadline) {
+            void* sample = nullptr;
+            dds_sample_info_t info{};
+            const dds_return_t n = dds_take(reader, &sample, &info, 1, 1);
+            if (n <= 0) {
+                std::this_thread::sleep_for(1ms);
+                continue;
+            }
+            if (info.valid_data) {
+                const auto* cloud = static_cast<const sensor_msgs_msg_dds__PointCloud2_*>(sample);
+                EXPECT_EQ(cloud->point_step, 20u) << "attempt " << attempt;
+                EXPECT_EQ(cloud->fields._length, 5u) << "attempt " << attempt;
+                EXPECT_EQ(cloud->width, kPoints / static_cast<uint32_t>(settings.points_step))
+                    << "attempt " << attempt;
+                got = true;
+            }
+            dds_return_loan(reader, &sample, n);
+        }
+        EXPECT_TRUE(got) << "attempt " << attempt << ": no cloud for 10 s";
+        dds_delete(reader);
+    }
+    done.store(true);
+    offering.join();
+    publisher.stop();
 }
 
 } // namespace
