@@ -64,8 +64,6 @@ class GuidedSpans {
 
     // The full level's spans, width x height, valid until the next predict().
     const LaneSpan* spans() const { return spans_.data(); }
-    // The span of a pixel that searches the whole range.
-    LaneSpan wholeRange() const { return {0, static_cast<uint8_t>(units_)}; }
     // Whether full-resolution pixel i (row-major) searches less than the whole range.
     bool narrow(size_t i) const { return spans_[i].first != 0 || spans_[i].end != units_; }
     // The share of the full level's lanes the last prediction searches, 0..1.

@@ -187,13 +187,11 @@ struct PyramidSgm::Impl {
     // over the whole range at the same place must agree with its disparity (an unmeasured
     // one does not). Not where the coarse level saw something nearer than its own range,
     // which mergePixel() marks whatever the full level found. Full-resolution row at
-    // `row`, its coarse row at `crow`; no branch: a vector loop.
+    // `row`, its coarse row at `crow`; one pass over the row, no per-pixel merge.
     void dropDisagreeingRow(size_t row, size_t crow, const PyramidSgmOutput& out)
     {
         const int w = settings.full.width;
         const int cw = coarse->settings().width;
-        const LaneSpan* spans = guide->spans() + row;
-        const LaneSpan whole = guide->wholeRange();
         const float* coarse_row = coarse_disparity.data() + crow;
         const uint8_t* limit_row = coarse_limit.data() + crow;
         float* disparity = out.disparity_px + row;
@@ -201,10 +199,10 @@ struct PyramidSgm::Impl {
         for (int x = 0; x < w; ++x) {
             const int cx = std::min(x / 2, cw - 1);
             const float fine = disparity[x];
-            const bool narrow = (spans[x].first != whole.first) | (spans[x].end != whole.end);
             const bool agrees =
                 std::abs(2.0f * coarse_row[cx] - fine) <= static_cast<float>(kGuideAgreePx);
-            const bool drop = narrow & (limit_row[cx] == 0) & (fine < kNone) & !agrees;
+            const bool drop = guide->narrow(row + static_cast<size_t>(x)) & (limit_row[cx] == 0) &
+                              (fine < kNone) & !agrees;
             disparity[x] = drop ? kNone : fine;
             confidence[x] = drop ? uint8_t{0} : confidence[x];
         }
