@@ -430,9 +430,17 @@ Tally sceneReadings(RangeChoice choice, const char* label)
 }
 
 // With the whole range the readings stay as accurate as without the near-field guard and
-// the extended range (measured before them: within 5 % on 48 of the 51 regions, and the same
-// three regions a little too far: tsukuba left, Laundry left, KITTI centre, where the
-// matcher leaves the nearest part of a thin or flat surface without depth).
+// the extended range (measured before them: within 5 % on 48 of the 51 regions). Three
+// regions read farther than the judge allows, each for its own reason (docs/configuration.md):
+//  - Laundry left, 0.264 m against 0.169 m: the bottle at the image's left edge lies outside
+//    the right image (its disparity, about 60, exceeds its columns), so no matcher can see it;
+//  - tsukuba left, 0.964 m against 0.909 m: the near surface is measured (1000 of its 1003
+//    pixels, none more than 2 px off), 0.6 px short of the truth's whole 11 px, which is 6 %
+//    at so small a disparity;
+//  - KITTI centre, 0.213 m against 0.197 m: the truth (LiDAR) covers 40 % of the region,
+//    its lower, nearer part; the reading's percentile runs over the 79 % measured.
+// The first is a surface the reading cannot see; the others are within what the matcher's
+// sub-pixel error and the truth's coverage allow.
 TEST(SharedScenes, TheWholeRangeReadsAsAccuratelyAsBefore)
 {
     const Tally tally = sceneReadings(RangeChoice::Full, "whole range");
