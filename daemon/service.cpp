@@ -97,6 +97,7 @@ Service::Service(ServiceConfig config, std::unique_ptr<FrameSource> source,
         initial_matcher_ = processor_->matcherName();
         initial_max_output_depth_m_ = processor_->maxOutputDepth();
         logDisparityRange(initial_range_, config_.processing.matcher, initial_matcher_);
+        logRegionLeftEdge(*processor_);
     } else {
         initial_matcher_ = "none";
         spdlog::warn("no calibration: running uncalibrated, serving raw frames only; every "
@@ -716,6 +717,7 @@ void Service::installCalibration(ArrivingCalibration arriving)
                  calibration_->rectified.image_size.height, calibration_->rectified.focal_px,
                  calibration_->rectified.baseline_m);
     logDisparityRange(initial_range_, config_.processing.matcher, initial_matcher_);
+    logRegionLeftEdge(*processor_);
     health_ = std::make_unique<CalibrationHealthMonitor>(calibration_->rectified,
                                                          config_.calibration_health.interval_s);
     worker_->setWithholdWhenFailed(config_.calibration_health.withhold_when_failed);

@@ -46,6 +46,22 @@ void logDisparityRange(const DisparityRange& range, const MatcherSettings& setti
                      settings.max_num_disparities);
 }
 
+void logRegionLeftEdge(const StereoProcessor& processor)
+{
+    const LeftEdgeView view = processor.regionLeftEdge();
+    if (view.short_columns == 0)
+        return;
+    const int last = view.first_column + view.short_columns - 1;
+    const double last_seen_m =
+        processor.calibration().rectified.depthFromDisparity(last - kLeftEdgeMarginPx);
+    spdlog::warn("nearest.roi: its columns {} to {} ({:.0f} % of it) see no nearer than {:.3f} to "
+                 "{:.3f} m, where the range measures from {:.3f} m; nearer than that there, a "
+                 "surface is outside the right camera's view and the reading passes over it "
+                 "(raise nearest.roi.x for the whole range in the whole region)",
+                 view.first_column, last, 100.0 * view.short_columns / std::max(1, view.columns),
+                 view.nearest_seen_m, last_seen_m, processor.disparityRange().closest_depth_m);
+}
+
 void copyRawPair(const StereoPair& pair, RawPair& raw)
 {
     raw.present = false;
@@ -142,6 +158,7 @@ void Worker::applyPendingSettings()
         refreshRange();
         spdlog::info("new processing settings in force");
         logDisparityRange(stats_.range, settings->matcher, std::string(stats_.matcher.view()));
+        logRegionLeftEdge(*processor_);
     } catch (const std::exception& e) {
         spdlog::error("new processing settings refused, the previous ones stay in force: {}",
                       e.what());

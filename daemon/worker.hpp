@@ -48,6 +48,10 @@ namespace stereod {
 // distance out of sight ("cannot see closer than X m with N disparities").
 void logDisparityRange(const DisparityRange& range, const MatcherSettings& settings,
                        const std::string& matcher_name);
+// A warning when the nearest-object region reaches so near the image's left edge that its
+// left columns cannot see as near as the range measures (LeftEdgeView): a surface that
+// near there goes unseen, and the reading passes over it.
+void logRegionLeftEdge(const StereoProcessor& processor);
 
 // Copies the pair's frames into `raw` (as captured, with each camera's own stamp) and
 // marks it present; a missing frame leaves it not present. Allocates only when the

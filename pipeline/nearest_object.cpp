@@ -77,6 +77,21 @@ NearestObjectFinder::NearestObjectFinder(size_t max_region_pixels)
 {
 }
 
+LeftEdgeView leftEdgeView(const cv::Rect& region, int last_disparity_px,
+                          const RectifiedGeometry& geometry)
+{
+    LeftEdgeView view;
+    view.first_column = region.x;
+    view.columns = region.width;
+    // Column x sees disparities up to x - margin: the range's last from last + margin on.
+    view.short_columns =
+        std::clamp(last_disparity_px + kLeftEdgeMarginPx - region.x, 0, region.width);
+    const int seen = region.x - kLeftEdgeMarginPx;
+    if (seen + geometry.doffs_px > 0.0)
+        view.nearest_seen_m = geometry.depthFromDisparity(seen);
+    return view;
+}
+
 ReadingFacts regionFacts(const RegionMeasurement& region, const NearestSettings& settings,
                          const NearFieldFacts& near, int64_t stamp_ns, uint64_t frame)
 {

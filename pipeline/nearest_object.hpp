@@ -11,6 +11,7 @@
 #include <opencv2/core/types.hpp>
 
 #include "model/reading.hpp"
+#include "model/rectified_geometry.hpp"
 #include "pipeline/nearest_settings.hpp"
 #include "pipeline/reading_verdict.hpp"
 
@@ -28,6 +29,22 @@ cv::Rect regionPixels(const RegionOfInterest& roi, cv::Size image_size);
 // Index into the ascending-sorted in-range depths that the percentile designates:
 // floor(percentile / 100 * (count - 1)). count must be > 0.
 size_t percentileIndex(double percentile, size_t count);
+
+// What a region sees near the image's left edge. At column x the right image holds
+// disparities up to x (less kLeftEdgeMarginPx, the pixels a matcher keeps clear of the
+// edge of its search): a surface nearer than that there lies outside the right image,
+// and no matcher can see it however near it is (docs/configuration.md).
+inline constexpr int kLeftEdgeMarginPx = 4;
+struct LeftEdgeView {
+    int first_column = 0; // the region's left column
+    int columns = 0;      // the region's width in pixels
+    // Of those, the columns that cannot see as near as the range measures (from the left).
+    int short_columns = 0;
+    // The nearest depth the region's left column sees, metres; +inf when it sees nothing.
+    double nearest_seen_m = std::numeric_limits<double>::infinity();
+};
+LeftEdgeView leftEdgeView(const cv::Rect& region, int last_disparity_px,
+                          const RectifiedGeometry& geometry);
 
 // The facts of a processed pair's region for judgeReading(): the measurement and the
 // thresholds of `settings`.

@@ -415,6 +415,13 @@ DisparityRange StereoProcessor::disparityRange() const
     return impl_->range;
 }
 
+LeftEdgeView StereoProcessor::regionLeftEdge() const
+{
+    const RectifiedGeometry& geometry = impl_->calibration.rectified;
+    return leftEdgeView(regionPixels(impl_->settings.nearest.roi, toCv(geometry.image_size)),
+                        impl_->range.last_disparity_px, geometry);
+}
+
 double StereoProcessor::maxOutputDepth() const
 {
     return impl_->max_output_depth_m;

@@ -21,6 +21,7 @@
 #include "model/stage_timings.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/matcher_settings.hpp"
+#include "pipeline/nearest_object.hpp"
 #include "pipeline/nearest_settings.hpp"
 #include "pipeline/reading_verdict.hpp"
 
@@ -126,6 +127,8 @@ class StereoProcessor {
     const StereoCalibration& calibration() const;
     const ProcessorSettings& settings() const;
     DisparityRange disparityRange() const;
+    // What the nearest-object region sees near the image's left edge, with this range.
+    LeftEdgeView regionLeftEdge() const;
     // The outputs' depth cap in force (output.max_depth_m, or its default), metres.
     double maxOutputDepth() const;
     // A name for logs and status: "census-sgm", "sgbm", "sgbm-3way", "bm".

@@ -66,6 +66,30 @@ class StereodCli : public ::testing::Test {
         return runProcess(arguments);
     }
 
+    // The log of the service started on the replay with this configuration, until it
+    // listens, then stopped: what it says as it sets up. Fails the test on a bad exit.
+    std::string startUpLog(const std::string& config_text)
+    {
+        const std::string config = dir_.file("startup.yaml");
+        std::ofstream(config) << config_text << "source:\n  replay:\n    loop: false\n";
+        const std::string log_path = dir_.file("stereod.log");
+        ChildProcess service({stereodPath(), "--config", config, "--replay", replay_, "--calib",
+                              calibration_, "--socket", socket_},
+                             log_path);
+        const auto log = [&] {
+            std::ifstream file(log_path);
+            return std::string(std::istreambuf_iterator<char>(file), {});
+        };
+        EXPECT_TRUE(waitUntil([&] {
+            return log().find("listening on") != std::string::npos || !service.running();
+        })) << log();
+        service.sendSignal(SIGTERM);
+        const std::optional<int> status = service.waitFor(10s);
+        EXPECT_TRUE(status.has_value());
+        EXPECT_TRUE(status && WIFEXITED(*status) && WEXITSTATUS(*status) == 0) << log();
+        return log();
+    }
+
     TempDir dir_;
     std::string replay_;
     std::string calibration_;
@@ -346,27 +370,24 @@ TEST_F(StereodCli, SigtermStopsAStartUpBlockedInItsSourceWithinOneSecond)
 TEST_F(StereodCli, WarnsWhenTheDisparityCapHidesTheClosestDistance)
 {
     // 615 px * 0.013 m / 0.01 m = 800 px of disparity wanted, 64 allowed.
-    const std::string config = dir_.file("close.yaml");
-    std::ofstream(config) << "matcher:\n  min_depth_m: 0.01\n  max_num_disparities: 64\n"
-                          << "source:\n  replay:\n    loop: false\n";
-    ChildProcess service({stereodPath(), "--config", config, "--replay", replay_, "--calib",
-                          calibration_, "--socket", socket_},
-                         dir_.file("stereod.log"));
-    const auto log = [&] {
-        std::ifstream file(dir_.file("stereod.log"));
-        return std::string(std::istreambuf_iterator<char>(file), {});
-    };
-    ASSERT_TRUE(waitUntil([&] {
-        return log().find("listening on") != std::string::npos || !service.running();
-    })) << log();
-    service.sendSignal(SIGTERM);
-    const std::optional<int> status = service.waitFor(10s);
-    ASSERT_TRUE(status.has_value());
-    EXPECT_TRUE(WIFEXITED(*status) && WEXITSTATUS(*status) == 0) << log();
-    const std::string text = log();
+    const std::string text =
+        startUpLog("matcher:\n  min_depth_m: 0.01\n  max_num_disparities: 64\n");
     const std::size_t warning = text.find("cannot see closer than ");
     ASSERT_NE(warning, std::string::npos) << text;
     EXPECT_NE(text.find(" m with 64 disparities", warning), std::string::npos) << text;
+}
+
+// A region from the image's left edge: its first columns hold no match in the right image
+// as near as the range measures, and the service says so when it starts.
+TEST_F(StereodCli, WarnsWhenTheRegionMeetsTheLeftEdgeWithinTheRange)
+{
+    const std::string text =
+        startUpLog("nearest:\n  roi: {x: 0.0, y: 0.25, width: 0.5, height: 0.5}\n");
+    const std::size_t warning = text.find("[warning] nearest.roi: its columns 0 to ");
+    ASSERT_NE(warning, std::string::npos) << text;
+    EXPECT_NE(text.find("outside the right camera's view", warning), std::string::npos) << text;
+    // Said once, when the chain is set up.
+    EXPECT_EQ(text.find("[warning] nearest.roi:", warning + 1), std::string::npos) << text;
 }
 
 } // namespace

@@ -33,6 +33,31 @@ TEST(NearestObject, RegionPixelsScaleWithTheImage)
     EXPECT_EQ(regionPixels({0.9, 0.9, 0.2, 0.2}, {100, 100}), cv::Rect(90, 90, 10, 10));
 }
 
+// The demo's rig (focal 515.4 px, baseline 83.16 mm, 640x480) at the default range, 192
+// disparities with the extended range: the default region starts at column 160, which
+// holds disparities up to 156 in the right image.
+TEST(NearestObject, TheRegionsLeftColumnsNearTheImageEdgeSeeLessNear)
+{
+    RectifiedGeometry rig;
+    rig.image_size = {640, 480};
+    rig.focal_px = 515.4;
+    rig.baseline_m = 0.08316;
+    const cv::Rect region = regionPixels({0.25, 0.25, 0.5, 0.5}, {640, 480});
+
+    const LeftEdgeView view = leftEdgeView(region, 191, rig);
+    EXPECT_EQ(view.first_column, 160);
+    EXPECT_EQ(view.columns, 320);
+    EXPECT_EQ(view.short_columns, 35); // columns 160..194 cannot see disparity 191
+    EXPECT_NEAR(view.nearest_seen_m, 515.4 * 0.08316 / 156, 1e-9);
+
+    // The full-resolution range alone (96 disparities) is seen from column 99 on.
+    EXPECT_EQ(leftEdgeView(region, 95, rig).short_columns, 0);
+    // A region from the edge sees nothing at its first columns, every column short.
+    const LeftEdgeView edge = leftEdgeView(cv::Rect(2, 0, 20, 10), 191, rig);
+    EXPECT_EQ(edge.short_columns, 20);
+    EXPECT_TRUE(std::isinf(edge.nearest_seen_m));
+}
+
 TEST(NearestObject, PercentileIndex)
 {
     EXPECT_EQ(percentileIndex(0.0, 100), 0u);
