@@ -84,6 +84,24 @@ std::string suspectNote(const nlohmann::ordered_json& reading)
     return note;
 }
 
+// "  LEFT EDGE: 11 % of the region cannot see this near" when the image's left edge cuts
+// the view of part of the region short of the distance, else "".
+std::string outOfViewNote(const nlohmann::ordered_json& reading)
+{
+    const auto share = reading.find("out_of_view_fraction");
+    if (share == reading.end() || !share->is_number() || !(share->get<double>() > 0.0)) {
+        return {};
+    }
+    return fmt::format("  LEFT EDGE: {:.0f} % of the region cannot see this near",
+                       100.0 * share->get<double>());
+}
+
+// The notes a valid reading carries, at the end of its line.
+std::string notes(const nlohmann::ordered_json& reading)
+{
+    return isValid(reading) ? suspectNote(reading) + outOfViewNote(reading) : std::string();
+}
+
 } // namespace
 
 namespace {
@@ -101,7 +119,7 @@ std::string distanceText(const nlohmann::ordered_json& reading)
 
 std::string formatDistance(const nlohmann::ordered_json& reading)
 {
-    return distanceText(reading) + (isValid(reading) ? suspectNote(reading) : std::string());
+    return distanceText(reading) + notes(reading);
 }
 
 std::string formatWatchLine(const nlohmann::ordered_json& reading)
@@ -118,11 +136,8 @@ std::string formatWatchLine(const nlohmann::ordered_json& reading)
         valid != reading.end() && valid->is_number()) {
         line += fmt::format("  valid {:.0f} %", 100.0 * valid->get<double>());
     }
-    // At the end, where a reader scanning the columns finds it.
-    if (isValid(reading)) {
-        line += suspectNote(reading);
-    }
-    return line;
+    // At the end, where a reader scanning the columns finds them.
+    return line + notes(reading);
 }
 
 } // namespace stereod

@@ -30,11 +30,13 @@ int exitCodeForReading(const nlohmann::ordered_json& reading);
 bool calibrationSuspect(const nlohmann::ordered_json& reading);
 
 // "0.873 m", "0.873 m  CALIBRATION SUSPECT: rows +1.52 px apart" when the reading is
-// flagged, or "no reading: <reason message>".
+// flagged, "0.264 m  LEFT EDGE: 11 % of the region cannot see this near" when part of the
+// region cannot see as near (out_of_view_fraction), or "no reading: <reason message>".
 std::string formatDistance(const nlohmann::ordered_json& reading);
 
 // One line of `stereoctl watch`: "frame 118  1.412 m  age 37 ms  valid 83 %", or the
-// reason instead of the distance; flagged readings end with "  CALIBRATION SUSPECT: ...".
+// reason instead of the distance; flagged readings end with "  CALIBRATION SUSPECT: ...",
+// and those with part of the region short of the distance with "  LEFT EDGE: ...".
 std::string formatWatchLine(const nlohmann::ordered_json& reading);
 
 } // namespace stereod

@@ -70,6 +70,10 @@ struct Reading {
     // matched at the coarse level only), counted in the distance when that brings it
     // nearer (pipeline/nearest_object.hpp).
     double inferred_fraction = 0.0;
+    // Of the region's pixels, those in columns that cannot see as near as distance_m: the
+    // image's left edge cuts their view (pipeline/nearest_object.hpp, LeftEdgeView), so a
+    // surface that near there would go unseen. 0 when the whole region sees that near.
+    double out_of_view_fraction = 0.0;
     // NearerThanRange: the closest depth the disparity range can see, in metres; the
     // obstacle is nearer than this.
     double nearer_than_m = 0.0;

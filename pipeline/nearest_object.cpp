@@ -92,6 +92,19 @@ LeftEdgeView leftEdgeView(const cv::Rect& region, int last_disparity_px,
     return view;
 }
 
+uint32_t outOfViewPixels(const cv::Rect& region, double distance_m,
+                         const RectifiedGeometry& geometry)
+{
+    if (!(distance_m > 0.0) || !std::isfinite(distance_m) || geometry.focal_px <= 0.0)
+        return 0;
+    const double disparity = std::ceil(geometry.disparityAtDepth(distance_m));
+    // Beyond any column's reach: every column is short (and the cast below stays in range).
+    const int last =
+        static_cast<int>(std::min(disparity, static_cast<double>(region.x + region.width)));
+    const LeftEdgeView view = leftEdgeView(region, last, geometry);
+    return static_cast<uint32_t>(view.short_columns) * static_cast<uint32_t>(region.height);
+}
+
 ReadingFacts regionFacts(const RegionMeasurement& region, const NearestSettings& settings,
                          const NearFieldFacts& near, int64_t stamp_ns, uint64_t frame)
 {

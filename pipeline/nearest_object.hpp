@@ -45,6 +45,10 @@ struct LeftEdgeView {
 };
 LeftEdgeView leftEdgeView(const cv::Rect& region, int last_disparity_px,
                           const RectifiedGeometry& geometry);
+// The region's pixels in the columns that cannot see as near as distance_m (0 for no
+// distance): where a surface at that distance, or nearer, would go unseen.
+uint32_t outOfViewPixels(const cv::Rect& region, double distance_m,
+                         const RectifiedGeometry& geometry);
 
 // The facts of a processed pair's region for judgeReading(): the measurement and the
 // thresholds of `settings`.

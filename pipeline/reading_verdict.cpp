@@ -45,6 +45,7 @@ Reading judgeReading(const ReadingFacts& facts)
         reading.in_range_fraction = region.in_range_pixels / total;
         reading.range_limit_fraction = region.nearer_than_range_pixels / total;
         reading.inferred_fraction = region.inferred_pixels / total;
+        reading.out_of_view_fraction = region.out_of_view_pixels / total;
         reading.calibration_suspect = facts.calibration_suspect;
         if (facts.calibration_suspect)
             reading.calibration_row_offset_px = facts.calibration_row_offset_px;

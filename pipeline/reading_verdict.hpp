@@ -28,6 +28,9 @@ struct RegionMeasurement {
     // than the extended range too.
     uint32_t nearer_than_range_pixels = 0;
     uint32_t nearer_than_extended_pixels = 0;
+    // Pixels of the columns that cannot see as near as percentile_depth_m (the image's left
+    // edge cuts their view; filled by the stereo chain, which knows the geometry).
+    uint32_t out_of_view_pixels = 0;
 };
 
 // When the region's evidence of something nearer than the range outweighs a number: at

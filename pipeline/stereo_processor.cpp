@@ -346,9 +346,11 @@ void StereoProcessor::process(const cv::Mat& left, const cv::Mat& left_colour, c
         cv::Mat inferred_rows = p.inferred_depth_m(rows);
         disparityToDepth(p.inferred_px(rows), p.calibration.rectified, inferred_rows);
     });
-    out.facts = regionFacts(p.nearest.measure(out.depth_m, out.confidence, out.near_field,
-                                              p.inferred_depth_m, p.settings.nearest),
-                            p.settings.nearest, p.nearFieldFacts(), stamp_ns, frame);
+    RegionMeasurement measured = p.nearest.measure(out.depth_m, out.confidence, out.near_field,
+                                                   p.inferred_depth_m, p.settings.nearest);
+    measured.out_of_view_pixels =
+        outOfViewPixels(region, measured.percentile_depth_m, p.calibration.rectified);
+    out.facts = regionFacts(measured, p.settings.nearest, p.nearFieldFacts(), stamp_ns, frame);
     out.reading = judgeReading(out.facts);
     const Clock::time_point t4 = Clock::now();
 

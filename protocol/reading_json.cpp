@@ -119,6 +119,8 @@ void appendReadingJson(std::string& out, const ReadingReport& report, int64_t no
     object.field("region_pixels", reading.region_pixels);
     object.field("range_limit_fraction", roundTo(reading.range_limit_fraction, 4));
     object.field("inferred_fraction", roundTo(reading.inferred_fraction, 4));
+    if (reading.out_of_view_fraction > 0.0)
+        object.field("out_of_view_fraction", roundTo(reading.out_of_view_fraction, 4));
     if (reading.calibration_suspect) {
         object.field("calibration_suspect", true);
         object.field("calibration_row_offset_px", roundTo(reading.calibration_row_offset_px, 3));

@@ -167,6 +167,10 @@ class Reading:
     region_pixels: Optional[int] = None
     range_limit_fraction: Optional[float] = None
     inferred_fraction: Optional[float] = None
+    #: Of the region, the share whose columns cannot see as near as the distance (the
+    #: image's left edge): a surface that near there would go unseen. ``None`` when the
+    #: whole region sees that near (the service leaves the field out).
+    out_of_view_fraction: Optional[float] = None
     #: Why there is no reading (a code of docs/protocol.md), ``None`` when valid.
     reason: Optional[str] = None
     #: The reason in words, for logs and people; may change between versions.
@@ -222,6 +226,7 @@ class Reading:
                 region_pixels=_opt_int(obj.get("region_pixels")),
                 range_limit_fraction=_opt_float(obj.get("range_limit_fraction")),
                 inferred_fraction=_opt_float(obj.get("inferred_fraction")),
+                out_of_view_fraction=_opt_float(obj.get("out_of_view_fraction")),
                 reason=code,
                 message=message,
                 nearer_than_m=_opt_float(obj.get("nearer_than_m")),

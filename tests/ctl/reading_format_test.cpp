@@ -47,6 +47,22 @@ TEST(ReadingFormat, ExitCodeFollowsTheReasonClass)
     }
 }
 
+// A region the image's left edge cuts short of the distance: the number stands (exit 0),
+// and the line says how much of the region could hide something nearer.
+TEST(ReadingFormat, ARegionShortOfTheDistanceAtTheLeftEdgeIsPrinted)
+{
+    Json reading = {{"valid", true},  {"distance_m", 0.264},    {"frame", 3},
+                    {"age_ms", 12.0}, {"valid_fraction", 0.68}, {"out_of_view_fraction", 0.1094}};
+    EXPECT_EQ(exitCodeForReading(reading), kExitOk);
+    EXPECT_EQ(formatDistance(reading),
+              "0.264 m  LEFT EDGE: 11 % of the region cannot see this near");
+    EXPECT_EQ(formatWatchLine(reading), "frame 3  0.264 m  age 12 ms  valid 68 %  LEFT EDGE: 11 % "
+                                        "of the region cannot see this near");
+    reading["calibration_suspect"] = true;
+    EXPECT_EQ(formatDistance(reading),
+              "0.264 m  CALIBRATION SUSPECT  LEFT EDGE: 11 % of the region cannot see this near");
+}
+
 TEST(ReadingFormat, ASuspectCalibrationHasItsOwnExitCodeAndIsPrinted)
 {
     Json suspect = {{"valid", true},

@@ -230,6 +230,31 @@ TEST_F(Processor, ProducesAReadingWithStampAndTimings)
 // p2_gradient_scale unset: the tuning decides (natural adapts P2 at 3 grey levels, planar
 // does not); a number sets it; 0 (the configuration's `off`) turns adaptation off, and on
 // a real pair the depth differs from the automatic one.
+// A region from the image's left edge: its first columns hold no match in the right image
+// as near as the distance (at column x, disparities up to x less the margin). The reading
+// keeps its number and says how much of the region that is; the default region, a quarter
+// in, sees tsukuba's range whole.
+TEST_F(Processor, AReadingSaysHowMuchOfItsRegionCannotSeeThatNear)
+{
+    ProcessorSettings edge = settings_;
+    edge.nearest.roi = {0.0, 0.25, 0.5, 0.5};
+    StereoProcessor p(calibration_, edge);
+    DepthResult out;
+    p.process(left_, right_, 1, 0, out);
+    ASSERT_TRUE(out.reading.valid) << reasonText(out.reading.reason);
+    // f*B = 10 px*m, doffs 5: the distance's disparity, and the columns short of it.
+    const double disparity = 10.0 / out.reading.distance_m - 5.0;
+    const int short_columns = static_cast<int>(std::ceil(disparity)) + kLeftEdgeMarginPx;
+    const cv::Rect region = regionPixels(edge.nearest.roi, left_.size());
+    EXPECT_NEAR(out.reading.out_of_view_fraction, static_cast<double>(short_columns) / region.width,
+                1e-9);
+
+    StereoProcessor centred(calibration_, settings_);
+    centred.process(left_, right_, 2, 0, out);
+    ASSERT_TRUE(out.reading.valid) << reasonText(out.reading.reason);
+    EXPECT_EQ(out.reading.out_of_view_fraction, 0.0);
+}
+
 TEST_F(Processor, GradientScaleUnsetIsTheTuningsAndZeroTurnsAdaptationOff)
 {
     const DisparityRange range{0, 16};

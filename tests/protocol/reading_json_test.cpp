@@ -30,6 +30,19 @@ TEST(ProtocolReading, ValidReadingHasEveryField)
     EXPECT_FALSE(reading.contains("reason"));
 }
 
+// The share of the region that cannot see as near as the distance: said when there is one.
+TEST(ProtocolReading, ARegionShortOfTheDistanceSaysHowMuch)
+{
+    ReadingReport report;
+    report.reading = sampleValidReading();
+    const int64_t now_ns = report.reading.stamp_ns;
+    EXPECT_FALSE(readingToJson(report, now_ns).contains("out_of_view_fraction"));
+    report.reading.out_of_view_fraction = 0.10937;
+    const Json reading = readingToJson(report, now_ns);
+    EXPECT_NEAR(reading["out_of_view_fraction"].get<double>(), 0.1094, 1e-12);
+    EXPECT_EQ(reading["valid"], true); // a caveat on the number, not a refusal
+}
+
 TEST(ProtocolReading, RefusalCarriesReasonWithNumbers)
 {
     ReadingReport report;

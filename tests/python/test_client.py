@@ -48,6 +48,18 @@ def test_distance_is_a_valid_reading(client):
     assert reading.producing and not reading.stale
     assert reading.calibration_suspect is False
     assert reading.raw["distance_m"] == reading.distance_m
+    # The default region, a quarter in, sees that near in every column.
+    assert reading.out_of_view_fraction is None
+
+
+def test_a_reading_says_how_much_of_its_region_cannot_see_that_near():
+    # A region from the image's left edge: its first columns hold no match in the right
+    # image as near as the distance; the reading keeps its number and says how much.
+    raw = {"valid": True, "distance_m": 0.8, "frame": 3, "valid_fraction": 0.9,
+           "out_of_view_fraction": 0.125}
+    reading = Reading.from_json(raw)
+    assert reading.valid and reading.distance_m == 0.8
+    assert reading.out_of_view_fraction == 0.125
 
 
 def test_distance_older_than_allowed_is_stale_not_an_exception(client):
