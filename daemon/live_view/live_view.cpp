@@ -46,6 +46,8 @@ const char* kReadingSchema =
     R"(evidence of a surface nearer than the range"},)"
     R"("inferred_fraction":{"type":"number","description":"share of the region without a )"
     R"(measured depth, counted at the nearest other evidence says it may be"},)"
+    R"("out_of_view_fraction":{"type":"number","description":"share of the region whose )"
+    R"(columns cannot see as near as the distance: the image's left edge cuts their view"},)"
     R"("closest_m":{"type":"number","description":"the closest depth the matcher measures"},)"
     R"("near_field_guard":{"type":"boolean","description":"whether the matcher looks for )"
     R"(surfaces nearer than its range"},)"

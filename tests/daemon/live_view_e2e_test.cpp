@@ -329,6 +329,25 @@ TEST_F(LiveViewPage, RegionAimedAtNothingShowsNoReadingAndTheReason)
         << shown["detail"];
 }
 
+// A region from the image's left edge: the distance, and under it how much of the region the
+// edge keeps from seeing that near (out_of_view_fraction).
+TEST_F(LiveViewPage, ARegionAtTheLeftEdgeShowsWhatItCannotSee)
+{
+    const std::string config = dir_.file("edge.yaml");
+    std::ofstream(config) << "nearest:\n  roi: {x: 0.0, y: 0.25, width: 0.5, height: 0.5}\n"
+                          << "publish:\n  max_reading_age_ms: 10000\n";
+    const uint16_t port = freePort();
+    startService("127.0.0.1:" + std::to_string(port), config, false);
+    ASSERT_FALSE(HasFailure());
+    openPage("left-edge", {"valid"});
+    const Json shown = next();
+    EXPECT_NE(shown["distance"].get<std::string>().find(" m"), std::string::npos)
+        << shown["distance"];
+    const std::string detail = shown["detail"].get<std::string>();
+    EXPECT_EQ(detail.rfind("LEFT EDGE: ", 0), 0u) << detail;
+    EXPECT_NE(detail.find("% of the region cannot see this near"), std::string::npos) << detail;
+}
+
 // Something nearer than the disparity range can see (tsukuba enlarged three times, as
 // census-sgm's accuracy test has it, with 32 disparities): NEARER THAN the bound, never a
 // distance.

@@ -3,7 +3,7 @@
 //
 // States:
 //   waiting       connected, no reading yet
-//   valid         a distance
+//   valid         a distance (with LEFT EDGE when part of the region cannot see that near)
 //   suspect       a distance, but the service suspects its calibration (calibration_suspect)
 //   nearer        nearer_than_range: something is nearer than the range can see
 //   none          no reading, with the reason's code and message
@@ -30,14 +30,19 @@ export function readingView(reading, ageMs, maxAgeMs, connected) {
     return { state: "stale", text: `STALE ${last}`, detail: `no fresh reading: ${why}` };
   }
   if (reading.valid) {
+    // Part of the region the image's left edge cuts short of the distance (docs/protocol.md).
+    const leftEdge = reading.out_of_view_fraction > 0
+      ? `LEFT EDGE: ${(100 * reading.out_of_view_fraction).toFixed(0)} % of the region ` +
+        "cannot see this near" : "";
     if (reading.calibration_suspect) {
       const rows = typeof reading.calibration_row_offset_px === "number"
         ? `: rows ${reading.calibration_row_offset_px >= 0 ? "+" : ""}` +
           `${reading.calibration_row_offset_px.toFixed(2)} px apart` : "";
       return { state: "suspect", text: number,
-               detail: `CALIBRATION SUSPECT${rows}; the distance may be wrong` };
+               detail: `CALIBRATION SUSPECT${rows}; the distance may be wrong` +
+                       (leftEdge ? `; ${leftEdge}` : "") };
     }
-    return { state: "valid", text: number, detail: "" };
+    return { state: "valid", text: number, detail: leftEdge };
   }
   if (reason.code === "nearer_than_range") {
     const bound = typeof reading.nearer_than_m === "number"
