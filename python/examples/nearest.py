@@ -41,6 +41,10 @@ def main() -> int:
                         suspect = "  CALIBRATION SUSPECT"
                         if reading.calibration_row_offset_px is not None:
                             suspect += f": rows {reading.calibration_row_offset_px:+.2f} px apart"
+                    # Part of the region the image's left edge keeps from seeing that near.
+                    if reading.out_of_view_fraction:
+                        suspect += (f"  LEFT EDGE: {100 * reading.out_of_view_fraction:.0f} % "
+                                    "of the region cannot see this near")
                     print(f"frame {reading.frame}  {reading.distance_m:.3f} m  "
                           f"age {reading.age_ms:.0f} ms{suspect}", flush=True)
                 elif reading.reason == "nearer_than_range":
