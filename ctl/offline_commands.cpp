@@ -205,6 +205,10 @@ void printDepthReport(const DepthResult& result, const DisparityRange& range,
     }
     fmt::print("  region {} px, {:.1f} % valid, {:.1f} % in range\n", reading.region_pixels,
                100.0 * reading.valid_fraction, 100.0 * reading.in_range_fraction);
+    if (reading.out_of_view_fraction > 0.0)
+        fmt::print("  LEFT EDGE: {:.0f} % of the region cannot see as near as the distance "
+                   "(nearest.roi.x or --roi further right sees it whole)\n",
+                   100.0 * reading.out_of_view_fraction);
     fmt::print("matcher {}, disparities {}..{}{}, closest measured depth {:.3f} m{}\n", matcher,
                range.min_disparity, range.min_disparity + range.num_disparities - 1,
                range.extended ? fmt::format(" (extended to {})", range.last_disparity_px) : "",

@@ -175,6 +175,22 @@ TEST(StereoctlDepth, RegionWithoutEnoughPixelsIsNoReadingWithExitOne)
     EXPECT_EQ(run.out.rfind("no reading: ", 0), 0u) << run.out;
 }
 
+// A region from the left edge: the distance, and how much of the region cannot see that
+// near (the right image holds no match there), in the report and the JSON.
+TEST(StereoctlDepth, ARegionAtTheLeftEdgeSaysWhatItCannotSee)
+{
+    const ProcessResult run = runProcess(depthCommand({"--roi", "0,0.25,0.5,0.5"}));
+    EXPECT_EQ(run.exit_code, 0) << run.out << run.err;
+    EXPECT_EQ(run.out.rfind("nearest: ", 0), 0u) << run.out;
+    EXPECT_NE(run.out.find("  LEFT EDGE: "), std::string::npos) << run.out;
+    const ProcessResult json = runProcess(depthCommand({"--roi", "0,0.25,0.5,0.5", "--json"}));
+    const nlohmann::json parsed = nlohmann::json::parse(json.out);
+    EXPECT_GT(parsed["reading"]["out_of_view_fraction"].get<double>(), 0.0) << json.out;
+    // The default region, a quarter in, sees tsukuba's 16 disparities whole.
+    const ProcessResult centred = runProcess(depthCommand({}));
+    EXPECT_EQ(centred.out.find("LEFT EDGE"), std::string::npos) << centred.out;
+}
+
 TEST(StereoctlDepth, BadArgumentsExitTwoWithOneLine)
 {
     const std::vector<std::vector<std::string>> cases = {
