@@ -72,7 +72,8 @@ struct Reading {
     double inferred_fraction = 0.0;
     // Of the region's pixels, those in columns that cannot see as near as distance_m: the
     // image's left edge cuts their view (pipeline/nearest_object.hpp, LeftEdgeView), so a
-    // surface that near there would go unseen. 0 when the whole region sees that near.
+    // surface that near there would go unseen. 0 when the whole region sees that near, and
+    // without a distance.
     double out_of_view_fraction = 0.0;
     // NearerThanRange: the closest depth the disparity range can see, in metres; the
     // obstacle is nearer than this.

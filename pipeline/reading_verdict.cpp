@@ -45,7 +45,6 @@ Reading judgeReading(const ReadingFacts& facts)
         reading.in_range_fraction = region.in_range_pixels / total;
         reading.range_limit_fraction = region.nearer_than_range_pixels / total;
         reading.inferred_fraction = region.inferred_pixels / total;
-        reading.out_of_view_fraction = region.out_of_view_pixels / total;
         reading.calibration_suspect = facts.calibration_suspect;
         if (facts.calibration_suspect)
             reading.calibration_row_offset_px = facts.calibration_row_offset_px;
@@ -84,6 +83,9 @@ Reading judgeReading(const ReadingFacts& facts)
     reading.valid = true;
     reading.reason = NoReadingReason::None;
     reading.distance_m = region.percentile_depth_m;
+    // A caveat on the number: without one, there is nothing it would qualify.
+    reading.out_of_view_fraction =
+        region.out_of_view_pixels / std::max<double>(1.0, region.region_pixels);
     return reading;
 }
 

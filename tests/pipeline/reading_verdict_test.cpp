@@ -174,6 +174,23 @@ TEST(ReadingVerdict, AValidReadingCarriesThePercentileAndTheRegion)
     EXPECT_FALSE(r.calibration_suspect);
 }
 
+// The share of the region that cannot see as near as the distance (the image's left edge)
+// qualifies a number: a valid reading carries it, a refusal has no number to qualify.
+TEST(ReadingVerdict, TheLeftEdgesShareQualifiesANumberOnly)
+{
+    ReadingFacts facts = goodPair();
+    facts.region.out_of_view_pixels = 1100;
+    Reading r = judgeReading(facts);
+    ASSERT_TRUE(r.valid);
+    EXPECT_DOUBLE_EQ(r.out_of_view_fraction, 0.11);
+    EXPECT_DOUBLE_EQ(r.distance_m, 1.25) << "a caveat, the number stays";
+
+    facts.region.nearer_than_range_pixels = 300;
+    r = judgeReading(facts);
+    EXPECT_EQ(r.reason, NoReadingReason::NearerThanRange);
+    EXPECT_EQ(r.out_of_view_fraction, 0.0);
+}
+
 TEST(ReadingVerdict, NearerThanRangeNamesTheBoundOfItsEvidence)
 {
     ReadingFacts facts = goodPair();
