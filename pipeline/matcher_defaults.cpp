@@ -42,7 +42,11 @@ MatcherSettings effectiveMatcherSettings(const MatcherSettings& settings)
     setIfUnset(s.speckle_window_px, 100);
     setIfUnset(s.speckle_range_px, 2);
     setIfUnset(s.lr_max_diff_px, 1);
-    const int area = s.block_size * s.block_size;
+    // The automatic penalties grow with the block's area. A block beyond every matcher's
+    // range (StereoBM's 255 px at most), which the checks refuse after this, must not
+    // overflow them first: 2113092847 px did (found by fuzz_config).
+    const int side = std::clamp(s.block_size, 0, 255);
+    const int area = side * side;
     setIfUnset(s.p1, 8 * area);
     setIfUnset(s.p2, 32 * area);
     return s;

@@ -324,6 +324,11 @@ INSTANTIATE_TEST_SUITE_P(
         RejectedCase{"matcher:\n  block_size: [5]\n", "matcher.block_size", 2, "got a list"},
         RejectedCase{"matcher:\n  algorithm: bm\n  block_size: 3\n", "matcher.block_size", 3,
                      "5 to 255 px for bm"},
+        // Far beyond: refused by name, not overflowed on the way (its automatic penalties).
+        RejectedCase{"matcher:\n  algorithm: bm\n  block_size: 2113092847\n", "matcher.block_size",
+                     3, "5 to 255 px for bm"},
+        RejectedCase{"matcher:\n  algorithm: sgbm\n  block_size: -2113092847\n",
+                     "matcher.block_size", 3, "1 to 31 px for sgbm"},
         RejectedCase{"matcher:\n  tuning: flat\n", "matcher.tuning", 2,
                      "unknown value (got flat, expected natural, planar or patterns"},
         RejectedCase{"matcher:\n  uniqueness_ratio: 101\n", "matcher.uniqueness_ratio", 2,
