@@ -16,6 +16,7 @@
 #include "ctl/commands.hpp"
 #include "ctl/exit_codes.hpp"
 #include "ctl/output.hpp"
+#include "ctl/reading_format.hpp"
 #include "pipeline/calibration.hpp"
 #include "pipeline/census_sgm_matcher.hpp"
 #include "pipeline/depth_io.hpp"
@@ -206,9 +207,8 @@ void printDepthReport(const DepthResult& result, const DisparityRange& range,
     fmt::print("  region {} px, {:.1f} % valid, {:.1f} % in range\n", reading.region_pixels,
                100.0 * reading.valid_fraction, 100.0 * reading.in_range_fraction);
     if (reading.out_of_view_fraction > 0.0)
-        fmt::print("  LEFT EDGE: {:.0f} % of the region cannot see as near as the distance "
-                   "(nearest.roi.x or --roi further right sees it whole)\n",
-                   100.0 * reading.out_of_view_fraction);
+        fmt::print("  {} (nearest.roi.x or --roi further right sees it whole)\n",
+                   leftEdgeNote(reading.out_of_view_fraction));
     fmt::print("matcher {}, disparities {}..{}{}, closest measured depth {:.3f} m{}\n", matcher,
                range.min_disparity, range.min_disparity + range.num_disparities - 1,
                range.extended ? fmt::format(" (extended to {})", range.last_disparity_px) : "",

@@ -92,8 +92,7 @@ std::string outOfViewNote(const nlohmann::ordered_json& reading)
     if (share == reading.end() || !share->is_number() || !(share->get<double>() > 0.0)) {
         return {};
     }
-    return fmt::format("  LEFT EDGE: {:.0f} % of the region cannot see this near",
-                       100.0 * share->get<double>());
+    return "  " + leftEdgeNote(share->get<double>());
 }
 
 // The notes a valid reading carries, at the end of its line.
@@ -116,6 +115,12 @@ std::string distanceText(const nlohmann::ordered_json& reading)
 }
 
 } // namespace
+
+std::string leftEdgeNote(double out_of_view_fraction)
+{
+    return fmt::format("LEFT EDGE: {:.0f} % of the region cannot see this near",
+                       100.0 * out_of_view_fraction);
+}
 
 std::string formatDistance(const nlohmann::ordered_json& reading)
 {

@@ -29,6 +29,10 @@ int exitCodeForReading(const nlohmann::ordered_json& reading);
 // Whether the reading carries `calibration_suspect: true`.
 bool calibrationSuspect(const nlohmann::ordered_json& reading);
 
+// "LEFT EDGE: 11 % of the region cannot see this near": the note of a reading whose region
+// the image's left edge keeps, in part, from seeing as near as its distance.
+std::string leftEdgeNote(double out_of_view_fraction);
+
 // "0.873 m", "0.873 m  CALIBRATION SUSPECT: rows +1.52 px apart" when the reading is
 // flagged, "0.264 m  LEFT EDGE: 11 % of the region cannot see this near" when part of the
 // region cannot see as near (out_of_view_fraction), or "no reading: <reason message>".

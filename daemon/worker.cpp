@@ -52,14 +52,13 @@ void logRegionLeftEdge(const StereoProcessor& processor)
     if (view.short_columns == 0)
         return;
     const int last = view.first_column + view.short_columns - 1;
-    const double last_seen_m =
-        processor.calibration().rectified.depthFromDisparity(last - kLeftEdgeMarginPx);
     spdlog::warn("nearest.roi: its columns {} to {} ({:.0f} % of it) see no nearer than {:.3f} to "
                  "{:.3f} m, where the range measures from {:.3f} m; nearer than that there, a "
                  "surface is outside the right camera's view and the reading passes over it "
                  "(raise nearest.roi.x for the whole range in the whole region)",
                  view.first_column, last, 100.0 * view.short_columns / std::max(1, view.columns),
-                 view.nearest_seen_m, last_seen_m, processor.disparityRange().closest_depth_m);
+                 view.nearest_seen_m, view.last_short_seen_m,
+                 processor.disparityRange().closest_depth_m);
 }
 
 void copyRawPair(const StereoPair& pair, RawPair& raw)

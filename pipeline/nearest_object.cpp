@@ -86,9 +86,14 @@ LeftEdgeView leftEdgeView(const cv::Rect& region, int last_disparity_px,
     // Column x sees disparities up to x - margin: the range's last from last + margin on.
     view.short_columns =
         std::clamp(last_disparity_px + kLeftEdgeMarginPx - region.x, 0, region.width);
-    const int seen = region.x - kLeftEdgeMarginPx;
-    if (seen + geometry.doffs_px > 0.0)
-        view.nearest_seen_m = geometry.depthFromDisparity(seen);
+    // The nearest depth column x sees: that of its largest disparity.
+    const auto seen_at = [&](int x) {
+        const int largest = x - kLeftEdgeMarginPx;
+        return largest + geometry.doffs_px > 0.0 ? geometry.depthFromDisparity(largest)
+                                                 : std::numeric_limits<double>::infinity();
+    };
+    view.nearest_seen_m = seen_at(region.x);
+    view.last_short_seen_m = seen_at(region.x + std::max(view.short_columns, 1) - 1);
     return view;
 }
 

@@ -40,8 +40,10 @@ struct LeftEdgeView {
     int columns = 0;      // the region's width in pixels
     // Of those, the columns that cannot see as near as the range measures (from the left).
     int short_columns = 0;
-    // The nearest depth the region's left column sees, metres; +inf when it sees nothing.
+    // The nearest depth the region's left column sees, and its last short column, metres;
+    // +inf where a column sees nothing.
     double nearest_seen_m = std::numeric_limits<double>::infinity();
+    double last_short_seen_m = std::numeric_limits<double>::infinity();
 };
 LeftEdgeView leftEdgeView(const cv::Rect& region, int last_disparity_px,
                           const RectifiedGeometry& geometry);
